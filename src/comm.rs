@@ -1,0 +1,229 @@
+//! The few collective operations octmesh needs, over MPI or over one process.
+//!
+//! Every algorithm talks to a [`Comm`] instead of to rsmpi directly. Buffers are
+//! plain integers and bytes (never derived MPI datatypes), so the same code
+//! works when the host program, not octmesh, initialised MPI, and serial unit
+//! tests run without MPI at all through [`SerialComm`].
+
+use std::rc::Rc;
+
+use mpi::collective::SystemOperation;
+use mpi::datatype::{Partition, PartitionMut};
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::*;
+
+use crate::error::{Error, ErrorKind, Result};
+
+/// Shared handle to a communicator.
+pub type CommRef = Rc<dyn Comm>;
+
+/// Collective operations over a group of ranks. All methods are collective
+/// unless stated otherwise: every rank must call them in the same order.
+pub trait Comm {
+    /// This process's rank, in `0..size()`. Not collective.
+    fn rank(&self) -> usize;
+    /// Number of ranks. Not collective.
+    fn size(&self) -> usize;
+    /// Blocks until every rank has called it.
+    fn barrier(&self);
+    /// Element-wise maximum over ranks.
+    fn max_u64(&self, values: &mut [u64]);
+    /// Element-wise sum over ranks.
+    fn sum_u64(&self, values: &mut [u64]);
+    /// Element-wise maximum over ranks.
+    fn max_f64(&self, values: &mut [f64]);
+    /// Gathers one value from every rank, in rank order, on every rank.
+    fn allgather_u64(&self, value: u64) -> Vec<u64>;
+    /// Personalised all-to-all: `send[displs[q]..displs[q]+counts[q]]` goes to
+    /// rank `q`; returns what every rank sent here, concatenated in rank order,
+    /// and the count received from each rank.
+    fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>);
+    /// Replaces `bytes` on every rank with rank `root`'s bytes.
+    fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>);
+}
+
+/// Exclusive prefix sums of `counts` with the total appended (`len + 1`
+/// entries).
+pub fn offsets(counts: &[usize]) -> Vec<usize> {
+    let mut out = Vec::with_capacity(counts.len() + 1);
+    let mut acc = 0usize;
+    out.push(0);
+    for &c in counts {
+        acc += c;
+        out.push(acc);
+    }
+    out
+}
+
+/// Makes a collective decision out of a rank-local result: if any rank failed,
+/// every rank returns an error. The failing rank keeps its own error; the
+/// others receive the message of the lowest failing rank, kind
+/// [`ErrorKind::RemoteFailure`] unless all ranks failed with the same kind.
+pub fn agree<T>(comm: &dyn Comm, local: Result<T>) -> Result<T> {
+    let code = match &local {
+        Ok(_) => 0u64,
+        Err(e) => e.kind() as i32 as u64,
+    };
+    // One reduction carries "anyone failed" and "lowest failing rank".
+    let mut flags = [
+        code,
+        if code != 0 {
+            u64::MAX - comm.rank() as u64
+        } else {
+            0
+        },
+    ];
+    comm.max_u64(&mut flags);
+    if flags[0] == 0 {
+        return local;
+    }
+    let root = (u64::MAX - flags[1]) as usize;
+    let mut msg = match &local {
+        Err(e) if comm.rank() == root => {
+            let mut b = (e.kind() as i32).to_le_bytes().to_vec();
+            b.extend_from_slice(e.message().as_bytes());
+            b
+        }
+        _ => Vec::new(),
+    };
+    comm.broadcast_bytes(root, &mut msg);
+    match local {
+        Err(e) => Err(e),
+        Ok(_) => {
+            let kind = ErrorKind::from_code(i32::from_le_bytes([msg[0], msg[1], msg[2], msg[3]]));
+            let text = String::from_utf8_lossy(&msg[4..]);
+            let kind = if kind == ErrorKind::Limit || kind == ErrorKind::RemoteFailure {
+                kind
+            } else {
+                ErrorKind::RemoteFailure
+            };
+            Err(Error::new(kind, format!("rank {root}: {text}")))
+        }
+    }
+}
+
+/// A single process: every collective is a local copy.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SerialComm;
+
+impl Comm for SerialComm {
+    fn rank(&self) -> usize {
+        0
+    }
+    fn size(&self) -> usize {
+        1
+    }
+    fn barrier(&self) {}
+    fn max_u64(&self, _values: &mut [u64]) {}
+    fn sum_u64(&self, _values: &mut [u64]) {}
+    fn max_f64(&self, _values: &mut [f64]) {}
+    fn allgather_u64(&self, value: u64) -> Vec<u64> {
+        vec![value]
+    }
+    fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
+        (send[..counts[0]].to_vec(), counts.to_vec())
+    }
+    fn broadcast_bytes(&self, _root: usize, _bytes: &mut Vec<u8>) {}
+}
+
+/// An MPI communicator. Owned: it is freed when dropped (for the world
+/// communicator, nothing is freed).
+pub struct MpiComm {
+    comm: SimpleCommunicator,
+}
+
+impl MpiComm {
+    /// Wraps a communicator octmesh owns (the world, or a duplicate).
+    pub fn new(comm: SimpleCommunicator) -> MpiComm {
+        MpiComm { comm }
+    }
+
+    /// The underlying rsmpi communicator.
+    pub fn raw(&self) -> &SimpleCommunicator {
+        &self.comm
+    }
+}
+
+fn to_i32_counts(counts: &[usize]) -> Vec<i32> {
+    counts
+        .iter()
+        .map(|&c| i32::try_from(c).expect("message larger than 2^31 elements"))
+        .collect()
+}
+
+impl Comm for MpiComm {
+    fn rank(&self) -> usize {
+        self.comm.rank() as usize
+    }
+    fn size(&self) -> usize {
+        self.comm.size() as usize
+    }
+    fn barrier(&self) {
+        self.comm.barrier();
+    }
+    fn max_u64(&self, values: &mut [u64]) {
+        let send = values.to_vec();
+        self.comm
+            .all_reduce_into(&send[..], values, SystemOperation::max());
+    }
+    fn sum_u64(&self, values: &mut [u64]) {
+        let send = values.to_vec();
+        self.comm
+            .all_reduce_into(&send[..], values, SystemOperation::sum());
+    }
+    fn max_f64(&self, values: &mut [f64]) {
+        let send = values.to_vec();
+        self.comm
+            .all_reduce_into(&send[..], values, SystemOperation::max());
+    }
+    fn allgather_u64(&self, value: u64) -> Vec<u64> {
+        let mut out = vec![0u64; self.size()];
+        self.comm.all_gather_into(&value, &mut out[..]);
+        out
+    }
+    fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
+        let p = self.size();
+        let send_counts = to_i32_counts(counts);
+        let mut recv_counts = vec![0i32; p];
+        self.comm
+            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
+        let sdispl: Vec<i32> = offsets(counts)[..p].iter().map(|&d| d as i32).collect();
+        let rc: Vec<usize> = recv_counts.iter().map(|&c| c as usize).collect();
+        let roff = offsets(&rc);
+        let rdispl: Vec<i32> = roff[..p].iter().map(|&d| d as i32).collect();
+        let mut recv = vec![0u64; roff[p]];
+        {
+            let sbuf = Partition::new(send, &send_counts[..], &sdispl[..]);
+            let mut rbuf = PartitionMut::new(&mut recv[..], &recv_counts[..], &rdispl[..]);
+            self.comm.all_to_all_varcount_into(&sbuf, &mut rbuf);
+        }
+        (recv, rc)
+    }
+    fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>) {
+        let mut len = bytes.len() as u64;
+        let proc = self.comm.process_at_rank(root as i32);
+        proc.broadcast_into(&mut len);
+        bytes.resize(len as usize, 0);
+        if len > 0 {
+            proc.broadcast_into(&mut bytes[..]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn offsets_are_exclusive_prefix_sums() {
+        assert_eq!(offsets(&[3, 0, 2]), vec![0, 3, 3, 5]);
+    }
+
+    #[test]
+    fn serial_agree_passes_errors_through() {
+        let c = SerialComm;
+        let r: Result<u32> = agree(&c, Err(Error::invalid("bad level")));
+        assert_eq!(r.unwrap_err().message(), "bad level");
+        assert_eq!(agree(&c, Ok(5)).unwrap(), 5);
+    }
+}

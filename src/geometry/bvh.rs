@@ -1,0 +1,333 @@
+//! Bounding-volume hierarchy over triangles for axis-aligned box queries.
+//!
+//! A binary tree stored flat in a `Vec`: each internal node is split at the
+//! median of its triangles' centroids along the longest axis of the centroid
+//! bounds, which keeps the tree balanced (depth at most 32 for `u32`
+//! indices) whatever the triangle distribution. Leaves hold at most
+//! [`LEAF_SIZE`] triangles. The two children of a node are stored next to
+//! each other, so one index per node suffices.
+//!
+//! The tree keeps its own copy of the triangle bounding boxes (in leaf
+//! order) so candidate queries do not need the triangles; exact queries take
+//! the triangle slice the tree was built from.
+
+use super::intersect::triangle_box_overlap;
+use super::{Aabb, Triangle};
+
+/// Maximum number of triangles in a leaf.
+pub const LEAF_SIZE: usize = 4;
+
+/// Traversal stack size; a balanced tree over `u32` indices needs at most
+/// 33 entries.
+const STACK: usize = 64;
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    bbox: Aabb,
+    /// Leaf: first slot in `order`. Internal: index of the left child (the
+    /// right child follows it).
+    first: u32,
+    /// Number of triangles in a leaf, 0 for an internal node.
+    count: u32,
+}
+
+/// A bounding-box tree over a triangle slice.
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    nodes: Vec<Node>,
+    /// Triangle indices in leaf order.
+    order: Vec<u32>,
+    /// Bounding box of `order[i]`, at slot `i`.
+    boxes: Vec<Aabb>,
+}
+
+impl Bvh {
+    /// Builds the tree over `tris`; indices returned by queries refer to
+    /// this slice.
+    ///
+    /// # Panics
+    /// If there are more than `u32::MAX` triangles.
+    pub fn new(tris: &[Triangle]) -> Bvh {
+        let n = tris.len();
+        assert!(n <= u32::MAX as usize, "too many triangles for a Bvh");
+        if n == 0 {
+            return Bvh {
+                nodes: Vec::new(),
+                order: Vec::new(),
+                boxes: Vec::new(),
+            };
+        }
+        let boxes: Vec<Aabb> = tris.iter().map(Triangle::aabb).collect();
+        let centroids: Vec<[f64; 3]> = tris.iter().map(Triangle::centroid).collect();
+        let mut order: Vec<u32> = (0..n as u32).collect();
+
+        let placeholder = Node {
+            bbox: Aabb::empty(),
+            first: 0,
+            count: 0,
+        };
+        let mut nodes = Vec::with_capacity(2 * n.div_ceil(LEAF_SIZE));
+        nodes.push(placeholder);
+        let mut work = vec![(0usize, 0usize, n)];
+        while let Some((ni, start, end)) = work.pop() {
+            let range = &mut order[start..end];
+            let bbox = range
+                .iter()
+                .fold(Aabb::empty(), |b, &i| b.union(&boxes[i as usize]));
+            if range.len() <= LEAF_SIZE {
+                nodes[ni] = Node {
+                    bbox,
+                    first: start as u32,
+                    count: range.len() as u32,
+                };
+                continue;
+            }
+            let cb = Aabb::from_points(range.iter().map(|&i| centroids[i as usize]));
+            let e = cb.extent();
+            let axis = if e[0] >= e[1] && e[0] >= e[2] {
+                0
+            } else if e[1] >= e[2] {
+                1
+            } else {
+                2
+            };
+            let half = range.len() / 2;
+            range.select_nth_unstable_by(half, |&a, &b| {
+                centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
+            });
+            let left = nodes.len();
+            nodes.push(placeholder);
+            nodes.push(placeholder);
+            nodes[ni] = Node {
+                bbox,
+                first: left as u32,
+                count: 0,
+            };
+            work.push((left, start, start + half));
+            work.push((left + 1, start + half, end));
+        }
+        let boxes = order.iter().map(|&i| boxes[i as usize]).collect();
+        Bvh {
+            nodes,
+            order,
+            boxes,
+        }
+    }
+
+    /// Bounding box of all triangles (empty for an empty tree).
+    pub fn bbox(&self) -> Aabb {
+        self.nodes.first().map_or(Aabb::empty(), |n| n.bbox)
+    }
+
+    /// Appends to `out` the indices of the triangles that overlap the closed
+    /// box `[box_min, box_max]` by [`triangle_box_overlap`] (touching counts).
+    /// `tris` must be the slice the tree was built from. Indices come in tree
+    /// order, not sorted.
+    pub fn query_box(
+        &self,
+        tris: &[Triangle],
+        box_min: [f64; 3],
+        box_max: [f64; 3],
+        out: &mut Vec<u32>,
+    ) {
+        debug_assert_eq!(tris.len(), self.order.len());
+        self.visit(box_min, box_max, |ti| {
+            if triangle_box_overlap(&tris[ti as usize], box_min, box_max) {
+                out.push(ti);
+            }
+            false
+        });
+    }
+
+    /// True if some triangle overlaps the closed box; stops at the first
+    /// hit. `tris` must be the slice the tree was built from.
+    pub fn any_overlap(&self, tris: &[Triangle], box_min: [f64; 3], box_max: [f64; 3]) -> bool {
+        debug_assert_eq!(tris.len(), self.order.len());
+        self.visit(box_min, box_max, |ti| {
+            triangle_box_overlap(&tris[ti as usize], box_min, box_max)
+        })
+    }
+
+    /// Appends to `out` the indices of the triangles whose bounding box
+    /// overlaps the closed box (a superset of [`Bvh::query_box`]).
+    pub fn query_candidates(&self, box_min: [f64; 3], box_max: [f64; 3], out: &mut Vec<u32>) {
+        self.visit(box_min, box_max, |ti| {
+            out.push(ti);
+            false
+        });
+    }
+
+    /// Calls `hit` for each triangle whose box overlaps the query box, until
+    /// `hit` returns true; returns whether it did.
+    #[inline]
+    fn visit(
+        &self,
+        box_min: [f64; 3],
+        box_max: [f64; 3],
+        mut hit: impl FnMut(u32) -> bool,
+    ) -> bool {
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let query = Aabb {
+            min: box_min,
+            max: box_max,
+        };
+        let mut stack = [0u32; STACK];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let node = &self.nodes[stack[sp] as usize];
+            if !node.bbox.overlaps(&query) {
+                continue;
+            }
+            if node.count == 0 {
+                debug_assert!(sp + 2 <= STACK);
+                stack[sp] = node.first + 1;
+                stack[sp + 1] = node.first;
+                sp += 2;
+                continue;
+            }
+            let first = node.first as usize;
+            for slot in first..first + node.count as usize {
+                if self.boxes[slot].overlaps(&query) && hit(self.order[slot]) {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::shapes::{default_sphere, default_torus, sphere};
+    use crate::geometry::Surface;
+
+    struct Rng(u64);
+    impl Rng {
+        fn next_f64(&mut self) -> f64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+        fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * self.next_f64()
+        }
+    }
+
+    fn check_structure(bvh: &Bvh, n: usize) {
+        let mut seen = vec![false; n];
+        for &i in &bvh.order {
+            assert!(!seen[i as usize]);
+            seen[i as usize] = true;
+        }
+        assert!(seen.iter().all(|&s| s));
+        for node in &bvh.nodes {
+            if node.count == 0 {
+                for c in [node.first, node.first + 1] {
+                    let child = bvh.nodes[c as usize].bbox;
+                    assert_eq!(node.bbox.union(&child), node.bbox);
+                }
+            } else {
+                assert!(node.count as usize <= LEAF_SIZE);
+                let f = node.first as usize;
+                for b in &bvh.boxes[f..f + node.count as usize] {
+                    assert_eq!(node.bbox.union(b), node.bbox);
+                }
+            }
+        }
+    }
+
+    fn compare_with_brute_force(s: &Surface, seed: u64, queries: usize) {
+        let tris = s.triangles();
+        let bvh = Bvh::new(tris);
+        check_structure(&bvh, tris.len());
+        assert_eq!(bvh.bbox(), s.bbox());
+        let sb = s.bbox();
+        let mut rng = Rng(seed);
+        let (mut out, mut cand) = (Vec::new(), Vec::new());
+        let mut nonempty = 0;
+        for q in 0..queries {
+            let size = [0.0, 0.01, 0.05, 0.2, 1.0][q % 5] * sb.longest_side();
+            let mut lo = [0.0; 3];
+            let mut hi = [0.0; 3];
+            if q % 3 == 0 {
+                // Boxes with a corner on a vertex exercise exact touching.
+                let t = &tris[(rng.next_f64() * tris.len() as f64) as usize];
+                lo = t.v[q % 3];
+                for k in 0..3 {
+                    hi[k] = lo[k] + size * rng.next_f64();
+                }
+            } else {
+                for k in 0..3 {
+                    lo[k] = rng.uniform(sb.min[k] - 0.1, sb.max[k] + 0.1);
+                    hi[k] = lo[k] + size * rng.next_f64();
+                }
+            }
+            out.clear();
+            cand.clear();
+            bvh.query_box(tris, lo, hi, &mut out);
+            bvh.query_candidates(lo, hi, &mut cand);
+            out.sort_unstable();
+            cand.sort_unstable();
+            let query = Aabb { min: lo, max: hi };
+            let brute_cand: Vec<u32> = (0..tris.len() as u32)
+                .filter(|&i| tris[i as usize].aabb().overlaps(&query))
+                .collect();
+            let brute: Vec<u32> = brute_cand
+                .iter()
+                .copied()
+                .filter(|&i| triangle_box_overlap(&tris[i as usize], lo, hi))
+                .collect();
+            assert_eq!(out, brute, "query {q}");
+            assert_eq!(cand, brute_cand, "query {q}");
+            assert_eq!(bvh.any_overlap(tris, lo, hi), !brute.is_empty());
+            if !brute.is_empty() {
+                nonempty += 1;
+            }
+        }
+        assert!(nonempty > queries / 10, "{nonempty}");
+    }
+
+    #[test]
+    fn sphere_matches_brute_force() {
+        compare_with_brute_force(&default_sphere(), 0x1234_5678_9abc_def1, 600);
+    }
+
+    #[test]
+    fn torus_matches_brute_force() {
+        compare_with_brute_force(&default_torus(), 0x0fed_cba9_8765_4321, 600);
+    }
+
+    #[test]
+    fn small_and_empty_trees() {
+        let empty = Bvh::new(&[]);
+        let mut out = Vec::new();
+        empty.query_candidates([-1e9; 3], [1e9; 3], &mut out);
+        assert!(out.is_empty());
+        assert!(!empty.any_overlap(&[], [-1e9; 3], [1e9; 3]));
+        assert!(empty.bbox().is_empty());
+
+        let s = sphere([0.0; 3], 1.0, 0);
+        let few = &s.triangles()[..3];
+        let bvh = Bvh::new(few);
+        check_structure(&bvh, 3);
+        bvh.query_box(few, [-2.0; 3], [2.0; 3], &mut out);
+        out.sort_unstable();
+        assert_eq!(out, vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn identical_centroids_still_split() {
+        let t = Triangle::new([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        let tris = vec![t; 37];
+        let bvh = Bvh::new(&tris);
+        check_structure(&bvh, 37);
+        let mut out = Vec::new();
+        bvh.query_box(&tris, [1.0, 0.0, 0.0], [2.0, 1.0, 1.0], &mut out);
+        assert_eq!(out.len(), 37);
+    }
+}

@@ -1,0 +1,404 @@
+//! Triangle / axis-aligned box overlap by the separating-axis theorem.
+//!
+//! Candidate axes (Akenine-Möller 2001): the three box face normals, the
+//! triangle normal, and the nine cross products of a triangle edge with a
+//! box axis. For convex sets these 13 axes are enough: if none separates,
+//! the sets intersect.
+//!
+//! # Touching rule
+//!
+//! The box and the triangle are both *closed* sets. They overlap iff no axis
+//! separates them with a strictly positive gap: on every axis, with `[t0, t1]`
+//! the triangle's projection and `[b0, b1]` the box's, they are separated iff
+//! `t0 > b1 || t1 < b0`. Consequently a triangle that touches the box only at
+//! a box face, edge or corner overlaps it, and a triangle lying exactly in the
+//! plane of a box face overlaps it if it meets that face. A gap of any
+//! positive size (even `1e-9`) means no overlap.
+//!
+//! Degenerate triangles (segments and points) are handled: cross-product
+//! axes of zero length are skipped, and the remaining axes (box normals and
+//! segment-direction x box-axis products) are exactly the candidate set for
+//! a segment or a point against a box.
+//!
+//! # Precision
+//!
+//! The box-normal tests compare the raw coordinates, so they are exact. The
+//! other axes work on coordinates relative to `box_min`, which keeps the
+//! numbers small for a small box far from the origin; a vertex lying exactly
+//! on a box corner or face is then mapped to exactly the same value as that
+//! corner, so exact contact is detected on those axes too. When all inputs
+//! are small integers (or dyadic values of similar size) every operation is
+//! exact and the result is the exact answer for closed sets. Inputs must be
+//! finite.
+
+use super::{cross, dot, sub, Triangle};
+
+/// True if the closed triangle and the closed box `[box_min, box_max]` share
+/// at least one point (see the module documentation for the touching rule).
+/// A box with `box_min > box_max` on some axis is empty and overlaps nothing.
+pub fn triangle_box_overlap(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3]) -> bool {
+    let [p, q, r] = tri.v;
+    // Box face normals, on untranslated coordinates so they are exact.
+    for k in 0..3 {
+        let lo = p[k].min(q[k]).min(r[k]);
+        let hi = p[k].max(q[k]).max(r[k]);
+        if box_min[k] > box_max[k] || lo > box_max[k] || hi < box_min[k] {
+            return false;
+        }
+    }
+
+    let v = [sub(p, box_min), sub(q, box_min), sub(r, box_min)];
+    let h = sub(box_max, box_min);
+    let e = [sub(v[1], v[0]), sub(v[2], v[1]), sub(v[0], v[2])];
+
+    if separates(cross(e[0], e[1]), &v, h) {
+        return false;
+    }
+    const AXES: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for edge in &e {
+        for axis in &AXES {
+            if separates(cross(*edge, *axis), &v, h) {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// True if `axis` separates the triangle `v` from the box `[0, h]` with a
+/// strictly positive gap. A zero axis separates nothing.
+#[inline]
+fn separates(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> bool {
+    if axis == [0.0; 3] {
+        return false;
+    }
+    let d0 = dot(axis, v[0]);
+    let d1 = dot(axis, v[1]);
+    let d2 = dot(axis, v[2]);
+    let t_min = d0.min(d1).min(d2);
+    let t_max = d0.max(d1).max(d2);
+    // The box [0, h] projects onto [sum of negative terms, sum of positive
+    // terms] of axis[k] * h[k].
+    let (mut b_min, mut b_max) = (0.0, 0.0);
+    for k in 0..3 {
+        let t = axis[k] * h[k];
+        if t > 0.0 {
+            b_max += t;
+        } else {
+            b_min += t;
+        }
+    }
+    t_min > b_max || t_max < b_min
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Aabb;
+    use std::cmp::Ordering;
+
+    const LO: [f64; 3] = [0.0, 0.0, 0.0];
+    const HI: [f64; 3] = [1.0, 1.0, 1.0];
+
+    fn t(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> Triangle {
+        Triangle::new(a, b, c)
+    }
+
+    fn shift(tri: Triangle, d: [f64; 3]) -> Triangle {
+        Triangle {
+            v: tri.v.map(|p| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]),
+        }
+    }
+
+    fn unit_box(tri: &Triangle) -> bool {
+        triangle_box_overlap(tri, LO, HI)
+    }
+
+    #[test]
+    fn inside_and_far() {
+        let inside = t([0.2, 0.2, 0.2], [0.8, 0.3, 0.4], [0.5, 0.9, 0.7]);
+        assert!(unit_box(&inside));
+        let far = shift(inside, [10.0, -3.0, 7.0]);
+        assert!(!unit_box(&far));
+    }
+
+    #[test]
+    fn touching_corner() {
+        let at_vertex = t([1.0, 1.0, 1.0], [2.0, 3.0, 2.0], [3.0, 2.0, 2.0]);
+        assert!(unit_box(&at_vertex));
+        assert!(!unit_box(&shift(at_vertex, [1e-9, 0.0, 0.0])));
+        // The corner (1,1,1) lies inside this triangle, the box is on one side.
+        let through = t([3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]);
+        assert!(unit_box(&through));
+        let off = shift(through, [1e-9, 0.0, 0.0]);
+        assert!(!unit_box(&off));
+        assert!(!unit_box(&t(
+            [-1e-9, 0.0, 0.0],
+            [-3.0, 0.0, 0.0],
+            [0.0, -3.0, -3.0]
+        )));
+    }
+
+    #[test]
+    fn touching_edge() {
+        // The triangle's edge x + y = 2 touches the box edge x = y = 1.
+        let tri = t([2.0, 0.0, 0.5], [0.0, 2.0, 0.5], [2.0, 2.0, 0.5]);
+        assert!(unit_box(&tri));
+        assert!(!unit_box(&shift(tri, [1e-9, 1e-9, 0.0])));
+        // Tilted so that only the triangle edge meets the box edge.
+        let tilted = t([2.0, 0.0, 0.5], [0.0, 2.0, 0.5], [2.0, 2.0, 5.0]);
+        assert!(unit_box(&tilted));
+        assert!(!unit_box(&shift(tilted, [1e-9, 1e-9, 0.0])));
+    }
+
+    #[test]
+    fn touching_face() {
+        let on_top = t([0.2, 0.2, 1.0], [0.8, 0.2, 1.0], [0.5, 3.0, 1.0]);
+        assert!(unit_box(&on_top));
+        assert!(!unit_box(&shift(on_top, [0.0, 0.0, 1e-9])));
+        // Standing on the face with one vertex.
+        let standing = t([0.5, 0.5, 1.0], [0.0, 0.0, 2.0], [1.0, 0.0, 2.0]);
+        assert!(unit_box(&standing));
+        assert!(!unit_box(&shift(standing, [0.0, 0.0, 1e-9])));
+    }
+
+    #[test]
+    fn crossing_without_inside_vertex() {
+        let slab = t([-3.0, -3.0, 0.5], [5.0, -3.0, 0.5], [0.5, 5.0, 0.5]);
+        assert!(unit_box(&slab));
+        let oblique = t([-1.0, 0.5, -1.0], [2.0, 0.5, -1.0], [0.5, 0.3, 3.0]);
+        assert!(unit_box(&oblique));
+        // Bounding boxes overlap but the plane passes beside the box.
+        let beside = t([-1.0, 3.25, 0.0], [3.25, -1.0, 0.0], [3.25, -1.0, 1.0]);
+        assert!(unit_box(&shift(beside, [-0.25, 0.0, 0.0])));
+        assert!(!unit_box(&beside));
+    }
+
+    #[test]
+    fn large_triangle_containing_box_in_plane() {
+        let big = t(
+            [-100.0, -100.0, 0.0],
+            [100.0, -100.0, 0.0],
+            [0.0, 100.0, 0.0],
+        );
+        assert!(unit_box(&big));
+        assert!(triangle_box_overlap(&big, [0.0, 0.0, 0.0], [1.0, 1.0, 0.0]));
+        assert!(!triangle_box_overlap(
+            &big,
+            [0.0, 0.0, 1e-9],
+            [1.0, 1.0, 1e-9]
+        ));
+    }
+
+    #[test]
+    fn degenerate_triangles() {
+        let seg = t([-1.0, 0.5, 0.5], [2.0, 0.5, 0.5], [2.0, 0.5, 0.5]);
+        assert!(unit_box(&seg));
+        let diag = t([-1.0, 2.0, 0.5], [2.0, -1.0, 0.5], [0.5, 0.5, 0.5]);
+        assert!(unit_box(&diag));
+        // Bounding box overlaps, but the segment passes the corner at a gap.
+        let miss = t([-0.5, 3.0, 0.5], [3.0, -0.5, 0.5], [3.0, -0.5, 0.5]);
+        assert!(!unit_box(&miss));
+        let corner = t([-1.0, 3.0, 0.5], [3.0, -1.0, 0.5], [1.0, 1.0, 0.5]);
+        assert!(unit_box(&corner));
+        let p = [0.25, 1.0, 0.75];
+        assert!(unit_box(&t(p, p, p)));
+        let q = [0.25, 1.0 + 1e-9, 0.75];
+        assert!(!unit_box(&t(q, q, q)));
+    }
+
+    #[test]
+    fn empty_box() {
+        let tri = t([-3.0, -3.0, 0.5], [5.0, -3.0, 0.5], [0.5, 5.0, 0.5]);
+        assert!(!triangle_box_overlap(
+            &tri,
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 1.0]
+        ));
+    }
+
+    // ---- independent exact check: rational Sutherland-Hodgman clipping ----
+
+    #[derive(Clone, Copy, Debug)]
+    struct Q {
+        n: i128,
+        d: i128,
+    }
+
+    fn gcd(mut a: i128, mut b: i128) -> i128 {
+        a = a.abs();
+        b = b.abs();
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    }
+
+    impl Q {
+        fn int(n: i64) -> Q {
+            Q { n: n as i128, d: 1 }
+        }
+        fn new(n: i128, d: i128) -> Q {
+            assert!(d != 0);
+            let s = if d < 0 { -1 } else { 1 };
+            let g = gcd(n, d).max(1);
+            Q {
+                n: s * n / g,
+                d: s * d / g,
+            }
+        }
+        fn add(self, o: Q) -> Q {
+            Q::new(self.n * o.d + o.n * self.d, self.d * o.d)
+        }
+        fn sub(self, o: Q) -> Q {
+            Q::new(self.n * o.d - o.n * self.d, self.d * o.d)
+        }
+        fn mul(self, o: Q) -> Q {
+            Q::new(self.n * o.n, self.d * o.d)
+        }
+        fn div(self, o: Q) -> Q {
+            Q::new(self.n * o.d, self.d * o.n)
+        }
+        fn sign(self) -> Ordering {
+            self.n.cmp(&0)
+        }
+    }
+
+    type P = [Q; 3];
+
+    /// Keeps the part of the closed polygon where `s * (p[k] - bound) >= 0`.
+    fn clip(poly: &[P], k: usize, bound: Q, upper: bool) -> Vec<P> {
+        let dist = |p: &P| {
+            let d = p[k].sub(bound);
+            if upper {
+                Q::new(-d.n, d.d)
+            } else {
+                d
+            }
+        };
+        let mut out = Vec::new();
+        for i in 0..poly.len() {
+            let cur = poly[i];
+            let next = poly[(i + 1) % poly.len()];
+            let (dc, dn) = (dist(&cur), dist(&next));
+            let cur_in = dc.sign() != Ordering::Less;
+            let next_in = dn.sign() != Ordering::Less;
+            if cur_in {
+                out.push(cur);
+            }
+            if cur_in != next_in {
+                let s = dc.div(dc.sub(dn));
+                let mut p = cur;
+                for (j, c) in p.iter_mut().enumerate() {
+                    *c = cur[j].add(s.mul(next[j].sub(cur[j])));
+                }
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    fn exact_overlap(tri: [[i64; 3]; 3], lo: [i64; 3], hi: [i64; 3]) -> bool {
+        let mut poly: Vec<P> = tri.iter().map(|p| p.map(Q::int)).collect();
+        for k in 0..3 {
+            poly = clip(&poly, k, Q::int(lo[k]), false);
+            poly = clip(&poly, k, Q::int(hi[k]), true);
+            if poly.is_empty() {
+                return false;
+            }
+        }
+        // Every surviving point must really lie in the box.
+        for p in &poly {
+            for k in 0..3 {
+                assert!(p[k].sub(Q::int(lo[k])).sign() != Ordering::Less);
+                assert!(Q::int(hi[k]).sub(p[k]).sign() != Ordering::Less);
+            }
+        }
+        true
+    }
+
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            // splitmix64
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^ (z >> 31)
+        }
+        fn range(&mut self, lo: i64, hi: i64) -> i64 {
+            lo + (self.next() % (hi - lo + 1) as u64) as i64
+        }
+    }
+
+    #[test]
+    fn clipping_reference_sanity() {
+        let tri = [[2, 0, 0], [0, 2, 0], [2, 2, 0]];
+        assert!(exact_overlap(tri, [0, 0, 0], [1, 1, 1]));
+        assert!(!exact_overlap(tri, [0, 0, 1], [1, 1, 1]));
+        assert!(exact_overlap(tri, [0, 0, 0], [1, 1, 0]));
+        let far = [[5, 5, 5], [6, 5, 5], [5, 6, 5]];
+        assert!(!exact_overlap(far, [0, 0, 0], [1, 1, 1]));
+    }
+
+    #[test]
+    fn random_integer_cases_match_exact_clipping() {
+        let mut rng = Rng(0x0c7e_5eed);
+        let (mut hits, mut misses, mut degenerate, mut subtle) = (0u32, 0u32, 0u32, 0u32);
+        for case in 0..200_000 {
+            let span = if case % 2 == 0 { 3 } else { 6 };
+            let mut tri = [[0i64; 3]; 3];
+            for p in tri.iter_mut() {
+                for c in p.iter_mut() {
+                    *c = rng.range(-span + 2, span);
+                }
+            }
+            if case % 7 == 0 {
+                // Force collinear or coincident vertices now and then.
+                tri[2] = if case % 14 == 0 {
+                    tri[1]
+                } else {
+                    [
+                        2 * tri[1][0] - tri[0][0],
+                        2 * tri[1][1] - tri[0][1],
+                        2 * tri[1][2] - tri[0][2],
+                    ]
+                };
+            }
+            let mut lo = [0i64; 3];
+            let mut hi = [0i64; 3];
+            for k in 0..3 {
+                lo[k] = rng.range(-1, 2);
+                hi[k] = lo[k] + rng.range(0, 2);
+            }
+            let f = |p: [i64; 3]| p.map(|c| c as f64);
+            let ftri = Triangle::new(f(tri[0]), f(tri[1]), f(tri[2]));
+            if ftri.is_degenerate() {
+                degenerate += 1;
+            }
+            let fast = triangle_box_overlap(&ftri, f(lo), f(hi));
+            let exact = exact_overlap(tri, lo, hi);
+            let boxes_meet = ftri.aabb().overlaps(&Aabb {
+                min: f(lo),
+                max: f(hi),
+            });
+            if boxes_meet && !exact {
+                subtle += 1;
+            }
+            assert_eq!(
+                fast, exact,
+                "case {case}: triangle {tri:?} box {lo:?}..{hi:?}"
+            );
+            if exact {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(hits > 20_000 && misses > 20_000, "{hits} / {misses}");
+        assert!(degenerate > 20_000, "{degenerate}");
+        // Cases only the normal or edge-cross axes can reject.
+        assert!(subtle > 5_000, "{subtle}");
+    }
+}

@@ -1,0 +1,3 @@
+//! Files octmesh writes and reads: leaf lists, and (in `geometry::stl`) STL.
+
+pub mod leaves;

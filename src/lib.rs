@@ -1,0 +1,34 @@
+//! # octmesh
+//!
+//! Parallel 2:1-balanced linear octrees and trilinear hexahedral meshes from
+//! triangulated surfaces.
+//!
+//! The pipeline, every step collective over the ranks of a [`comm::Comm`]:
+//!
+//! 1. read a [`geometry::Surface`] (STL or a built-in shape) and fit a
+//!    [`domain::Domain`] cube around it;
+//! 2. build the [`octree::LinearOctree`] refined to the surface
+//!    ([`refine::build_from_surface`]) or by a predicate
+//!    ([`refine::build_from_callback`]);
+//! 3. [`octree::LinearOctree::partition`], then
+//!    [`octree::LinearOctree::balance`] for face, edge or corner
+//!    [`octant::Connectivity`], then partition again.
+//!
+//! Octants live on a lattice of 2^19 points per side (see [`octant`]); leaves
+//! are kept in Morton order, each rank holding a contiguous run.
+
+pub mod balance;
+pub mod comm;
+pub mod domain;
+pub mod error;
+pub mod geometry;
+pub mod io;
+pub mod octant;
+pub mod octree;
+pub mod partition;
+pub mod refine;
+pub mod report;
+
+pub use error::{Error, ErrorKind, Result};
+pub use octant::{Connectivity, Octant, MAX_LEVEL};
+pub use octree::LinearOctree;

@@ -1,0 +1,121 @@
+//! Morton-order partition: contiguous runs of leaves, equal counts or equal
+//! weights, moved with one `alltoallv`.
+//!
+//! Leaf `i` (global Morton index, or global prefix of weights `s_i` with
+//! total `W`) goes to rank `floor(s_i * P / W)`. That destination never
+//! decreases along the Morton order, so ranks keep contiguous ranges, and it
+//! depends only on the global sequence of weights, never on the current
+//! partition: partitioning twice gives the same result as once.
+
+use crate::error::Result;
+use crate::octant::Octant;
+use crate::octree::LinearOctree;
+
+/// What a partition did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PartitionStats {
+    /// Leaves this rank sent to other ranks.
+    pub sent: u64,
+    /// Leaves this rank received from other ranks.
+    pub received: u64,
+}
+
+/// Destination rank of each item, given its global exclusive prefix of
+/// weights `prefix` and the global total `total`.
+#[inline]
+pub fn destination(prefix: u64, total: u64, ranks: usize) -> usize {
+    if total == 0 {
+        return 0;
+    }
+    ((prefix as u128 * ranks as u128) / total as u128).min(ranks as u128 - 1) as usize
+}
+
+/// First index of each of `parts` contiguous parts of `weights` (with
+/// `weights.len()` appended), by the rule of the module documentation.
+pub fn split_by_weight(weights: &[u64], parts: usize) -> Vec<usize> {
+    let total: u64 = weights.iter().sum();
+    let mut bounds = vec![weights.len(); parts + 1];
+    let mut prefix = 0u64;
+    let mut next = 0usize;
+    for (i, &w) in weights.iter().enumerate() {
+        let d = destination(prefix, total, parts);
+        while next <= d {
+            bounds[next] = i;
+            next += 1;
+        }
+        prefix += w;
+    }
+    bounds
+}
+
+impl LinearOctree {
+    /// Gives every rank the same number of leaves (within one). Collective.
+    pub fn partition(&mut self) -> Result<PartitionStats> {
+        let n = self.global_len();
+        let first = self.global_offsets()[self.comm().rank()];
+        let p = self.comm().size();
+        let dest = |i: usize| destination(first + i as u64, n, p);
+        self.redistribute(dest)
+    }
+
+    /// Gives every rank about the same total weight; `weight` is called once
+    /// per local leaf. Collective.
+    pub fn partition_weighted(&mut self, weight: impl Fn(Octant) -> u64) -> Result<PartitionStats> {
+        let w: Vec<u64> = self.leaves().iter().map(|&o| weight(o)).collect();
+        let local: u64 = w.iter().sum();
+        let sums = self.comm().allgather_u64(local);
+        let r = self.comm().rank();
+        let total: u64 = sums.iter().sum();
+        let mut prefix: Vec<u64> = Vec::with_capacity(w.len());
+        let mut acc: u64 = sums[..r].iter().sum();
+        for &x in &w {
+            prefix.push(acc);
+            acc += x;
+        }
+        let p = self.comm().size();
+        self.redistribute(|i| destination(prefix[i], total, p))
+    }
+
+    /// Sends local leaf `i` to rank `dest(i)` (non-decreasing in `i`).
+    fn redistribute(&mut self, dest: impl Fn(usize) -> usize) -> Result<PartitionStats> {
+        let p = self.comm().size();
+        let me = self.comm().rank();
+        let mut counts = vec![0usize; p];
+        for i in 0..self.local_len() {
+            counts[dest(i)] += 1;
+        }
+        let sent = (self.local_len() - counts[me]) as u64;
+        let keys: Vec<u64> = self.leaves().iter().map(|o| o.key()).collect();
+        let (recv, rc) = self.comm().alltoallv_u64(&keys, &counts);
+        drop(keys);
+        let received = (recv.len() - rc[me]) as u64;
+        *self.leaves_mut() = recv.into_iter().map(Octant::from_key).collect();
+        self.refresh()?;
+        Ok(PartitionStats { sent, received })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_is_contiguous_and_even() {
+        let w = vec![1u64; 10];
+        assert_eq!(split_by_weight(&w, 3), vec![0, 4, 7, 10]);
+        let w = vec![5, 0, 0, 1, 1, 1, 1, 1];
+        let b = split_by_weight(&w, 2);
+        assert_eq!(b, vec![0, 1, 8]);
+        assert_eq!(split_by_weight(&[], 2), vec![0, 0, 0]);
+    }
+
+    #[test]
+    fn destination_is_monotone() {
+        let mut last = 0;
+        for i in 0..1000 {
+            let d = destination(i, 1000, 7);
+            assert!(d >= last && d < 7);
+            last = d;
+        }
+    }
+}

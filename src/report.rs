@@ -1,0 +1,151 @@
+//! Timings, memory and statistics for people running octmesh: a phase table
+//! like the seed paper's, and a JSON record for scripts.
+
+use std::time::Instant;
+
+use crate::comm::Comm;
+
+/// Peak resident set size of this process in bytes (`getrusage`).
+pub fn peak_rss_bytes() -> u64 {
+    // SAFETY: getrusage only writes into the zeroed struct we pass.
+    unsafe {
+        let mut u: libc::rusage = std::mem::zeroed();
+        if libc::getrusage(libc::RUSAGE_SELF, &mut u) == 0 {
+            (u.ru_maxrss as u64) * 1024
+        } else {
+            0
+        }
+    }
+}
+
+/// Wall-clock phases, each reported as the maximum over ranks.
+#[derive(Default)]
+pub struct PhaseTimer {
+    phases: Vec<(String, f64)>,
+}
+
+impl PhaseTimer {
+    /// An empty timer.
+    pub fn new() -> PhaseTimer {
+        PhaseTimer::default()
+    }
+
+    /// Runs `f` as phase `name`, with barriers so the time is the
+    /// collective time of the phase. Collective.
+    pub fn time<T>(&mut self, comm: &dyn Comm, name: &str, f: impl FnOnce() -> T) -> T {
+        comm.barrier();
+        let t0 = Instant::now();
+        let r = f();
+        let mut dt = [t0.elapsed().as_secs_f64()];
+        comm.max_f64(&mut dt);
+        self.phases.push((name.to_string(), dt[0]));
+        r
+    }
+
+    /// Seconds of phase `name` (0 if it did not run).
+    pub fn get(&self, name: &str) -> f64 {
+        self.phases
+            .iter()
+            .filter(|p| p.0 == name)
+            .map(|p| p.1)
+            .sum()
+    }
+
+    /// Phases in the order they ran.
+    pub fn phases(&self) -> &[(String, f64)] {
+        &self.phases
+    }
+}
+
+/// A small ordered JSON object writer (keys in insertion order).
+#[derive(Default)]
+pub struct JsonObject {
+    fields: Vec<(String, String)>,
+}
+
+impl JsonObject {
+    /// An empty object.
+    pub fn new() -> JsonObject {
+        JsonObject::default()
+    }
+
+    /// Adds a number (non-finite values become `null`).
+    pub fn num(&mut self, key: &str, v: f64) -> &mut Self {
+        let s = if v.is_finite() {
+            format!("{v}")
+        } else {
+            "null".into()
+        };
+        self.fields.push((key.into(), s));
+        self
+    }
+
+    /// Adds an integer.
+    pub fn int(&mut self, key: &str, v: u64) -> &mut Self {
+        self.fields.push((key.into(), v.to_string()));
+        self
+    }
+
+    /// Adds a string.
+    pub fn str(&mut self, key: &str, v: &str) -> &mut Self {
+        self.fields.push((key.into(), quote(v)));
+        self
+    }
+
+    /// Adds a nested object.
+    pub fn obj(&mut self, key: &str, v: &JsonObject) -> &mut Self {
+        self.fields.push((key.into(), v.render(1)));
+        self
+    }
+
+    fn render(&self, depth: usize) -> String {
+        let pad = "  ".repeat(depth + 1);
+        let body: Vec<String> = self
+            .fields
+            .iter()
+            .map(|(k, v)| format!("{pad}{}: {v}", quote(k)))
+            .collect();
+        format!("{{\n{}\n{}}}", body.join(",\n"), "  ".repeat(depth))
+    }
+
+    /// The JSON text.
+    pub fn to_json(&self) -> String {
+        self.render(0) + "\n"
+    }
+}
+
+fn quote(s: &str) -> String {
+    let mut o = String::with_capacity(s.len() + 2);
+    o.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => o.push_str("\\\""),
+            '\\' => o.push_str("\\\\"),
+            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
+            c => o.push(c),
+        }
+    }
+    o.push('"');
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_is_well_formed() {
+        let mut inner = JsonObject::new();
+        inner.num("read", 0.5);
+        let mut o = JsonObject::new();
+        o.int("ranks", 2)
+            .str("name", "a\"b")
+            .obj("timings", &inner)
+            .num("bad", f64::NAN);
+        let s = o.to_json();
+        assert!(s.contains("\"ranks\": 2"));
+        assert!(s.contains("\"a\\\"b\""));
+        assert!(s.contains("\"bad\": null"));
+        assert!(peak_rss_bytes() > 0);
+    }
+}
