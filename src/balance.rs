@@ -165,7 +165,7 @@ impl Balancer {
     fn probe_family(&mut self, p: Octant, splits: &mut Vec<(usize, Octant)>) {
         let skip = self.skip[p.child_id() as usize];
         let c = p.coords();
-        let len = p.len() as i64;
+        let len = p.side() as i64;
         let level = p.level();
         for (i, d) in self.offsets.iter().enumerate() {
             if skip & (1 << i) != 0 {
@@ -313,8 +313,9 @@ mod tests {
             let comm: CommRef = Rc::new(SerialComm);
             // Refining towards one interior point leaves level jumps behind.
             let p = [157_286u32, 91_000, 200_001];
-            let contains =
-                |o: Octant| (0..3).all(|k| o.coords()[k] <= p[k] && p[k] < o.coords()[k] + o.len());
+            let contains = |o: Octant| {
+                (0..3).all(|k| o.coords()[k] <= p[k] && p[k] < o.coords()[k] + o.side())
+            };
             let mut t = build_from_callback(comm, 7, contains, NO_LIMIT).unwrap();
             assert!(!brute_force_balanced(t.leaves(), conn));
             let before = t.leaves().to_vec();

@@ -1,6 +1,7 @@
 //! The `octmesh` command: runs the pipeline on a surface, directly or under
 //! `mpirun`, and reports a table of phases.
 
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::rc::Rc;
@@ -143,7 +144,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
         i += consumed;
     }
     if o.surface.is_empty() {
-        return Err(Error::invalid(format!("no surface given\n{USAGE}")));
+        return Err(Error::invalid("no surface given (see octmesh --help)"));
     }
     if o.level == u8::MAX {
         return Err(Error::invalid("--level is required"));
@@ -274,9 +275,9 @@ fn main() -> ExitCode {
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
     let (rank, size) = (comm.rank(), comm.size());
     let result = parse_args(&args).and_then(|o| run_octree(comm.clone(), &o));
-    drop(comm);
-    drop(universe);
-    match result {
+    // Report before MPI_Finalize: once one rank exits non-zero, mpirun may
+    // kill the others before they print.
+    let code = match &result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             if e.message().starts_with("usage:") {
@@ -284,9 +285,20 @@ fn main() -> ExitCode {
                     eprint!("{}", e.message());
                 }
             } else {
-                eprintln!("octmesh: error: {} [rank {rank} of {size}]", e.message());
+                // One write per line so that ranks' lines do not interleave.
+                let line = format!("octmesh: error [rank {rank} of {size}]: {}\n", e.message());
+                let _ = std::io::stderr().write_all(line.as_bytes());
             }
             ExitCode::from(2)
         }
+    };
+    let _ = std::io::stderr().flush();
+    if result.is_err() {
+        // Every rank has printed before any rank exits: mpirun stops the job
+        // at the first non-zero exit.
+        comm.barrier();
     }
+    drop(comm);
+    drop(universe);
+    code
 }

@@ -243,7 +243,7 @@ impl Octant {
 
     /// Side length in lattice units.
     #[inline]
-    pub const fn len(self) -> u32 {
+    pub const fn side(self) -> u32 {
         ROOT_LEN >> self.level()
     }
 
@@ -361,7 +361,7 @@ impl Octant {
     /// outside the root cube.
     #[inline]
     pub fn neighbor(self, d: [i32; 3]) -> Option<Octant> {
-        let len = self.len() as i64;
+        let len = self.side() as i64;
         let c = self.coords();
         let mut n = [0u32; 3];
         for k in 0..3 {
@@ -395,14 +395,14 @@ impl Octant {
 
     /// Whether the octant touches the boundary of the root cube.
     pub fn touches_domain_boundary(self) -> bool {
-        let len = self.len();
+        let len = self.side();
         self.coords().iter().any(|&c| c == 0 || c + len == ROOT_LEN)
     }
 
     /// Lower and upper corners in lattice units.
     pub fn bounds_f64(self) -> ([f64; 3], [f64; 3]) {
         let c = self.coords();
-        let l = self.len() as f64;
+        let l = self.side() as f64;
         let lo = [c[0] as f64, c[1] as f64, c[2] as f64];
         (lo, [lo[0] + l, lo[1] + l, lo[2] + l])
     }
@@ -411,8 +411,8 @@ impl Octant {
     /// overlapping, and the dimension of their contact: 2 face, 1 edge,
     /// 0 corner.
     pub fn contact(self, other: Octant) -> Option<u32> {
-        let (a, la) = (self.coords(), self.len() as i64);
-        let (b, lb) = (other.coords(), other.len() as i64);
+        let (a, la) = (self.coords(), self.side() as i64);
+        let (b, lb) = (other.coords(), other.side() as i64);
         let mut dim = 0;
         for k in 0..3 {
             let (a0, a1) = (a[k] as i64, a[k] as i64 + la);

@@ -243,7 +243,7 @@ impl SurfaceWalker<'_> {
             return self.check_limit();
         }
         let (min, _) = o.bounds_f64();
-        let half = (o.len() / 2) as f64;
+        let half = (o.side() / 2) as f64;
         for i in 0..8u32 {
             let c = o.child(i);
             let cmin = [

@@ -36,3 +36,10 @@ for b in none face edge corner; do
   done
   echo "ok $b: $(cat "$tmp/c_${b}_1_txt")"
 done
+
+# Binary output read back and rewritten as text must equal the text output.
+$MPIRUN -np 2 "$bin" --in "$tmp/o_corner_1.bin" --balance none \
+  --out "$tmp/rt.txt" >/dev/null
+cmp -s "$tmp/rt.txt" "$tmp/o_corner_1.txt" ||
+  { echo "FAIL: binary and text outputs differ"; exit 1; }
+echo "ok binary/text round trip"

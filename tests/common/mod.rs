@@ -1,0 +1,237 @@
+//! Helpers shared by the integration tests: running programs under `mpirun`
+//! with a time limit, locating the shared STL models, and checks written
+//! independently of the library's algorithms.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use octmesh::Octant;
+
+/// The `octmesh` command built for this test run.
+pub fn octmesh_bin() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_octmesh"))
+}
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A fresh scratch directory for one test.
+pub fn scratch(name: &str) -> PathBuf {
+    let d = repo().join("target").join("test-scratch").join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("create scratch dir");
+    d
+}
+
+/// A model from `../shared/data`, or `None` (with the reason printed) when
+/// the directory is not there.
+pub fn shared_model(name: &str) -> Option<PathBuf> {
+    let p = repo().join("..").join("shared").join("data").join(name);
+    if p.is_file() {
+        Some(p)
+    } else {
+        println!(
+            "SKIP: {} not found (the shared models are not beside the repository)",
+            p.display()
+        );
+        None
+    }
+}
+
+/// Runs `prog args` under `mpirun -np np`, killing it after `limit`.
+/// Returns the output, or panics on a hang.
+pub fn mpirun(np: usize, prog: &Path, args: &[&str], limit: Duration) -> Output {
+    mpirun_env(np, prog, args, &[], limit)
+}
+
+/// [`mpirun`] with extra environment variables for the launched processes.
+pub fn mpirun_env(
+    np: usize,
+    prog: &Path,
+    args: &[&str],
+    env: &[(&str, &str)],
+    limit: Duration,
+) -> Output {
+    let mut cmd = Command::new("mpirun");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_rmaps_base_oversubscribe", "1")
+        .arg("--oversubscribe")
+        .arg("-np")
+        .arg(np.to_string())
+        .arg(prog)
+        .args(args);
+    run_with_limit(cmd, limit)
+}
+
+/// Runs a command with a time limit; panics if it does not finish.
+pub fn run_with_limit(mut cmd: Command, limit: Duration) -> Output {
+    let desc = format!("{cmd:?}");
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot start {desc}: {e}"));
+    // Drain the pipes in threads so a chatty child cannot block on them.
+    let mut so = child.stdout.take().expect("stdout");
+    let mut se = child.stderr.take().expect("stderr");
+    let t1 = std::thread::spawn(move || {
+        let mut b = Vec::new();
+        std::io::Read::read_to_end(&mut so, &mut b).ok();
+        b
+    });
+    let t2 = std::thread::spawn(move || {
+        let mut b = Vec::new();
+        std::io::Read::read_to_end(&mut se, &mut b).ok();
+        b
+    });
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            break s;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{desc} did not finish within {limit:?} (hang?)");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Output {
+        status,
+        stdout: t1.join().unwrap_or_default(),
+        stderr: t2.join().unwrap_or_default(),
+    }
+}
+
+/// Runs the octmesh command and asserts success.
+pub fn octmesh_ok(np: usize, args: &[&str]) -> Output {
+    let out = mpirun(np, &octmesh_bin(), args, Duration::from_secs(600));
+    assert!(
+        out.status.success(),
+        "octmesh {args:?} on {np} ranks failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Reads a leaf file written by octmesh or by the p4est reference program.
+pub fn leaves(path: &Path) -> Vec<Octant> {
+    octmesh::io::leaves::read_leaves(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Completeness and linearity, checked by volume and order only: sorted,
+/// pairwise disjoint, and the volumes add up to the root cube.
+pub fn assert_complete_linear(l: &[Octant]) {
+    let mut vol: u128 = 0;
+    for w in l.windows(2) {
+        assert!(w[0] < w[1], "not sorted: {:?} {:?}", w[0], w[1]);
+        assert!(!w[0].overlaps(w[1]), "overlap: {:?} {:?}", w[0], w[1]);
+    }
+    for o in l {
+        vol += (o.side() as u128).pow(3);
+    }
+    assert_eq!(
+        vol,
+        (octmesh::octant::ROOT_LEN as u128).pow(3),
+        "volumes do not fill the root"
+    );
+}
+
+/// Brute-force 2:1 check written without the balance code: every pair of
+/// leaves whose closed boxes touch with a contact of the counted dimension
+/// differs by at most one level. Pairs are found through a uniform grid of
+/// buckets; within a bucket every pair is compared directly.
+pub fn assert_balanced(l: &[Octant], conn: octmesh::Connectivity) {
+    const G: i64 = 16; // buckets per side
+    let root = octmesh::octant::ROOT_LEN as i64;
+    let cell = root / G;
+    let mut buckets: Vec<Vec<usize>> = vec![Vec::new(); (G * G * G) as usize];
+    for (i, o) in l.iter().enumerate() {
+        let c = o.coords();
+        let len = o.side() as i64;
+        // Closed box: include the buckets the upper faces touch.
+        let lo: Vec<i64> = (0..3).map(|k| (c[k] as i64 / cell).max(0)).collect();
+        let hi: Vec<i64> = (0..3)
+            .map(|k| ((c[k] as i64 + len) / cell).min(G - 1))
+            .collect();
+        for x in lo[0]..=hi[0] {
+            for y in lo[1]..=hi[1] {
+                for z in lo[2]..=hi[2] {
+                    buckets[(x + G * (y + G * z)) as usize].push(i);
+                }
+            }
+        }
+    }
+    for b in &buckets {
+        for (ii, &i) in b.iter().enumerate() {
+            for &j in &b[ii + 1..] {
+                let (a, c) = (l[i], l[j]);
+                let (pa, la) = (a.coords(), a.side() as i64);
+                let (pc, lc) = (c.coords(), c.side() as i64);
+                let mut touching = true;
+                let mut dim = 0;
+                for k in 0..3 {
+                    let (a0, a1) = (pa[k] as i64, pa[k] as i64 + la);
+                    let (c0, c1) = (pc[k] as i64, pc[k] as i64 + lc);
+                    if a1 < c0 || c1 < a0 {
+                        touching = false;
+                    } else if a1 > c0 && c1 > a0 {
+                        dim += 1;
+                    }
+                }
+                let counted = match conn {
+                    octmesh::Connectivity::Face => dim == 2,
+                    octmesh::Connectivity::Edge => dim == 1 || dim == 2,
+                    octmesh::Connectivity::Corner => dim <= 2,
+                };
+                if touching && counted {
+                    assert!(
+                        a.level().abs_diff(c.level()) <= 1,
+                        "{conn:?} balance violated between {a:?} and {c:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// The p4est reference program, built on first use.
+pub fn p4est_ref() -> PathBuf {
+    let dir = repo().join("tools").join("p4est_ref");
+    let st = Command::new("make")
+        .arg("-s")
+        .arg("-C")
+        .arg(&dir)
+        .status()
+        .expect("run make for tools/p4est_ref");
+    assert!(st.success(), "building tools/p4est_ref failed");
+    dir.join("octmesh_p4est")
+}
+
+/// Writes a binary STL (normals zero) for tests.
+pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]], header: &[u8]) {
+    let mut b = Vec::new();
+    let mut h = [b' '; 80];
+    h[..header.len()].copy_from_slice(header);
+    b.extend_from_slice(&h);
+    b.extend_from_slice(&(tris.len() as u32).to_le_bytes());
+    for t in tris {
+        b.extend_from_slice(&[0u8; 12]);
+        for v in t {
+            for c in v {
+                b.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        b.extend_from_slice(&[0u8; 2]);
+    }
+    std::fs::write(path, b).expect("write stl");
+}
