@@ -11,12 +11,19 @@
 //! Biros 2008). So the result is the coarsest balanced refinement, which is
 //! unique: the same on any number of ranks, and the same as p4est's.
 //!
-//! Two facts keep the work small:
+//! Three facts keep the work small:
 //! - the siblings of `p` are always covered (a leaf containing one would
-//!   contain `p`), so only the neighbours outside `p`'s parent are probed;
+//!   contain `p`), so only the neighbours outside `p`'s parent matter;
+//! - such a neighbour `m` is covered exactly when its parent `q` is not a
+//!   leaf and not inside one, and covering `m` means splitting `q`; so a
+//!   family probes the distinct parents `q` (at most 7) rather than every
+//!   `m` (up to 19);
 //! - an internal node's rule follows from its descendants' rules, so only
 //!   families that contain at least one leaf are processed, and after a split
 //!   only the new families.
+//!
+//! The probes of one level are radix-sorted and resolved in one sequential
+//! sweep over the leaves, which is far cheaper than a search per probe.
 //!
 //! # Passes and rounds
 //!
@@ -24,13 +31,14 @@
 //! cover a level-`l-1` octant only creates leaves coarser than `l`, which are
 //! processed later in the same pass. A probe `m` that lies in another rank's
 //! range is sent to that rank; a probe that straddles a rank boundary cannot
-//! be strictly inside a leaf and is dropped. Each round is one local pass and
+//! be inside a leaf and is dropped. Each round is one local pass and
 //! one `alltoallv` of probes; rounds repeat until no rank sends anything, so
 //! a ripple may cross any number of ranks.
 
 use crate::error::Result;
 use crate::octant::{morton_encode, Connectivity, Octant, MAX_LEVEL, ROOT_LEN};
-use crate::octree::{containing_leaf, LinearOctree};
+use crate::octree::{LeafIndex, LinearOctree};
+use crate::sort::radix_sort_bits;
 
 /// What a balance did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -102,6 +110,7 @@ struct Balancer {
     end: u64,
     first_cell: Vec<u64>,
     leaves: Vec<Octant>,
+    spare: Vec<Octant>,
     /// `pending[l]`: parents of families at level `l` still to process.
     pending: Vec<Vec<Octant>>,
     outbox: Vec<Vec<u64>>,
@@ -111,7 +120,10 @@ impl Balancer {
     fn new(tree: &mut LinearOctree, conn: Connectivity) -> Balancer {
         let (begin, end) = tree.local_cells();
         let p = tree.comm().size();
-        let leaves = std::mem::take(tree.leaves_mut());
+        let mut leaves = std::mem::take(tree.leaves_mut());
+        // Headroom for the balance's growth, so the leaf buffers are not
+        // reallocated (and their pages faulted in again) at every level.
+        leaves.reserve(leaves.len() / 4);
         let mut pending = vec![Vec::new(); MAX_LEVEL as usize + 1];
         for &o in &leaves {
             let l = o.level() as usize;
@@ -124,6 +136,7 @@ impl Balancer {
             }
         }
         Balancer {
+            spare: Vec::with_capacity(leaves.len() + leaves.len() / 4),
             offsets: conn.offsets(),
             skip: sibling_masks(),
             begin,
@@ -143,30 +156,64 @@ impl Balancer {
     /// Processes all pending families, finest level first.
     fn local_pass(&mut self) {
         let mut splits: Vec<(usize, Octant)> = Vec::new();
+        let mut probes: Vec<u64> = Vec::new();
+        let mut tmp: Vec<u64> = Vec::new();
         for l in (2..=MAX_LEVEL as usize).rev() {
             let mut fams = std::mem::take(&mut self.pending[l]);
             if fams.is_empty() {
                 continue;
             }
-            fams.sort_unstable();
-            fams.dedup();
-            splits.clear();
-            for &p in &fams {
-                self.probe_family(p, &mut splits);
+            if !fams.windows(2).all(|w| w[0] <= w[1]) {
+                fams.sort_unstable();
             }
+            fams.dedup();
+            probes.clear();
+            for &p in &fams {
+                self.probe_family(p, &mut probes);
+            }
+            // Resolve the probes in one sorted sweep over the leaves instead
+            // of a random-access search each: the sweep is sequential in
+            // memory.
+            let qlevel = (l - 2) as u8;
+            let low = 3 * (crate::octant::LATTICE_BITS - qlevel as u32);
+            radix_sort_bits(&mut probes, &mut tmp, low, 57);
+            probes.dedup();
+            splits.clear();
+            let mut i = 0usize;
+            for &q in &probes {
+                while i + 1 < self.leaves.len() && self.leaves[i + 1].cell_begin() <= q {
+                    i += 1;
+                }
+                if self.leaves[i].level() <= qlevel {
+                    // q is a leaf or inside one: it must be split.
+                    splits.push((i, Octant::from_parts(q, qlevel + 1)));
+                }
+            }
+            self.pending[l] = fams; // keep the allocation
+            self.pending[l].clear();
             if !splits.is_empty() {
                 self.apply_splits(&mut splits);
             }
         }
     }
 
-    /// Probes the neighbours of family parent `p`.
+    /// For family parent `p` (level `l - 1`), collects the octants `q` at
+    /// level `l - 2` that must not be leaves: the parents of `p`'s counted
+    /// neighbours outside `p`'s own parent. A neighbour `m` is covered
+    /// exactly when its parent `q` is an internal node, and splitting `q`
+    /// creates `m` and its siblings at once, so probing `q` (at most 7 per
+    /// family) replaces probing every `m` (up to 19). Local `q` go to
+    /// `probes` (Morton codes); `q` inside one other rank go to its outbox
+    /// as their first child; `q` straddling ranks are internal already.
     #[inline]
-    fn probe_family(&mut self, p: Octant, splits: &mut Vec<(usize, Octant)>) {
+    fn probe_family(&mut self, p: Octant, probes: &mut Vec<u64>) {
         let skip = self.skip[p.child_id() as usize];
         let c = p.coords();
         let len = p.side() as i64;
-        let level = p.level();
+        let qmask = !(2 * p.side() - 1);
+        let qlevel = p.level() - 1;
+        let mut seen = [u64::MAX; 8];
+        let mut nseen = 0;
         for (i, d) in self.offsets.iter().enumerate() {
             if skip & (1 << i) != 0 {
                 continue;
@@ -178,17 +225,20 @@ impl Balancer {
             if x < 0 || y < 0 || z < 0 || x >= r || y >= r || z >= r {
                 continue;
             }
-            let m = Octant::from_parts(morton_encode(x as u32, y as u32, z as u32), level);
-            let (mb, me) = (m.cell_begin(), m.cell_end());
-            if mb >= self.begin && me <= self.end {
-                let idx = containing_leaf(&self.leaves, m);
-                if self.leaves[idx].level() < level {
-                    splits.push((idx, m));
-                }
-            } else if me <= self.begin || mb >= self.end {
-                let q = self.owner(mb);
-                if me <= self.first_cell[q + 1] {
-                    self.outbox[q].push(m.key());
+            let qb = morton_encode(x as u32 & qmask, y as u32 & qmask, z as u32 & qmask);
+            if seen[..nseen].contains(&qb) {
+                continue;
+            }
+            seen[nseen] = qb;
+            nseen += 1;
+            let q = Octant::from_parts(qb, qlevel);
+            let qe = q.cell_end();
+            if qb >= self.begin && qe <= self.end {
+                probes.push(qb);
+            } else if qe <= self.begin || qb >= self.end {
+                let r = self.owner(qb);
+                if qe <= self.first_cell[r + 1] {
+                    self.outbox[r].push(q.child(0).key());
                 }
             }
         }
@@ -198,7 +248,12 @@ impl Balancer {
     /// that covers every required octant inside it.
     fn apply_splits(&mut self, splits: &mut [(usize, Octant)]) {
         splits.sort_unstable();
-        let mut out = Vec::with_capacity(self.leaves.len() + 8 * splits.len());
+        let mut out = std::mem::take(&mut self.spare);
+        out.clear();
+        let need = self.leaves.len() + 8 * splits.len();
+        if out.capacity() < need {
+            out.reserve(need + need / 4);
+        }
         let mut done = 0usize;
         let mut i = 0;
         let mut members = Vec::new();
@@ -226,17 +281,18 @@ impl Balancer {
             done = idx + 1;
         }
         out.extend_from_slice(&self.leaves[done..]);
-        self.leaves = out;
+        self.spare = std::mem::replace(&mut self.leaves, out);
     }
 
     /// Applies probes received from other ranks.
     fn apply_probes(&mut self, probes: Vec<Octant>) {
         let mut splits = Vec::new();
+        let index = LeafIndex::new(&self.leaves, self.begin, self.end);
         for m in probes {
             if m.cell_begin() < self.begin || m.cell_end() > self.end {
                 continue; // stale: cannot happen with a consistent partition
             }
-            let idx = containing_leaf(&self.leaves, m);
+            let idx = index.find(&self.leaves, m.cell_begin());
             if self.leaves[idx].level() < m.level() {
                 splits.push((idx, m));
             }

@@ -28,6 +28,7 @@ pub mod octree;
 pub mod partition;
 pub mod refine;
 pub mod report;
+pub mod sort;
 
 pub use error::{Error, ErrorKind, Result};
 pub use octant::{Connectivity, Octant, MAX_LEVEL};

@@ -246,3 +246,53 @@ mod tests {
         assert!(LinearOctree::from_local_leaves(c, l).is_err());
     }
 }
+
+/// Finds the leaf containing a cell in a sorted complete run of leaves,
+/// faster than a binary search over the whole run: the run's cell range is
+/// cut into about one bucket per leaf, and a lookup searches only the
+/// leaves that begin in one bucket.
+#[derive(Clone, Debug, Default)]
+pub struct LeafIndex {
+    begin: u64,
+    shift: u32,
+    /// `start[b]`: number of leaves beginning before bucket `b`.
+    start: Vec<u32>,
+}
+
+impl LeafIndex {
+    /// Indexes `leaves`, which must cover `begin..end` contiguously.
+    pub fn new(leaves: &[Octant], begin: u64, end: u64) -> LeafIndex {
+        let span = end.saturating_sub(begin).max(1);
+        let want = (leaves.len() as u64).clamp(1, 1 << 26);
+        let mut shift = 0;
+        while (span >> shift) > want {
+            shift += 1;
+        }
+        let buckets = ((span - 1) >> shift) as usize + 1;
+        let mut start = vec![0u32; buckets + 1];
+        let mut i = 0usize;
+        for (b, s) in start.iter_mut().enumerate() {
+            let cell = begin + ((b as u64) << shift);
+            while i < leaves.len() && leaves[i].cell_begin() < cell {
+                i += 1;
+            }
+            *s = i as u32;
+        }
+        start[buckets] = leaves.len() as u32;
+        LeafIndex {
+            begin,
+            shift,
+            start,
+        }
+    }
+
+    /// Index of the leaf containing cell `cell` (which must lie in the
+    /// indexed range).
+    #[inline]
+    pub fn find(&self, leaves: &[Octant], cell: u64) -> usize {
+        let b = ((cell - self.begin) >> self.shift) as usize;
+        let lo = self.start[b] as usize;
+        let hi = self.start[b + 1] as usize;
+        lo + leaves[lo..hi].partition_point(|x| x.cell_begin() <= cell) - 1
+    }
+}
