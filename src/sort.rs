@@ -18,7 +18,7 @@ pub fn radix_sort_bits(v: &mut Vec<u64>, tmp: &mut Vec<u64>, lo: u32, hi: u32) {
         for &k in v.iter() {
             count[((k >> shift) as usize) & (BUCKETS - 1)] += 1;
         }
-        if count.iter().any(|&c| c == v.len()) {
+        if count.contains(&v.len()) {
             shift += DIGIT; // this digit is the same everywhere
             continue;
         }
