@@ -217,6 +217,12 @@ impl Octant {
         Octant(key)
     }
 
+    /// Views a slice of octants as their keys, without copying.
+    pub fn as_keys(octants: &[Octant]) -> &[u64] {
+        // SAFETY: Octant is repr(transparent) over u64.
+        unsafe { std::slice::from_raw_parts(octants.as_ptr() as *const u64, octants.len()) }
+    }
+
     /// The packed key; integer order is Morton pre-order.
     #[inline]
     pub const fn key(self) -> u64 {

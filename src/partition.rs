@@ -52,10 +52,19 @@ impl LinearOctree {
     /// Gives every rank the same number of leaves (within one). Collective.
     pub fn partition(&mut self) -> Result<PartitionStats> {
         let n = self.global_len();
-        let first = self.global_offsets()[self.comm().rank()];
         let p = self.comm().size();
-        let dest = |i: usize| destination(first + i as u64, n, p);
-        self.redistribute(dest)
+        let first = self.global_offsets()[self.comm().rank()];
+        let last = first + self.local_len() as u64;
+        // Rank q receives global indices [ceil(q n / p), ceil((q+1) n / p)),
+        // the indices whose destination is q.
+        let start = |q: usize| ((q as u128 * n as u128).div_ceil(p as u128)) as u64;
+        let counts = (0..p)
+            .map(|q| {
+                let (a, b) = (start(q).max(first), start(q + 1).min(last));
+                b.saturating_sub(a) as usize
+            })
+            .collect();
+        self.send_counts(counts)
     }
 
     /// Gives every rank about the same total weight; `weight` is called once
@@ -78,16 +87,26 @@ impl LinearOctree {
 
     /// Sends local leaf `i` to rank `dest(i)` (non-decreasing in `i`).
     fn redistribute(&mut self, dest: impl Fn(usize) -> usize) -> Result<PartitionStats> {
-        let p = self.comm().size();
-        let me = self.comm().rank();
-        let mut counts = vec![0usize; p];
+        let mut counts = vec![0usize; self.comm().size()];
         for i in 0..self.local_len() {
             counts[dest(i)] += 1;
         }
+        self.send_counts(counts)
+    }
+
+    /// Sends the first `counts[0]` local leaves to rank 0, the next
+    /// `counts[1]` to rank 1, and so on.
+    fn send_counts(&mut self, counts: Vec<usize>) -> Result<PartitionStats> {
+        let me = self.comm().rank();
         let sent = (self.local_len() - counts[me]) as u64;
-        let keys: Vec<u64> = self.leaves().iter().map(|o| o.key()).collect();
-        let (recv, rc) = self.comm().alltoallv_u64(&keys, &counts);
-        drop(keys);
+        let mut moving = [sent];
+        self.comm().sum_u64(&mut moving);
+        if moving[0] == 0 {
+            return Ok(PartitionStats::default());
+        }
+        let (recv, rc) = self
+            .comm()
+            .alltoallv_u64(Octant::as_keys(self.leaves()), &counts);
         let received = (recv.len() - rc[me]) as u64;
         *self.leaves_mut() = recv.into_iter().map(Octant::from_key).collect();
         self.refresh()?;
