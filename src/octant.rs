@@ -333,6 +333,15 @@ impl Octant {
         self.contains(other) || other.contains(self)
     }
 
+    /// The eight children of the parent (the family), in Morton order; the
+    /// root's family is just the root, repeated.
+    pub fn siblings(self) -> [Octant; 8] {
+        if self.level() == 0 {
+            return [self; 8];
+        }
+        self.parent().children()
+    }
+
     /// Whether both have the same parent and level (an octant is its own
     /// sibling).
     pub fn is_sibling_of(self, other: Octant) -> bool {
@@ -529,7 +538,8 @@ mod tests {
         let n = o.face_neighbor(1).unwrap();
         assert_eq!(n.coords(), [ROOT_LEN / 4, 0, 0]);
         assert_eq!(o.contact(n), Some(2));
-        assert_eq!(o.contact(o.edge_neighbor(11).unwrap()), Some(1)); // +x -z? offset [1,0,-1] out
+        assert_eq!(o.contact(o.edge_neighbor(11).unwrap()), Some(1)); // offset [1, 0, 1]
+        assert!(o.siblings().contains(&o) && o.siblings().iter().all(|s| s.is_sibling_of(o)));
         let c = o.corner_neighbor(7).unwrap();
         assert_eq!(o.contact(c), Some(0));
         assert_eq!(o.contact(o.children()[0]), None);
