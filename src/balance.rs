@@ -37,7 +37,7 @@
 
 use crate::error::Result;
 use crate::octant::{morton_encode, Connectivity, Octant, MAX_LEVEL, ROOT_LEN};
-use crate::octree::{LeafIndex, LinearOctree};
+use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
 use crate::sort::radix_sort_bits;
 
 /// What a balance did.
@@ -126,14 +126,7 @@ impl Balancer {
         leaves.reserve(leaves.len() / 4);
         let mut pending = vec![Vec::new(); MAX_LEVEL as usize + 1];
         for &o in &leaves {
-            let l = o.level() as usize;
-            if l >= 2 {
-                let q = o.parent();
-                // Siblings that are leaves are usually adjacent: skip repeats.
-                if pending[l].last() != Some(&q) {
-                    pending[l].push(q);
-                }
-            }
+            queue_family(&mut pending, o);
         }
         Balancer {
             spare: Vec::with_capacity(leaves.len() + leaves.len() / 4),
@@ -146,11 +139,6 @@ impl Balancer {
             pending,
             outbox: vec![Vec::new(); p],
         }
-    }
-
-    fn owner(&self, cell: u64) -> usize {
-        let p = self.first_cell.len() - 1;
-        self.first_cell[..p].partition_point(|&f| f <= cell) - 1
     }
 
     /// Processes all pending families, finest level first.
@@ -236,7 +224,7 @@ impl Balancer {
             if qb >= self.begin && qe <= self.end {
                 probes.push(qb);
             } else if qe <= self.begin || qb >= self.end {
-                let r = self.owner(qb);
+                let r = owner_of_cell(&self.first_cell, qb);
                 if qe <= self.first_cell[r + 1] {
                     self.outbox[r].push(q.child(0).key());
                 }
@@ -271,11 +259,7 @@ impl Balancer {
             new_leaves.clear();
             refine_to(self.leaves[idx], &members, &mut new_leaves);
             for &o in &new_leaves {
-                let l = o.level() as usize;
-                let q = o.parent();
-                if l >= 2 && self.pending[l].last() != Some(&q) {
-                    self.pending[l].push(q);
-                }
+                queue_family(&mut self.pending, o);
             }
             out.extend_from_slice(&new_leaves);
             done = idx + 1;
@@ -312,6 +296,18 @@ impl Balancer {
             send.append(o);
         }
         (send, counts)
+    }
+}
+
+/// Queues the family of leaf `o` (its parent) for processing at `o`'s level.
+/// Sibling leaves are usually adjacent, so a repeat of the last entry is
+/// skipped here; the rest are removed by the sort before processing.
+#[inline]
+fn queue_family(pending: &mut [Vec<Octant>], o: Octant) {
+    let l = o.level() as usize;
+    let q = o.parent();
+    if l >= 2 && pending[l].last() != Some(&q) {
+        pending[l].push(q);
     }
 }
 

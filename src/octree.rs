@@ -118,8 +118,7 @@ impl LinearOctree {
 
     /// The rank whose range holds finest cell `cell`.
     pub fn owner_of_cell(&self, cell: u64) -> usize {
-        let p = self.comm.size();
-        self.first_cell[..p].partition_point(|&f| f <= cell) - 1
+        owner_of_cell(&self.first_cell, cell)
     }
 
     /// Index of the local leaf containing the anchor of `o`, if `o`'s anchor
@@ -192,6 +191,15 @@ fn layout(comm: &dyn crate::comm::Comm, leaves: &[Octant]) -> Result<(Vec<u64>, 
         offsets[r + 1] = offsets[r] + counts[r];
     }
     Ok((first_cell, offsets))
+}
+
+/// The rank whose range holds finest cell `cell`, given the per-rank first
+/// cells with the total appended (empty ranks share their successor's first
+/// cell and are never chosen).
+#[inline]
+pub fn owner_of_cell(first_cell: &[u64], cell: u64) -> usize {
+    let p = first_cell.len() - 1;
+    first_cell[..p].partition_point(|&f| f <= cell) - 1
 }
 
 /// Index of the leaf that contains the anchor of `o` in a sorted complete
