@@ -59,6 +59,8 @@ impl LinearOctree {
     pub fn balance(&mut self, conn: Connectivity) -> Result<BalanceStats> {
         let comm = self.comm().clone();
         let before = self.local_len();
+        // Balancing for a weaker contact keeps a stronger balance.
+        let strongest = self.balanced().map_or(conn, |b| b.max(conn));
         let mut b = Balancer::new(self, conn);
         let mut stats = BalanceStats::default();
         loop {
@@ -80,6 +82,7 @@ impl LinearOctree {
         *self.leaves_mut() = leaves;
         stats.leaves_added = (self.local_len() - before) as u64;
         self.refresh()?;
+        self.set_balanced(Some(strongest));
         Ok(stats)
     }
 }

@@ -18,11 +18,14 @@
 //! are kept in Morton order, each rank holding a contiguous run.
 
 pub mod balance;
+pub mod classify;
 pub mod comm;
 pub mod domain;
 pub mod error;
 pub mod geometry;
+pub mod ghost;
 pub mod io;
+pub mod mesh;
 pub mod octant;
 pub mod octree;
 pub mod partition;

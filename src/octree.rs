@@ -9,7 +9,7 @@
 
 use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{Octant, CELLS, MAX_LEVEL};
+use crate::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
 
 /// A distributed, complete, linear octree (see the module documentation).
 pub struct LinearOctree {
@@ -17,6 +17,7 @@ pub struct LinearOctree {
     leaves: Vec<Octant>,
     first_cell: Vec<u64>,
     offsets: Vec<u64>,
+    balanced: Option<Connectivity>,
 }
 
 impl std::fmt::Debug for LinearOctree {
@@ -42,6 +43,7 @@ impl LinearOctree {
             leaves,
             first_cell: Vec::new(),
             offsets: Vec::new(),
+            balanced: None,
         };
         t.refresh()?;
         Ok(t)
@@ -75,6 +77,17 @@ impl LinearOctree {
         Ok(())
     }
 
+    /// The strongest connectivity the octree is known to be 2:1 balanced
+    /// for: set by [`LinearOctree::balance`], kept by partitioning, cleared
+    /// by refinement.
+    pub fn balanced(&self) -> Option<Connectivity> {
+        self.balanced
+    }
+
+    pub(crate) fn set_balanced(&mut self, conn: Option<Connectivity>) {
+        self.balanced = conn;
+    }
+
     /// The communicator.
     pub fn comm(&self) -> &CommRef {
         &self.comm
@@ -87,6 +100,9 @@ impl LinearOctree {
 
     /// Replaces the local leaves (crate internal: callers refresh after).
     pub(crate) fn leaves_mut(&mut self) -> &mut Vec<Octant> {
+        // Any change of the leaf set may break balance; `balance` and
+        // `partition` restore the flag themselves.
+        self.balanced = None;
         &mut self.leaves
     }
 

@@ -42,6 +42,11 @@ impl PhaseTimer {
         r
     }
 
+    /// Adds a phase timed elsewhere (already the maximum over ranks).
+    pub fn record(&mut self, name: &str, secs: f64) {
+        self.phases.push((name.to_string(), secs));
+    }
+
     /// Seconds of phase `name` (0 if it did not run).
     pub fn get(&self, name: &str) -> f64 {
         self.phases
@@ -95,6 +100,12 @@ impl JsonObject {
     /// Adds a nested object.
     pub fn obj(&mut self, key: &str, v: &JsonObject) -> &mut Self {
         self.fields.push((key.into(), v.render(1)));
+        self
+    }
+
+    /// Appends all fields of `other`.
+    pub fn merge(&mut self, other: &JsonObject) -> &mut Self {
+        self.fields.extend(other.fields.iter().cloned());
         self
     }
 
