@@ -6,19 +6,26 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::rc::Rc;
 
+use octmesh::classify::{classify_leaves, CutRule, Keep};
 use octmesh::comm::{agree, CommRef, MpiComm};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::load_surface;
 use octmesh::io::leaves::write_leaves;
+use octmesh::io::vtu::{write_parallel, VtuPiece};
+use octmesh::mesh::{Mesh, MeshOptions};
 use octmesh::refine::{construct_for_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::report::{peak_rss_bytes, JsonObject, PhaseTimer};
 use octmesh::{Connectivity, Error, Result};
 
 const USAGE: &str = "\
 usage: octmesh octree <file.stl | sphere | torus> --level L [options]
+       octmesh mesh   <file.stl | sphere | torus> --level L [options]
 
-Builds the surface-refined linear octree, partitions it over the MPI ranks
-and 2:1-balances it. Leaves touching the surface are at level L (at most 18).
+octree: builds the surface-refined linear octree, partitions it over the MPI
+ranks and 2:1-balances it. Leaves touching the surface are at level L (at
+most 18).
+mesh: then builds the trilinear hexahedral mesh (ghost layer, independent and
+hanging nodes, global numbering) of the kept elements, and writes it.
 
 options:
   --level L             refinement level of the leaves touching the surface
@@ -33,9 +40,18 @@ options:
                         lattice units of 2^-19 of the cube; .bin = binary)
   --write-refined FILE  write the leaves before balance, same format
   --quiet               print nothing but errors
+
+mesh options:
+  --keep WHICH          all | inside (solid) | outside (fluid); default all
+  --cut-rule RULE       for inside/outside, leaves touching the surface are
+                        kept when their centre is on the kept side (center,
+                        the default), always (all) or never (none)
+  --out NAME.pvtu       write one binary VTU per rank and a PVTU
+  (--balance must be edge or corner; corner is the default)
 ";
 
 struct Options {
+    command: Command,
     surface: String,
     level: u8,
     balance: Option<Connectivity>,
@@ -46,19 +62,32 @@ struct Options {
     write_leaves: Option<PathBuf>,
     write_refined: Option<PathBuf>,
     quiet: bool,
+    keep: Keep,
+    cut_rule: CutRule,
+    out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Command {
+    Octree,
+    Mesh,
 }
 
 fn parse_args(args: &[String]) -> Result<Options> {
     if args.is_empty() || args[0] == "--help" || args[0] == "-h" {
         return Err(Error::invalid(USAGE));
     }
-    if args[0] != "octree" {
-        return Err(Error::invalid(format!(
-            "unknown command '{}'\n{USAGE}",
-            args[0]
-        )));
-    }
+    let command = match args[0].as_str() {
+        "octree" => Command::Octree,
+        "mesh" => Command::Mesh,
+        other => {
+            return Err(Error::invalid(format!(
+                "unknown command '{other}'\n{USAGE}"
+            )))
+        }
+    };
     let mut o = Options {
+        command,
         surface: String::new(),
         level: u8::MAX,
         balance: Some(Connectivity::Corner),
@@ -69,6 +98,9 @@ fn parse_args(args: &[String]) -> Result<Options> {
         write_leaves: None,
         write_refined: None,
         quiet: false,
+        keep: Keep::All,
+        cut_rule: CutRule::Center,
+        out: None,
     };
     let mut i = 1;
     let value = |i: usize, name: &str| -> Result<String> {
@@ -126,6 +158,17 @@ fn parse_args(args: &[String]) -> Result<Options> {
             "--stats" => o.stats = Some(value(i, a)?.into()),
             "--write-leaves" => o.write_leaves = Some(value(i, a)?.into()),
             "--write-refined" => o.write_refined = Some(value(i, a)?.into()),
+            "--keep" if command == Command::Mesh => o.keep = Keep::parse(&value(i, a)?)?,
+            "--cut-rule" if command == Command::Mesh => o.cut_rule = CutRule::parse(&value(i, a)?)?,
+            "--out" if command == Command::Mesh => {
+                let v = value(i, a)?;
+                if !v.ends_with(".pvtu") {
+                    return Err(Error::invalid(format!(
+                        "--out expects a file name ending in .pvtu, got '{v}'"
+                    )));
+                }
+                o.out = Some(v.into());
+            }
             "--quiet" => {
                 o.quiet = true;
                 consumed = 1;
@@ -156,26 +199,45 @@ fn parse_args(args: &[String]) -> Result<Options> {
             octmesh::MAX_LEVEL
         )));
     }
+    if command == Command::Mesh
+        && !matches!(
+            o.balance,
+            Some(Connectivity::Edge) | Some(Connectivity::Corner)
+        )
+    {
+        return Err(Error::invalid(format!(
+            "meshing needs --balance edge or corner (got {}): with face balance alone a \
+             hanging node may depend on another hanging node",
+            o.balance.map_or("none", |c| c.name())
+        )));
+    }
     Ok(o)
 }
 
-fn run_octree(comm: CommRef, o: &Options) -> Result<()> {
-    let root = comm.rank() == 0 && !o.quiet;
-    let mut timer = PhaseTimer::new();
-    let say = |name: &str, t: &PhaseTimer, count: Option<u64>| {
-        if root {
+/// Prints one phase line on rank 0.
+struct Table {
+    on: bool,
+}
+
+impl Table {
+    fn row(&self, t: &PhaseTimer, count: Option<u64>) {
+        if self.on {
+            let (name, secs) = t.phases().last().cloned().unwrap_or_default();
             let c = count.map(|c| c.to_string()).unwrap_or_default();
-            println!(
-                "  {name:<12} {:>10.3} {c:>14}",
-                t.phases().last().map_or(0.0, |p| p.1)
-            );
+            println!("  {name:<12} {secs:>10.3} {c:>14}");
         }
-    };
+    }
+}
+
+fn run(comm: CommRef, o: &Options) -> Result<()> {
+    let root = comm.rank() == 0 && !o.quiet;
+    let table = Table { on: root };
+    let mut timer = PhaseTimer::new();
 
     let loaded = timer.time(
         &*comm,
         "read",
-        || -> Result<(usize, Domain, SurfaceIndex)> {
+        || -> Result<(usize, f64, Domain, SurfaceIndex)> {
             let surface = load_surface(&o.surface)?;
             let b = surface.bbox();
             let domain = match o.domain {
@@ -183,13 +245,21 @@ fn run_octree(comm: CommRef, o: &Options) -> Result<()> {
                 None => Domain::around(b.min, b.max, o.fit)?,
             };
             let index = SurfaceIndex::new(&surface, &domain);
-            Ok((surface.len(), domain, index))
+            Ok((surface.len(), surface.signed_volume().abs(), domain, index))
         },
     );
-    let (ntri, domain, index) = agree(&*comm, loaded)?;
+    let (ntri, surface_volume, domain, index) = agree(&*comm, loaded)?;
     if root {
+        let what = match o.command {
+            Command::Octree => "octree".to_string(),
+            Command::Mesh => format!(
+                "mesh (keep {}, cut rule {})",
+                o.keep.name(),
+                o.cut_rule.name()
+            ),
+        };
         println!(
-            "octmesh octree: {} ({ntri} triangles), level {}, balance {}, {} rank(s)",
+            "octmesh {what}: {} ({ntri} triangles), level {}, balance {}, {} rank(s)",
             o.surface,
             o.level,
             o.balance.map_or("none", |c| c.name()),
@@ -199,34 +269,109 @@ fn run_octree(comm: CommRef, o: &Options) -> Result<()> {
             "  cube: origin ({:.6}, {:.6}, {:.6}), side {:.6}",
             domain.origin[0], domain.origin[1], domain.origin[2], domain.side
         );
-        println!("  {:<12} {:>10} {:>14}", "phase", "time [s]", "leaves");
+        println!("  {:<12} {:>10} {:>14}", "phase", "time [s]", "count");
     }
-    say("read", &timer, None);
+    table.row(&timer, None);
 
     let mut tree = timer.time(&*comm, "construct", || {
         construct_for_surface(comm.clone(), &index, o.level)
     })?;
-    say("construct", &timer, Some(tree.global_len()));
+    table.row(&timer, Some(tree.global_len()));
     timer.time(&*comm, "refine", || {
         tree.refine_surface(&index, o.level, o.max_octants)
     })?;
     let refined = tree.global_len();
-    say("refine", &timer, Some(refined));
+    table.row(&timer, Some(refined));
     timer.time(&*comm, "partition", || tree.partition())?;
-    say("partition", &timer, Some(refined));
+    table.row(&timer, Some(refined));
     if let Some(p) = &o.write_refined {
         write_leaves(&tree, p, "refined leaves")?;
     }
     if let Some(conn) = o.balance {
         timer.time(&*comm, "balance", || tree.balance(conn))?;
-        say("balance", &timer, Some(tree.global_len()));
+        table.row(&timer, Some(tree.global_len()));
         timer.time(&*comm, "partition", || tree.partition())?;
-        say("partition", &timer, Some(tree.global_len()));
+        table.row(&timer, Some(tree.global_len()));
     }
     let balanced = tree.global_len();
     if let Some(p) = &o.write_leaves {
         write_leaves(&tree, p, "balanced leaves")?;
     }
+
+    let mut stats = JsonObject::new();
+    let mut phase_keys = vec!["read", "construct", "refine", "partition", "balance"];
+    if o.command == Command::Mesh {
+        phase_keys.extend([
+            "classify",
+            "ghost",
+            "nodes",
+            "numbering",
+            "connectivity",
+            "write",
+        ]);
+        let classes = timer.time(&*comm, "classify", || {
+            classify_leaves(tree.leaves(), &index)
+        });
+        table.row(&timer, None);
+        let opts = MeshOptions {
+            keep: o.keep,
+            cut_rule: o.cut_rule,
+        };
+        let mesh = Mesh::build(&tree, &domain, Some(&classes), &opts)?;
+        for (name, secs) in mesh.timings() {
+            timer.record(name, *secs);
+            let c = mesh.counts();
+            let count = match name.as_str() {
+                "ghost" => Some(c.ghosts),
+                "nodes" => Some(c.independent_nodes + c.face_hanging_nodes + c.edge_hanging_nodes),
+                "connectivity" => Some(c.elements),
+                _ => None,
+            };
+            table.row(&timer, count);
+        }
+        if let Some(out) = &o.out {
+            timer.time(&*comm, "write", || write_mesh(&*comm, out, &mesh))?;
+            table.row(&timer, None);
+        }
+        let c = *mesh.counts();
+        let mut cells = [mesh.local_volume_cells()];
+        comm.sum_u64(&mut cells);
+        let vol = [mesh.cells_to_volume(cells[0])];
+        let mut points = [mesh.num_nodes() as u64];
+        comm.sum_u64(&mut points);
+        if root {
+            println!(
+                "  elements {} | independent nodes {} | hanging nodes {} face, {} edge | ghosts {}",
+                c.elements,
+                c.independent_nodes,
+                c.face_hanging_nodes,
+                c.edge_hanging_nodes,
+                c.ghosts
+            );
+            let rel = (vol[0] - surface_volume) / surface_volume;
+            println!(
+                "  kept volume {:.6e} | surface volume {:.6e} | relative difference {rel:+.3e}",
+                vol[0], surface_volume
+            );
+            if let Some(out) = &o.out {
+                println!("  wrote {}", out.display());
+            }
+        }
+        stats
+            .int("elements", c.elements)
+            .int("independent_nodes", c.independent_nodes)
+            .int("face_hanging_nodes", c.face_hanging_nodes)
+            .int("edge_hanging_nodes", c.edge_hanging_nodes)
+            .int("elements_with_hanging", c.elements_with_hanging)
+            .int("ghosts", c.ghosts)
+            .int("points_written", points[0])
+            .num("kept_volume", vol[0])
+            .int("kept_cells", cells[0])
+            .str("keep", o.keep.name())
+            .str("cut_rule", o.cut_rule.name());
+    }
+    stats.num("surface_volume", surface_volume);
+
     let mut rss = [peak_rss_bytes()];
     comm.max_u64(&mut rss);
     if root {
@@ -240,21 +385,29 @@ fn run_octree(comm: CommRef, o: &Options) -> Result<()> {
     }
     if let Some(path) = &o.stats {
         let mut t = JsonObject::new();
-        for k in ["read", "construct", "refine", "partition", "balance"] {
+        for k in phase_keys {
             t.num(k, timer.get(k));
         }
         let mut j = JsonObject::new();
-        j.str("command", "octree")
-            .str("surface", &o.surface)
-            .int("ranks", comm.size() as u64)
-            .int("triangles", ntri as u64)
-            .int("level", o.level as u64)
-            .str("balance", o.balance.map_or("none", |c| c.name()))
-            .int("octants_refined", refined)
-            .int("octants_balanced", balanced)
-            .obj("timings", &t)
-            .int("peak_rss_bytes", rss[0])
-            .num("domain_side", domain.side);
+        j.str(
+            "command",
+            if o.command == Command::Mesh {
+                "mesh"
+            } else {
+                "octree"
+            },
+        )
+        .str("surface", &o.surface)
+        .int("ranks", comm.size() as u64)
+        .int("triangles", ntri as u64)
+        .int("level", o.level as u64)
+        .str("balance", o.balance.map_or("none", |c| c.name()))
+        .int("octants_refined", refined)
+        .int("octants_balanced", balanced)
+        .merge(&stats)
+        .obj("timings", &t)
+        .int("peak_rss_bytes", rss[0])
+        .num("domain_side", domain.side);
         let written = if comm.rank() == 0 {
             std::fs::write(path, j.to_json())
                 .map_err(|e| Error::io(format!("cannot write '{}': {e}", path.display())))
@@ -266,7 +419,58 @@ fn run_octree(comm: CommRef, o: &Options) -> Result<()> {
     Ok(())
 }
 
+/// Writes this rank's piece and, on rank 0, the PVTU. Collective.
+fn write_mesh(comm: &dyn octmesh::comm::Comm, out: &std::path::Path, mesh: &Mesh) -> Result<()> {
+    let points = mesh.coordinates();
+    let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level()).collect();
+    let ni = mesh.num_independent();
+    let global: Vec<i64> = (0..mesh.num_nodes())
+        .map(|i| {
+            if i < ni {
+                mesh.global_ids()[i] as i64
+            } else {
+                -1
+            }
+        })
+        .collect();
+    let hanging: Vec<u8> = (0..mesh.num_nodes())
+        .map(|i| {
+            if i < ni {
+                0
+            } else if mesh.hanging()[i - ni].count == 2 {
+                1
+            } else {
+                2
+            }
+        })
+        .collect();
+    let piece = VtuPiece {
+        points: &points,
+        cells: mesh.connectivity(),
+        cell_level: &levels,
+        cell_class: mesh.element_class(),
+        rank: comm.rank() as u32,
+        point_global_id: &global,
+        point_hanging: &hanging,
+    };
+    write_parallel(comm, out, &piece).map(|_| ())
+}
+
+/// Keeps freed memory in the process: the pipeline frees and reallocates
+/// arrays of several GB, and returning them to the kernel makes every
+/// reuse pay for zeroing fresh pages again.
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only changes allocator tuning; called before any
+    // threads exist.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_MAX, 0);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX);
+    }
+}
+
 fn main() -> ExitCode {
+    keep_freed_memory();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(universe) = mpi::initialize() else {
         eprintln!("octmesh: error: MPI was already initialised");
@@ -274,7 +478,7 @@ fn main() -> ExitCode {
     };
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
     let (rank, size) = (comm.rank(), comm.size());
-    let result = parse_args(&args).and_then(|o| run_octree(comm.clone(), &o));
+    let result = parse_args(&args).and_then(|o| run(comm.clone(), &o));
     // Report before MPI_Finalize: once one rank exits non-zero, mpirun may
     // kill the others before they print.
     let code = match &result {

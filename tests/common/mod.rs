@@ -235,3 +235,33 @@ pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]], header: &[u8]) {
     }
     std::fs::write(path, b).expect("write stl");
 }
+
+/// A Python that can import meshio: `$OCTMESH_PYTHON`, else `python3`, else
+/// `/usr/bin/python3` (a `python3` from pyenv first in PATH does not see
+/// Debian's python3-meshio). Panics, never skips, when there is none.
+pub fn python_with_meshio() -> String {
+    let candidates: Vec<String> = match std::env::var("OCTMESH_PYTHON") {
+        Ok(p) => vec![p],
+        Err(_) => vec!["python3".into(), "/usr/bin/python3".into()],
+    };
+    for c in &candidates {
+        let ok = Command::new(c)
+            .args(["-c", "import meshio"])
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if ok {
+            return c.clone();
+        }
+    }
+    panic!(
+        "no Python with meshio found (tried {candidates:?}): install Debian's python3-meshio \
+         or set OCTMESH_PYTHON"
+    );
+}
+
+/// Parses a JSON file.
+pub fn json_file(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("bad JSON in {}: {e}", path.display()))
+}

@@ -1,0 +1,213 @@
+//! The `octmesh mesh` command: solid and fluid selections, volumes, the
+//! PVTU read back by an independent reader, and its errors.
+
+mod common;
+use common::*;
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+/// Runs `octmesh mesh` and returns its statistics.
+fn mesh_stats(
+    np: usize,
+    surface: &str,
+    level: u32,
+    extra: &[&str],
+    dir: &Path,
+) -> serde_json::Value {
+    let stats = dir.join(format!(
+        "{}_{level}_{}_{np}.json",
+        Path::new(surface).file_stem().unwrap().to_string_lossy(),
+        extra.join("_").replace(['/', '.'], "")
+    ));
+    let mut args = vec![
+        "mesh",
+        surface,
+        "--level",
+        Box::leak(level.to_string().into_boxed_str()),
+        "--quiet",
+        "--stats",
+        stats.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    octmesh_ok(np, &args);
+    json_file(&stats)
+}
+
+fn int(v: &serde_json::Value, k: &str) -> u64 {
+    v[k].as_u64()
+        .unwrap_or_else(|| panic!("no integer '{k}' in {v}"))
+}
+
+fn num(v: &serde_json::Value, k: &str) -> f64 {
+    v[k].as_f64()
+        .unwrap_or_else(|| panic!("no number '{k}' in {v}"))
+}
+
+#[test]
+fn inside_and_outside_tile_the_cube() {
+    let dir = scratch("mesh_tile");
+    for (surface, np) in [("sphere", 1), ("torus", 3)] {
+        let all = mesh_stats(np, surface, 6, &["--keep", "all"], &dir);
+        let inside = mesh_stats(np, surface, 6, &["--keep", "inside"], &dir);
+        let outside = mesh_stats(np, surface, 6, &["--keep", "outside"], &dir);
+        assert_eq!(
+            int(&all, "kept_cells"),
+            1u64 << 57,
+            "{surface}: all = the cube"
+        );
+        assert_eq!(
+            int(&inside, "kept_cells") + int(&outside, "kept_cells"),
+            int(&all, "kept_cells"),
+            "{surface}: inside + outside"
+        );
+        assert_eq!(
+            int(&inside, "elements") + int(&outside, "elements"),
+            int(&all, "elements"),
+            "{surface}: every element on exactly one side"
+        );
+        let side = num(&all, "domain_side");
+        assert!((num(&all, "kept_volume") - side.powi(3)).abs() <= 1e-12 * side.powi(3));
+        // Both selections are meshes of their own: nodes only where used.
+        assert!(int(&inside, "independent_nodes") < int(&all, "independent_nodes"));
+        assert!(int(&outside, "independent_nodes") < int(&all, "independent_nodes"));
+    }
+}
+
+/// Relative error of the solid's volume at each level.
+fn volume_errors(surface: &str, levels: &[u32], np: usize, dir: &Path) -> Vec<f64> {
+    levels
+        .iter()
+        .map(|&l| {
+            let s = mesh_stats(np, surface, l, &["--keep", "inside"], dir);
+            let (v, want) = (num(&s, "kept_volume"), num(&s, "surface_volume"));
+            let e = (v - want).abs() / want;
+            println!("{surface} level {l}: solid volume {v:.6e}, enclosed {want:.6e}, relative error {e:.2e}");
+            e
+        })
+        .collect()
+}
+
+#[test]
+fn solid_volume_converges_for_built_in_shapes() {
+    let dir = scratch("mesh_volume");
+    for surface in ["sphere", "torus"] {
+        let e = volume_errors(surface, &[4, 6, 8], 2, &dir);
+        assert!(
+            e[1] < e[0] && e[2] < e[1],
+            "{surface}: errors {e:?} do not shrink"
+        );
+        assert!(e[2] < 2e-3, "{surface}: level 8 error {:e}", e[2]);
+    }
+}
+
+#[test]
+fn solid_volume_converges_for_shared_models() {
+    let dir = scratch("mesh_volume_models");
+    for name in ["bunny.stl", "dragon.stl"] {
+        let Some(path) = shared_model(name) else {
+            continue;
+        };
+        let e = volume_errors(path.to_str().unwrap(), &[5, 7, 9], 2, &dir);
+        assert!(
+            e[1] < e[0] && e[2] < e[1],
+            "{name}: errors {e:?} do not shrink"
+        );
+        assert!(e[2] < 1e-2, "{name}: level 9 error {:e}", e[2]);
+    }
+}
+
+#[test]
+fn pvtu_is_read_back_by_meshio() {
+    let dir = scratch("mesh_vtu");
+    for (keep, np) in [("all", 1), ("inside", 3), ("outside", 2)] {
+        let out = dir.join(format!("torus_{keep}.pvtu"));
+        let s = mesh_stats(
+            np,
+            "torus",
+            5,
+            &[
+                "--keep",
+                keep,
+                "--balance",
+                "edge",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &dir,
+        );
+        let py = Command::new(python_with_meshio())
+            .arg(repo().join("tools").join("check_vtu.py"))
+            .arg(&out)
+            .output()
+            .expect("run tools/check_vtu.py");
+        assert!(
+            py.status.success(),
+            "check_vtu.py failed: {}",
+            String::from_utf8_lossy(&py.stderr)
+        );
+        let r: serde_json::Value =
+            serde_json::from_slice(&py.stdout).expect("JSON from check_vtu.py");
+        assert_eq!(int(&r, "pieces"), np as u64, "{keep}: one piece per rank");
+        assert_eq!(int(&r, "cells"), int(&s, "elements"), "{keep}: cells");
+        assert_eq!(
+            int(&r, "points"),
+            int(&s, "points_written"),
+            "{keep}: points"
+        );
+        let (v, want) = (num(&r, "volume"), num(&s, "kept_volume"));
+        assert!(
+            (v - want).abs() <= 1e-9 * want,
+            "{keep}: volume {v} against {want}"
+        );
+        assert_eq!(
+            int(&r, "max_global_id") + 1,
+            int(&s, "independent_nodes"),
+            "{keep}: ids"
+        );
+        assert!(
+            int(&r, "hanging_points") > 0,
+            "{keep}: hanging points flagged"
+        );
+    }
+}
+
+#[test]
+fn mesh_rejects_face_balance_and_unwritable_output() {
+    for np in [1, 3] {
+        let out = mpirun(
+            np,
+            &octmesh_bin(),
+            &["mesh", "sphere", "--level", "4", "--balance", "face"],
+            Duration::from_secs(120),
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(err.contains("edge or corner"), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+
+        let out = mpirun(
+            np,
+            &octmesh_bin(),
+            &[
+                "mesh",
+                "sphere",
+                "--level",
+                "4",
+                "--out",
+                "/nonexistent/dir/m.pvtu",
+            ],
+            Duration::from_secs(120),
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        for r in 0..np {
+            assert!(
+                err.contains(&format!("[rank {r} of {np}]")),
+                "rank {r} reported nothing: {err}"
+            );
+        }
+        assert!(err.contains("/nonexistent/dir"), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
