@@ -191,12 +191,24 @@ fn gather(comm: &CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
     out
 }
 
+/// How the balanced octree is spread over the ranks before meshing.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Skew {
+    /// Equal counts.
+    Equal,
+    /// Most weight near the bottom of the cube: thin ranks, many ghosts.
+    Front,
+    /// All weight on the last leaf: every rank but the last is empty or
+    /// nearly so.
+    Single,
+}
+
 struct Case {
     shape: &'static str,
     level: u8,
     conn: Connectivity,
     keep: Keep,
-    skew: bool,
+    skew: Skew,
 }
 
 fn build(comm: CommRef, case: &Case) -> (Mesh, Domain) {
@@ -207,12 +219,19 @@ fn build(comm: CommRef, case: &Case) -> (Mesh, Domain) {
     let mut t = build_from_surface(comm, &index, case.level, NO_LIMIT).unwrap();
     t.partition().unwrap();
     t.balance(case.conn).unwrap();
-    if case.skew {
-        // Most weight near the start: thin ranks, many ghosts.
-        t.partition_weighted(|o| if o.coords()[2] < (1 << 17) { 40 } else { 1 })
-            .unwrap();
-    } else {
-        t.partition().unwrap();
+    match case.skew {
+        Skew::Equal => {
+            t.partition().unwrap();
+        }
+        Skew::Front => {
+            t.partition_weighted(|o| if o.coords()[2] < (1 << 17) { 40 } else { 1 })
+                .unwrap();
+        }
+        Skew::Single => {
+            let last = octmesh::Octant::ROOT.last_descendant(octmesh::MAX_LEVEL);
+            t.partition_weighted(|o| if o.contains(last) { 1 << 40 } else { 0 })
+                .unwrap();
+        }
     }
     let classes = classify_leaves(t.leaves(), &index);
     let opts = MeshOptions {
@@ -242,40 +261,40 @@ fn child() {
             level: 5,
             conn: Connectivity::Corner,
             keep: Keep::All,
-            skew: false,
+            skew: Skew::Equal,
         },
         Case {
             shape: "sphere",
             level: 6,
             conn: Connectivity::Edge,
             keep: Keep::All,
-            skew: true,
+            skew: Skew::Front,
         },
         Case {
             shape: "torus",
             level: 6,
             conn: Connectivity::Corner,
             keep: Keep::Inside,
-            skew: false,
+            skew: Skew::Equal,
         },
         Case {
             shape: "torus",
             level: 5,
             conn: Connectivity::Edge,
             keep: Keep::Outside,
-            skew: true,
+            skew: Skew::Single,
         },
         Case {
             shape: "sphere",
             level: 6,
             conn: Connectivity::Corner,
             keep: Keep::Inside,
-            skew: true,
+            skew: Skew::Front,
         },
     ];
     for case in &cases {
         let tag = format!(
-            "{} L{} {} keep {} skew {} np {}",
+            "{} L{} {} keep {} skew {:?} np {}",
             case.shape,
             case.level,
             case.conn.name(),
