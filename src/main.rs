@@ -452,6 +452,7 @@ fn write_mesh(comm: &dyn octmesh::comm::Comm, out: &std::path::Path, mesh: &Mesh
         rank: comm.rank() as u32,
         point_global_id: &global,
         point_hanging: &hanging,
+        point_fields: &[],
     };
     write_parallel(comm, out, &piece).map(|_| ())
 }

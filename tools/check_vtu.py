@@ -4,13 +4,19 @@
 Usage: check_vtu.py MESH.pvtu
 
 Reads the PVTU with xml.etree, checks that it declares exactly the arrays
-octmesh writes, reads every piece with meshio (Debian's python3-meshio) and
-prints one JSON object:
+octmesh writes (its own, plus any caller point fields: Float64 point arrays
+of one component), reads every piece with meshio (Debian's python3-meshio),
+checks that each piece holds exactly the declared arrays with one finite
+value per point for each field, and prints one JSON object:
 
   {"pieces": n, "cells": ..., "points": ... (summed over pieces),
    "volume": sum over hexahedra of the volume of their bounding box,
    "levels": {"level": count, ...}, "hanging_points": count of hanging > 0,
-   "min_global_id": ..., "max_global_id": ... (over independent points)}
+   "min_global_id": ..., "max_global_id": ... (over independent points),
+   "fields": {"name": {"min": ..., "max": ..., "sum": ...}, ...}}
+
+Field statistics run over every point of every piece (a node shared by two
+pieces counts twice); min and max are null when there are no points.
 
 Exits with status 1 and a message on stderr on any failure.
 
@@ -56,11 +62,16 @@ NUMPY = {
 def declared(parent, tag):
     if parent is None:
         fail(f"missing <{tag}>")
-    return {a.get("Name"): a.get("type") for a in parent.findall("PDataArray")}
+    arrays = parent.findall("PDataArray")
+    names = [a.get("Name") for a in arrays]
+    if len(set(names)) != len(names) or any(not n for n in names):
+        fail(f"<{tag}> declares an array twice or without a name: {names}")
+    return {a.get("Name"): (a.get("type"), a.get("NumberOfComponents", "1")) for a in arrays}
 
 
 def read_pvtu(path):
-    """Checks the PVTU's declarations and returns its piece paths."""
+    """Checks the PVTU's declarations; returns its piece paths and the names
+    of the caller point fields."""
     try:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as e:
@@ -70,9 +81,15 @@ def read_pvtu(path):
     grid = root.find("PUnstructuredGrid")
     if grid is None:
         fail(f"'{path}' has no <PUnstructuredGrid>")
-    if declared(grid.find("PPointData"), "PPointData") != POINT_ARRAYS:
+    point = declared(grid.find("PPointData"), "PPointData")
+    if {n: point.get(n, (None,))[0] for n in POINT_ARRAYS} != POINT_ARRAYS:
         fail(f"'{path}': PPointData does not declare {POINT_ARRAYS}")
-    if declared(grid.find("PCellData"), "PCellData") != CELL_ARRAYS:
+    fields = [n for n in point if n not in POINT_ARRAYS]
+    for n in fields:
+        if point[n] != ("Float64", "1"):
+            fail(f"'{path}': point field {n!r} is {point[n]}, expected Float64 of 1 component")
+    cell = {n: t for n, (t, _) in declared(grid.find("PCellData"), "PCellData").items()}
+    if cell != CELL_ARRAYS:
         fail(f"'{path}': PCellData does not declare {CELL_ARRAYS}")
     pts = grid.find("PPoints")
     pa = [] if pts is None else pts.findall("PDataArray")
@@ -82,7 +99,7 @@ def read_pvtu(path):
     if not sources or any(not s for s in sources):
         fail(f"'{path}' lists no pieces, or a piece without Source")
     base = os.path.dirname(os.path.abspath(path))
-    return [os.path.join(base, s) for s in sources]
+    return [os.path.join(base, s) for s in sources], fields
 
 
 def xml_head(raw, path):
@@ -92,7 +109,7 @@ def xml_head(raw, path):
     if at < 0:
         fail(f"'{path}' has no raw AppendedData")
     try:
-        root = ET.fromstring(raw[:at].decode("ascii") + "</VTKFile>")
+        root = ET.fromstring(raw[:at].decode("utf-8") + "</VTKFile>")
     except (UnicodeDecodeError, ET.ParseError) as e:
         fail(f"'{path}': bad XML header: {e}")
     underscore = raw.find(b"_", at + len(tag))
@@ -179,13 +196,15 @@ def main():
     total = {"cells": 0, "points": 0, "volume": 0.0, "hanging": 0}
     levels = {}
     gid_min, gid_max = None, None
-    pieces = read_pvtu(sys.argv[1])
+    pieces, fields = read_pvtu(sys.argv[1])
+    point_arrays = dict(POINT_ARRAYS, **{f: "Float64" for f in fields})
+    stats = {f: {"min": None, "max": None, "sum": 0.0} for f in fields}
     for path in pieces:
         points, blocks, pd, cd = read_piece(path)
         if points.ndim != 2 or points.shape[1] != 3 or points.dtype != np.float64:
             fail(f"'{path}': points are {points.dtype} {points.shape}, expected Float64 (n, 3)")
         n_cells = sum(len(b) for b in blocks)
-        check_arrays(path, pd, POINT_ARRAYS, len(points), "point")
+        check_arrays(path, pd, point_arrays, len(points), "point")
         check_arrays(path, cd, CELL_ARRAYS, n_cells, "cell")
         for b in blocks:
             if b.ndim != 2 or b.shape[1] != 8:
@@ -209,6 +228,16 @@ def main():
             lo, hi = int(independent.min()), int(independent.max())
             gid_min = lo if gid_min is None else min(gid_min, lo)
             gid_max = hi if gid_max is None else max(gid_max, hi)
+        for f in fields:
+            v = pd[f]
+            if not np.all(np.isfinite(v)):
+                fail(f"'{path}': point field {f!r} has non-finite values")
+            if len(v):
+                st = stats[f]
+                lo, hi = float(v.min()), float(v.max())
+                st["min"] = lo if st["min"] is None else min(st["min"], lo)
+                st["max"] = hi if st["max"] is None else max(st["max"], hi)
+                st["sum"] += float(v.sum())
         for lv, c in zip(*np.unique(cd["level"], return_counts=True)):
             levels[int(lv)] = levels.get(int(lv), 0) + int(c)
         total["cells"] += n_cells
@@ -225,6 +254,7 @@ def main():
                 "hanging_points": total["hanging"],
                 "min_global_id": gid_min,
                 "max_global_id": gid_max,
+                "fields": stats,
             }
         )
     )

@@ -24,9 +24,14 @@
 //!   array being looked up always comes before the already rewritten ones.
 //!   VTK reads each array at its `offset`, so the order does not matter to it.
 //!
+//! Caller fields ([`VtuPiece::point_fields`], e.g. a solution) are `Float64`
+//! point arrays declared after `global_id` and `hanging`; they take part in
+//! the reversed layout like every other array.
+//!
 //! Hexahedra use `VTK_HEXAHEDRON` (type 12) point order: the bottom face
 //! counter-clockwise seen from above, then the top face.
 
+use std::collections::HashSet;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -51,6 +56,13 @@ pub struct VtuPiece<'a> {
     pub point_global_id: &'a [i64],
     /// Per node: 0 independent, 1 edge-hanging, 2 face-hanging.
     pub point_hanging: &'a [u8],
+    /// Caller fields, written as `Float64` point arrays after `global_id`
+    /// and `hanging`, in this order: `(name, one value per point)`. Names
+    /// must be non-empty, free of control characters, distinct, and neither
+    /// `global_id` nor `hanging`; XML special characters (`&<>"'`) in them
+    /// are escaped. Every rank of [`write_parallel`] must pass the same
+    /// names in the same order.
+    pub point_fields: &'a [(&'a str, &'a [f64])],
 }
 
 /// `VTK_HEXAHEDRON`.
@@ -73,6 +85,8 @@ enum Section {
 enum Array {
     GlobalId,
     Hanging,
+    /// `VtuPiece::point_fields[k]`.
+    Field(usize),
     Level,
     Rank,
     Class,
@@ -83,10 +97,12 @@ enum Array {
 }
 
 /// How one array appears in the XML and how many bytes it takes.
-struct ArrayDesc {
+#[derive(Clone, Copy, Debug)]
+struct ArrayDesc<'a> {
     array: Array,
     section: Section,
-    name: &'static str,
+    /// Unescaped; see [`xml_attr`].
+    name: &'a str,
     vtk_type: &'static str,
     components: usize,
     /// Bytes per point (`per_cell == false`) or per cell.
@@ -94,9 +110,9 @@ struct ArrayDesc {
     per_cell: bool,
 }
 
-/// Every array, in XML document order. The `.pvtu` declares the same list
-/// (without `Cells`), so the two cannot drift apart.
-const ARRAYS: [ArrayDesc; 9] = [
+/// octmesh's own arrays, in XML document order; [`all_arrays`] adds the
+/// caller fields.
+const ARRAYS: [ArrayDesc<'static>; 9] = [
     ArrayDesc {
         array: Array::GlobalId,
         section: Section::PointData,
@@ -180,6 +196,63 @@ const ARRAYS: [ArrayDesc; 9] = [
     },
 ];
 
+/// Every array of a file with the point fields `fields`, in XML document
+/// order: octmesh's own arrays with the fields after the last of its point
+/// arrays. The `.pvtu` declares the same list (without `Cells`), so the two
+/// cannot drift apart.
+fn all_arrays<'a>(fields: &[&'a str]) -> Vec<ArrayDesc<'a>> {
+    let mut out = Vec::with_capacity(ARRAYS.len() + fields.len());
+    for d in ARRAYS {
+        out.push(d);
+        if d.array == Array::Hanging {
+            out.extend(fields.iter().enumerate().map(|(k, &name)| ArrayDesc {
+                array: Array::Field(k),
+                section: Section::PointData,
+                name,
+                vtk_type: "Float64",
+                components: 1,
+                bytes_per_item: 8,
+                per_cell: false,
+            }));
+        }
+    }
+    out
+}
+
+fn field_names<'a>(piece: &VtuPiece<'a>) -> Vec<&'a str> {
+    piece.point_fields.iter().map(|f| f.0).collect()
+}
+
+/// Checks the names of caller point fields (see [`VtuPiece::point_fields`]).
+fn check_field_names(names: &[&str]) -> Result<()> {
+    let mut seen = HashSet::with_capacity(names.len());
+    for (k, &name) in names.iter().enumerate() {
+        let bad = if name.is_empty() {
+            Some("is empty")
+        } else if name
+            .chars()
+            .any(|c| c.is_control() || c == '\u{FFFE}' || c == '\u{FFFF}')
+        {
+            Some("contains a control character")
+        } else if ARRAYS
+            .iter()
+            .any(|d| d.section == Section::PointData && d.name == name)
+        {
+            Some("is the name of one of octmesh's own point arrays")
+        } else if !seen.insert(name) {
+            Some("is given twice")
+        } else {
+            None
+        };
+        if let Some(why) = bad {
+            return Err(Error::invalid(format!(
+                "VTU point field {k}: name {name:?} {why}"
+            )));
+        }
+    }
+    Ok(())
+}
+
 const SECTIONS: [(Section, &str); 4] = [
     (Section::PointData, "PointData"),
     (Section::CellData, "CellData"),
@@ -200,6 +273,7 @@ fn xml_attr(s: &str) -> String {
             '<' => out.push_str("&lt;"),
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
             _ => out.push(c),
         }
     }
@@ -223,6 +297,15 @@ fn validate(piece: &VtuPiece) -> Result<i32> {
             )));
         }
     }
+    for (k, (name, values)) in piece.point_fields.iter().enumerate() {
+        if values.len() != np {
+            return Err(Error::invalid(format!(
+                "VTU piece: point field {k} ({name:?}) has {} entries for {np} points",
+                values.len()
+            )));
+        }
+    }
+    check_field_names(&field_names(piece))?;
     if let Some(c) = piece
         .cells
         .iter()
@@ -271,6 +354,7 @@ fn put_array<W: Write>(
         Array::GlobalId => put(w, buf, piece.point_global_id.iter(), |v| v.to_le_bytes()),
         // Byte arrays are already in file order.
         Array::Hanging => w.write_all(piece.point_hanging),
+        Array::Field(k) => put(w, buf, piece.point_fields[k].1.iter(), |v| v.to_le_bytes()),
         Array::Level => w.write_all(piece.cell_level),
         Array::Class => w.write_all(piece.cell_class),
         Array::Rank => put(w, buf, std::iter::repeat_n(rank, nc), i32::to_le_bytes),
@@ -290,21 +374,23 @@ fn put_array<W: Write>(
 ///
 /// Arrays: `Points` Float64 x 3; `Cells` with `connectivity` and `offsets`
 /// Int64 and `types` UInt8 (all 12); cell data `level` UInt8, `rank` Int32,
-/// `class` UInt8; point data `global_id` Int64, `hanging` UInt8. A piece with
-/// no cells and no points is a valid, empty file.
+/// `class` UInt8; point data `global_id` Int64, `hanging` UInt8, then the
+/// caller's [`VtuPiece::point_fields`], Float64. A piece with no cells and no
+/// points is a valid, empty file.
 ///
 /// Errors: [`crate::ErrorKind::InvalidArgument`] if an array length does not
-/// match its point or cell count, or a cell names a point that does not exist
-/// (nothing is written then); [`crate::ErrorKind::Io`] if the file cannot be
+/// match its point or cell count, a cell names a point that does not exist,
+/// or a field name is not allowed (nothing is written then); [`crate::ErrorKind::Io`] if the file cannot be
 /// written.
 pub fn write_vtu(path: &Path, piece: &VtuPiece) -> Result<()> {
     let rank = validate(piece)?;
     let (np, nc) = (piece.points.len(), piece.cells.len());
+    let arrays = all_arrays(&field_names(piece));
     let bytes = |d: &ArrayDesc| d.bytes_per_item * if d.per_cell { nc } else { np };
     // Offsets for the reversed layout (see the module documentation).
-    let mut offsets = [0usize; ARRAYS.len()];
+    let mut offsets = vec![0usize; arrays.len()];
     let mut at = 0usize;
-    for (k, d) in ARRAYS.iter().enumerate().rev() {
+    for (k, d) in arrays.iter().enumerate().rev() {
         offsets[k] = at;
         at += 8 + bytes(d);
     }
@@ -324,13 +410,16 @@ pub fn write_vtu(path: &Path, piece: &VtuPiece) -> Result<()> {
         )?;
         for (section, tag) in SECTIONS {
             writeln!(w, "      <{tag}>")?;
-            for (k, d) in ARRAYS.iter().enumerate() {
+            for (k, d) in arrays.iter().enumerate() {
                 if d.section == section {
                     writeln!(
                         w,
                         "        <DataArray type=\"{}\" Name=\"{}\" NumberOfComponents=\"{}\" \
                          format=\"appended\" offset=\"{}\"/>",
-                        d.vtk_type, d.name, d.components, offsets[k]
+                        d.vtk_type,
+                        xml_attr(d.name),
+                        d.components,
+                        offsets[k]
                     )?;
                 }
             }
@@ -340,7 +429,7 @@ pub fn write_vtu(path: &Path, piece: &VtuPiece) -> Result<()> {
         writeln!(w, "  </UnstructuredGrid>")?;
         write!(w, "  <AppendedData encoding=\"raw\">\n   _")?;
         let mut buf = Vec::with_capacity(CHUNK + 64);
-        for d in ARRAYS.iter().rev() {
+        for d in arrays.iter().rev() {
             w.write_all(&(bytes(d) as u64).to_le_bytes())?;
             put_array(&mut w, &mut buf, piece, rank, d.array)?;
         }
@@ -366,12 +455,16 @@ fn check_pvtu_path(path: &Path) -> Result<()> {
 
 /// Writes a PVTU file that references the given piece files (paths relative
 /// to the PVTU's directory, escaped here) and declares the arrays
-/// [`write_vtu`] writes. Not collective.
+/// [`write_vtu`] writes for pieces with the point fields named
+/// `point_fields` (in their order). Not collective.
 ///
 /// Errors: [`crate::ErrorKind::InvalidArgument`] if `path` does not end in
-/// `.pvtu`; [`crate::ErrorKind::Io`] if it cannot be written.
-pub fn write_pvtu(path: &Path, pieces: &[String]) -> Result<()> {
+/// `.pvtu` or a field name is not allowed (see [`VtuPiece::point_fields`]);
+/// [`crate::ErrorKind::Io`] if it cannot be written.
+pub fn write_pvtu(path: &Path, pieces: &[String], point_fields: &[&str]) -> Result<()> {
     check_pvtu_path(path)?;
+    check_field_names(point_fields)?;
+    let arrays = all_arrays(point_fields);
     let write = || -> std::io::Result<()> {
         let mut w = BufWriter::new(File::create(path)?);
         writeln!(w, "<?xml version=\"1.0\"?>")?;
@@ -384,11 +477,13 @@ pub fn write_pvtu(path: &Path, pieces: &[String]) -> Result<()> {
         // Cells are not declared in a PVTU; the other sections are.
         for (section, tag) in &SECTIONS[..3] {
             writeln!(w, "    <P{tag}>")?;
-            for d in ARRAYS.iter().filter(|d| d.section == *section) {
+            for d in arrays.iter().filter(|d| d.section == *section) {
                 writeln!(
                     w,
                     "      <PDataArray type=\"{}\" Name=\"{}\" NumberOfComponents=\"{}\"/>",
-                    d.vtk_type, d.name, d.components
+                    d.vtk_type,
+                    xml_attr(d.name),
+                    d.components
                 )?;
             }
             writeln!(w, "    </P{tag}>")?;
@@ -403,6 +498,26 @@ pub fn write_pvtu(path: &Path, pieces: &[String]) -> Result<()> {
     write().map_err(|e| io_err(path, e))
 }
 
+/// Checks that `names` are rank 0's. Collective.
+fn same_as_rank_0(comm: &dyn Comm, names: &[&str]) -> Result<()> {
+    // Length-prefixed, so that no two lists encode alike.
+    let mut mine = Vec::new();
+    for n in names {
+        mine.extend_from_slice(&(n.len() as u64).to_le_bytes());
+        mine.extend_from_slice(n.as_bytes());
+    }
+    let mut root = mine.clone();
+    comm.broadcast_bytes(0, &mut root);
+    if root == mine {
+        Ok(())
+    } else {
+        Err(Error::invalid(format!(
+            "VTU point fields differ between ranks: rank {} has {names:?}, unlike rank 0",
+            comm.rank()
+        )))
+    }
+}
+
 /// File name of rank `rank`'s piece for a `.pvtu` path: `NAME_<rank>.vtu` in
 /// the same directory, the rank zero-padded to at least 4 digits
 /// (`out/mesh.pvtu`, 3 gives `out/mesh_0003.vtu`).
@@ -415,12 +530,16 @@ pub fn piece_path(pvtu: &Path, rank: usize) -> PathBuf {
 /// piece to [`piece_path`]`(pvtu, rank)`, then rank 0 writes the PVTU listing
 /// all of them. Collective. Returns the PVTU path.
 ///
-/// A failure on any rank (invalid piece, unwritable directory) becomes an
-/// error on every rank through [`crate::comm::agree`], never a hang; the PVTU
-/// is only written once every piece is.
+/// A failure on any rank (invalid piece, unwritable directory, point field
+/// names other than rank 0's) becomes an error on every rank through
+/// [`crate::comm::agree`], never a hang; the PVTU is only written once every
+/// piece is.
 pub fn write_parallel(comm: &dyn Comm, pvtu: &Path, piece: &VtuPiece) -> Result<PathBuf> {
-    let mine =
-        check_pvtu_path(pvtu).and_then(|()| write_vtu(&piece_path(pvtu, comm.rank()), piece));
+    let fields = field_names(piece);
+    let same = same_as_rank_0(comm, &fields);
+    let mine = check_pvtu_path(pvtu)
+        .and(same)
+        .and_then(|()| write_vtu(&piece_path(pvtu, comm.rank()), piece));
     agree(comm, mine)?;
     let index = if comm.rank() == 0 {
         // Sources are relative to the PVTU's directory, where the pieces are.
@@ -433,7 +552,7 @@ pub fn write_parallel(comm: &dyn Comm, pvtu: &Path, piece: &VtuPiece) -> Result<
                     .into_owned()
             })
             .collect();
-        write_pvtu(pvtu, &names)
+        write_pvtu(pvtu, &names, &fields)
     } else {
         Ok(())
     };
@@ -519,6 +638,7 @@ mod tests {
             rank,
             point_global_id: &m.gid,
             point_hanging: &m.hanging,
+            point_fields: &[],
         }
     }
 
@@ -530,6 +650,7 @@ mod tests {
         rank: 1,
         point_global_id: &[],
         point_hanging: &[],
+        point_fields: &[],
     };
 
     fn attr<'s>(tag: &'s str, name: &str) -> &'s str {
@@ -688,13 +809,26 @@ mod tests {
     fn pvtu_lists_arrays_and_pieces() {
         let dir = scratch("pvtu");
         let path = dir.join("m.pvtu");
-        write_pvtu(&path, &["m_0000.vtu".into(), "a&b\".vtu".into()]).unwrap();
+        write_pvtu(
+            &path,
+            &["m_0000.vtu".into(), "a&b\".vtu".into()],
+            &["u", "<v>"],
+        )
+        .unwrap();
         let s = std::fs::read_to_string(&path).unwrap();
         assert!(s.contains("<VTKFile type=\"PUnstructuredGrid\""));
         for d in &ARRAYS {
             let decl = format!("<PDataArray type=\"{}\" Name=\"{}\"", d.vtk_type, d.name);
             assert_eq!(s.contains(&decl), d.section != Section::Cells, "{decl}");
         }
+        // The fields follow hanging, inside PPointData.
+        let hang = s.find("Name=\"hanging\"").unwrap();
+        let u = s
+            .find("<PDataArray type=\"Float64\" Name=\"u\" NumberOfComponents=\"1\"/>")
+            .unwrap();
+        let v = s.find("Name=\"&lt;v&gt;\"").unwrap();
+        let end = s.find("</PPointData>").unwrap();
+        assert!(hang < u && u < v && v < end, "{s}");
         let pp = s.find("<PPointData>").unwrap();
         let pc = s.find("<PCellData>").unwrap();
         let pts = s.find("<PPoints>").unwrap();
@@ -722,6 +856,7 @@ mod tests {
         // A cell pointing one past the last point.
         let mut cells = m.cells.clone();
         cells[1][6] = 12;
+        let x: Vec<f64> = m.points.iter().map(|p| p[0]).collect();
         let bad = [
             VtuPiece {
                 cell_level: &short_u8,
@@ -754,6 +889,28 @@ mod tests {
                 rank: u32::MAX,
                 ..piece(&m, 0)
             },
+            // Point fields: short, empty name, control character, reserved
+            // name, duplicate.
+            VtuPiece {
+                point_fields: &[("u", &x[..11])],
+                ..piece(&m, 0)
+            },
+            VtuPiece {
+                point_fields: &[("", &x)],
+                ..piece(&m, 0)
+            },
+            VtuPiece {
+                point_fields: &[("a\nb", &x)],
+                ..piece(&m, 0)
+            },
+            VtuPiece {
+                point_fields: &[("hanging", &x)],
+                ..piece(&m, 0)
+            },
+            VtuPiece {
+                point_fields: &[("u", &x), ("u", &x)],
+                ..piece(&m, 0)
+            },
         ];
         for (k, p) in bad.iter().enumerate() {
             let e = write_vtu(&path, p).unwrap_err();
@@ -764,8 +921,13 @@ mod tests {
             assert!(!dir.join("bad.pvtu").exists(), "case {k} wrote the PVTU");
             assert!(!dir.join("bad_0000.vtu").exists(), "case {k} wrote a piece");
         }
+        for names in [&["global_id"][..], &[""], &["x", "x"]] {
+            let e = write_pvtu(&dir.join("bad.pvtu"), &[], names).unwrap_err();
+            assert_eq!(e.kind(), ErrorKind::InvalidArgument, "{names:?}");
+            assert!(!dir.join("bad.pvtu").exists(), "{names:?}");
+        }
         for p in ["m.vtu", "m", "m.pvtu.tmp"] {
-            let e = write_pvtu(&dir.join(p), &[]).unwrap_err();
+            let e = write_pvtu(&dir.join(p), &[], &[]).unwrap_err();
             assert_eq!(e.kind(), ErrorKind::InvalidArgument, "{p}");
             let e = write_parallel(&SerialComm, &dir.join(p), &piece(&m, 0)).unwrap_err();
             assert_eq!(e.kind(), ErrorKind::InvalidArgument, "{p}");
@@ -780,7 +942,7 @@ mod tests {
         let e = write_vtu(&dir.join("a.vtu"), &piece(&m, 0)).unwrap_err();
         assert_eq!(e.kind(), ErrorKind::Io);
         assert!(e.message().contains("does_not_exist"), "{e}");
-        let e = write_pvtu(&dir.join("a.pvtu"), &["a_0000.vtu".into()]).unwrap_err();
+        let e = write_pvtu(&dir.join("a.pvtu"), &["a_0000.vtu".into()], &[]).unwrap_err();
         assert_eq!(e.kind(), ErrorKind::Io);
         let e = write_parallel(&SerialComm, &dir.join("a.pvtu"), &piece(&m, 0)).unwrap_err();
         assert_eq!(e.kind(), ErrorKind::Io);
@@ -838,7 +1000,12 @@ mod tests {
         let m = two_cubes();
         write_vtu(&piece_path(&pvtu, 0), &piece(&m, 0)).unwrap();
         write_vtu(&piece_path(&pvtu, 1), &EMPTY).unwrap();
-        write_pvtu(&pvtu, &["mesh_0000.vtu".into(), "mesh_0001.vtu".into()]).unwrap();
+        write_pvtu(
+            &pvtu,
+            &["mesh_0000.vtu".into(), "mesh_0001.vtu".into()],
+            &[],
+        )
+        .unwrap();
         let j = check_json(&pvtu);
         assert_eq!(j["pieces"], 2, "{j}");
         assert_eq!(j["cells"], 2, "{j}");
@@ -897,11 +1064,126 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
+    /// x and y + 10 z of each point of `m`.
+    fn xy_fields(m: &Mesh) -> (Vec<f64>, Vec<f64>) {
+        let x = m.points.iter().map(|p| p[0]).collect();
+        let y = m.points.iter().map(|p| p[1] + 10.0 * p[2]).collect();
+        (x, y)
+    }
+
+    #[test]
+    fn point_fields_follow_hanging_and_read_back() {
+        let dir = scratch("fields");
+        let m = two_cubes();
+        let (x, y) = xy_fields(&m);
+        let path = dir.join("f.vtu");
+        let fields = [("x", &x[..]), ("y&\"z\"", &y[..])];
+        let p = VtuPiece {
+            point_fields: &fields,
+            ..piece(&m, 0)
+        };
+        write_vtu(&path, &p).unwrap();
+        let (xml, arrays) = read_back(&path);
+        assert!(xml.contains("Name=\"y&amp;&quot;z&quot;\""), "{xml}");
+        let names: Vec<&str> = arrays.iter().map(|a| a.0.as_str()).collect();
+        assert_eq!(
+            names[..5],
+            ["global_id", "hanging", "x", "y&amp;&quot;z&quot;", "level"]
+        );
+        assert_eq!(arrays.len(), 11);
+        for (k, want) in [(2, &x), (3, &y)] {
+            let (_, ty, comps, b) = &arrays[k];
+            assert_eq!((ty.as_str(), comps.as_str()), ("Float64", "1"));
+            let v: Vec<f64> = le::<8>(b).into_iter().map(f64::from_le_bytes).collect();
+            assert_eq!(&v, want);
+        }
+        // The PointData section holds exactly the four point arrays.
+        let pd = &xml[xml.find("<PointData>").unwrap()..xml.find("</PointData>").unwrap()];
+        assert_eq!(pd.matches("<DataArray").count(), 4, "{pd}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// Point fields round-trip through meshio, with one empty piece and
+    /// sizes where the offsets would trip meshio without the reversed layout.
+    #[test]
+    fn meshio_reads_point_fields() {
+        let dir = scratch("meshio_fields");
+        let pvtu = dir.join("f.pvtu");
+        let mut m = two_cubes();
+        for i in 0..6 {
+            m.points.push([i as f64, 0.5, 2.0]);
+            m.gid.push(10 + i);
+            m.hanging.push(0);
+        }
+        let (x, y) = xy_fields(&m);
+        let fields = [("x", &x[..]), ("y<&>\"'", &y[..])];
+        let p = VtuPiece {
+            point_fields: &fields,
+            ..piece(&m, 0)
+        };
+        let names = ["x", "y<&>\"'"];
+        let no_values: [(&str, &[f64]); 2] = [("x", &[]), ("y<&>\"'", &[])];
+        let empty = VtuPiece {
+            point_fields: &no_values,
+            ..EMPTY
+        };
+        write_vtu(&piece_path(&pvtu, 0), &p).unwrap();
+        write_vtu(&piece_path(&pvtu, 1), &empty).unwrap();
+        write_pvtu(&pvtu, &["f_0000.vtu".into(), "f_0001.vtu".into()], &names).unwrap();
+        let j = check_json(&pvtu);
+        assert_eq!(j["points"], 18, "{j}");
+        assert!((j["volume"].as_f64().unwrap() - 2.0).abs() < 1e-12, "{j}");
+        let f = &j["fields"];
+        assert_eq!(f.as_object().map(|o| o.len()), Some(2), "{j}");
+        let sum = |v: &[f64]| v.iter().sum::<f64>();
+        for (name, v) in [("x", &x), ("y<&>\"'", &y)] {
+            let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            assert_eq!(f[name]["min"].as_f64(), Some(min), "{name}: {j}");
+            assert_eq!(f[name]["max"].as_f64(), Some(max), "{name}: {j}");
+            let s = f[name]["sum"].as_f64().unwrap();
+            assert!((s - sum(v)).abs() < 1e-9, "{name}: {s} vs {}", sum(v));
+        }
+        // Without fields the JSON still has the key, empty.
+        let plain = write_parallel(&SerialComm, &dir.join("plain.pvtu"), &piece(&m, 0)).unwrap();
+        assert_eq!(check_json(&plain)["fields"], serde_json::json!({}));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn check_vtu_rejects_pieces_without_the_declared_fields() {
+        let dir = scratch("reject_fields");
+        let pvtu = dir.join("r.pvtu");
+        let m = two_cubes();
+        let (x, _) = xy_fields(&m);
+        // Declared in the PVTU, missing in the piece.
+        write_vtu(&piece_path(&pvtu, 0), &piece(&m, 0)).unwrap();
+        write_pvtu(&pvtu, &["r_0000.vtu".into()], &["x"]).unwrap();
+        assert!(!check_vtu(&pvtu).status.success(), "missing field accepted");
+        // In the piece, not declared.
+        let fields = [("x", &x[..])];
+        let p = VtuPiece {
+            point_fields: &fields,
+            ..piece(&m, 0)
+        };
+        write_vtu(&piece_path(&pvtu, 0), &p).unwrap();
+        write_pvtu(&pvtu, &["r_0000.vtu".into()], &[]).unwrap();
+        assert!(
+            !check_vtu(&pvtu).status.success(),
+            "undeclared field accepted"
+        );
+        // Both agree: accepted.
+        write_pvtu(&pvtu, &["r_0000.vtu".into()], &["x"]).unwrap();
+        let j = check_json(&pvtu);
+        assert_eq!(j["fields"]["x"]["max"], 2.0, "{j}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
     #[test]
     fn check_vtu_rejects_missing_and_corrupt_pieces() {
         let dir = scratch("reject");
         let pvtu = dir.join("x.pvtu");
-        write_pvtu(&pvtu, &["x_0000.vtu".into()]).unwrap();
+        write_pvtu(&pvtu, &["x_0000.vtu".into()], &[]).unwrap();
         let out = check_vtu(&pvtu);
         assert!(!out.status.success(), "missing piece accepted");
         // A piece cut short inside its appended data.
