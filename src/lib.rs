@@ -22,6 +22,7 @@ pub mod classify;
 pub mod comm;
 pub mod domain;
 pub mod error;
+pub mod ffi;
 pub mod geometry;
 pub mod ghost;
 pub mod io;

@@ -1,0 +1,344 @@
+//! The C ABI: an opaque handle ([`octmesh_t`]) driving the pipeline through
+//! `extern "C"` functions, for C, C++ and Fortran callers.
+//!
+//! The layer is thin: every function checks its arguments, calls the Rust
+//! API and translates the result. Conventions, the same for every function:
+//!
+//! - Each function returns an [`octmesh_status_t`]; `OCTMESH_STATUS_OK` (0)
+//!   means success, the other values are the numbers of
+//!   [`crate::ErrorKind`]. [`handle::octmesh_last_error`] gives the message of the
+//!   last failed call on a handle.
+//! - Out-parameters are written only on success.
+//! - No panic crosses the boundary: a panic becomes
+//!   `OCTMESH_STATUS_INTERNAL` with a message starting with `panic: `, and
+//!   the handle then refuses further work (destroy it).
+//! - Collective functions (marked so in their documentation) must be called
+//!   by every rank of the handle's communicator in the same order. Their
+//!   argument and state checks are agreed over the ranks, so a failure on
+//!   one rank (a NULL pointer, an unreadable file) is reported on every rank
+//!   instead of leaving the others waiting. A NULL handle cannot be agreed
+//!   on: it fails on the calling rank only.
+//! - A failed call leaves the handle as it was before the call.
+//! - Enumerations passed *to* octmesh are `int32_t` typedefs (`..._t`) with
+//!   named constants in an enum of the same name without `_t`, so that an
+//!   unknown value is an `OCTMESH_STATUS_INVALID_ARGUMENT`, never undefined
+//!   behaviour.
+//!
+//! The header `include/octmesh.h` is generated from this module by cbindgen
+//! (`tests/c_header.rs` checks that it is up to date).
+//!
+//! Submodules: [`handle`] (create, destroy, options, errors, domain),
+//! [`octree`] (surface, refinement, balance, partition), [`mesh`] (mesh,
+//! getters, VTU output).
+
+#![allow(non_camel_case_types)]
+#![allow(clippy::missing_safety_doc)]
+
+pub mod handle;
+pub mod mesh;
+pub mod octree;
+
+use std::any::Any;
+use std::cell::RefCell;
+use std::ffi::{c_char, CStr, CString};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::PathBuf;
+
+use crate::error::{Error, ErrorKind, Result};
+
+pub use handle::octmesh_t;
+
+/// Status returned by every octmesh function. The values other than
+/// `OCTMESH_STATUS_OK` are the stable error codes of octmesh's error kinds.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_status_t {
+    /// Success.
+    OCTMESH_STATUS_OK = 0,
+    /// An argument was NULL, out of range or inconsistent.
+    OCTMESH_STATUS_INVALID_ARGUMENT = 1,
+    /// A file could not be opened, read or written.
+    OCTMESH_STATUS_IO = 2,
+    /// An input file's content is not valid (malformed STL).
+    OCTMESH_STATUS_FORMAT = 3,
+    /// The surface cannot be used (no triangles, non-finite coordinates,
+    /// zero extent).
+    OCTMESH_STATUS_GEOMETRY = 4,
+    /// A resource limit was reached (the octant limit of the options).
+    OCTMESH_STATUS_LIMIT = 5,
+    /// Functions were called in an order that is not allowed (the message
+    /// says what to call first).
+    OCTMESH_STATUS_STATE = 6,
+    /// An MPI call failed, MPI is not initialised, or ranks disagree.
+    OCTMESH_STATUS_MPI = 7,
+    /// Another rank failed; the message is that rank's.
+    OCTMESH_STATUS_REMOTE_FAILURE = 8,
+    /// A bug inside octmesh (a caught panic, a broken invariant).
+    OCTMESH_STATUS_INTERNAL = 9,
+}
+
+impl octmesh_status_t {
+    /// The status of an error kind.
+    pub fn from_kind(kind: ErrorKind) -> octmesh_status_t {
+        use octmesh_status_t::*;
+        match kind {
+            ErrorKind::InvalidArgument => OCTMESH_STATUS_INVALID_ARGUMENT,
+            ErrorKind::Io => OCTMESH_STATUS_IO,
+            ErrorKind::Format => OCTMESH_STATUS_FORMAT,
+            ErrorKind::Geometry => OCTMESH_STATUS_GEOMETRY,
+            ErrorKind::Limit => OCTMESH_STATUS_LIMIT,
+            ErrorKind::State => OCTMESH_STATUS_STATE,
+            ErrorKind::Mpi => OCTMESH_STATUS_MPI,
+            ErrorKind::RemoteFailure => OCTMESH_STATUS_REMOTE_FAILURE,
+            ErrorKind::Internal => OCTMESH_STATUS_INTERNAL,
+        }
+    }
+}
+
+/// Contacts the 2:1 balance applies to (values of `octmesh_connect_t`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_connect {
+    /// Leaves sharing a face.
+    OCTMESH_CONNECT_FACE = 1,
+    /// Leaves sharing a face or an edge (enough for meshing).
+    OCTMESH_CONNECT_EDGE = 2,
+    /// Leaves sharing a face, an edge or a corner.
+    OCTMESH_CONNECT_CORNER = 3,
+}
+
+/// One of the `octmesh_connect` constants.
+pub type octmesh_connect_t = i32;
+
+/// Which leaves become elements (values of `octmesh_keep_t`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_keep {
+    /// Every leaf (the only choice without a surface).
+    OCTMESH_KEEP_ALL = 0,
+    /// Leaves inside the surface (solid mesh).
+    OCTMESH_KEEP_INSIDE = 1,
+    /// Leaves outside the surface (fluid mesh).
+    OCTMESH_KEEP_OUTSIDE = 2,
+}
+
+/// One of the `octmesh_keep` constants.
+pub type octmesh_keep_t = i32;
+
+/// What happens to leaves touching the surface when keeping inside or
+/// outside (values of `octmesh_cut_rule_t`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_cut_rule {
+    /// A cut leaf goes with its centre: inside and outside tile the cube.
+    OCTMESH_CUT_RULE_CENTER = 0,
+    /// Every cut leaf is kept.
+    OCTMESH_CUT_RULE_ALL = 1,
+    /// No cut leaf is kept.
+    OCTMESH_CUT_RULE_NONE = 2,
+}
+
+/// One of the `octmesh_cut_rule` constants.
+pub type octmesh_cut_rule_t = i32;
+
+/// Class of an element, as stored in the array of
+/// `octmesh_mesh_get_element_class`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_class {
+    /// Does not touch the surface, centre outside (every element when there
+    /// is no surface).
+    OCTMESH_CLASS_OUTSIDE = 0,
+    /// Does not touch the surface, centre inside.
+    OCTMESH_CLASS_INSIDE = 1,
+    /// Touches the surface.
+    OCTMESH_CLASS_CUT = 2,
+}
+
+/// An octant as seen by callbacks: its lowest corner in lattice units (the
+/// root cube is `[0, 2^19]^3`; lattice point `q` is the user point
+/// `origin + q * side / 2^19`, see `octmesh_get_domain`) and its
+/// level (side `2^(19 - level)` lattice units).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct octmesh_octant_t {
+    /// Lowest x corner, lattice units.
+    pub x: i32,
+    /// Lowest y corner, lattice units.
+    pub y: i32,
+    /// Lowest z corner, lattice units.
+    pub z: i32,
+    /// Level, 0 (root) to 18.
+    pub level: i32,
+}
+
+impl octmesh_octant_t {
+    pub(crate) fn of(o: crate::Octant) -> octmesh_octant_t {
+        let c = o.coords();
+        octmesh_octant_t {
+            x: c[0] as i32,
+            y: c[1] as i32,
+            z: c[2] as i32,
+            level: o.level() as i32,
+        }
+    }
+}
+
+thread_local! {
+    /// Message of the last failure that had no handle to store it in.
+    static NO_HANDLE_ERROR: RefCell<CString> = RefCell::new(CString::new(
+        "no error recorded without a handle").unwrap_or_default());
+}
+
+/// Text made safe for a C string (interior NUL bytes replaced).
+pub(crate) fn c_string(text: &str) -> CString {
+    CString::new(text.replace('\0', "?")).unwrap_or_default()
+}
+
+/// Records the message of a failure that has no handle (NULL handle,
+/// failed creation) and returns its status.
+pub(crate) fn fail_without_handle(e: &Error) -> octmesh_status_t {
+    NO_HANDLE_ERROR.with(|m| *m.borrow_mut() = c_string(e.message()));
+    octmesh_status_t::from_kind(e.kind())
+}
+
+/// The message of the last failure without a handle (thread-local; valid
+/// until the next such failure on this thread).
+pub(crate) fn no_handle_error() -> *const c_char {
+    NO_HANDLE_ERROR.with(|m| m.borrow().as_ptr())
+}
+
+fn panic_message(p: &(dyn Any + Send)) -> String {
+    if let Some(s) = p.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = p.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".to_string()
+    }
+}
+
+/// Runs `f`; `Err` carries the message of a panic.
+fn catch_panic<T>(f: impl FnOnce() -> T) -> std::result::Result<T, Error> {
+    catch_unwind(AssertUnwindSafe(f)).map_err(|p| {
+        Error::new(
+            ErrorKind::Internal,
+            format!("panic: {}", panic_message(&*p)),
+        )
+    })
+}
+
+/// Runs `f`, turning a panic into an [`ErrorKind::Internal`] error.
+pub(crate) fn catch<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
+    catch_panic(f).and_then(|r| r)
+}
+
+fn null_handle() -> Error {
+    Error::invalid("the octmesh handle is NULL")
+}
+
+/// The boundary of a function that may change the handle: NULL check, panic
+/// boundary, error recording.
+pub(crate) fn with_mut(
+    h: *mut octmesh_t,
+    f: impl FnOnce(&mut octmesh_t) -> Result<()>,
+) -> octmesh_status_t {
+    // SAFETY: a non-NULL handle comes from octmesh_create and is not used
+    // concurrently (documented requirement of the C API).
+    let Some(h) = (unsafe { h.as_mut() }) else {
+        return fail_without_handle(&null_handle());
+    };
+    if let Err(e) = h.usable() {
+        return h.fail(e);
+    }
+    match catch_panic(|| f(&mut *h)) {
+        Ok(Ok(())) => octmesh_status_t::OCTMESH_STATUS_OK,
+        Ok(Err(e)) => h.fail(e),
+        Err(panic) => {
+            // The panic may have left the handle half-updated.
+            h.poison();
+            h.fail(panic)
+        }
+    }
+}
+
+/// The boundary of a function that only reads the handle.
+pub(crate) fn with_ref(
+    h: *const octmesh_t,
+    f: impl FnOnce(&octmesh_t) -> Result<()>,
+) -> octmesh_status_t {
+    // SAFETY: as in `with_mut`.
+    let Some(h) = (unsafe { h.as_ref() }) else {
+        return fail_without_handle(&null_handle());
+    };
+    if let Err(e) = h.usable() {
+        return h.fail(e);
+    }
+    match catch(|| f(h)) {
+        Ok(()) => octmesh_status_t::OCTMESH_STATUS_OK,
+        Err(e) => h.fail(e),
+    }
+}
+
+/// Fails unless `p` is non-NULL.
+pub(crate) fn non_null<T>(p: *const T, name: &str) -> Result<()> {
+    if p.is_null() {
+        Err(Error::invalid(format!("argument '{name}' is NULL")))
+    } else {
+        Ok(())
+    }
+}
+
+/// A path from a NUL-terminated C string.
+pub(crate) fn path_arg(p: *const c_char, name: &str) -> Result<PathBuf> {
+    non_null(p, name)?;
+    // SAFETY: non-NULL and NUL-terminated (requirement of the C API).
+    let s = unsafe { CStr::from_ptr(p) };
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        Ok(PathBuf::from(std::ffi::OsStr::from_bytes(s.to_bytes())))
+    }
+    #[cfg(not(unix))]
+    {
+        s.to_str()
+            .map(PathBuf::from)
+            .map_err(|_| Error::invalid(format!("argument '{name}' is not UTF-8")))
+    }
+}
+
+/// Writes `value` through an out-pointer already checked to be non-NULL.
+pub(crate) fn write_out<T>(p: *mut T, value: T) {
+    // SAFETY: checked non-NULL by the caller; the C API requires it to be
+    // valid for writes.
+    unsafe { p.write(value) }
+}
+
+/// The name of a status value, e.g. `"OCTMESH_STATUS_STATE"`, or
+/// `"OCTMESH_STATUS_UNKNOWN"` for a value that is not a status. The string
+/// is static. Not collective.
+#[no_mangle]
+pub extern "C" fn octmesh_status_name(status: i32) -> *const c_char {
+    let s: &'static CStr = match status {
+        0 => c"OCTMESH_STATUS_OK",
+        1 => c"OCTMESH_STATUS_INVALID_ARGUMENT",
+        2 => c"OCTMESH_STATUS_IO",
+        3 => c"OCTMESH_STATUS_FORMAT",
+        4 => c"OCTMESH_STATUS_GEOMETRY",
+        5 => c"OCTMESH_STATUS_LIMIT",
+        6 => c"OCTMESH_STATUS_STATE",
+        7 => c"OCTMESH_STATUS_MPI",
+        8 => c"OCTMESH_STATUS_REMOTE_FAILURE",
+        9 => c"OCTMESH_STATUS_INTERNAL",
+        _ => c"OCTMESH_STATUS_UNKNOWN",
+    };
+    s.as_ptr()
+}
+
+/// Panics inside the boundary; for testing that no panic crosses it. Only
+/// built with the cargo feature `ffi-test-panic`, and not in the header.
+#[cfg(feature = "ffi-test-panic")]
+#[no_mangle]
+pub extern "C" fn octmesh_test_panic(h: *mut octmesh_t) -> octmesh_status_t {
+    with_mut(h, |_| panic!("test panic requested"))
+}

@@ -1,0 +1,230 @@
+//! The C ABI from C: small programs in `tests/c` compiled with `mpicc`
+//! against `include/octmesh.h` and the `liboctmesh.so` of this build, run
+//! under `mpirun` on 1 and 2 ranks.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use common::{mpirun, python_with_meshio, repo, run_with_limit, scratch};
+
+/// `target/<profile>/deps`, where `cargo test` puts the `liboctmesh.so`
+/// built with this test (`cargo build` also copies it one level up).
+fn deps_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    exe.parent().expect("target/<profile>/deps").to_path_buf()
+}
+
+/// Copies `liboctmesh.so` from `from` into `dir` under its SONAME too.
+fn stage_library(from: &Path, dir: &Path) {
+    let so = from.join("liboctmesh.so");
+    assert!(
+        so.is_file(),
+        "{} not found: the cdylib is built with the library (crate-type in Cargo.toml)",
+        so.display()
+    );
+    std::fs::create_dir_all(dir).unwrap();
+    for name in ["liboctmesh.so", "liboctmesh.so.0"] {
+        std::fs::copy(&so, dir.join(name)).expect("copy liboctmesh.so");
+    }
+}
+
+/// Compiles `tests/c/<name>.c` with mpicc against the library in `lib`.
+fn compile(name: &str, lib: &Path, out_dir: &Path) -> PathBuf {
+    let root = repo();
+    let exe = out_dir.join(name);
+    let mut cmd = Command::new("mpicc");
+    cmd.arg("-std=c11")
+        .arg("-Wall")
+        .arg("-Wextra")
+        .arg("-Werror")
+        .arg("-I")
+        .arg(root.join("include"))
+        .arg("-I")
+        .arg(root.join("tests/c"))
+        .arg(root.join("tests/c").join(format!("{name}.c")))
+        .arg("-o")
+        .arg(&exe)
+        .arg("-L")
+        .arg(lib)
+        .arg(format!("-Wl,-rpath,{}", lib.display()))
+        .arg("-loctmesh");
+    let out = run_with_limit(cmd, Duration::from_secs(120));
+    assert!(
+        out.status.success(),
+        "mpicc {name}.c failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    exe
+}
+
+fn run_ok(np: usize, exe: &Path, args: &[&str]) -> String {
+    let out = mpirun(np, exe, args, Duration::from_secs(300));
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{} on {np} ranks failed:\n{stdout}\n{}",
+        exe.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+fn line_starting<'a>(text: &'a str, prefix: &str) -> &'a str {
+    text.lines()
+        .find(|l| l.starts_with(prefix))
+        .unwrap_or_else(|| panic!("no line starting with {prefix} in:\n{text}"))
+}
+
+/// Checks the PVTU written with point fields by `pipeline.c` against its
+/// line `FIELDS points=P x_sum=S x_min=A x_max=B`, through
+/// `tools/check_vtu.py` (meshio).
+fn check_fields(pvtu: &Path, line: &str) {
+    let out = Command::new(python_with_meshio())
+        .arg(repo().join("tools").join("check_vtu.py"))
+        .arg(pvtu)
+        .output()
+        .expect("run tools/check_vtu.py");
+    assert!(
+        out.status.success(),
+        "check_vtu.py failed on {}: {}",
+        pvtu.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let want = |key: &str| -> f64 {
+        line.split_whitespace()
+            .find_map(|w| w.strip_prefix(&format!("{key}=")))
+            .unwrap_or_else(|| panic!("no {key} in {line}"))
+            .parse()
+            .unwrap()
+    };
+    let points = want("points");
+    assert_eq!(j["points"].as_f64(), Some(points), "{line}\n{j}");
+    let f = &j["fields"];
+    assert_eq!(f.as_object().map(|o| o.len()), Some(2), "{j}");
+    let x = &f["x"];
+    let sum = x["sum"].as_f64().unwrap();
+    let tol = 1e-9 * (1.0 + want("x_sum").abs() + points);
+    assert!((sum - want("x_sum")).abs() <= tol, "x sum {sum}: {line}");
+    assert_eq!(x["min"].as_f64(), Some(want("x_min")), "{line}\n{j}");
+    assert_eq!(x["max"].as_f64(), Some(want("x_max")), "{line}\n{j}");
+    // The sphere lies in [-1, 1]^3, and the mesh touches both sides.
+    assert!(want("x_min") < -0.5 && want("x_max") > 0.5, "{line}");
+    let one = &f["one"];
+    assert_eq!(one["sum"].as_f64(), Some(points), "{j}");
+    assert_eq!(
+        (one["min"].as_f64(), one["max"].as_f64()),
+        (Some(1.0), Some(1.0)),
+        "{j}"
+    );
+}
+
+#[test]
+fn pipeline_from_c_on_1_and_2_ranks() {
+    let dir = scratch("c_api_pipeline");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("pipeline", &lib, &dir);
+    let mut sphere = Vec::new();
+    let mut callback = Vec::new();
+    for np in [1, 2] {
+        let pvtu = dir.join(format!("sphere_np{np}.pvtu"));
+        let fields = dir.join(format!("fields_np{np}.pvtu"));
+        let out = run_ok(
+            np,
+            &exe,
+            &[pvtu.to_str().unwrap(), fields.to_str().unwrap()],
+        );
+        assert_eq!(out.matches("PIPELINE OK").count(), np, "{out}");
+        assert!(pvtu.is_file(), "{} not written", pvtu.display());
+        for r in 0..np {
+            assert!(dir.join(format!("sphere_np{np}_{r:04}.vtu")).is_file());
+        }
+        check_fields(&fields, line_starting(&out, "FIELDS"));
+        sphere.push(line_starting(&out, "SPHERE").to_string());
+        callback.push(line_starting(&out, "CALLBACK").to_string());
+    }
+    // Global counts do not depend on the number of ranks.
+    assert_eq!(sphere[0], sphere[1]);
+    assert_eq!(callback[0], callback[1]);
+    // ... and equal those of the octmesh command on the same input.
+    let cli = common::octmesh_ok(1, &["mesh", "sphere", "--level", "5", "--keep", "inside"]);
+    let cli = String::from_utf8_lossy(&cli.stdout).into_owned();
+    let nums = |line: &str| -> Vec<u64> {
+        line.split(|c: char| !c.is_ascii_digit())
+            .filter(|w| !w.is_empty())
+            .map(|w| w.parse().unwrap())
+            .collect()
+    };
+    let cli_line = cli
+        .lines()
+        .map(str::trim)
+        .find(|l| l.starts_with("elements"))
+        .expect("elements line");
+    let c = nums(cli_line);
+    // elements, independent, face, edge (ghosts last).
+    let f = nums(&sphere[0]);
+    assert_eq!(
+        &f[..4],
+        &c[..4],
+        "C API: {}\ncommand: {cli_line}",
+        sphere[0]
+    );
+}
+
+#[test]
+fn misuse_from_c_on_1_and_2_ranks() {
+    let dir = scratch("c_api_misuse");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("misuse", &lib, &dir);
+    let good = dir.join("sphere.stl");
+    octmesh::geometry::stl::write_stl_binary(&good, &octmesh::geometry::shapes::default_sphere())
+        .unwrap();
+    let missing = dir.join("no-such-file.stl");
+    for np in [1, 2] {
+        let out = run_ok(
+            np,
+            &exe,
+            &[good.to_str().unwrap(), missing.to_str().unwrap()],
+        );
+        assert_eq!(out.matches("MISUSE OK").count(), np, "{out}");
+    }
+}
+
+/// Builds the library with the `ffi-test-panic` feature in its own target
+/// directory and checks that a panic inside becomes a status.
+#[test]
+fn panic_becomes_a_status() {
+    let root = repo();
+    let target = root.join("target").join("ffi-test-panic");
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_string());
+    let mut cmd = Command::new(cargo);
+    cmd.current_dir(&root)
+        .args([
+            "build",
+            "--release",
+            "--lib",
+            "--features",
+            "ffi-test-panic",
+        ])
+        .arg("--target-dir")
+        .arg(&target);
+    let out = run_with_limit(cmd, Duration::from_secs(1200));
+    assert!(
+        out.status.success(),
+        "cargo build --features ffi-test-panic failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dir = scratch("c_api_panic");
+    let lib = dir.join("lib");
+    stage_library(&target.join("release"), &lib);
+    let exe = compile("panic", &lib, &dir);
+    for np in [1, 2] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("PANIC OK").count(), np, "{out}");
+    }
+}
