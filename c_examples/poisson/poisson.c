@@ -1,0 +1,353 @@
+/* Poisson problem -Δu = f on a solid meshed by octmesh, with trilinear
+ * hexahedra, hanging nodes eliminated, and a matrix-free parallel
+ * conjugate gradient.
+ *
+ * Usage: poisson LEVEL [SURFACE.stl] [OUT.pvtu]
+ *
+ * The solid is the union of the kept elements (KEEP_INSIDE, cut leaves by
+ * their centres) of the surface refined at LEVEL, with every leaf refined to
+ * at least LEVEL-2 so that the whole mesh gets finer with LEVEL. Without a
+ * readable STL file the built-in sphere is used (and said so).
+ *
+ * Manufactured solution, in cube coordinates s = (x - origin) / side:
+ *   u = sin(pi s_x) sin(pi s_y) sin(pi s_z),  f = 3 pi^2 / side^2 u,
+ * with u = exact on the boundary nodes of the solid.
+ *
+ * Discretisation.
+ * - Unknowns: the independent local nodes. A hanging node's value is the
+ *   mean of its dependencies, u_full = P u; the operator is P^T K P, applied
+ *   element by element (elements are axis-aligned cubes of side h, so
+ *   K_e = h K_ref with K_ref the unit-cube stiffness) and never assembled.
+ * - Parallel sums: each rank adds its elements' contributions to its local
+ *   nodes; the exchange lists then add the partial sums of the other ranks
+ *   using the same nodes, so every rank holds full sums on all its
+ *   independent nodes. Dot products run over owned nodes only.
+ * - Boundary: an independent node is interior iff it is a corner of exactly
+ *   8 kept elements (summed over ranks like the operator). Each element
+ *   having the node as a corner covers one of the 8 octants around it; an
+ *   octant covered by a kept element that does not have the node as a corner
+ *   would put the node inside that element's face or edge, which makes it a
+ *   hanging node, not an independent one. So fewer than 8 means some octant
+ *   around the node is outside the solid: the node is on the boundary.
+ * - Dirichlet: u = u_D + w, u_D = exact on boundary nodes and 0 elsewhere,
+ *   w solves the interior rows of (P^T K P) w = b - (P^T K P) u_D.
+ *
+ * Output: one line "POISSON level=... max_error=..." (max over independent
+ * nodes of |u - exact|). With OUT.pvtu, the mesh is written with the point
+ * fields "u" (computed solution), "u_exact" and "error" (u - u_exact) on
+ * every local node, a hanging node's u being the mean of its dependencies. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <mpi.h>
+#include "octmesh.h"
+
+static octmesh_t *g_handle = NULL;
+
+#define TRY(call)                                                                       \
+  do {                                                                                  \
+    octmesh_status_t s_ = (call);                                                       \
+    if (s_ != OCTMESH_STATUS_OK) {                                                      \
+      fprintf(stderr, "%s failed: %s: %s\n", #call, octmesh_status_name(s_),            \
+              octmesh_last_error(g_handle));                                            \
+      MPI_Abort(MPI_COMM_WORLD, 2);                                                     \
+    }                                                                                   \
+  } while (0)
+
+/* Corners of the unit cube in VTK hexahedron order. */
+static const int CORNER[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                 {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+
+static double g_origin[3], g_side;
+
+static double exact(const double *x) {
+  const double pi = acos(-1.0);
+  double v = 1.0;
+  for (int d = 0; d < 3; d++) v *= sin(pi * (x[d] - g_origin[d]) / g_side);
+  return v;
+}
+
+static double rhs(const double *x) {
+  const double pi = acos(-1.0);
+  return 3.0 * pi * pi / (g_side * g_side) * exact(x);
+}
+
+/* Refinement context: every leaf below min_level is split. */
+typedef struct {
+  int min_level;
+} uniform_ctx;
+
+static int32_t refine_uniform(void *ctx, const octmesh_octant_t *o) {
+  return o->level < ((const uniform_ctx *)ctx)->min_level;
+}
+
+/* The mesh and what the solver derives from it. */
+typedef struct {
+  int64_t ne, nl, ni, nown;
+  const int32_t *conn, *hcount, *hdeps;
+  const double *xyz;
+  double *h;          /* element sides */
+  unsigned char *bnd; /* per independent node: 1 on the boundary */
+  double *ufull, *rfull;
+  /* exchange */
+  int32_t nnb;
+  const int32_t *xr, *xo, *xn;
+  double *sendbuf, *recvbuf;
+  MPI_Request *req;
+} problem;
+
+static double KREF[8][8];
+
+/* Unit-cube trilinear stiffness, 2x2x2 Gauss (exact for it). */
+static void init_kref(void) {
+  const double g[2] = {0.5 - 0.5 / sqrt(3.0), 0.5 + 0.5 / sqrt(3.0)};
+  memset(KREF, 0, sizeof KREF);
+  for (int q = 0; q < 8; q++) {
+    double p[3] = {g[q & 1], g[(q >> 1) & 1], g[(q >> 2) & 1]};
+    double grad[8][3];
+    for (int i = 0; i < 8; i++)
+      for (int d = 0; d < 3; d++) {
+        double v = 1.0;
+        for (int e = 0; e < 3; e++) {
+          double s = CORNER[i][e] ? 1.0 : -1.0;
+          if (e == d)
+            v *= s;
+          else
+            v *= CORNER[i][e] ? p[e] : 1.0 - p[e];
+        }
+        grad[i][d] = v;
+      }
+    for (int i = 0; i < 8; i++)
+      for (int j = 0; j < 8; j++)
+        KREF[i][j] += (grad[i][0] * grad[j][0] + grad[i][1] * grad[j][1] +
+                       grad[i][2] * grad[j][2]) / 8.0;
+  }
+}
+
+/* Adds the other ranks' partial sums to v on shared independent nodes. */
+static void exchange_sum(problem *pb, double *v) {
+  for (int32_t k = 0; k < pb->xo[pb->nnb]; k++) pb->sendbuf[k] = v[pb->xn[k]];
+  for (int32_t k = 0; k < pb->nnb; k++) {
+    int n = pb->xo[k + 1] - pb->xo[k];
+    MPI_Irecv(pb->recvbuf + pb->xo[k], n, MPI_DOUBLE, pb->xr[k], 71, MPI_COMM_WORLD, &pb->req[2 * k]);
+    MPI_Isend(pb->sendbuf + pb->xo[k], n, MPI_DOUBLE, pb->xr[k], 71, MPI_COMM_WORLD,
+              &pb->req[2 * k + 1]);
+  }
+  MPI_Waitall(2 * pb->nnb, pb->req, MPI_STATUSES_IGNORE);
+  for (int32_t k = 0; k < pb->xo[pb->nnb]; k++) v[pb->xn[k]] += pb->recvbuf[k];
+}
+
+/* Folds hanging-node entries of a full local vector onto their dependencies
+ * (P^T) and writes the independent part to out. */
+static void fold_hanging(const problem *pb, const double *full, double *out) {
+  for (int64_t i = 0; i < pb->ni; i++) out[i] = full[i];
+  for (int64_t k = 0; k < pb->nl - pb->ni; k++) {
+    double share = full[pb->ni + k] / pb->hcount[k];
+    for (int j = 0; j < pb->hcount[k]; j++) out[pb->hdeps[4 * k + j]] += share;
+  }
+}
+
+/* y = P^T K P x on independent nodes (full sums); rows of boundary nodes
+ * zeroed when mask is set. */
+static void apply(problem *pb, const double *x, double *y, int mask) {
+  for (int64_t i = 0; i < pb->ni; i++) pb->ufull[i] = x[i];
+  for (int64_t k = 0; k < pb->nl - pb->ni; k++) {
+    double s = 0.0;
+    for (int j = 0; j < pb->hcount[k]; j++) s += x[pb->hdeps[4 * k + j]];
+    pb->ufull[pb->ni + k] = s / pb->hcount[k];
+  }
+  memset(pb->rfull, 0, sizeof(double) * (size_t)pb->nl);
+  for (int64_t e = 0; e < pb->ne; e++) {
+    const int32_t *c = pb->conn + 8 * e;
+    double ue[8];
+    for (int j = 0; j < 8; j++) ue[j] = pb->ufull[c[j]];
+    for (int i = 0; i < 8; i++) {
+      double s = 0.0;
+      for (int j = 0; j < 8; j++) s += KREF[i][j] * ue[j];
+      pb->rfull[c[i]] += pb->h[e] * s;
+    }
+  }
+  fold_hanging(pb, pb->rfull, y);
+  exchange_sum(pb, y);
+  if (mask)
+    for (int64_t i = 0; i < pb->ni; i++)
+      if (pb->bnd[i]) y[i] = 0.0;
+}
+
+static double dot(const problem *pb, const double *a, const double *b) {
+  double s = 0.0, g = 0.0;
+  for (int64_t i = 0; i < pb->nown; i++) s += a[i] * b[i];
+  MPI_Allreduce(&s, &g, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+  return g;
+}
+
+int main(int argc, char **argv) {
+  MPI_Init(&argc, &argv);
+  int rank, size;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  if (argc < 2 || atoi(argv[1]) < 2 || atoi(argv[1]) > 12) {
+    if (rank == 0) fprintf(stderr, "usage: %s LEVEL(2-12) [SURFACE.stl] [OUT.pvtu]\n", argv[0]);
+    MPI_Finalize();
+    return 1;
+  }
+  int level = atoi(argv[1]);
+  const char *stl = argc > 2 ? argv[2] : NULL;
+  const char *pvtu = argc > 3 ? argv[3] : NULL;
+
+  /* Every rank must take the same branch: rank 0 decides. */
+  int have_stl = 0;
+  if (rank == 0 && stl) {
+    FILE *f = fopen(stl, "rb");
+    if (f) {
+      have_stl = 1;
+      fclose(f);
+    }
+  }
+  MPI_Bcast(&have_stl, 1, MPI_INT, 0, MPI_COMM_WORLD);
+
+  TRY(octmesh_create(MPI_COMM_WORLD, NULL, &g_handle));
+  octmesh_t *h = g_handle;
+  if (have_stl) {
+    TRY(octmesh_surface_from_stl(h, stl));
+  } else {
+    if (rank == 0)
+      printf("surface %s not found: using the built-in sphere\n", stl ? stl : "(none given)");
+    TRY(octmesh_surface_builtin(h, "sphere"));
+  }
+  TRY(octmesh_refine_surface(h, level));
+  uniform_ctx uctx = {level - 2};
+  TRY(octmesh_refine_callback(h, level - 2, refine_uniform, &uctx));
+  TRY(octmesh_balance(h, OCTMESH_CONNECT_CORNER));
+  TRY(octmesh_partition(h, NULL, NULL));
+  TRY(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER));
+  TRY(octmesh_get_domain(h, g_origin, &g_side));
+
+  octmesh_mesh_counts_t c;
+  TRY(octmesh_mesh_get_counts(h, &c));
+  problem pb;
+  memset(&pb, 0, sizeof pb);
+  pb.ne = c.local_elements;
+  pb.nl = c.local_nodes;
+  pb.ni = c.num_independent;
+  pb.nown = c.num_owned;
+  TRY(octmesh_mesh_get_connectivity(h, &pb.conn));
+  TRY(octmesh_mesh_get_coordinates(h, &pb.xyz));
+  TRY(octmesh_mesh_get_hanging(h, &pb.hcount, &pb.hdeps));
+  TRY(octmesh_mesh_get_exchange(h, &pb.nnb, &pb.xr, &pb.xo, &pb.xn));
+
+  size_t nl = (size_t)pb.nl + 1, ni = (size_t)pb.ni + 1, nx = (size_t)pb.xo[pb.nnb] + 1;
+  pb.h = malloc(sizeof(double) * ((size_t)pb.ne + 1));
+  pb.bnd = malloc(ni);
+  pb.ufull = malloc(sizeof(double) * nl);
+  pb.rfull = malloc(sizeof(double) * nl);
+  pb.sendbuf = malloc(sizeof(double) * nx);
+  pb.recvbuf = malloc(sizeof(double) * nx);
+  pb.req = malloc(sizeof(MPI_Request) * (2 * (size_t)pb.nnb + 1));
+  double *b = malloc(sizeof(double) * ni), *x = malloc(sizeof(double) * ni);
+  double *r = malloc(sizeof(double) * ni), *p = malloc(sizeof(double) * ni);
+  double *ap = malloc(sizeof(double) * ni), *ud = malloc(sizeof(double) * ni);
+  init_kref();
+
+  for (int64_t e = 0; e < pb.ne; e++)
+    pb.h[e] = pb.xyz[3 * pb.conn[8 * e + 6]] - pb.xyz[3 * pb.conn[8 * e]];
+
+  /* Boundary: corners of fewer than 8 kept elements (summed over ranks). */
+  memset(pb.rfull, 0, sizeof(double) * nl);
+  for (int64_t e = 0; e < 8 * pb.ne; e++) pb.rfull[pb.conn[e]] += 1.0;
+  for (int64_t i = 0; i < pb.ni; i++) b[i] = pb.rfull[i];
+  exchange_sum(&pb, b);
+  long nbnd = 0, gbnd = 0;
+  for (int64_t i = 0; i < pb.ni; i++) {
+    pb.bnd[i] = b[i] < 7.5;
+    if (i < pb.nown) nbnd += pb.bnd[i];
+  }
+  MPI_Allreduce(&nbnd, &gbnd, 1, MPI_LONG, MPI_SUM, MPI_COMM_WORLD);
+
+  /* Load b = P^T (element integrals of f N_i), 2x2x2 Gauss. */
+  const double g[2] = {0.5 - 0.5 / sqrt(3.0), 0.5 + 0.5 / sqrt(3.0)};
+  memset(pb.rfull, 0, sizeof(double) * nl);
+  for (int64_t e = 0; e < pb.ne; e++) {
+    const int32_t *ce = pb.conn + 8 * e;
+    const double *x0 = pb.xyz + 3 * ce[0];
+    double he = pb.h[e];
+    for (int q = 0; q < 8; q++) {
+      double s[3] = {g[q & 1], g[(q >> 1) & 1], g[(q >> 2) & 1]};
+      double xq[3] = {x0[0] + he * s[0], x0[1] + he * s[1], x0[2] + he * s[2]};
+      double fq = rhs(xq) * he * he * he / 8.0;
+      for (int i = 0; i < 8; i++) {
+        double n = 1.0;
+        for (int d = 0; d < 3; d++) n *= CORNER[i][d] ? s[d] : 1.0 - s[d];
+        pb.rfull[ce[i]] += fq * n;
+      }
+    }
+  }
+  fold_hanging(&pb, pb.rfull, b);
+  exchange_sum(&pb, b);
+
+  /* r = b - A u_D on interior rows. */
+  for (int64_t i = 0; i < pb.ni; i++) ud[i] = pb.bnd[i] ? exact(pb.xyz + 3 * i) : 0.0;
+  apply(&pb, ud, ap, 1);
+  for (int64_t i = 0; i < pb.ni; i++) {
+    r[i] = pb.bnd[i] ? 0.0 : b[i] - ap[i];
+    p[i] = r[i];
+    x[i] = 0.0;
+  }
+  double rr = dot(&pb, r, r), rr0 = rr;
+  int it = 0;
+  const int max_it = 20000;
+  while (it < max_it && rr > 1e-24 * rr0 && rr > 0.0) {
+    apply(&pb, p, ap, 1);
+    double alpha = rr / dot(&pb, p, ap);
+    for (int64_t i = 0; i < pb.ni; i++) {
+      x[i] += alpha * p[i];
+      r[i] -= alpha * ap[i];
+    }
+    double rr1 = dot(&pb, r, r);
+    double beta = rr1 / rr;
+    rr = rr1;
+    for (int64_t i = 0; i < pb.ni; i++) p[i] = r[i] + beta * p[i];
+    it++;
+  }
+
+  double err = 0.0, gerr = 0.0;
+  for (int64_t i = 0; i < pb.nown; i++) {
+    double e = fabs(ud[i] + x[i] - exact(pb.xyz + 3 * i));
+    if (e > err) err = e;
+  }
+  MPI_Allreduce(&err, &gerr, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+  if (pvtu) {
+    /* Point fields on all local nodes, hanging ones from their deps. */
+    double *fu = malloc(sizeof(double) * nl), *fex = malloc(sizeof(double) * nl);
+    double *ferr = malloc(sizeof(double) * nl);
+    for (int64_t i = 0; i < pb.ni; i++) fu[i] = ud[i] + x[i];
+    for (int64_t k = 0; k < pb.nl - pb.ni; k++) {
+      double s = 0.0;
+      for (int j = 0; j < pb.hcount[k]; j++) s += fu[pb.hdeps[4 * k + j]];
+      fu[pb.ni + k] = s / pb.hcount[k];
+    }
+    for (int64_t i = 0; i < pb.nl; i++) {
+      fex[i] = exact(pb.xyz + 3 * i);
+      ferr[i] = fu[i] - fex[i];
+    }
+    const char *names[3] = {"u", "u_exact", "error"};
+    const double *values[3] = {fu, fex, ferr};
+    TRY(octmesh_mesh_write_vtu_fields(h, pvtu, 3, names, values));
+    free(fu); free(fex); free(ferr);
+  }
+  if (rank == 0) {
+    printf("POISSON level=%d ranks=%d elements=%lld independent=%lld hanging=%lld "
+           "boundary=%ld iterations=%d residual=%.3e max_error=%.6e\n",
+           level, size, (long long)c.global_elements, (long long)c.global_independent,
+           (long long)(c.global_face_hanging + c.global_edge_hanging), gbnd, it,
+           rr0 > 0 ? sqrt(rr / rr0) : 0.0, gerr);
+    if (pvtu) printf("mesh and fields u, u_exact, error written to %s\n", pvtu);
+  }
+  int failed = it >= max_it;
+  free(pb.h); free(pb.bnd); free(pb.ufull); free(pb.rfull); free(pb.sendbuf); free(pb.recvbuf);
+  free(pb.req); free(b); free(x); free(r); free(p); free(ap); free(ud);
+  octmesh_destroy(h);
+  MPI_Finalize();
+  return failed ? 1 : 0;
+}

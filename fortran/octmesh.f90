@@ -1,0 +1,397 @@
+!> Fortran interface of octmesh (module `octmesh`), through iso_c_binding.
+!>
+!> Every function returns the integer status of the C API (OCTMESH_STATUS_OK
+!> on success); `octmesh_error(h)` gives the message of the last failure.
+!> The communicator is a Fortran handle: an INTEGER with `use mpi`, or
+!> `comm%MPI_VAL` with `use mpi_f08`.
+!>
+!>   type(c_ptr) :: h
+!>   st = octmesh_create_f(MPI_COMM_WORLD, h)          ! use mpi
+!>   st = octmesh_create_f(MPI_COMM_WORLD%MPI_VAL, h)  ! use mpi_f08
+!>   st = octmesh_surface_builtin_f(h, "torus")
+!>   st = octmesh_refine_callback(h, 6, c_funloc(my_refine), c_null_ptr)
+!>   ...
+!>   call octmesh_destroy(h)
+!>
+!> A refinement callback is a bind(c) function:
+!>   integer(c_int32_t) function my_refine(ctx, o) bind(c)
+!>     type(c_ptr), value :: ctx
+!>     type(octmesh_octant_t), intent(in) :: o
+module octmesh
+  use, intrinsic :: iso_c_binding
+  implicit none
+  private
+
+  ! Status values (octmesh_status_t).
+  integer(c_int), parameter, public :: OCTMESH_STATUS_OK = 0, &
+       OCTMESH_STATUS_INVALID_ARGUMENT = 1, OCTMESH_STATUS_IO = 2, &
+       OCTMESH_STATUS_FORMAT = 3, OCTMESH_STATUS_GEOMETRY = 4, &
+       OCTMESH_STATUS_LIMIT = 5, OCTMESH_STATUS_STATE = 6, &
+       OCTMESH_STATUS_MPI = 7, OCTMESH_STATUS_REMOTE_FAILURE = 8, &
+       OCTMESH_STATUS_INTERNAL = 9
+  ! Balance contacts (octmesh_connect).
+  integer(c_int32_t), parameter, public :: OCTMESH_CONNECT_FACE = 1, &
+       OCTMESH_CONNECT_EDGE = 2, OCTMESH_CONNECT_CORNER = 3
+  ! Elements kept (octmesh_keep).
+  integer(c_int32_t), parameter, public :: OCTMESH_KEEP_ALL = 0, &
+       OCTMESH_KEEP_INSIDE = 1, OCTMESH_KEEP_OUTSIDE = 2
+  ! Cut leaves (octmesh_cut_rule).
+  integer(c_int32_t), parameter, public :: OCTMESH_CUT_RULE_CENTER = 0, &
+       OCTMESH_CUT_RULE_ALL = 1, OCTMESH_CUT_RULE_NONE = 2
+  ! Element classes (octmesh_class).
+  integer(c_int8_t), parameter, public :: OCTMESH_CLASS_OUTSIDE = 0, &
+       OCTMESH_CLASS_INSIDE = 1, OCTMESH_CLASS_CUT = 2
+  !> Lattice units per side of the root cube.
+  integer(c_int32_t), parameter, public :: OCTMESH_ROOT_LEN = 2**19
+
+  !> octmesh_options_t
+  type, bind(c), public :: octmesh_options_t
+     real(c_double) :: fit
+     integer(c_int64_t) :: max_octants
+     integer(c_int32_t) :: verbosity
+  end type octmesh_options_t
+
+  !> octmesh_octant_t: lowest corner (lattice units) and level.
+  type, bind(c), public :: octmesh_octant_t
+     integer(c_int32_t) :: x, y, z, level
+  end type octmesh_octant_t
+
+  !> octmesh_mesh_counts_t
+  type, bind(c), public :: octmesh_mesh_counts_t
+     integer(c_int64_t) :: local_elements, local_nodes, num_owned, num_independent, &
+          first_global, global_elements, global_independent, global_face_hanging, &
+          global_edge_hanging
+  end type octmesh_mesh_counts_t
+
+  public :: octmesh_create_f, octmesh_destroy, octmesh_error, octmesh_status_name_f
+  public :: octmesh_options_default
+  public :: octmesh_surface_builtin_f, octmesh_surface_from_stl_f, octmesh_surface_from_triangles
+  public :: octmesh_set_domain, octmesh_get_domain
+  public :: octmesh_refine_surface, octmesh_refine_callback, octmesh_balance, octmesh_partition
+  public :: octmesh_get_num_leaves, octmesh_get_leaves
+  public :: octmesh_mesh, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
+  public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
+  public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
+  public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
+  public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
+
+  interface
+     function octmesh_status_name(status) bind(c, name="octmesh_status_name")
+       import :: c_ptr, c_int32_t
+       integer(c_int32_t), value :: status
+       type(c_ptr) :: octmesh_status_name
+     end function octmesh_status_name
+
+     function octmesh_options_default(out) bind(c, name="octmesh_options_default")
+       import :: c_int, octmesh_options_t
+       type(octmesh_options_t), intent(out) :: out
+       integer(c_int) :: octmesh_options_default
+     end function octmesh_options_default
+
+     function c_octmesh_create_f(comm, opts, out) bind(c, name="octmesh_create_f")
+       import :: c_int, c_ptr
+       integer(c_int), value :: comm
+       type(c_ptr), value :: opts
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: c_octmesh_create_f
+     end function c_octmesh_create_f
+
+     subroutine octmesh_destroy(h) bind(c, name="octmesh_destroy")
+       import :: c_ptr
+       type(c_ptr), value :: h
+     end subroutine octmesh_destroy
+
+     function octmesh_last_error(h) bind(c, name="octmesh_last_error")
+       import :: c_ptr
+       type(c_ptr), value :: h
+       type(c_ptr) :: octmesh_last_error
+     end function octmesh_last_error
+
+     function octmesh_set_domain(h, origin, side) bind(c, name="octmesh_set_domain")
+       import :: c_ptr, c_double, c_int
+       type(c_ptr), value :: h
+       real(c_double), intent(in) :: origin(3)
+       real(c_double), value :: side
+       integer(c_int) :: octmesh_set_domain
+     end function octmesh_set_domain
+
+     function octmesh_get_domain(h, origin, side) bind(c, name="octmesh_get_domain")
+       import :: c_ptr, c_double, c_int
+       type(c_ptr), value :: h
+       real(c_double), intent(out) :: origin(3)
+       real(c_double), intent(out) :: side
+       integer(c_int) :: octmesh_get_domain
+     end function octmesh_get_domain
+
+     function c_octmesh_surface_builtin(h, name) bind(c, name="octmesh_surface_builtin")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: name(*)
+       integer(c_int) :: c_octmesh_surface_builtin
+     end function c_octmesh_surface_builtin
+
+     function c_octmesh_surface_from_stl(h, path) bind(c, name="octmesh_surface_from_stl")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_surface_from_stl
+     end function c_octmesh_surface_from_stl
+
+     !> xyz: 9 doubles per triangle.
+     function octmesh_surface_from_triangles(h, ntri, xyz) &
+          bind(c, name="octmesh_surface_from_triangles")
+       import :: c_ptr, c_int64_t, c_double, c_int
+       type(c_ptr), value :: h
+       integer(c_int64_t), value :: ntri
+       real(c_double), intent(in) :: xyz(*)
+       integer(c_int) :: octmesh_surface_from_triangles
+     end function octmesh_surface_from_triangles
+
+     function octmesh_refine_surface(h, level) bind(c, name="octmesh_refine_surface")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: level
+       integer(c_int) :: octmesh_refine_surface
+     end function octmesh_refine_surface
+
+     !> refine: c_funloc of a bind(c) function (ctx, octant) -> int32;
+     !> ctx: c_loc of anything, or c_null_ptr.
+     function octmesh_refine_callback(h, max_level, refine, ctx) &
+          bind(c, name="octmesh_refine_callback")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: max_level
+       type(c_funptr), value :: refine
+       type(c_ptr), value :: ctx
+       integer(c_int) :: octmesh_refine_callback
+     end function octmesh_refine_callback
+
+     function octmesh_balance(h, connect) bind(c, name="octmesh_balance")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: connect
+       integer(c_int) :: octmesh_balance
+     end function octmesh_balance
+
+     !> weight: c_null_funptr for equal counts, or c_funloc of a bind(c)
+     !> function (ctx, octant) -> int64.
+     function octmesh_partition(h, weight, ctx) bind(c, name="octmesh_partition")
+       import :: c_ptr, c_funptr, c_int
+       type(c_ptr), value :: h
+       type(c_funptr), value :: weight
+       type(c_ptr), value :: ctx
+       integer(c_int) :: octmesh_partition
+     end function octmesh_partition
+
+     function octmesh_get_num_leaves(h, nlocal, nglobal) bind(c, name="octmesh_get_num_leaves")
+       import :: c_ptr, c_int64_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int64_t), intent(out) :: nlocal, nglobal
+       integer(c_int) :: octmesh_get_num_leaves
+     end function octmesh_get_num_leaves
+
+     function octmesh_get_leaves(h, out) bind(c, name="octmesh_get_leaves")
+       import :: c_ptr, c_int, octmesh_octant_t
+       type(c_ptr), value :: h
+       type(octmesh_octant_t), intent(out) :: out(*)
+       integer(c_int) :: octmesh_get_leaves
+     end function octmesh_get_leaves
+
+     function octmesh_mesh(h, keep, rule) bind(c, name="octmesh_mesh")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: keep, rule
+       integer(c_int) :: octmesh_mesh
+     end function octmesh_mesh
+
+     function octmesh_mesh_get_counts(h, out) bind(c, name="octmesh_mesh_get_counts")
+       import :: c_ptr, c_int, octmesh_mesh_counts_t
+       type(c_ptr), value :: h
+       type(octmesh_mesh_counts_t), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_counts
+     end function octmesh_mesh_get_counts
+
+     !> The arrays stay owned by the handle: convert with c_f_pointer
+     !> (sizes from octmesh_mesh_get_counts).
+     function octmesh_mesh_get_connectivity(h, out) bind(c, name="octmesh_mesh_get_connectivity")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_connectivity
+     end function octmesh_mesh_get_connectivity
+
+     function octmesh_mesh_get_coordinates(h, out) bind(c, name="octmesh_mesh_get_coordinates")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_coordinates
+     end function octmesh_mesh_get_coordinates
+
+     function octmesh_mesh_get_global_ids(h, out) bind(c, name="octmesh_mesh_get_global_ids")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_global_ids
+     end function octmesh_mesh_get_global_ids
+
+     function octmesh_mesh_get_owners(h, out) bind(c, name="octmesh_mesh_get_owners")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_owners
+     end function octmesh_mesh_get_owners
+
+     function octmesh_mesh_get_hanging(h, count, deps) bind(c, name="octmesh_mesh_get_hanging")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: count, deps
+       integer(c_int) :: octmesh_mesh_get_hanging
+     end function octmesh_mesh_get_hanging
+
+     function octmesh_mesh_get_element_class(h, out) bind(c, name="octmesh_mesh_get_element_class")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_element_class
+     end function octmesh_mesh_get_element_class
+
+     function octmesh_mesh_get_element_level(h, out) bind(c, name="octmesh_mesh_get_element_level")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_element_level
+     end function octmesh_mesh_get_element_level
+
+     function c_octmesh_mesh_write_vtu(h, pvtu) bind(c, name="octmesh_mesh_write_vtu")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: pvtu(*)
+       integer(c_int) :: c_octmesh_mesh_write_vtu
+     end function c_octmesh_mesh_write_vtu
+
+     !> The C function: `names(k)` points to a NUL-terminated name and
+     !> `values(k)` to `local_nodes` doubles (see octmesh.h).
+     function octmesh_mesh_write_vtu_fields(h, pvtu, nfields, names, values) &
+          bind(c, name="octmesh_mesh_write_vtu_fields")
+       import :: c_ptr, c_char, c_int, c_int32_t
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: pvtu(*)
+       integer(c_int32_t), value :: nfields
+       type(c_ptr), intent(in) :: names(*), values(*)
+       integer(c_int) :: octmesh_mesh_write_vtu_fields
+     end function octmesh_mesh_write_vtu_fields
+
+     function c_strlen(s) bind(c, name="strlen")
+       import :: c_ptr, c_size_t
+       type(c_ptr), value :: s
+       integer(c_size_t) :: c_strlen
+     end function c_strlen
+  end interface
+
+contains
+
+  !> Creates a handle over a duplicate of the Fortran communicator `comm`
+  !> (INTEGER with `use mpi`, comm%MPI_VAL with `use mpi_f08`). `opts` is
+  !> optional (defaults otherwise). Collective.
+  function octmesh_create_f(comm, h, opts) result(status)
+    integer, intent(in) :: comm
+    type(c_ptr), intent(out) :: h
+    type(octmesh_options_t), intent(in), optional, target :: opts
+    integer(c_int) :: status
+    h = c_null_ptr
+    if (present(opts)) then
+       status = c_octmesh_create_f(int(comm, c_int), c_loc(opts), h)
+    else
+       status = c_octmesh_create_f(int(comm, c_int), c_null_ptr, h)
+    end if
+  end function octmesh_create_f
+
+  !> Copies a NUL-terminated C string into a Fortran string.
+  function c_to_f_string(p) result(s)
+    type(c_ptr), intent(in) :: p
+    character(len=:), allocatable :: s
+    character(kind=c_char), pointer :: chars(:)
+    integer :: n, i
+    if (.not. c_associated(p)) then
+       s = ''
+       return
+    end if
+    n = int(c_strlen(p))
+    call c_f_pointer(p, chars, [n])
+    allocate(character(len=n) :: s)
+    do i = 1, n
+       s(i:i) = chars(i)
+    end do
+  end function c_to_f_string
+
+  !> The message of the last failed call on `h` (c_null_ptr: of the last
+  !> failed octmesh_create_f on this thread).
+  function octmesh_error(h) result(msg)
+    type(c_ptr), intent(in) :: h
+    character(len=:), allocatable :: msg
+    msg = c_to_f_string(octmesh_last_error(h))
+  end function octmesh_error
+
+  !> The name of a status value, e.g. "OCTMESH_STATUS_IO".
+  function octmesh_status_name_f(status) result(name)
+    integer, intent(in) :: status
+    character(len=:), allocatable :: name
+    name = c_to_f_string(octmesh_status_name(int(status, c_int32_t)))
+  end function octmesh_status_name_f
+
+  !> Built-in surface: "sphere" or "torus". Collective.
+  function octmesh_surface_builtin_f(h, name) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: name
+    integer(c_int) :: status
+    status = c_octmesh_surface_builtin(h, trim(name) // c_null_char)
+  end function octmesh_surface_builtin_f
+
+  !> Surface from an STL file (ASCII or binary). Collective.
+  function octmesh_surface_from_stl_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_surface_from_stl(h, trim(path) // c_null_char)
+  end function octmesh_surface_from_stl_f
+
+  !> Writes the mesh as VTU pieces and the PVTU `pvtu`. Collective.
+  function octmesh_mesh_write_vtu_f(h, pvtu) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: pvtu
+    integer(c_int) :: status
+    status = c_octmesh_mesh_write_vtu(h, trim(pvtu) // c_null_char)
+  end function octmesh_mesh_write_vtu_f
+
+  !> Writes the mesh as VTU pieces and the PVTU `pvtu` with point fields:
+  !> `values(:, k)` (one value per local node, in local node order, hanging
+  !> nodes included) is called `trim(names(k))`. `size(values, 2)` must
+  !> equal `size(names)` (otherwise every rank gets
+  !> OCTMESH_STATUS_INVALID_ARGUMENT) and `size(values, 1)` the number of
+  !> local nodes. Collective.
+  function octmesh_mesh_write_vtu_fields_f(h, pvtu, names, values) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: pvtu
+    character(len=*), intent(in) :: names(:)
+    real(c_double), intent(in), target, contiguous :: values(:, :)
+    integer(c_int) :: status
+    character(kind=c_char, len=len(names) + 1), allocatable, target :: cnames(:)
+    type(c_ptr), allocatable :: pn(:), pv(:)
+    integer :: k, n
+    integer(c_int32_t) :: nfields
+    n = size(names)
+    allocate(cnames(n), pn(n), pv(n))
+    do k = 1, n
+       cnames(k) = trim(names(k)) // c_null_char
+       pn(k) = c_loc(cnames(k))
+       pv(k) = c_null_ptr
+       if (k <= size(values, 2) .and. size(values, 1) > 0) pv(k) = c_loc(values(1, k))
+    end do
+    ! A shape mismatch is passed on as an invalid count, so that every rank
+    ! still takes part in the collective call and fails with the others.
+    nfields = int(n, c_int32_t)
+    if (size(values, 2) /= n) nfields = -1_c_int32_t
+    status = octmesh_mesh_write_vtu_fields(h, trim(pvtu) // c_null_char, nfields, pn, pv)
+  end function octmesh_mesh_write_vtu_fields_f
+
+end module octmesh

@@ -1,0 +1,184 @@
+// Header-only C++ wrapper of the octmesh C API (octmesh.h): an RAII handle
+// whose methods throw octmesh::Error (a std::runtime_error carrying the
+// status) with the library's message when a call fails.
+//
+//   octmesh::Mesher m(MPI_COMM_WORLD);
+//   m.surface_builtin("sphere");
+//   m.refine_surface(5);
+//   m.balance(OCTMESH_CONNECT_CORNER);
+//   m.partition();
+//   m.mesh(OCTMESH_KEEP_INSIDE);
+//   auto c = m.counts();
+#ifndef OCTMESH_HPP
+#define OCTMESH_HPP
+
+#include <cstdint>
+#include <stdexcept>
+#include <type_traits>
+#include <string>
+#include <utility>
+#include <vector>
+
+// Only the C bindings of MPI are needed: skip the deprecated MPI C++
+// bindings (which would need libmpi_cxx) unless the program asked for them
+// by including mpi.h first.
+#ifndef OMPI_SKIP_MPICXX
+#define OMPI_SKIP_MPICXX 1
+#endif
+#ifndef MPICH_SKIP_MPICXX
+#define MPICH_SKIP_MPICXX 1
+#endif
+#include "octmesh.h"
+
+namespace octmesh {
+
+/// A failed octmesh call: what() is the library's message.
+class Error : public std::runtime_error {
+ public:
+  Error(octmesh_status_t status, const std::string &what)
+      : std::runtime_error(what), status_(status) {}
+  octmesh_status_t status() const noexcept { return status_; }
+
+ private:
+  octmesh_status_t status_;
+};
+
+namespace detail {
+inline void check(octmesh_status_t s, const octmesh_t *h, const char *call) {
+  if (s != OCTMESH_STATUS_OK)
+    throw Error(s, std::string(call) + ": " + octmesh_status_name(s) + ": " +
+                       octmesh_last_error(h));
+}
+}  // namespace detail
+
+/// Owns an octmesh handle (created in the constructor, destroyed in the
+/// destructor, which is collective: destroy before MPI_Finalize). Movable,
+/// not copyable.
+class Mesher {
+ public:
+  explicit Mesher(MPI_Comm comm, const octmesh_options_t *opts = nullptr) {
+    detail::check(octmesh_create(comm, opts, &h_), nullptr, "octmesh_create");
+  }
+  ~Mesher() { octmesh_destroy(h_); }
+  Mesher(const Mesher &) = delete;
+  Mesher &operator=(const Mesher &) = delete;
+  Mesher(Mesher &&o) noexcept : h_(std::exchange(o.h_, nullptr)) {}
+  Mesher &operator=(Mesher &&o) noexcept {
+    if (this != &o) {
+      octmesh_destroy(h_);
+      h_ = std::exchange(o.h_, nullptr);
+    }
+    return *this;
+  }
+
+  /// The C handle, for calls this wrapper does not cover.
+  octmesh_t *get() const noexcept { return h_; }
+
+  void set_domain(const double origin[3], double side) {
+    detail::check(octmesh_set_domain(h_, origin, side), h_, "octmesh_set_domain");
+  }
+  void get_domain(double origin[3], double &side) const {
+    detail::check(octmesh_get_domain(h_, origin, &side), h_, "octmesh_get_domain");
+  }
+  void surface_builtin(const std::string &name) {
+    detail::check(octmesh_surface_builtin(h_, name.c_str()), h_, "octmesh_surface_builtin");
+  }
+  void surface_from_stl(const std::string &path) {
+    detail::check(octmesh_surface_from_stl(h_, path.c_str()), h_, "octmesh_surface_from_stl");
+  }
+  /// xyz: 9 doubles per triangle.
+  void surface_from_triangles(const std::vector<double> &xyz) {
+    if (xyz.size() % 9 != 0)
+      throw std::invalid_argument("surface_from_triangles: size is not a multiple of 9");
+    detail::check(octmesh_surface_from_triangles(h_, (int64_t)(xyz.size() / 9), xyz.data()), h_,
+                  "octmesh_surface_from_triangles");
+  }
+  void refine_surface(int level) {
+    detail::check(octmesh_refine_surface(h_, level), h_, "octmesh_refine_surface");
+  }
+  /// Refines while `f(octant)` is true (below max_level). `f` must give the
+  /// same answer on every rank and must not throw.
+  template <class F>
+  void refine(int max_level, F &&f) {
+    auto tramp = [](void *ctx, const octmesh_octant_t *o) -> int32_t {
+      return (*static_cast<typename std::remove_reference<F>::type *>(ctx))(*o) ? 1 : 0;
+    };
+    detail::check(octmesh_refine_callback(h_, max_level, tramp, (void *)&f), h_,
+                  "octmesh_refine_callback");
+  }
+  void balance(octmesh_connect_t connect = OCTMESH_CONNECT_CORNER) {
+    detail::check(octmesh_balance(h_, connect), h_, "octmesh_balance");
+  }
+  void partition() {
+    detail::check(octmesh_partition(h_, nullptr, nullptr), h_, "octmesh_partition");
+  }
+  /// Partitions by `w(octant)` (a uint64_t; must not throw).
+  template <class W>
+  void partition(W &&w) {
+    auto tramp = [](void *ctx, const octmesh_octant_t *o) -> uint64_t {
+      return (*static_cast<typename std::remove_reference<W>::type *>(ctx))(*o);
+    };
+    detail::check(octmesh_partition(h_, tramp, (void *)&w), h_, "octmesh_partition");
+  }
+  std::pair<int64_t, int64_t> num_leaves() const {
+    int64_t l = 0, g = 0;
+    detail::check(octmesh_get_num_leaves(h_, &l, &g), h_, "octmesh_get_num_leaves");
+    return {l, g};
+  }
+  std::vector<octmesh_octant_t> leaves() const {
+    std::vector<octmesh_octant_t> v((size_t)num_leaves().first);
+    detail::check(octmesh_get_leaves(h_, v.data()), h_, "octmesh_get_leaves");
+    return v;
+  }
+  void mesh(octmesh_keep_t keep = OCTMESH_KEEP_ALL,
+            octmesh_cut_rule_t rule = OCTMESH_CUT_RULE_CENTER) {
+    detail::check(octmesh_mesh(h_, keep, rule), h_, "octmesh_mesh");
+  }
+  octmesh_mesh_counts_t counts() const {
+    octmesh_mesh_counts_t c;
+    detail::check(octmesh_mesh_get_counts(h_, &c), h_, "octmesh_mesh_get_counts");
+    return c;
+  }
+  /// 8 local node numbers per element (VTK hexahedron order); owned by the handle.
+  const int32_t *connectivity() const {
+    const int32_t *p = nullptr;
+    detail::check(octmesh_mesh_get_connectivity(h_, &p), h_, "octmesh_mesh_get_connectivity");
+    return p;
+  }
+  /// x, y, z per local node; owned by the handle.
+  const double *coordinates() const {
+    const double *p = nullptr;
+    detail::check(octmesh_mesh_get_coordinates(h_, &p), h_, "octmesh_mesh_get_coordinates");
+    return p;
+  }
+  void write_vtu(const std::string &pvtu) {
+    detail::check(octmesh_mesh_write_vtu(h_, pvtu.c_str()), h_, "octmesh_mesh_write_vtu");
+  }
+  /// Writes the mesh with point fields: each pair is a field name and a
+  /// pointer to one double per local node (local node order, hanging nodes
+  /// included). Collective; every rank passes the same names.
+  void write_vtu(const std::string &pvtu,
+                 const std::vector<std::pair<std::string, const double *>> &fields) {
+    std::vector<const char *> names;
+    std::vector<const double *> values;
+    names.reserve(fields.size());
+    values.reserve(fields.size());
+    for (const auto &f : fields) {
+      names.push_back(f.first.c_str());
+      values.push_back(f.second);
+    }
+    // More fields than int32_t holds: -1, which every rank rejects.
+    const int32_t n = fields.size() <= static_cast<size_t>(INT32_MAX)
+                          ? static_cast<int32_t>(fields.size())
+                          : -1;
+    detail::check(octmesh_mesh_write_vtu_fields(h_, pvtu.c_str(), n, names.data(), values.data()),
+                  h_, "octmesh_mesh_write_vtu_fields");
+  }
+
+ private:
+  octmesh_t *h_ = nullptr;
+};
+
+}  // namespace octmesh
+
+#endif
