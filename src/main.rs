@@ -11,7 +11,7 @@ use octmesh::comm::{agree, CommRef, MpiComm};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::load_surface;
 use octmesh::io::leaves::write_leaves;
-use octmesh::io::vtu::{write_parallel, VtuPiece};
+use octmesh::io::vtu::write_mesh;
 use octmesh::mesh::{Mesh, MeshOptions};
 use octmesh::refine::{construct_for_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::report::{peak_rss_bytes, JsonObject, PhaseTimer};
@@ -330,7 +330,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             table.row(&timer, count);
         }
         if let Some(out) = &o.out {
-            timer.time(&*comm, "write", || write_mesh(&*comm, out, &mesh))?;
+            timer.time(&*comm, "write", || write_mesh(&*comm, out, &mesh, &[]))?;
             table.row(&timer, None);
         }
         let c = *mesh.counts();
@@ -417,44 +417,6 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         agree(&*comm, written)?;
     }
     Ok(())
-}
-
-/// Writes this rank's piece and, on rank 0, the PVTU. Collective.
-fn write_mesh(comm: &dyn octmesh::comm::Comm, out: &std::path::Path, mesh: &Mesh) -> Result<()> {
-    let points = mesh.coordinates();
-    let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level()).collect();
-    let ni = mesh.num_independent();
-    let global: Vec<i64> = (0..mesh.num_nodes())
-        .map(|i| {
-            if i < ni {
-                mesh.global_ids()[i] as i64
-            } else {
-                -1
-            }
-        })
-        .collect();
-    let hanging: Vec<u8> = (0..mesh.num_nodes())
-        .map(|i| {
-            if i < ni {
-                0
-            } else if mesh.hanging()[i - ni].count == 2 {
-                1
-            } else {
-                2
-            }
-        })
-        .collect();
-    let piece = VtuPiece {
-        points: &points,
-        cells: mesh.connectivity(),
-        cell_level: &levels,
-        cell_class: mesh.element_class(),
-        rank: comm.rank() as u32,
-        point_global_id: &global,
-        point_hanging: &hanging,
-        point_fields: &[],
-    };
-    write_parallel(comm, out, &piece).map(|_| ())
 }
 
 /// Keeps freed memory in the process: the pipeline frees and reallocates

@@ -21,23 +21,12 @@ fn main() {
         child();
         return;
     }
-    let me = std::env::current_exe().expect("own path");
-    let mut passed = 0;
-    for np in 1..=4 {
-        let out = common::mpirun_env(np, &me, &[], &[(CHILD, "1")], Duration::from_secs(300));
-        let text = format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(
-            out.status.success(),
-            "mpi_balance on {np} ranks failed:\n{text}"
-        );
-        assert!(text.contains("all cases agree"), "{text}");
-        passed += 1;
-    }
-    println!("mpi_balance: {passed} passed, 0 failed");
+    common::run_self_on_1_to_4_ranks(
+        "mpi_balance",
+        CHILD,
+        "all cases agree",
+        Duration::from_secs(300),
+    );
 }
 
 /// All leaves on rank 0 (empty elsewhere).

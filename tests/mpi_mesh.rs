@@ -35,22 +35,12 @@ fn main() {
         child();
         return;
     }
-    let me = std::env::current_exe().expect("own path");
-    for np in 1..=4 {
-        let out = common::mpirun_env(np, &me, &[], &[(CHILD, "1")], Duration::from_secs(600));
-        let text = format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(
-            out.status.success(),
-            "mpi_mesh on {np} ranks failed:\n{text}"
-        );
-        assert!(text.contains("mpi_mesh: all checks passed"), "{text}");
-        print!("{text}");
-    }
-    println!("mpi_mesh: 4 passed, 0 failed");
+    common::run_self_on_1_to_4_ranks(
+        "mpi_mesh",
+        CHILD,
+        "mpi_mesh: all checks passed",
+        Duration::from_secs(600),
+    );
 }
 
 /// A mesh reduced to rank-independent facts, keyed by lattice coordinates.

@@ -18,7 +18,7 @@ use super::{
 };
 use crate::classify::{classify_leaves, CutRule, Keep};
 use crate::error::{Error, ErrorKind, Result};
-use crate::io::vtu::{write_parallel, VtuPiece};
+use crate::io::vtu::write_mesh;
 use crate::mesh::{Mesh, MeshOptions};
 
 /// Sizes of the mesh: this rank's part and global totals (the same on
@@ -440,36 +440,6 @@ pub unsafe extern "C" fn octmesh_mesh_write_vtu_fields(
             Ok((p, fields))
         });
         let (path, fields) = h.agree(checked)?;
-        let mesh = &mesh_of(h)?.mesh;
-        let points = mesh.coordinates();
-        let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level()).collect();
-        let ni = mesh.num_independent();
-        let global: Vec<i64> = (0..mesh.num_nodes())
-            .map(|i| {
-                if i < ni {
-                    mesh.global_ids()[i] as i64
-                } else {
-                    -1
-                }
-            })
-            .collect();
-        let hanging: Vec<u8> = (0..mesh.num_nodes())
-            .map(|i| match i.checked_sub(ni) {
-                None => 0,
-                Some(k) if mesh.hanging()[k].count == 2 => 1,
-                Some(_) => 2,
-            })
-            .collect();
-        let piece = VtuPiece {
-            points: &points,
-            cells: mesh.connectivity(),
-            cell_level: &levels,
-            cell_class: mesh.element_class(),
-            rank: h.comm.rank() as u32,
-            point_global_id: &global,
-            point_hanging: &hanging,
-            point_fields: &fields,
-        };
-        write_parallel(&*h.comm, &path, &piece).map(|_| ())
+        write_mesh(&*h.comm, &path, &mesh_of(h)?.mesh, &fields).map(|_| ())
     })
 }

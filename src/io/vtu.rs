@@ -560,6 +560,42 @@ pub fn write_parallel(comm: &dyn Comm, pvtu: &Path, piece: &VtuPiece) -> Result<
     Ok(pvtu.to_path_buf())
 }
 
+/// Writes a mesh: every rank its piece, rank 0 the PVTU, with the cell data
+/// `level`, `rank`, `class` and the point data `global_id` (-1 for hanging
+/// nodes), `hanging` and the user's `fields` (one value per local node, in
+/// the mesh's local node order). Collective; returns the PVTU path.
+pub fn write_mesh(
+    comm: &dyn Comm,
+    pvtu: &Path,
+    mesh: &crate::mesh::Mesh,
+    fields: &[(&str, &[f64])],
+) -> Result<PathBuf> {
+    let points = mesh.coordinates();
+    let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level()).collect();
+    let ni = mesh.num_independent();
+    let global: Vec<i64> = (0..mesh.num_nodes())
+        .map(|i| mesh.global_ids().get(i).map_or(-1, |&g| g as i64))
+        .collect();
+    let hanging: Vec<u8> = (0..mesh.num_nodes())
+        .map(|i| match i.checked_sub(ni) {
+            None => 0,
+            Some(k) if mesh.hanging()[k].count == 2 => 1,
+            Some(_) => 2,
+        })
+        .collect();
+    let piece = VtuPiece {
+        points: &points,
+        cells: mesh.connectivity(),
+        cell_level: &levels,
+        cell_class: mesh.element_class(),
+        rank: comm.rank() as u32,
+        point_global_id: &global,
+        point_hanging: &hanging,
+        point_fields: fields,
+    };
+    write_parallel(comm, pvtu, &piece)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

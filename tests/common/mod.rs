@@ -265,3 +265,25 @@ pub fn json_file(path: &Path) -> serde_json::Value {
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("bad JSON in {}: {e}", path.display()))
 }
+
+/// Test programs that launch themselves: runs this executable under
+/// `mpirun` on 1 to 4 ranks with `child_var` set, requires success and
+/// `marker` in the output of each run, and prints `NAME: 4 passed, 0 failed`.
+pub fn run_self_on_1_to_4_ranks(name: &str, child_var: &str, marker: &str, limit: Duration) {
+    let me = std::env::current_exe().expect("own path");
+    for np in 1..=4 {
+        let out = mpirun_env(np, &me, &[], &[(child_var, "1")], limit);
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "{name} on {np} ranks failed:\n{text}");
+        assert!(
+            text.contains(marker),
+            "{name} on {np} ranks: no '{marker}' in\n{text}"
+        );
+        print!("{text}");
+    }
+    println!("{name}: 4 passed, 0 failed");
+}
