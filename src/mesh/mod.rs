@@ -182,36 +182,15 @@ impl Mesh {
         });
         let (d, local_range, kept, (face_hanging, edge_hanging)) = nodes_phase;
 
-        // Nodes this rank uses: corners of its kept elements and what their
-        // hanging corners depend on.
-        let mut used = vec![false; d.coords.len()];
-        for i in local_range.clone() {
-            if kept[i] {
-                for &n in &d.corners[i] {
-                    used[n as usize] = true;
-                }
-            }
-        }
-        let mut deps_of = vec![u32::MAX; d.coords.len()]; // index into d.hanging
-        for (h, &(n, q, mask)) in d.hanging.iter().enumerate() {
-            deps_of[n as usize] = h as u32;
-            if used[n as usize] {
-                for c in 0..8 {
-                    if mask >> c & 1 == 1 {
-                        let dep = d.corners[q as usize][c];
-                        debug_assert_ne!(dep, UNSET);
-                        used[dep as usize] = true;
-                    }
-                }
-            }
-        }
-
-        let independent: Vec<u32> = (0..d.coords.len() as u32)
-            .filter(|&n| used[n as usize] && d.kind[n as usize] == 0)
-            .collect();
-        let icoords: Vec<[u32; 3]> = independent.iter().map(|&n| d.coords[n as usize]).collect();
-        let numbering = timer.time(comm, "numbering", || {
-            numbering::number_nodes(comm, tree.first_cells(), &icoords)
+        let (used, independent, numbering) = timer.time(comm, "numbering", || {
+            let used = used_nodes(&d, &local_range, &kept);
+            let independent: Vec<u32> = (0..d.coords.len() as u32)
+                .filter(|&n| used[n as usize] && d.kind[n as usize] == 0)
+                .collect();
+            let icoords: Vec<[u32; 3]> =
+                independent.iter().map(|&n| d.coords[n as usize]).collect();
+            let numbering = numbering::number_nodes(comm, tree.first_cells(), &icoords);
+            (used, independent, numbering)
         });
         let numbering = crate::comm::agree(comm, numbering)?;
 
@@ -224,7 +203,6 @@ impl Mesh {
                 &kept,
                 &local_class,
                 used,
-                deps_of,
                 &independent,
                 numbering,
             )
@@ -445,6 +423,31 @@ fn count_hanging(comm: &dyn Comm, first_cell: &[u64], d: &dual::DualNodes) -> (u
     (c[0], c[1])
 }
 
+/// Nodes this rank uses: corners of its kept elements and what their
+/// hanging corners depend on.
+fn used_nodes(d: &dual::DualNodes, local: &std::ops::Range<usize>, kept: &[bool]) -> Vec<bool> {
+    let mut used = vec![false; d.coords.len()];
+    for i in local.clone() {
+        if kept[i] {
+            for &n in &d.corners[i] {
+                used[n as usize] = true;
+            }
+        }
+    }
+    for &(n, q, mask) in &d.hanging {
+        if used[n as usize] {
+            for c in 0..8 {
+                if mask >> c & 1 == 1 {
+                    let dep = d.corners[q as usize][c];
+                    debug_assert_ne!(dep, UNSET);
+                    used[dep as usize] = true;
+                }
+            }
+        }
+    }
+    used
+}
+
 #[allow(clippy::too_many_arguments)]
 fn assemble(
     tree: &LinearOctree,
@@ -454,14 +457,13 @@ fn assemble(
     kept: &[bool],
     local_class: &[u8],
     used: Vec<bool>,
-    deps_of: Vec<u32>,
     independent: &[u32],
     num: numbering::Numbering,
 ) -> Result<Mesh> {
     let comm: &dyn Comm = &**tree.comm();
     let me = comm.rank() as u32;
     // Final local order: owned (by global number), other independent (by
-    // global number), hanging (by coordinates).
+    // global number), hanging (in traversal order).
     let mut owned: Vec<u32> = Vec::new();
     let mut others: Vec<u32> = Vec::new();
     for k in 0..independent.len() as u32 {
@@ -473,31 +475,41 @@ fn assemble(
     }
     // Owned nodes are already in global order; the others are few.
     others.sort_unstable_by_key(|&k| num.global[k as usize]);
-    let hanging_nodes: Vec<u32> = (0..d.coords.len() as u32)
-        .filter(|&n| used[n as usize] && d.kind[n as usize] != 0)
-        .collect();
+    let used_hanging = d.hanging.iter().filter(|h| used[h.0 as usize]).count();
 
+    // New numbers, then the lattice coordinates in the new order; the
+    // traversal's arrays are released as soon as they are read.
     let mut new_of = vec![UNSET; d.coords.len()];
-    let mut node_lattice = Vec::with_capacity(independent.len() + hanging_nodes.len());
+    let mut next = 0u32;
     let mut node_global = Vec::with_capacity(independent.len());
     let mut node_owner = Vec::with_capacity(independent.len());
-    let mut new_of_k = vec![UNSET; independent.len()];
     for &k in owned.iter().chain(&others) {
-        let n = independent[k as usize];
-        new_of[n as usize] = node_lattice.len() as u32;
-        new_of_k[k as usize] = node_lattice.len() as u32;
-        node_lattice.push(d.coords[n as usize]);
+        new_of[independent[k as usize] as usize] = next;
+        next += 1;
         node_global.push(num.global[k as usize]);
         node_owner.push(num.owner[k as usize]);
     }
-    let num_independent = node_lattice.len();
-    for &n in &hanging_nodes {
-        new_of[n as usize] = node_lattice.len() as u32;
-        node_lattice.push(d.coords[n as usize]);
+    let num_independent = next as usize;
+    for &(n, _, _) in &d.hanging {
+        if used[n as usize] {
+            new_of[n as usize] = next;
+            next += 1;
+        }
     }
-    let mut hanging = Vec::with_capacity(hanging_nodes.len());
-    for &n in &hanging_nodes {
-        let (_, q, mask) = d.hanging[deps_of[n as usize] as usize];
+    drop(used);
+    let mut node_lattice = vec![[0u32; 3]; next as usize];
+    for (n, &x) in d.coords.iter().enumerate() {
+        let m = new_of[n];
+        if m != UNSET {
+            node_lattice[m as usize] = x;
+        }
+    }
+    drop((d.coords, d.kind));
+    let mut hanging = Vec::with_capacity(used_hanging);
+    for &(n, q, mask) in &d.hanging {
+        if new_of[n as usize] == UNSET {
+            continue;
+        }
         let mut deps = [0u32; 4];
         let mut count = 0u8;
         for c in 0..8 {
@@ -515,8 +527,7 @@ fn assemble(
         }
         hanging.push(HangingNode { deps, count });
     }
-
-    drop((used, deps_of, d.coords, d.kind, d.hanging));
+    drop(d.hanging);
 
     // The corner table becomes the connectivity in place: local kept leaves
     // move to the front (never past their own slot), renumbered.
@@ -544,7 +555,7 @@ fn assemble(
         .shared
         .iter()
         .enumerate()
-        .map(|(s, &k)| (new_of_k[k as usize], s))
+        .map(|(s, &k)| (new_of[independent[k as usize] as usize], s))
         .collect();
     order.sort_unstable();
     let mut shared_offsets = vec![0u32];
