@@ -9,6 +9,7 @@ use std::rc::Rc;
 use octmesh::classify::{classify_leaves, CutRule, Keep};
 use octmesh::comm::{agree, CommRef, MpiComm};
 use octmesh::domain::{Domain, DEFAULT_FIT};
+use octmesh::geometry::diagnostics::{clean, diagnose, SurfaceReport};
 use octmesh::geometry::load_surface;
 use octmesh::io::leaves::write_leaves;
 use octmesh::io::vtu::write_mesh;
@@ -20,12 +21,17 @@ use octmesh::{Connectivity, Error, Result};
 const USAGE: &str = "\
 usage: octmesh octree <file.stl | sphere | torus> --level L [options]
        octmesh mesh   <file.stl | sphere | torus> --level L [options]
+       octmesh check  <file.stl | sphere | torus> [--json FILE] [--quiet]
 
 octree: builds the surface-refined linear octree, partitions it over the MPI
 ranks and 2:1-balances it. Leaves touching the surface are at level L (at
 most 18).
 mesh: then builds the trilinear hexahedral mesh (ghost layer, independent and
 hanging nodes, global numbering) of the kept elements, and writes it.
+check: prints the surface diagnostics (welded vertices, boundary,
+non-manifold and inconsistently oriented edges, edge-connected components,
+degenerate and duplicate facets, Euler characteristic, genus, volume);
+--json FILE also writes them as JSON.
 
 options:
   --level L             refinement level of the leaves touching the surface
@@ -39,6 +45,8 @@ options:
   --write-leaves FILE   write the balanced leaves (x y z level per line,
                         lattice units of 2^-19 of the cube; .bin = binary)
   --write-refined FILE  write the leaves before balance, same format
+  --drop-degenerate     remove zero-area facets after loading
+  --drop-duplicates     remove facets repeating the vertices of an earlier one
   --quiet               print nothing but errors
 
 mesh options:
@@ -65,12 +73,16 @@ struct Options {
     keep: Keep,
     cut_rule: CutRule,
     out: Option<PathBuf>,
+    drop_degenerate: bool,
+    drop_duplicates: bool,
+    json: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Command {
     Octree,
     Mesh,
+    Check,
 }
 
 fn parse_args(args: &[String]) -> Result<Options> {
@@ -80,6 +92,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
     let command = match args[0].as_str() {
         "octree" => Command::Octree,
         "mesh" => Command::Mesh,
+        "check" => Command::Check,
         other => {
             return Err(Error::invalid(format!(
                 "unknown command '{other}'\n{USAGE}"
@@ -101,6 +114,9 @@ fn parse_args(args: &[String]) -> Result<Options> {
         keep: Keep::All,
         cut_rule: CutRule::Center,
         out: None,
+        drop_degenerate: false,
+        drop_duplicates: false,
+        json: None,
     };
     let mut i = 1;
     let value = |i: usize, name: &str| -> Result<String> {
@@ -112,6 +128,16 @@ fn parse_args(args: &[String]) -> Result<Options> {
         let a = args[i].as_str();
         let mut consumed = 2;
         match a {
+            "--json" if command == Command::Check => o.json = Some(value(i, a)?.into()),
+            "--quiet" => {
+                o.quiet = true;
+                consumed = 1;
+            }
+            _ if command == Command::Check && a.starts_with("--") => {
+                return Err(Error::invalid(format!(
+                    "option '{a}' is not valid for check\n{USAGE}"
+                )))
+            }
             "--level" => {
                 let v = value(i, a)?;
                 o.level = v
@@ -169,8 +195,12 @@ fn parse_args(args: &[String]) -> Result<Options> {
                 }
                 o.out = Some(v.into());
             }
-            "--quiet" => {
-                o.quiet = true;
+            "--drop-degenerate" => {
+                o.drop_degenerate = true;
+                consumed = 1;
+            }
+            "--drop-duplicates" => {
+                o.drop_duplicates = true;
                 consumed = 1;
             }
             _ if a.starts_with("--") => {
@@ -188,6 +218,9 @@ fn parse_args(args: &[String]) -> Result<Options> {
     }
     if o.surface.is_empty() {
         return Err(Error::invalid("no surface given (see octmesh --help)"));
+    }
+    if command == Command::Check {
+        return Ok(o);
     }
     if o.level == u8::MAX {
         return Err(Error::invalid("--level is required"));
@@ -237,18 +270,30 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     let loaded = timer.time(
         &*comm,
         "read",
-        || -> Result<(usize, f64, Domain, SurfaceIndex)> {
-            let surface = load_surface(&o.surface)?;
+        || -> Result<(usize, f64, Domain, SurfaceIndex, usize, Option<SurfaceReport>)> {
+            let mut surface = load_surface(&o.surface)?;
+            let mut dropped = 0;
+            if o.drop_degenerate || o.drop_duplicates {
+                (surface, dropped) = clean(&surface, o.drop_degenerate, o.drop_duplicates)?;
+            }
+            let report = o.stats.is_some().then(|| diagnose(&surface));
             let b = surface.bbox();
             let domain = match o.domain {
                 Some(d) => d,
                 None => Domain::around(b.min, b.max, o.fit)?,
             };
             let index = SurfaceIndex::new(&surface, &domain);
-            Ok((surface.len(), surface.signed_volume().abs(), domain, index))
+            Ok((
+                surface.len(),
+                surface.signed_volume().abs(),
+                domain,
+                index,
+                dropped,
+                report,
+            ))
         },
     );
-    let (ntri, surface_volume, domain, index) = agree(&*comm, loaded)?;
+    let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
     if root {
         let what = match o.command {
             Command::Octree => "octree".to_string(),
@@ -257,6 +302,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
                 o.keep.name(),
                 o.cut_rule.name()
             ),
+            Command::Check => unreachable!("check does not build an octree"),
         };
         println!(
             "octmesh {what}: {} ({ntri} triangles), level {}, balance {}, {} rank(s)",
@@ -265,6 +311,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             o.balance.map_or("none", |c| c.name()),
             comm.size()
         );
+        if o.drop_degenerate || o.drop_duplicates {
+            println!("  dropped {dropped} facet(s) (degenerate or duplicate)");
+        }
         println!(
             "  cube: origin ({:.6}, {:.6}, {:.6}), side {:.6}",
             domain.origin[0], domain.origin[1], domain.origin[2], domain.side
@@ -370,7 +419,18 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             .str("keep", o.keep.name())
             .str("cut_rule", o.cut_rule.name());
     }
-    stats.num("surface_volume", surface_volume);
+    stats
+        .num("surface_volume", surface_volume)
+        .int("dropped_facets", dropped as u64);
+    if let Some(r) = &report {
+        let mut s = JsonObject::new();
+        s.int("triangles", r.triangles as u64)
+            .int("boundary_edges", r.boundary_edges as u64)
+            .int("non_manifold_edges", r.non_manifold_edges as u64)
+            .int("components", r.components as u64)
+            .bool("closed", r.closed);
+        stats.obj("surface", &s);
+    }
 
     let mut rss = [peak_rss_bytes()];
     comm.max_u64(&mut rss);
@@ -419,6 +479,34 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     Ok(())
 }
 
+/// The `check` command: every rank diagnoses the surface (it is cheap) and
+/// rank 0 prints the report and writes the JSON.
+fn run_check(comm: CommRef, o: &Options) -> Result<()> {
+    let start = std::time::Instant::now();
+    let surface = agree(&*comm, load_surface(&o.surface))?;
+    let read = start.elapsed().as_secs_f64();
+    let report = diagnose(&surface);
+    let diagnosed = start.elapsed().as_secs_f64() - read;
+    if comm.rank() == 0 && !o.quiet {
+        println!(
+            "octmesh check: {} ({} triangles)",
+            o.surface, report.triangles
+        );
+        println!("{report}");
+        println!("  read {read:.3} s | diagnose {diagnosed:.3} s (rank 0)");
+    }
+    if let Some(path) = &o.json {
+        let written = if comm.rank() == 0 {
+            std::fs::write(path, report.to_json())
+                .map_err(|e| Error::io(format!("cannot write '{}': {e}", path.display())))
+        } else {
+            Ok(())
+        };
+        agree(&*comm, written)?;
+    }
+    Ok(())
+}
+
 /// Keeps freed memory in the process: the pipeline frees and reallocates
 /// arrays of several GB, and returning them to the kernel makes every
 /// reuse pay for zeroing fresh pages again.
@@ -441,7 +529,10 @@ fn main() -> ExitCode {
     };
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
     let (rank, size) = (comm.rank(), comm.size());
-    let result = parse_args(&args).and_then(|o| run(comm.clone(), &o));
+    let result = parse_args(&args).and_then(|o| match o.command {
+        Command::Check => run_check(comm.clone(), &o),
+        _ => run(comm.clone(), &o),
+    });
     // Report before MPI_Finalize: once one rank exits non-zero, mpirun may
     // kill the others before they print.
     let code = match &result {

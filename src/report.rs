@@ -91,6 +91,12 @@ impl JsonObject {
         self
     }
 
+    /// Adds a boolean.
+    pub fn bool(&mut self, key: &str, v: bool) -> &mut Self {
+        self.fields.push((key.into(), v.to_string()));
+        self
+    }
+
     /// Adds a string.
     pub fn str(&mut self, key: &str, v: &str) -> &mut Self {
         self.fields.push((key.into(), quote(v)));

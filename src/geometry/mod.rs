@@ -7,6 +7,7 @@
 //! that were read from a file and not transformed.
 
 pub mod bvh;
+pub mod diagnostics;
 pub mod intersect;
 pub mod shapes;
 pub mod stl;
