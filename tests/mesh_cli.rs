@@ -20,11 +20,12 @@ fn mesh_stats(
         Path::new(surface).file_stem().unwrap().to_string_lossy(),
         extra.join("_").replace(['/', '.'], "")
     ));
+    let level = level.to_string();
     let mut args = vec![
         "mesh",
         surface,
         "--level",
-        Box::leak(level.to_string().into_boxed_str()),
+        &level,
         "--quiet",
         "--stats",
         stats.to_str().unwrap(),

@@ -7,12 +7,6 @@
 mod common;
 use common::*;
 use std::path::Path;
-use std::time::Duration;
-
-fn json(path: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(path).expect("read stats");
-    serde_json::from_str(&text).expect("valid JSON")
-}
 
 fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
     let tag = format!(
@@ -38,9 +32,8 @@ fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
             ours.to_str().unwrap(),
         ],
     );
-    let out = mpirun(
+    p4est_ref_ok(
         np,
-        &p4est_ref(),
         &[
             "--in",
             leaves_file.to_str().unwrap(),
@@ -50,14 +43,9 @@ fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
             "--json",
             theirs.to_str().unwrap(),
         ],
-        Duration::from_secs(600),
+        &tag,
     );
-    assert!(
-        out.status.success(),
-        "p4est reference failed on {tag}:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let (a, b) = (json(&ours), json(&theirs));
+    let (a, b) = (json_file(&ours), json_file(&theirs));
     let n = |v: &serde_json::Value, k: &str| {
         v[k].as_u64()
             .unwrap_or_else(|| panic!("{tag}: no integer '{k}' in {v}"))

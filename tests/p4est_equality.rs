@@ -5,7 +5,6 @@
 mod common;
 use common::*;
 use std::path::Path;
-use std::time::Duration;
 
 fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
     let tag = format!(
@@ -31,9 +30,8 @@ fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
             ours.to_str().unwrap(),
         ],
     );
-    let out = mpirun(
+    p4est_ref_ok(
         np,
-        &p4est_ref(),
         &[
             "--in",
             refined.to_str().unwrap(),
@@ -42,12 +40,7 @@ fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
             "--out",
             theirs.to_str().unwrap(),
         ],
-        Duration::from_secs(600),
-    );
-    assert!(
-        out.status.success(),
-        "p4est reference failed on {tag}:\n{}",
-        String::from_utf8_lossy(&out.stderr)
+        &tag,
     );
     let (a, b) = (leaves(&ours), leaves(&theirs));
     assert!(

@@ -138,26 +138,39 @@ impl octmesh_t {
     }
 
     /// The surface index mapped to `domain` (rebuilt if it was mapped to
-    /// another cube).
-    pub(crate) fn index_for(&mut self, domain: &Domain) -> Option<&SurfaceIndex> {
-        let s = self.surface.as_mut()?;
+    /// another cube), or a state error saying how to give a surface.
+    pub(crate) fn index_for(&mut self, domain: &Domain) -> Result<&SurfaceIndex> {
+        let s = self.surface.as_mut().ok_or_else(|| {
+            Error::new(
+                ErrorKind::State,
+                "there is no surface: call octmesh_surface_from_stl, \
+                 octmesh_surface_from_triangles or octmesh_surface_builtin first",
+            )
+        })?;
         if s.index_domain != *domain {
             s.index = SurfaceIndex::new(&s.surface, domain);
             s.index_domain = *domain;
         }
-        Some(&s.index)
+        Ok(&s.index)
     }
 
     /// The octree, or a state error saying how to make one.
     pub(crate) fn tree_or_state(&self) -> Result<&(LinearOctree, Domain)> {
-        self.tree.as_ref().ok_or_else(|| {
-            Error::new(
-                ErrorKind::State,
-                "there is no octree yet: call octmesh_refine_surface or \
-                 octmesh_refine_callback first",
-            )
-        })
+        self.tree.as_ref().ok_or_else(no_tree)
     }
+
+    /// [`Handle::tree_or_state`], mutable.
+    pub(crate) fn tree_mut_or_state(&mut self) -> Result<&mut (LinearOctree, Domain)> {
+        self.tree.as_mut().ok_or_else(no_tree)
+    }
+}
+
+fn no_tree() -> Error {
+    Error::new(
+        ErrorKind::State,
+        "there is no octree yet: call octmesh_refine_surface or \
+         octmesh_refine_callback first",
+    )
 }
 
 /// Writes the default options (fit 0.7, no octant limit, verbosity 0) to

@@ -90,9 +90,12 @@ pub unsafe extern "C" fn octmesh_mesh(
         };
         let checked = keep.and_then(|k| Ok((k, rule?, h.tree_or_state()?.1)));
         let (keep, cut_rule, domain) = h.agree(checked)?;
-        // Map the surface to the octree's cube, then classify against it.
-        let _ = h.index_for(&domain);
-        let (tree, _) = h.tree.as_ref().expect("checked above");
+        // Classify against the surface mapped to the octree's cube, if there
+        // is a surface (keeping all elements needs none).
+        if h.surface.is_some() {
+            h.index_for(&domain)?;
+        }
+        let (tree, _) = h.tree_or_state()?;
         let classes = h
             .surface
             .as_ref()

@@ -7,7 +7,7 @@ use super::{
     non_null, octmesh_connect, octmesh_connect_t, octmesh_octant_t, octmesh_status_t, path_arg,
     with_mut, with_ref, write_out,
 };
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, Result};
 use crate::geometry::{shapes, stl, Surface, Triangle};
 use crate::octree::LinearOctree;
 use crate::refine::{construct_for_callback, construct_for_surface, SurfaceIndex};
@@ -129,18 +129,13 @@ fn level_arg(level: i32, name: &str) -> Result<u8> {
 pub unsafe extern "C" fn octmesh_refine_surface(h: *mut octmesh_t, level: i32) -> octmesh_status_t {
     with_mut(h, |h| {
         let checked = level_arg(level, "level").and_then(|l| {
-            if h.surface.is_none() {
-                return Err(Error::new(
-                    ErrorKind::State,
-                    "there is no surface: call octmesh_surface_from_stl, \
-                     octmesh_surface_from_triangles or octmesh_surface_builtin first",
-                ));
-            }
-            Ok((l, h.new_tree_domain()?))
+            let domain = h.new_tree_domain()?;
+            h.index_for(&domain)?;
+            Ok((l, domain))
         });
         let (level, domain) = h.agree(checked)?;
         let (comm, limit) = (h.comm.clone(), h.limit());
-        let index = h.index_for(&domain).expect("surface checked above");
+        let index = h.index_for(&domain)?;
         let mut tree = construct_for_surface(comm, index, level)?;
         tree.refine_surface(index, level, limit)?;
         h.tree = Some((tree, domain));
@@ -210,7 +205,7 @@ pub unsafe extern "C" fn octmesh_balance(
         };
         let checked = conn.and_then(|c| h.tree_or_state().map(|_| c));
         let conn = h.agree(checked)?;
-        let (tree, _) = h.tree.as_mut().expect("checked above");
+        let (tree, _) = h.tree_mut_or_state()?;
         tree.balance(conn)?;
         h.mesh = None;
         Ok(())
@@ -228,7 +223,7 @@ pub unsafe extern "C" fn octmesh_partition(
 ) -> octmesh_status_t {
     with_mut(h, |h| {
         h.agree(h.tree_or_state().map(|_| ()))?;
-        let (tree, _) = h.tree.as_mut().expect("checked above");
+        let (tree, _) = h.tree_mut_or_state()?;
         match weight {
             None => tree.partition()?,
             Some(f) => tree.partition_weighted(|o: Octant| {

@@ -234,12 +234,12 @@ impl Walker<'_> {
         let id = self.out.coords.len() as u32;
         let mut kind = 0u8;
         if let Some(p) = (0..8).find(|&p| count[p] == 4) {
-            // Face interior of the coarse leaf: find the axis across which
-            // all its positions lie on one side.
+            // Face interior of the coarse leaf: its 4 positions span two
+            // axes; the third, across which it does not extend, is the
+            // face normal.
             let q = refs[p];
-            let pos: Vec<usize> = (0..8).filter(|&i| refs[i] == q).collect();
             let n = (0..3)
-                .find(|&d| pos.iter().all(|&i| (i >> d) & 1 == (p >> d) & 1))
+                .find(|&d| refs[p ^ (1 << d)] != q)
                 .expect("a face leaf lies on one side of the point");
             let side = (p >> n) & 1;
             let mut mask = 0u8;

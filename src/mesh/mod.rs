@@ -154,13 +154,17 @@ impl Mesh {
         let check = check_inputs(tree, classes, opts);
         crate::comm::agree(comm, check)?;
         let mut timer = PhaseTimer::new();
-        let local_class: Vec<u8> = match classes {
-            Some(c) => c.to_vec(),
-            None => vec![LeafClass::Outside as u8; tree.local_len()],
+        let unclassified;
+        let local_class: &[u8] = match classes {
+            Some(c) => c,
+            None => {
+                unclassified = vec![LeafClass::Outside as u8; tree.local_len()];
+                &unclassified
+            }
         };
         let keep = |bits: u8| keeps(opts.keep, opts.cut_rule, bits);
 
-        let ghosts = timer.time(comm, "ghost", || build_ghost_layer(tree, &local_class));
+        let ghosts = timer.time(comm, "ghost", || build_ghost_layer(tree, local_class));
 
         let nodes_phase = timer.time(comm, "nodes", || {
             // Merged run: ghosts of lower ranks, local leaves, the rest.
@@ -201,7 +205,7 @@ impl Mesh {
                 d,
                 &local_range,
                 &kept,
-                &local_class,
+                local_class,
                 used,
                 &independent,
                 numbering,

@@ -217,6 +217,16 @@ pub fn p4est_ref() -> PathBuf {
     dir.join("octmesh_p4est")
 }
 
+/// Runs the p4est reference program on `np` ranks and asserts success.
+pub fn p4est_ref_ok(np: usize, args: &[&str], tag: &str) {
+    let out = mpirun(np, &p4est_ref(), args, Duration::from_secs(600));
+    assert!(
+        out.status.success(),
+        "p4est reference failed on {tag}:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// Writes a binary STL (normals zero) for tests.
 pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]], header: &[u8]) {
     let mut b = Vec::new();

@@ -177,6 +177,37 @@ def markdown_table(rows):
     return "\n".join(lines)
 
 
+def parse_nps(ap, text):
+    """Rank counts from '1,2', or an argparse error."""
+    try:
+        return [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        ap.error("--np expects integers, e.g. 1,2")
+
+
+def prepare(env, no_build, title):
+    """Builds both programs (unless no_build), checks they exist, prints the
+    title and the machine lines, and returns the machine info."""
+    if not no_build:
+        # Builds are no-ops when up to date and make sure the measured
+        # binaries match the sources.
+        try:
+            run(["cargo", "build", "--release", "--quiet"], env)
+            run(["make", "-s", "-C", str(P4EST.parent)], env)
+        except (RunError, OSError) as e:
+            sys.exit("build failed: %s" % e)
+    for exe in (OCTMESH, P4EST):
+        if not os.access(exe, os.X_OK):
+            sys.exit("missing %s (cargo build --release; make -C tools/p4est_ref)" % exe)
+    info = machine_info(env)
+    print(title, flush=True)
+    print("  machine: %s" % info["machine"])
+    print("  date:    %s" % info["date"])
+    print("  commit:  %s" % info["commit"])
+    print("  mpi:     %s" % info["mpi"])
+    return info
+
+
 def bench_case(surface, level, nps, args, env, files):
     """Yields one result dict per np; raises RunError on failure."""
     src = surface_arg(surface)
@@ -239,31 +270,11 @@ def main():
     args = ap.parse_args()
     if args.repeat < 1:
         ap.error("--repeat must be at least 1")
-    try:
-        nps = [int(x) for x in args.np.split(",") if x.strip()]
-    except ValueError:
-        ap.error("--np expects integers, e.g. 1,2")
+    nps = parse_nps(ap, args.np)
     cases = parse_cases(args.cases) if args.cases else DEFAULT_CASES
 
     env = mpi_env()
-    if not args.no_build:
-        # Builds are no-ops when up to date and make sure the measured
-        # binaries match the sources.
-        try:
-            run(["cargo", "build", "--release", "--quiet"], env)
-            run(["make", "-s", "-C", str(P4EST.parent)], env)
-        except (RunError, OSError) as e:
-            sys.exit("build failed: %s" % e)
-    for exe in (OCTMESH, P4EST):
-        if not os.access(exe, os.X_OK):
-            sys.exit("missing %s (cargo build --release; make -C tools/p4est_ref)" % exe)
-
-    info = machine_info(env)
-    print("octmesh 2:1 balance against p4est", flush=True)
-    print("  machine: %s" % info["machine"])
-    print("  date:    %s" % info["date"])
-    print("  commit:  %s" % info["commit"])
-    print("  mpi:     %s" % info["mpi"])
+    info = prepare(env, args.no_build, "octmesh 2:1 balance against p4est")
     print("  balance %s, median of %d runs, times in seconds (max over ranks)"
           % (args.balance, args.repeat), flush=True)
 

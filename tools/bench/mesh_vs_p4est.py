@@ -31,7 +31,6 @@ disagree on the element, independent-node or hanging-node counts.
 
 import argparse
 import json
-import os
 import statistics
 import sys
 from pathlib import Path
@@ -39,8 +38,8 @@ from pathlib import Path
 sys.dont_write_bytecode = True  # keep tools/bench free of __pycache__
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from balance_vs_p4est import (  # noqa: E402  (shared helpers)
-    DATA, MIB, OCTMESH, P4EST, WORK, RunError, fmt_s, machine_info, mpi_env,
-    parse_cases, run, surface_arg)
+    DATA, MIB, OCTMESH, P4EST, WORK, RunError, fmt_s, mpi_env, parse_cases,
+    parse_nps, prepare, run, surface_arg)
 
 DEFAULT_CASES = [("sphere", 9), ("sphere", 10), ("sphere", 11), ("bunny", 10)]
 OCTMESH_PHASES = ("ghost", "nodes", "numbering", "connectivity")
@@ -227,31 +226,11 @@ def main():
         args.p4est_repeat = args.repeat
     if args.repeat < 1 or args.p4est_repeat < 1:
         ap.error("--repeat and --p4est-repeat must be at least 1")
-    try:
-        nps = [int(x) for x in args.np.split(",") if x.strip()]
-    except ValueError:
-        ap.error("--np expects integers, e.g. 1,2")
+    nps = parse_nps(ap, args.np)
     cases = parse_cases(args.cases) if args.cases else DEFAULT_CASES
 
     env = mpi_env()
-    if not args.no_build:
-        # Builds are no-ops when up to date and make sure the measured
-        # binaries match the sources.
-        try:
-            run(["cargo", "build", "--release", "--quiet"], env)
-            run(["make", "-s", "-C", str(P4EST.parent)], env)
-        except (RunError, OSError) as e:
-            sys.exit("build failed: %s" % e)
-    for exe in (OCTMESH, P4EST):
-        if not os.access(exe, os.X_OK):
-            sys.exit("missing %s (cargo build --release; make -C tools/p4est_ref)" % exe)
-
-    info = machine_info(env)
-    print("octmesh hexahedral mesh against p4est", flush=True)
-    print("  machine: %s" % info["machine"])
-    print("  date:    %s" % info["date"])
-    print("  commit:  %s" % info["commit"])
-    print("  mpi:     %s" % info["mpi"])
+    info = prepare(env, args.no_build, "octmesh hexahedral mesh against p4est")
     print("  balance %s; octmesh median of %d runs, p4est median of %d repeats; "
           "times in seconds (max over ranks)" % (args.balance, args.repeat, args.p4est_repeat))
     print("  octmesh ghost+nodes = ghost + nodes + numbering + connectivity", flush=True)
