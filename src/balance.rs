@@ -77,8 +77,11 @@ impl LinearOctree {
             let (recv, _) = comm.alltoallv_u64(&send, &counts);
             b.apply_probes(recv.into_iter().map(Octant::from_key).collect());
         }
-        let leaves = std::mem::take(&mut b.leaves);
+        let mut leaves = std::mem::take(&mut b.leaves);
         drop(b);
+        // The work vector was sized for the worst case; the octree is kept
+        // for the rest of the pipeline, so give the slack back.
+        leaves.shrink_to_fit();
         *self.leaves_mut() = leaves;
         stats.leaves_added = (self.local_len() - before) as u64;
         self.refresh()?;

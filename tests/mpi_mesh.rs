@@ -66,7 +66,7 @@ fn flatten(m: &Mesh) -> Vec<u64> {
     v.push(m.hanging().len() as u64);
     for (k, h) in m.hanging().iter().enumerate() {
         let x = m.node_lattice()[m.num_independent() + k];
-        v.extend([x[0] as u64, x[1] as u64, x[2] as u64, h.count as u64]);
+        v.extend([x[0] as u64, x[1] as u64, x[2] as u64, h.count() as u64]);
         for &d in h.deps() {
             let y = m.node_lattice()[d as usize];
             v.extend([y[0] as u64, y[1] as u64, y[2] as u64]);

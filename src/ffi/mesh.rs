@@ -311,18 +311,10 @@ pub unsafe extern "C" fn octmesh_mesh_get_hanging(
         let m = mesh_of(h)?;
         let (c, d) = m.cache.hanging.get_or_init(|| {
             let hang = m.mesh.hanging();
-            let c = hang.iter().map(|x| x.count as i32).collect();
+            let c = hang.iter().map(|x| x.count() as i32).collect();
             let d = hang
                 .iter()
-                .flat_map(|x| {
-                    (0..4).map(move |j| {
-                        if j < x.count as usize {
-                            x.deps[j] as i32
-                        } else {
-                            -1
-                        }
-                    })
-                })
+                .flat_map(|x| (0..4).map(move |j| x.deps().get(j).map_or(-1, |&n| n as i32)))
                 .collect();
             (c, d)
         });

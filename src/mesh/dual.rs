@@ -15,7 +15,7 @@
 //! (it then depends on that face's 4 corners) or edge (its 2 ends). With an
 //! edge- or corner-balanced octree those corners never hang themselves.
 
-use crate::octant::{Octant, ROOT_LEN};
+use crate::octant::Octant;
 
 /// Reference to a pointer-tree entry: an internal node index, `LEAF | i`
 /// for leaf `i` of the merged array, or [`VOID`].
@@ -27,9 +27,9 @@ pub(crate) const UNSET: u32 = u32::MAX;
 
 /// What the traversal produced for the merged (ghost + local) leaves.
 pub(crate) struct DualNodes {
-    /// Lattice coordinates of every node found.
-    pub coords: Vec<[u32; 3]>,
-    /// 0 independent, 1 edge-hanging, 2 face-hanging.
+    /// 0 independent, 1 edge-hanging, 2 face-hanging, per node found. Node
+    /// coordinates are not stored: every node is a corner of a kept leaf, so
+    /// [`DualNodes::scatter_coords`] recovers them when they are needed.
     pub kind: Vec<u8>,
     /// Node at each Morton corner of each merged leaf that is kept
     /// ([`UNSET`] for leaves that are not kept).
@@ -49,28 +49,82 @@ pub(crate) fn extract_nodes(leaves: &[Octant], kept: &[bool]) -> DualNodes {
         tree: &tree,
         kept,
         out: DualNodes {
-            coords: Vec::with_capacity(leaves.len() + leaves.len() / 4),
-            kind: Vec::with_capacity(leaves.len() + leaves.len() / 4),
+            kind: Vec::with_capacity(leaves.len() + leaves.len() / 2),
             corners: vec![[UNSET; 8]; leaves.len()],
-            hanging: Vec::new(),
+            hanging: Vec::with_capacity(leaves.len() / 2),
         },
     };
-    w.start(0, [root; 8], [0; 3], ROOT_LEN);
+    w.start(0, [root; 8]);
     // The root's faces, edges and corners against the outside.
     for m in 1u32..8 {
         let mut b = m;
         loop {
             let mut refs = [VOID; 8];
             refs[(!b & m) as usize] = root;
-            let origin = std::array::from_fn(|d| if b >> d & 1 == 1 { ROOT_LEN } else { 0 });
-            w.start(m, refs, origin, ROOT_LEN);
+            w.start(m, refs);
             if b == 0 {
                 break;
             }
             b = (b - 1) & m;
         }
     }
+    w.out.kind.shrink_to_fit();
+    w.out.hanging.shrink_to_fit();
     w.out
+}
+
+/// Lattice coordinates of corner `c` (Morton order) of `o`.
+#[inline]
+pub(crate) fn corner_coords(o: Octant, c: usize) -> [u32; 3] {
+    let a = o.coords();
+    let s = o.side();
+    std::array::from_fn(|d| a[d] + if c >> d & 1 == 1 { s } else { 0 })
+}
+
+impl DualNodes {
+    /// Number of nodes found.
+    pub fn num_nodes(&self) -> usize {
+        self.kind.len()
+    }
+
+    /// Writes the lattice coordinates of node `n` to `out[map[n]]` for every
+    /// node with `map[n] != UNSET`. `leaf(i)` is merged leaf `i`.
+    pub fn scatter_coords(
+        &self,
+        leaf: impl Fn(usize) -> Octant,
+        kept: &[bool],
+        map: &[u32],
+        out: &mut [[u32; 3]],
+    ) {
+        for (i, cs) in self.corners.iter().enumerate() {
+            if !kept[i] {
+                continue;
+            }
+            let o = leaf(i);
+            for (c, &n) in cs.iter().enumerate() {
+                let m = map[n as usize];
+                if m != UNSET {
+                    out[m as usize] = corner_coords(o, c);
+                }
+            }
+        }
+    }
+
+    /// Lattice coordinates of hanging node entry `(_, q, mask)`: the mean
+    /// of the corners of leaf `q` it depends on.
+    pub fn hanging_coords(q: Octant, mask: u8) -> [u32; 3] {
+        let mut sum = [0u32; 3];
+        let k = mask.count_ones();
+        for c in 0..8 {
+            if mask >> c & 1 == 1 {
+                let x = corner_coords(q, c);
+                for d in 0..3 {
+                    sum[d] += x[d];
+                }
+            }
+        }
+        sum.map(|v| v / k)
+    }
 }
 
 /// Links `leaves[lo..hi]` (the leaves inside `o`) into the pointer tree.
@@ -104,6 +158,15 @@ fn build(leaves: &[Octant], o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32
     idx as u32
 }
 
+/// Grows a full vector by a quarter instead of doubling it: these arrays
+/// hold one entry per node, and doubling would leave up to half unused.
+#[inline]
+fn grow<T>(v: &mut Vec<T>) {
+    if v.len() == v.capacity() {
+        v.reserve_exact(v.len() / 4 + 1024);
+    }
+}
+
 struct Walker<'a> {
     tree: &'a [[u32; 8]],
     kept: &'a [bool],
@@ -127,8 +190,6 @@ fn subsets(mask: u32, mut f: impl FnMut(u32)) {
 struct Sub {
     /// Its kind.
     m: u8,
-    /// Axes along which its origin moves by half the parent size.
-    shift: u8,
     /// Number of octants around it.
     n: u8,
     /// For each: (its side `p2`, parent octant side `p`, child index).
@@ -148,7 +209,6 @@ fn split_table() -> &'static [Vec<Sub>; 7] {
                 subsets(free & !s, |t| {
                     let mut sub = Sub {
                         m: m2 as u8,
-                        shift: (s | t) as u8,
                         ..Sub::default()
                     };
                     subsets(m2, |p2| {
@@ -180,10 +240,8 @@ impl Walker<'_> {
     /// Visits the sub-cell shared by the octants `refs` around it, at least
     /// one of which is internal: `m` has a bit per axis across which the
     /// octants sit (0: a cell, 1 bit: a face, 2: an edge, 3: a point),
-    /// `refs[p]` for `p` a subset of `m` is the octant on side `p`; `origin`
-    /// is the sub-cell's lowest point and `size` the octants' side.
-    fn cell(&mut self, m: u32, refs: [u32; 8], origin: [u32; 3], size: u32) {
-        let h = size / 2;
+    /// `refs[p]` for `p` a subset of `m` is the octant on side `p`.
+    fn cell(&mut self, m: u32, refs: [u32; 8]) {
         for sub in &split_table()[m as usize] {
             let mut nr = [VOID; 8];
             let mut internal = false;
@@ -192,28 +250,26 @@ impl Walker<'_> {
                 internal |= r & LEAF == 0;
                 nr[p2 as usize] = r;
             }
-            let o =
-                std::array::from_fn(|d| origin[d] + if sub.shift >> d & 1 == 1 { h } else { 0 });
             if sub.m == 7 {
-                self.point(nr, o);
+                self.point(nr);
             } else if internal {
-                self.cell(sub.m as u32, nr, o, h);
+                self.cell(sub.m as u32, nr);
             }
         }
     }
 
     /// Starts a walk at a sub-cell of kind `m` (see [`Walker::cell`]).
-    fn start(&mut self, m: u32, refs: [u32; 8], origin: [u32; 3], size: u32) {
+    fn start(&mut self, m: u32, refs: [u32; 8]) {
         if m == 7 {
-            self.point(refs, origin);
+            self.point(refs);
         } else if refs.iter().any(|&r| r & LEAF == 0) {
-            self.cell(m, refs, origin, size);
+            self.cell(m, refs);
         }
     }
 
     /// A lattice point with the octants on its 8 sides: descend to the
     /// leaves touching it, then record it.
-    fn point(&mut self, mut refs: [u32; 8], x: [u32; 3]) {
+    fn point(&mut self, mut refs: [u32; 8]) {
         while refs.iter().any(|&r| r & LEAF == 0) {
             for (p, r) in refs.iter_mut().enumerate() {
                 *r = self.child(*r, !(p as u32) & 7);
@@ -231,7 +287,7 @@ impl Walker<'_> {
         if !corner {
             return;
         }
-        let id = self.out.coords.len() as u32;
+        let id = self.out.kind.len() as u32;
         let mut kind = 0u8;
         if let Some(p) = (0..8).find(|&p| count[p] == 4) {
             // Face interior of the coarse leaf: its 4 positions span two
@@ -249,6 +305,7 @@ impl Walker<'_> {
                 }
             }
             kind = 2;
+            grow(&mut self.out.hanging);
             self.out.hanging.push((id, q & !LEAF, mask));
         } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
             let q = refs[p];
@@ -260,9 +317,10 @@ impl Walker<'_> {
             let base = !p & 7 & !(1 << e);
             let mask = (1u8 << base) | (1u8 << (base | (1 << e)));
             kind = 1;
+            grow(&mut self.out.hanging);
             self.out.hanging.push((id, q & !LEAF, mask));
         }
-        self.out.coords.push(x);
+        grow(&mut self.out.kind);
         self.out.kind.push(kind);
         for p in 0..8 {
             if count[p] == 1 {
@@ -285,13 +343,25 @@ mod tests {
             .collect()
     }
 
+    fn coords(d: &DualNodes, leaves: &[Octant], kept: &[bool]) -> Vec<[u32; 3]> {
+        let map: Vec<u32> = (0..d.num_nodes() as u32).collect();
+        let mut out = vec![[u32::MAX; 3]; d.num_nodes()];
+        d.scatter_coords(|i| leaves[i], kept, &map, &mut out);
+        assert!(
+            out.iter().all(|x| x[0] != u32::MAX),
+            "a node is no kept leaf's corner"
+        );
+        out
+    }
+
     #[test]
     fn uniform_grid_has_every_lattice_point_once() {
         let leaves = uniform(2);
         let kept = vec![true; leaves.len()];
         let d = extract_nodes(&leaves, &kept);
-        assert_eq!(d.coords.len(), 125);
-        let mut c = d.coords.clone();
+        let coords = coords(&d, &leaves, &kept);
+        assert_eq!(coords.len(), 125);
+        let mut c = coords.clone();
         c.sort_unstable();
         c.dedup();
         assert_eq!(c.len(), 125);
@@ -305,7 +375,7 @@ mod tests {
                     a[1] + s * (j as u32 >> 1 & 1),
                     a[2] + s * (j as u32 >> 2 & 1),
                 ];
-                assert_eq!(d.coords[n as usize], want);
+                assert_eq!(coords[n as usize], want);
             }
         }
     }
@@ -319,8 +389,9 @@ mod tests {
         leaves.extend((1..8).map(|c| Octant::ROOT.child(c)));
         let kept = vec![true; leaves.len()];
         let d = extract_nodes(&leaves, &kept);
+        let coords = coords(&d, &leaves, &kept);
         // 27 coarse points + 27 fine points of child 0, 8 of them shared.
-        assert_eq!(d.coords.len(), 27 + 27 - 8);
+        assert_eq!(coords.len(), 27 + 27 - 8);
         let face = d.kind.iter().filter(|&&k| k == 2).count();
         let edge = d.kind.iter().filter(|&&k| k == 1).count();
         // Child 0's faces towards its siblings: 3 centres; its edges inside
@@ -330,15 +401,19 @@ mod tests {
         for &(n, q, mask) in &d.hanging {
             let corners: Vec<[u32; 3]> = (0..8)
                 .filter(|c| mask >> c & 1 == 1)
-                .map(|c| d.coords[d.corners[q as usize][c] as usize])
+                .map(|c| coords[d.corners[q as usize][c] as usize])
                 .collect();
             let k = d.kind[n as usize];
             assert_eq!(corners.len(), if k == 2 { 4 } else { 2 });
             // The hanging node is the average of what it depends on.
             for ax in 0..3 {
                 let sum: u32 = corners.iter().map(|c| c[ax]).sum();
-                assert_eq!(sum, d.coords[n as usize][ax] * corners.len() as u32);
+                assert_eq!(sum, coords[n as usize][ax] * corners.len() as u32);
             }
+            assert_eq!(
+                DualNodes::hanging_coords(leaves[q as usize], mask),
+                coords[n as usize]
+            );
         }
     }
 }

@@ -45,7 +45,7 @@ use crate::classify::{keeps, CutRule, Keep, LeafClass};
 use crate::comm::Comm;
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
-use crate::ghost::build_ghost_layer;
+use crate::ghost::{build_ghost_layer, GhostLayer};
 use crate::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::report::PhaseTimer;
@@ -78,23 +78,39 @@ impl Default for MeshOptions {
 /// A node constrained by 2 or 4 independent nodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct HangingNode {
-    /// Local indices of the independent nodes it depends on; the first
-    /// `count` entries are used.
-    pub deps: [u32; 4],
-    /// 2 for an edge-hanging node (weights 1/2), 4 for a face-hanging one
-    /// (weights 1/4).
-    pub count: u8,
+    /// Local indices of the independent nodes it depends on; an
+    /// edge-hanging node has only two, and `u32::MAX` in the last two
+    /// entries (16 bytes per node instead of 20 with a separate count).
+    deps: [u32; 4],
 }
 
 impl HangingNode {
+    /// A constraint on the given 2 or 4 independent nodes.
+    pub fn new(deps: &[u32]) -> HangingNode {
+        assert!(deps.len() == 2 || deps.len() == 4, "2 or 4 dependencies");
+        let mut d = [u32::MAX; 4];
+        d[..deps.len()].copy_from_slice(deps);
+        HangingNode { deps: d }
+    }
+
+    /// 2 for an edge-hanging node (weights 1/2), 4 for a face-hanging one
+    /// (weights 1/4).
+    pub fn count(&self) -> usize {
+        if self.deps[2] == u32::MAX {
+            2
+        } else {
+            4
+        }
+    }
+
     /// The nodes it depends on.
     pub fn deps(&self) -> &[u32] {
-        &self.deps[..self.count as usize]
+        &self.deps[..self.count()]
     }
 
     /// The weight of each dependency.
     pub fn weight(&self) -> f64 {
-        1.0 / self.count as f64
+        1.0 / self.count() as f64
     }
 }
 
@@ -181,20 +197,27 @@ impl Mesh {
             kept.extend(ghosts.data[b..].iter().map(|&c| keep(c)));
             let d = dual::extract_nodes(&merged, &kept);
             let local_range = b..b + nl;
-            let counted = count_hanging(comm, tree.first_cells(), &d);
+            let counted = count_hanging(comm, tree.first_cells(), &d, &merged);
             (d, local_range, kept, counted)
         });
         let (d, local_range, kept, (face_hanging, edge_hanging)) = nodes_phase;
+        let leaf_at = |i: usize| merged_leaf(&ghosts, tree.leaves(), i);
 
-        let (used, independent, numbering) = timer.time(comm, "numbering", || {
+        let (used, slot, numbering) = timer.time(comm, "numbering", || {
             let used = used_nodes(&d, &local_range, &kept);
-            let independent: Vec<u32> = (0..d.coords.len() as u32)
-                .filter(|&n| used[n as usize] && d.kind[n as usize] == 0)
-                .collect();
-            let icoords: Vec<[u32; 3]> =
-                independent.iter().map(|&n| d.coords[n as usize]).collect();
+            // slot[n]: the index of used independent node n among them.
+            let mut slot = vec![UNSET; d.num_nodes()];
+            let mut ni = 0u32;
+            for (n, s) in slot.iter_mut().enumerate() {
+                if used[n] && d.kind[n] == 0 {
+                    *s = ni;
+                    ni += 1;
+                }
+            }
+            let mut icoords = vec![[0u32; 3]; ni as usize];
+            d.scatter_coords(leaf_at, &kept, &slot, &mut icoords);
             let numbering = numbering::number_nodes(comm, tree.first_cells(), &icoords);
-            (used, independent, numbering)
+            (used, slot, numbering)
         });
         let numbering = crate::comm::agree(comm, numbering)?;
 
@@ -203,11 +226,12 @@ impl Mesh {
                 tree,
                 domain,
                 d,
+                leaf_at,
                 &local_range,
                 &kept,
                 local_class,
                 used,
-                &independent,
+                slot,
                 numbering,
             )
         });
@@ -415,11 +439,16 @@ fn check_inputs(tree: &LinearOctree, classes: Option<&[u8]>, opts: &MeshOptions)
 
 /// This rank's share of the face- and edge-hanging nodes: each node is
 /// counted by its directory rank, which sees every leaf around it.
-fn count_hanging(comm: &dyn Comm, first_cell: &[u64], d: &dual::DualNodes) -> (u64, u64) {
+fn count_hanging(
+    comm: &dyn Comm,
+    first_cell: &[u64],
+    d: &dual::DualNodes,
+    leaves: &[Octant],
+) -> (u64, u64) {
     let me = comm.rank();
     let mut c = [0u64; 2];
-    for &(n, _, _) in &d.hanging {
-        let x = d.coords[n as usize];
+    for &(n, q, mask) in &d.hanging {
+        let x = dual::DualNodes::hanging_coords(leaves[q as usize], mask);
         if numbering::directory_rank(first_cell, x) == me {
             c[if d.kind[n as usize] == 2 { 0 } else { 1 }] += 1;
         }
@@ -430,7 +459,7 @@ fn count_hanging(comm: &dyn Comm, first_cell: &[u64], d: &dual::DualNodes) -> (u
 /// Nodes this rank uses: corners of its kept elements and what their
 /// hanging corners depend on.
 fn used_nodes(d: &dual::DualNodes, local: &std::ops::Range<usize>, kept: &[bool]) -> Vec<bool> {
-    let mut used = vec![false; d.coords.len()];
+    let mut used = vec![false; d.num_nodes()];
     for i in local.clone() {
         if kept[i] {
             for &n in &d.corners[i] {
@@ -452,48 +481,75 @@ fn used_nodes(d: &dual::DualNodes, local: &std::ops::Range<usize>, kept: &[bool]
     used
 }
 
+/// Leaf `i` of the merged run (lower ghosts, local leaves, upper ghosts).
+fn merged_leaf(ghosts: &GhostLayer, local: &[Octant], i: usize) -> Octant {
+    let b = ghosts.before;
+    if i < b {
+        ghosts.leaves[i]
+    } else if i < b + local.len() {
+        local[i - b]
+    } else {
+        ghosts.leaves[i - local.len()]
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn assemble(
     tree: &LinearOctree,
     domain: &Domain,
-    d: dual::DualNodes,
+    mut d: dual::DualNodes,
+    leaf_at: impl Fn(usize) -> Octant,
     local_range: &std::ops::Range<usize>,
     kept: &[bool],
     local_class: &[u8],
     used: Vec<bool>,
-    independent: &[u32],
+    slot: Vec<u32>,
     num: numbering::Numbering,
 ) -> Result<Mesh> {
     let comm: &dyn Comm = &**tree.comm();
     let me = comm.rank() as u32;
+    let ni = num.owner.len();
     // Final local order: owned (by global number), other independent (by
-    // global number), hanging (in traversal order).
-    let mut owned: Vec<u32> = Vec::new();
-    let mut others: Vec<u32> = Vec::new();
-    for k in 0..independent.len() as u32 {
-        if num.owner[k as usize] == me {
-            owned.push(k);
-        } else {
-            others.push(k);
+    // global number), hanging (in traversal order). Owned nodes are already
+    // in global order; the others are few.
+    let mut pos = vec![UNSET; ni];
+    let mut others: Vec<(u64, u32, u32)> = Vec::new();
+    for k in 0..ni {
+        if num.owner[k] != me {
+            others.push((num.global[k], num.owner[k], k as u32));
         }
     }
-    // Owned nodes are already in global order; the others are few.
-    others.sort_unstable_by_key(|&k| num.global[k as usize]);
-    let used_hanging = d.hanging.iter().filter(|h| used[h.0 as usize]).count();
-
-    // New numbers, then the lattice coordinates in the new order; the
-    // traversal's arrays are released as soon as they are read.
-    let mut new_of = vec![UNSET; d.coords.len()];
+    others.sort_unstable();
+    // Owned entries move down in place (never past their own slot), the
+    // others are appended after them.
+    let (mut node_global, mut node_owner) = (num.global, num.owner);
     let mut next = 0u32;
-    let mut node_global = Vec::with_capacity(independent.len());
-    let mut node_owner = Vec::with_capacity(independent.len());
-    for &k in owned.iter().chain(&others) {
-        new_of[independent[k as usize] as usize] = next;
-        next += 1;
-        node_global.push(num.global[k as usize]);
-        node_owner.push(num.owner[k as usize]);
+    for k in 0..ni {
+        if node_owner[k] == me {
+            pos[k] = next;
+            node_global[next as usize] = node_global[k];
+            node_owner[next as usize] = me;
+            next += 1;
+        }
     }
+    let num_owned = next as usize;
+    for &(g, o, k) in &others {
+        pos[k as usize] = next;
+        node_global[next as usize] = g;
+        node_owner[next as usize] = o;
+        next += 1;
+    }
+    drop(others);
     let num_independent = next as usize;
+
+    // slot becomes the new local number of every used node, in place.
+    let mut new_of = slot;
+    for s in new_of.iter_mut() {
+        if *s != UNSET {
+            *s = pos[*s as usize];
+        }
+    }
+    let used_hanging = d.hanging.iter().filter(|h| used[h.0 as usize]).count();
     for &(n, _, _) in &d.hanging {
         if used[n as usize] {
             new_of[n as usize] = next;
@@ -501,14 +557,9 @@ fn assemble(
         }
     }
     drop(used);
-    let mut node_lattice = vec![[0u32; 3]; next as usize];
-    for (n, &x) in d.coords.iter().enumerate() {
-        let m = new_of[n];
-        if m != UNSET {
-            node_lattice[m as usize] = x;
-        }
-    }
-    drop((d.coords, d.kind));
+    d.kind = Vec::new();
+    // The constraints first: the traversal's list is released before the
+    // coordinates are allocated.
     let mut hanging = Vec::with_capacity(used_hanging);
     for &(n, q, mask) in &d.hanging {
         if new_of[n as usize] == UNSET {
@@ -529,14 +580,17 @@ fn assemble(
                 count += 1;
             }
         }
-        hanging.push(HangingNode { deps, count });
+        hanging.push(HangingNode::new(&deps[..count as usize]));
     }
-    drop(d.hanging);
+    d.hanging = Vec::new();
+    let mut node_lattice = vec![[0u32; 3]; next as usize];
+    d.scatter_coords(&leaf_at, kept, &new_of, &mut node_lattice);
 
     // The corner table becomes the connectivity in place: local kept leaves
     // move to the front (never past their own slot), renumbered.
-    let mut elements = Vec::new();
-    let mut element_class = Vec::new();
+    let nkept = kept[local_range.clone()].iter().filter(|&&k| k).count();
+    let mut elements = Vec::with_capacity(nkept);
+    let mut element_class = Vec::with_capacity(nkept);
     let mut connectivity = d.corners;
     let mut w = 0;
     for (j, i) in local_range.clone().enumerate() {
@@ -559,7 +613,7 @@ fn assemble(
         .shared
         .iter()
         .enumerate()
-        .map(|(s, &k)| (new_of[independent[k as usize] as usize], s))
+        .map(|(s, &k)| (pos[k as usize], s))
         .collect();
     order.sort_unstable();
     let mut shared_offsets = vec![0u32];
@@ -579,7 +633,7 @@ fn assemble(
         element_class,
         connectivity,
         node_lattice,
-        num_owned: owned.len(),
+        num_owned,
         num_independent,
         node_global,
         node_owner,
