@@ -60,8 +60,8 @@ fn flatten(m: &Mesh) -> Vec<u64> {
     for i in 0..m.num_independent() {
         let x = m.node_lattice()[i];
         v.extend([x[0] as u64, x[1] as u64, x[2] as u64]);
-        v.push(m.global_ids()[i]);
-        v.push(m.owners()[i] as u64);
+        v.push(m.global_id(i));
+        v.push(m.owner(i) as u64);
     }
     v.push(m.hanging().len() as u64);
     for (k, h) in m.hanging().iter().enumerate() {
@@ -77,7 +77,7 @@ fn flatten(m: &Mesh) -> Vec<u64> {
     for (r, nodes) in lists {
         v.push(r as u64);
         v.push(nodes.len() as u64);
-        v.extend(nodes.iter().map(|&n| m.global_ids()[n as usize]));
+        v.extend(nodes.iter().map(|&n| m.global_id(n as usize)));
     }
     v
 }

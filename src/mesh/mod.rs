@@ -143,8 +143,11 @@ pub struct Mesh {
     node_lattice: Vec<[u32; 3]>,
     num_owned: usize,
     num_independent: usize,
-    node_global: Vec<u64>,
-    node_owner: Vec<u32>,
+    /// Global numbers of the independent nodes this rank does not own
+    /// (owned ones are `first_global + i`).
+    other_global: Vec<u64>,
+    /// Owners of the independent nodes this rank does not own.
+    other_owner: Vec<u32>,
     hanging: Vec<HangingNode>,
     shared_nodes: Vec<u32>,
     shared_offsets: Vec<u32>,
@@ -319,14 +322,34 @@ impl Mesh {
         self.first_global
     }
 
-    /// Global numbers of the independent local nodes.
-    pub fn global_ids(&self) -> &[u64] {
-        &self.node_global
+    /// Global number of independent local node `i` (`i < num_independent()`).
+    /// Owned nodes are numbered `first_global() + i`, so only the others'
+    /// numbers are stored.
+    pub fn global_id(&self, i: usize) -> u64 {
+        if i < self.num_owned {
+            self.first_global + i as u64
+        } else {
+            self.other_global[i - self.num_owned]
+        }
     }
 
-    /// Owner rank of each independent local node.
-    pub fn owners(&self) -> &[u32] {
-        &self.node_owner
+    /// Owner rank of independent local node `i` (`i < num_independent()`).
+    pub fn owner(&self, i: usize) -> u32 {
+        if i < self.num_owned {
+            self.rank as u32
+        } else {
+            self.other_owner[i - self.num_owned]
+        }
+    }
+
+    /// Global numbers of all independent local nodes (a new vector).
+    pub fn global_ids(&self) -> Vec<u64> {
+        (0..self.num_independent).map(|i| self.global_id(i)).collect()
+    }
+
+    /// Owner ranks of all independent local nodes (a new vector).
+    pub fn owners(&self) -> Vec<u32> {
+        (0..self.num_independent).map(|i| self.owner(i)).collect()
     }
 
     /// Hanging nodes: entry `k` is local node `num_independent() + k`.
@@ -390,7 +413,7 @@ impl Mesh {
             .enumerate()
             .filter(|(_, l)| !l.is_empty())
             .map(|(r, mut l)| {
-                l.sort_unstable_by_key(|&n| self.node_global[n as usize]);
+                l.sort_unstable_by_key(|&n| self.global_id(n as usize));
                 (r as u32, l)
             })
             .collect()
@@ -514,29 +537,33 @@ fn assemble(
     // in global order; the others are few.
     let mut pos = vec![UNSET; ni];
     let mut others: Vec<(u64, u32, u32)> = Vec::new();
-    for k in 0..ni {
-        if num.owner[k] != me {
+    let mut next = 0u32;
+    for (k, p) in pos.iter_mut().enumerate() {
+        if num.owner[k] == me {
+            // Owned numbers are contiguous from first_global, so they are
+            // not stored.
+            if num.global[k] != num.first_global + next as u64 {
+                return Err(Error::new(
+                    ErrorKind::Internal,
+                    "owned node numbers are not contiguous",
+                ));
+            }
+            *p = next;
+            next += 1;
+        } else {
             others.push((num.global[k], num.owner[k], k as u32));
         }
     }
-    others.sort_unstable();
-    // Owned entries move down in place (never past their own slot), the
-    // others are appended after them.
-    let (mut node_global, mut node_owner) = (num.global, num.owner);
-    let mut next = 0u32;
-    for k in 0..ni {
-        if node_owner[k] == me {
-            pos[k] = next;
-            node_global[next as usize] = node_global[k];
-            node_owner[next as usize] = me;
-            next += 1;
-        }
-    }
     let num_owned = next as usize;
+    drop(num.global);
+    drop(num.owner);
+    others.sort_unstable();
+    let mut other_global = Vec::with_capacity(others.len());
+    let mut other_owner = Vec::with_capacity(others.len());
     for &(g, o, k) in &others {
         pos[k as usize] = next;
-        node_global[next as usize] = g;
-        node_owner[next as usize] = o;
+        other_global.push(g);
+        other_owner.push(o);
         next += 1;
     }
     drop(others);
@@ -635,8 +662,8 @@ fn assemble(
         node_lattice,
         num_owned,
         num_independent,
-        node_global,
-        node_owner,
+        other_global,
+        other_owner,
         hanging,
         shared_nodes,
         shared_offsets,
