@@ -154,10 +154,11 @@ impl LeakPath {
         Error::new(ErrorKind::Leak, self.message(domain, surface_box))
     }
 
-    /// Writes the path for ParaView: a legacy VTK polyline through the
-    /// centres (`.vtk`, with point data `size`, `level` and `step`), or for
-    /// any other extension a CSV table `step,x,y,z,size,level`. User units.
-    /// Not collective.
+    /// Writes the path for ParaView: for `.vtk`, a legacy VTK unstructured
+    /// grid holding the polyline through the centres as one line cell per
+    /// step, with point data `size`, `level` and `step`; for any other
+    /// extension a CSV table `step,x,y,z,size,level`. User units. Not
+    /// collective.
     pub fn write(&self, path: &Path, domain: &Domain) -> Result<()> {
         let vtk = path
             .extension()
@@ -173,13 +174,24 @@ impl LeakPath {
                 out,
                 "octmesh leak path: {n} octants from the domain boundary to the inside point"
             );
-            let _ = writeln!(out, "ASCII\nDATASET POLYDATA\nPOINTS {n} double");
+            let _ = writeln!(out, "ASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS {n} double");
             for p in &c {
                 let _ = writeln!(out, "{:e} {:e} {:e}", p[0], p[1], p[2]);
             }
-            let _ = write!(out, "LINES 1 {}\n{n}", n + 1);
-            for i in 0..n {
-                let _ = write!(out, " {i}");
+            // One line cell per step (a lone vertex for a path of one
+            // octant): what both ParaView and meshio read.
+            let cells = n.saturating_sub(1).max(1);
+            if n == 1 {
+                let _ = write!(out, "CELLS 1 2\n1 0\nCELL_TYPES 1\n1");
+            } else {
+                let _ = writeln!(out, "CELLS {cells} {}", 3 * cells);
+                for i in 1..n {
+                    let _ = writeln!(out, "2 {} {i}", i - 1);
+                }
+                let _ = write!(out, "CELL_TYPES {cells}");
+                for _ in 1..n {
+                    let _ = write!(out, "\n3");
+                }
             }
             let _ = writeln!(out, "\nPOINT_DATA {n}");
             let _ = writeln!(out, "SCALARS size double 1\nLOOKUP_TABLE default");
