@@ -300,7 +300,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     let loaded = timer.time(
         &*comm,
         "read",
-        || -> Result<(usize, f64, Domain, SurfaceIndex, usize, Option<SurfaceReport>, Aabb)> {
+        || -> Result<(usize, f64, Domain, SurfaceIndex, usize, Option<SurfaceReport>)> {
             let mut surface = load_surface(&o.surface)?;
             let mut dropped = 0;
             if o.drop_degenerate || o.drop_duplicates {
@@ -320,11 +320,10 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
                 index,
                 dropped,
                 report,
-                b,
             ))
         },
     );
-    let (ntri, surface_volume, domain, index, dropped, report, bbox) = agree(&*comm, loaded)?;
+    let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
     if root {
         let what = match o.command {
             Command::Octree => "octree".to_string(),
@@ -425,6 +424,14 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
                         println!("  wrote the leak path ({n} octants) to {}", file.display());
                     }
                 }
+                // The surface's box in user units, for the report.
+                let bbox = Aabb::from_points(
+                    index
+                        .triangles()
+                        .iter()
+                        .flat_map(|t| t.v)
+                        .map(|p| domain.from_lattice(p)),
+                );
                 leak_error = Some(path.to_error(&domain, Some(&bbox)));
             }
         }
