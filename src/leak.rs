@@ -318,12 +318,15 @@ impl Graph<'_> {
         let c = leaf.coords();
         let side = leaf.side();
         for f in 0..6 {
-            let Some(n) = leaf.face_neighbor(f) else {
-                continue;
-            };
             let axis = f / 2;
             let plus = f % 2 == 1;
             let plane = if plus { c[axis] + side } else { c[axis] };
+            if (!plus && plane == 0) || (plus && plane == ROOT_LEN) {
+                continue; // the cube's boundary
+            }
+            let mut nc = c;
+            nc[axis] = if plus { plane } else { plane - side };
+            let n = Octant::from_parts(morton_encode(nc[0], nc[1], nc[2]), leaf.level());
             // A leaf overlapping `n` touches the face if it contains `n` or
             // lies against the face plane inside it.
             let faces = |m: Octant| {
@@ -386,8 +389,6 @@ struct Search<'a> {
     proposed: Vec<u32>,
     /// Ghosts whose proposal changed since the last exchange.
     dirty: Vec<u32>,
-    /// Number of exchange rounds.
-    rounds: u32,
 }
 
 impl Search<'_> {
@@ -449,7 +450,6 @@ impl Search<'_> {
         if total[0] == 0 {
             return false;
         }
-        self.rounds += 1;
         let p = self.comm.size();
         let mut counts = vec![0usize; p];
         // Ghosts are sorted by owner, so this is grouped by rank.
@@ -574,7 +574,6 @@ pub fn find_leak(
         dist: vec![UNREACHED; leaves.len()],
         proposed: vec![UNREACHED; ghost.len()],
         dirty: Vec::new(),
-        rounds: 0,
     };
     let mut seeds: Vec<(u32, u32)> = Vec::new();
     for (i, o) in leaves.iter().enumerate() {
