@@ -28,7 +28,7 @@ module octmesh
        OCTMESH_STATUS_FORMAT = 3, OCTMESH_STATUS_GEOMETRY = 4, &
        OCTMESH_STATUS_LIMIT = 5, OCTMESH_STATUS_STATE = 6, &
        OCTMESH_STATUS_MPI = 7, OCTMESH_STATUS_REMOTE_FAILURE = 8, &
-       OCTMESH_STATUS_INTERNAL = 9
+       OCTMESH_STATUS_INTERNAL = 9, OCTMESH_STATUS_LEAK = 10
   ! Balance contacts (octmesh_connect).
   integer(c_int32_t), parameter, public :: OCTMESH_CONNECT_FACE = 1, &
        OCTMESH_CONNECT_EDGE = 2, OCTMESH_CONNECT_CORNER = 3
@@ -68,7 +68,7 @@ module octmesh
   public :: octmesh_surface_builtin_f, octmesh_surface_from_stl_f, octmesh_surface_from_triangles
   public :: octmesh_set_domain, octmesh_get_domain
   public :: octmesh_refine_surface, octmesh_refine_callback, octmesh_balance, octmesh_partition
-  public :: octmesh_get_num_leaves, octmesh_get_leaves
+  public :: octmesh_get_num_leaves, octmesh_get_leaves, octmesh_check_leak
   public :: octmesh_mesh, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
@@ -114,6 +114,16 @@ module octmesh
        real(c_double), value :: side
        integer(c_int) :: octmesh_set_domain
      end function octmesh_set_domain
+
+     !> OCTMESH_STATUS_LEAK when the region outside the surface reaches
+     !> point(3), known to be inside the body; octmesh_error(h) then
+     !> describes the path.
+     function octmesh_check_leak(h, point) bind(c, name="octmesh_check_leak")
+       import :: c_ptr, c_double, c_int
+       type(c_ptr), value :: h
+       real(c_double), intent(in) :: point(3)
+       integer(c_int) :: octmesh_check_leak
+     end function octmesh_check_leak
 
      function octmesh_get_domain(h, origin, side) bind(c, name="octmesh_get_domain")
        import :: c_ptr, c_double, c_int

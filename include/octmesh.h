@@ -60,6 +60,11 @@ typedef enum {
    * A bug inside octmesh (a caught panic, a broken invariant).
    */
   OCTMESH_STATUS_INTERNAL = 9,
+  /**
+   * The region outside the surface reaches the point given as inside
+   * (`octmesh_check_leak`); the message describes the path.
+   */
+  OCTMESH_STATUS_LEAK = 10,
 } octmesh_status_t;
 
 /**
@@ -513,6 +518,21 @@ octmesh_status_t octmesh_get_num_leaves(const octmesh_t *h, int64_t *local, int6
  * octree. Not collective.
  */
 octmesh_status_t octmesh_get_leaves(const octmesh_t *h, octmesh_octant_t *out);
+
+/**
+ * Checks that the region outside the surface does not reach `point[3]`
+ * (user units), a point the caller knows to be inside the body: no path of
+ * face-adjacent leaves touching no triangle leads from the boundary of the
+ * cube to the leaf holding it. Returns `OCTMESH_STATUS_OK` when the point
+ * is sealed off, `OCTMESH_STATUS_LEAK` when it is reached (then
+ * `octmesh_last_error` describes the path: its length, the first and last
+ * leaves' centres and sizes, where it enters the surface's bounding box),
+ * and `OCTMESH_STATUS_INVALID_ARGUMENT` when the point is outside the cube
+ * or in a leaf touching the surface. Run it after refinement and balance,
+ * before `octmesh_mesh` with `OCTMESH_KEEP_OUTSIDE`. Needs a surface and an
+ * octree. Collective; every rank gets the same status and message.
+ */
+octmesh_status_t octmesh_check_leak(octmesh_t *h, const double *point);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -130,6 +130,11 @@ class Mesher {
     detail::check(octmesh_get_leaves(h_, v.data()), h_, "octmesh_get_leaves");
     return v;
   }
+  // Throws Error with status OCTMESH_STATUS_LEAK when the region outside
+  // the surface reaches point[3], a point inside the body.
+  void check_leak(const double point[3]) {
+    detail::check(octmesh_check_leak(h_, point), h_, "octmesh_check_leak");
+  }
   void mesh(octmesh_keep_t keep = OCTMESH_KEEP_ALL,
             octmesh_cut_rule_t rule = OCTMESH_CUT_RULE_CENTER) {
     detail::check(octmesh_mesh(h_, keep, rule), h_, "octmesh_mesh");

@@ -33,6 +33,10 @@ pub enum ErrorKind {
     RemoteFailure = 8,
     /// A bug inside octmesh (a caught panic, a broken invariant).
     Internal = 9,
+    /// The region outside the surface reaches a point given as inside the
+    /// body (see [`crate::leak`]): the surface has a gap wider than the
+    /// leaves around it.
+    Leak = 10,
 }
 
 impl ErrorKind {
@@ -47,6 +51,7 @@ impl ErrorKind {
             6 => ErrorKind::State,
             7 => ErrorKind::Mpi,
             8 => ErrorKind::RemoteFailure,
+            10 => ErrorKind::Leak,
             _ => ErrorKind::Internal,
         }
     }

@@ -12,7 +12,9 @@
 //!    ([`refine::build_from_callback`]);
 //! 3. [`octree::LinearOctree::partition`], then
 //!    [`octree::LinearOctree::balance`] for face, edge or corner
-//!    [`octant::Connectivity`], then partition again.
+//!    [`octant::Connectivity`], then partition again;
+//! 4. optionally, for a fluid mesh, [`leak::find_leak`]: does the region
+//!    outside the surface reach a point known to be inside the body?
 //!
 //! Octants live on a lattice of 2^19 points per side (see [`octant`]); leaves
 //! are kept in Morton order, each rank holding a contiguous run.
@@ -26,6 +28,7 @@ pub mod ffi;
 pub mod geometry;
 pub mod ghost;
 pub mod io;
+pub mod leak;
 pub mod mesh;
 pub mod octant;
 pub mod octree;

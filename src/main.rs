@@ -10,9 +10,10 @@ use octmesh::classify::{classify_leaves, CutRule, Keep};
 use octmesh::comm::{agree, CommRef, MpiComm};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::diagnostics::{clean, diagnose, SurfaceReport};
-use octmesh::geometry::load_surface;
+use octmesh::geometry::{load_surface, Aabb};
 use octmesh::io::leaves::write_leaves;
 use octmesh::io::vtu::write_mesh;
+use octmesh::leak::find_leak;
 use octmesh::mesh::{Mesh, MeshOptions};
 use octmesh::refine::{construct_for_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::report::{peak_rss_bytes, JsonObject, PhaseTimer};
@@ -47,6 +48,11 @@ options:
   --write-refined FILE  write the leaves before balance, same format
   --drop-degenerate     remove zero-area facets after loading
   --drop-duplicates     remove facets repeating the vertices of an earlier one
+  --inside-point X,Y,Z  a point inside the body: after balance, fail with a
+                        leak report if the region outside the surface
+                        reaches it through leaves touching no triangle
+  --leak-path FILE      with --inside-point, write a leak's path of octant
+                        centres (.vtk: legacy VTK polyline; else CSV)
   --quiet               print nothing but errors
 
 mesh options:
@@ -76,6 +82,8 @@ struct Options {
     drop_degenerate: bool,
     drop_duplicates: bool,
     json: Option<PathBuf>,
+    inside_point: Option<[f64; 3]>,
+    leak_path: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -117,6 +125,8 @@ fn parse_args(args: &[String]) -> Result<Options> {
         drop_degenerate: false,
         drop_duplicates: false,
         json: None,
+        inside_point: None,
+        leak_path: None,
     };
     let mut i = 1;
     let value = |i: usize, name: &str| -> Result<String> {
@@ -182,6 +192,23 @@ fn parse_args(args: &[String]) -> Result<Options> {
                 })?;
             }
             "--stats" => o.stats = Some(value(i, a)?.into()),
+            "--inside-point" => {
+                let v = value(i, a)?;
+                let n: Vec<f64> = v
+                    .split(',')
+                    .map(|s| s.trim().parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| {
+                        Error::invalid(format!("--inside-point expects X,Y,Z, got '{v}'"))
+                    })?;
+                if n.len() != 3 || n.iter().any(|c| !c.is_finite()) {
+                    return Err(Error::invalid(format!(
+                        "--inside-point expects X,Y,Z, got '{v}'"
+                    )));
+                }
+                o.inside_point = Some([n[0], n[1], n[2]]);
+            }
+            "--leak-path" => o.leak_path = Some(value(i, a)?.into()),
             "--write-leaves" => o.write_leaves = Some(value(i, a)?.into()),
             "--write-refined" => o.write_refined = Some(value(i, a)?.into()),
             "--keep" if command == Command::Mesh => o.keep = Keep::parse(&value(i, a)?)?,
@@ -224,6 +251,9 @@ fn parse_args(args: &[String]) -> Result<Options> {
     }
     if o.level == u8::MAX {
         return Err(Error::invalid("--level is required"));
+    }
+    if o.leak_path.is_some() && o.inside_point.is_none() {
+        return Err(Error::invalid("--leak-path needs --inside-point"));
     }
     if o.level > octmesh::MAX_LEVEL {
         return Err(Error::invalid(format!(
@@ -349,19 +379,77 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
 
     let mut stats = JsonObject::new();
     let mut phase_keys = vec!["read", "construct", "refine", "partition", "balance"];
-    if o.command == Command::Mesh {
-        phase_keys.extend([
-            "classify",
-            "ghost",
-            "nodes",
-            "numbering",
-            "connectivity",
-            "write",
-        ]);
-        let classes = timer.time(&*comm, "classify", || {
+    if o.command == Command::Mesh || o.inside_point.is_some() {
+        phase_keys.push("classify");
+    }
+    let mut classes = None;
+    let mut leak_error = None;
+    let mut leak = JsonObject::new();
+    leak.bool("checked", o.inside_point.is_some());
+    if let Some(point) = o.inside_point {
+        phase_keys.push("leak_check");
+        let c = timer.time(&*comm, "classify", || {
             classify_leaves(tree.leaves(), &index)
         });
         table.row(&timer, None);
+        let found = timer.time(&*comm, "leak_check", || {
+            find_leak(&tree, &c, &domain, point)
+        })?;
+        table.row(&timer, None);
+        let n = found.as_ref().map_or(0, |p| p.len());
+        leak.bool("found", found.is_some())
+            .int("path_octants", n as u64);
+        match found {
+            None => {
+                if root {
+                    println!(
+                        "  leak check passed: the inside point ({}, {}, {}) is sealed off from \
+                         the domain boundary ({:.3} s)",
+                        point[0],
+                        point[1],
+                        point[2],
+                        timer.get("leak_check")
+                    );
+                }
+            }
+            Some(path) => {
+                if let Some(file) = &o.leak_path {
+                    let written = if comm.rank() == 0 {
+                        path.write(file, &domain)
+                    } else {
+                        Ok(())
+                    };
+                    agree(&*comm, written)?;
+                    if root {
+                        println!("  wrote the leak path ({n} octants) to {}", file.display());
+                    }
+                }
+                // The surface's box in user units, for the report.
+                let bbox = Aabb::from_points(
+                    index
+                        .triangles()
+                        .iter()
+                        .flat_map(|t| t.v)
+                        .map(|p| domain.from_lattice(p)),
+                );
+                leak_error = Some(path.to_error(&domain, Some(&bbox)));
+            }
+        }
+        classes = Some(c);
+    }
+    stats.obj("leak", &leak);
+    if o.command == Command::Mesh && leak_error.is_none() {
+        phase_keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
+        let classes = match classes {
+            Some(c) => c,
+            None => {
+                let c = timer.time(&*comm, "classify", || {
+                    classify_leaves(tree.leaves(), &index)
+                });
+                table.row(&timer, None);
+                c
+            }
+        };
         let opts = MeshOptions {
             keep: o.keep,
             cut_rule: o.cut_rule,
@@ -476,7 +564,10 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         };
         agree(&*comm, written)?;
     }
-    Ok(())
+    match leak_error {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
 }
 
 /// The `check` command: every rank diagnoses the surface (it is cheap) and

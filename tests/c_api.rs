@@ -228,3 +228,15 @@ fn panic_becomes_a_status() {
         assert_eq!(out.matches("PANIC OK").count(), np, "{out}");
     }
 }
+
+#[test]
+fn leak_check_from_c_on_1_and_2_ranks() {
+    let dir = scratch("c_api_leak");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("leak", &lib, &dir);
+    for np in [1, 2] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("LEAK OK").count(), np, "{out}");
+    }
+}

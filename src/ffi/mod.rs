@@ -75,6 +75,9 @@ pub enum octmesh_status_t {
     OCTMESH_STATUS_REMOTE_FAILURE = 8,
     /// A bug inside octmesh (a caught panic, a broken invariant).
     OCTMESH_STATUS_INTERNAL = 9,
+    /// The region outside the surface reaches the point given as inside
+    /// (`octmesh_check_leak`); the message describes the path.
+    OCTMESH_STATUS_LEAK = 10,
 }
 
 impl octmesh_status_t {
@@ -91,6 +94,7 @@ impl octmesh_status_t {
             ErrorKind::Mpi => OCTMESH_STATUS_MPI,
             ErrorKind::RemoteFailure => OCTMESH_STATUS_REMOTE_FAILURE,
             ErrorKind::Internal => OCTMESH_STATUS_INTERNAL,
+            ErrorKind::Leak => OCTMESH_STATUS_LEAK,
         }
     }
 }
@@ -330,6 +334,7 @@ pub extern "C" fn octmesh_status_name(status: i32) -> *const c_char {
         7 => c"OCTMESH_STATUS_MPI",
         8 => c"OCTMESH_STATUS_REMOTE_FAILURE",
         9 => c"OCTMESH_STATUS_INTERNAL",
+        10 => c"OCTMESH_STATUS_LEAK",
         _ => c"OCTMESH_STATUS_UNKNOWN",
     };
     s.as_ptr()

@@ -277,3 +277,39 @@ pub unsafe extern "C" fn octmesh_get_leaves(
         Ok(())
     })
 }
+
+/// Checks that the region outside the surface does not reach `point[3]`
+/// (user units), a point the caller knows to be inside the body: no path of
+/// face-adjacent leaves touching no triangle leads from the boundary of the
+/// cube to the leaf holding it. Returns `OCTMESH_STATUS_OK` when the point
+/// is sealed off, `OCTMESH_STATUS_LEAK` when it is reached (then
+/// `octmesh_last_error` describes the path: its length, the first and last
+/// leaves' centres and sizes, where it enters the surface's bounding box),
+/// and `OCTMESH_STATUS_INVALID_ARGUMENT` when the point is outside the cube
+/// or in a leaf touching the surface. Run it after refinement and balance,
+/// before `octmesh_mesh` with `OCTMESH_KEEP_OUTSIDE`. Needs a surface and an
+/// octree. Collective; every rank gets the same status and message.
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_check_leak(
+    h: *mut octmesh_t,
+    point: *const f64,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let checked = non_null(point, "point").and_then(|_| {
+            // SAFETY: non-NULL, 3 values (requirement of the C API).
+            let p = unsafe { std::slice::from_raw_parts(point, 3) };
+            let domain = h.tree_or_state()?.1;
+            h.index_for(&domain)?;
+            Ok(([p[0], p[1], p[2]], domain))
+        });
+        let (p, domain) = h.agree(checked)?;
+        h.index_for(&domain)?;
+        let (tree, _) = h.tree_or_state()?;
+        let s = h
+            .surface
+            .as_ref()
+            .ok_or_else(|| Error::new(crate::ErrorKind::Internal, "the surface vanished"))?;
+        let classes = crate::classify::classify_leaves(tree.leaves(), &s.index);
+        crate::leak::check_leak(tree, &classes, &domain, p, Some(&s.surface.bbox()))
+    })
+}
