@@ -266,6 +266,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     let root = comm.rank() == 0 && !o.quiet;
     let table = Table { on: root };
     let mut timer = PhaseTimer::new();
+    // Memory before and after the surface is loaded, so benchmarks can tell
+    // the surface (held whole on every rank) from the octree and mesh.
+    let rss_start = peak_rss_bytes();
 
     let loaded = timer.time(
         &*comm,
@@ -294,6 +297,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         },
     );
     let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
+    let rss_read = peak_rss_bytes();
     if root {
         let what = match o.command {
             Command::Octree => "octree".to_string(),
@@ -435,7 +439,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         stats.obj("surface", &s);
     }
 
-    let mut rss = [peak_rss_bytes()];
+    let mut rss = [peak_rss_bytes(), rss_start, rss_read];
     comm.max_u64(&mut rss);
     if root {
         let total: f64 = timer.phases().iter().map(|p| p.1).sum();
@@ -486,6 +490,8 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         .obj("comm_bytes_sent", &bytes_sent)
         .obj("comm_bytes_sum", &bytes_sum)
         .int("peak_rss_bytes", rss[0])
+        .int("rss_start_bytes", rss[1])
+        .int("rss_after_read_bytes", rss[2])
         .num("domain_side", domain.side);
         let written = if comm.rank() == 0 {
             std::fs::write(path, j.to_json())

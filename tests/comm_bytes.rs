@@ -1,6 +1,7 @@
 //! The `comm_bytes` fields of `--stats`: nothing crosses ranks on one rank;
 //! on two and three ranks every phase that exchanges leaves or nodes reports
-//! bytes, and the bytes sent over all ranks equal those received.
+//! bytes, and the bytes sent over all ranks equal those received. Also the
+//! memory marks and the two partition timings the benchmarks read.
 
 mod common;
 
@@ -45,6 +46,28 @@ fn one_rank_exchanges_nothing() {
     }
     assert_eq!(j["comm_bytes_sum"]["sent"].as_u64(), Some(0));
     assert_eq!(j["comm_bytes_sum"]["received"].as_u64(), Some(0));
+}
+
+#[test]
+fn memory_marks_and_partition_steps() {
+    let j = stats(2, &scratch("comm_bytes_marks"));
+    // High-water marks taken in this order cannot decrease.
+    let start = j["rss_start_bytes"].as_u64().unwrap();
+    let read = j["rss_after_read_bytes"].as_u64().unwrap();
+    let peak = j["peak_rss_bytes"].as_u64().unwrap();
+    assert!(
+        0 < start && start <= read && read <= peak,
+        "{start} {read} {peak}"
+    );
+    // The two partitions, apart, add up to the partition timing.
+    let a = j["partition_timings"]["refined"].as_f64().unwrap();
+    let b = j["partition_timings"]["balanced"].as_f64().unwrap();
+    let sum = j["timings"]["partition"].as_f64().unwrap();
+    assert!(a >= 0.0 && b >= 0.0);
+    assert!(
+        (a + b - sum).abs() <= 1e-9 * sum.max(1.0),
+        "{a} + {b} != {sum}"
+    );
 }
 
 #[test]
