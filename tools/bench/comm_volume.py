@@ -39,8 +39,8 @@ from benchlib import (  # noqa: E402
     octmesh_stats, parse_cases, parse_nps, prepare, surface_arg, surface_name, text_table)
 
 DEFAULT_CASES = "sphere:9,bunny:9"
-# Phases that exchange data; "other" collects the rest (read, classify,
-# nodes, connectivity: reductions only, or nothing).
+# Phases that exchange data; "other" adds up the rest (read, classify,
+# nodes, connectivity, write: reductions only, or nothing).
 PHASES = ("construct", "refine", "partition", "balance", "ghost", "numbering")
 MODELLED = ("balance", "ghost", "numbering", "boundary")
 
@@ -111,7 +111,7 @@ def main():
                     r[p] = b[p]
                 # The phases that move only boundary data, together.
                 r["boundary"] = b["balance"] + b["ghost"] + b["numbering"]
-                r["other"] = b["total"] - sum(b[p] for p in PHASES)
+                r["other"] = sum(v for k, v in b.items() if k not in PHASES + ("total",))
                 runs.append(r)
                 if r["sent_sum"] != r["received_sum"]:
                     problems.append("%s %d np %d: sent %d != received %d" % (
@@ -133,6 +133,7 @@ def main():
         columns = [("np", "np"), ("n", "leaves per rank n"), ("n23", "n^(2/3)")]
         for p in PHASES + ("other", "total"):
             columns.append((p, p))
+        columns.append(("per_leaf", "total B per local leaf"))
         for p in MODELLED:
             columns.append(("ratio_" + p, "%s / (c n^(2/3))" % p))
         rows = []
@@ -142,6 +143,7 @@ def main():
             row = {"np": str(r["np"]), "n": fmt_int(round(n)), "n23": "%.0f" % x}
             for p in PHASES + ("other", "total"):
                 row[p] = fmt_bytes(r[p])
+            row["per_leaf"] = "%.2f" % (r["total"] / n)
             for p in MODELLED:
                 row["ratio_" + p] = "%.2f" % (r[p] / (cs[p] * x)) if r["np"] > 1 and cs[p] else "-"
             rows.append(row)
@@ -160,8 +162,11 @@ def main():
     if args.markdown:
         with open(args.markdown, "w") as f:
             f.write(header_line(info, "octmesh mesh, --fit %s, corner balance, keep all. "
+                                "Each phase's figure is the maximum over ranks of the "
+                                "bytes one rank sent plus received; total is the maximum "
+                                "of the per-rank totals (not the sum of the column maxima). "
                                 "boundary = balance + ghost + numbering; other = the "
-                                "reductions of the remaining phases." % args.fit) + "\n")
+                                "remaining phases (reductions only)." % args.fit) + "\n")
             for title, rows, columns in tables:
                 f.write("\n%s.\n\n%s\n" % (title, markdown_table(rows, columns)))
             for note in notes:

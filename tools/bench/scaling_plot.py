@@ -117,23 +117,37 @@ def plot(records, png, title):
     colours = {"refine": "tab:blue", "balance": "tab:orange", "classify": "tab:purple",
                "mesh": "tab:green", "total": "black"}
     all_n = sorted(r["leaves"] for r in records)
+    # The phases of the series reaching the most leaves go on the cost panel.
+    detail = max(series, key=lambda k: max(r["leaves"] for r in series[k])) if series else None
     for i, ((surface, np_), rs) in enumerate(sorted(series.items())):
         rs = sorted(rs, key=lambda r: r["leaves"])
         n = [r["leaves"] for r in rs]
         m = markers[i % len(markers)]
         tag = "%s np %d" % (surface, np_)
+        colour = "C%d" % i
         for p in PHASES:
-            style = "-" if p == "total" else "--"
-            ax[0][0].loglog(n, [r[p] for r in rs], style, marker=m, color=colours[p],
-                            label="%s %s" % (tag, p) if p == "total" or i == 0 else None,
-                            linewidth=2 if p == "total" else 1, markersize=4)
-            ax[1][0].semilogx(n, [r[p] * np_ / r["leaves"] * 1e9 for r in rs], style,
-                              marker=m, color=colours[p], markersize=4,
-                              linewidth=2 if p == "total" else 1,
-                              label=p if i == 0 else None)
-        ax[0][1].loglog(n, [r["peak"] / GIB for r in rs], "-", marker=m, label=tag)
+            total = p == "total"
+            ax[0][0].loglog(n, [r[p] for r in rs], "-" if total else "--", marker=m,
+                            color=colours[p], linewidth=2 if total else 1, markersize=4,
+                            label="%s %s" % (tag, p) if total or (surface, np_) == detail
+                            else None)
+        # Cost per leaf: every series' total, the phases of one.
+        cost = [r["total"] * np_ / r["leaves"] * 1e9 for r in rs]
+        ax[1][0].semilogx(n, cost, "-", marker=m, color=colour, linewidth=2,
+                          label="%s total" % tag)
+        big = [c for c, r in zip(cost, rs) if r["leaves"] >= 1e5]
+        if big:
+            ax[1][0].fill_between([min(n), max(n)], min(big), FLAT * min(big), color=colour,
+                                  alpha=0.12, label="%s: 1.5x its smallest" % tag)
+        if (surface, np_) == detail:
+            for p in PHASES[:-1]:
+                ax[1][0].semilogx(n, [r[p] * np_ / r["leaves"] * 1e9 for r in rs], "--",
+                                  marker=m, color=colours[p], markersize=3, linewidth=1,
+                                  label="%s %s" % (tag, p))
+        ax[0][1].loglog(n, [r["peak"] / GIB for r in rs], "-", marker=m, color=colour,
+                        label=tag)
         ax[1][1].semilogx(n, [r["peak"] * np_ / r["leaves"] for r in rs], "-", marker=m,
-                          label=tag)
+                          color=colour, label=tag)
     # Linear reference lines through the middle of the data.
     if all_n:
         lo, hi = all_n[0], all_n[-1]
@@ -141,15 +155,9 @@ def plot(records, png, title):
         for a, key, scale in ((ax[0][0], "total", 1.0), (ax[0][1], "peak", 1.0 / GIB)):
             k = mid[key] * scale / mid["leaves"]
             a.loglog([lo, hi], [k * lo, k * hi], ":", color="grey", label="linear")
-        # The 1.5x band over the smallest total cost per leaf.
-        base = min(r["total"] * r["np"] / r["leaves"] * 1e9 for r in records
-                   if r["leaves"] >= 1e5) if any(r["leaves"] >= 1e5 for r in records) else None
-        if base:
-            ax[1][0].axhspan(base, FLAT * base, color="grey", alpha=0.15,
-                             label="1.5x the smallest total")
     ax[0][0].set(title="time per phase", xlabel="balanced leaves", ylabel="seconds (max over ranks)")
     ax[0][1].set(title="peak RSS per rank", xlabel="balanced leaves", ylabel="GiB")
-    ax[1][0].set(title="cost per leaf (time x np / leaves)", xlabel="balanced leaves",
+    ax[1][0].set(title="cost per leaf (time x np / leaves), band: flat within 1.5x", xlabel="balanced leaves",
                  ylabel="ns per leaf")
     ax[1][1].set(title="memory per leaf (peak x np / leaves)", xlabel="balanced leaves",
                  ylabel="bytes per leaf")
