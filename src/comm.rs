@@ -4,7 +4,13 @@
 //! plain integers and bytes (never derived MPI datatypes), so the same code
 //! works when the host program, not octmesh, initialised MPI, and serial unit
 //! tests run without MPI at all through [`SerialComm`].
+//!
+//! [`MpiComm`] counts the bytes each rank hands to MPI for other ranks and
+//! receives from them ([`Comm::traffic`]); [`crate::report::PhaseTimer`]
+//! attributes them to phases.
 
+use std::cell::Cell;
+use std::ops::{Add, AddAssign, Sub};
 use std::rc::Rc;
 
 use mpi::collective::SystemOperation;
@@ -40,6 +46,67 @@ pub trait Comm {
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>);
     /// Replaces `bytes` on every rank with rank `root`'s bytes.
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>);
+    /// Bytes this rank has exchanged with other ranks so far (see
+    /// [`Traffic`]). Not collective. The default, for communicators that do
+    /// not count, is zero.
+    fn traffic(&self) -> Traffic {
+        Traffic::default()
+    }
+}
+
+/// Payload bytes a rank has sent to and received from *other* ranks through
+/// the [`Comm`] collectives (data a rank keeps for itself is not counted).
+///
+/// The count is the data octmesh hands to MPI, not the bytes on the wire of
+/// MPI's internal algorithms (trees, rings, pipelining), which depend on the
+/// MPI library: an all-to-all counts each block once at its sender and once
+/// at its receiver (plus the 4-byte element counts exchanged first); a
+/// broadcast counts the message once per receiving rank at the root and once
+/// at each receiver; a reduction or all-gather counts each rank's
+/// contribution as sent to, and the result as received from, the other
+/// ranks (a reduction of `n` values: `8 n` bytes each way per rank; an
+/// all-gather of one value on `p` ranks: `8 (p - 1)` each way). Summed over
+/// the ranks, sent always equals received. One rank exchanges nothing.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Traffic {
+    /// Bytes handed to MPI for other ranks.
+    pub sent: u64,
+    /// Bytes received from other ranks.
+    pub received: u64,
+}
+
+impl Traffic {
+    /// `sent + received`.
+    pub fn total(&self) -> u64 {
+        self.sent + self.received
+    }
+}
+
+impl Add for Traffic {
+    type Output = Traffic;
+    fn add(self, o: Traffic) -> Traffic {
+        Traffic {
+            sent: self.sent + o.sent,
+            received: self.received + o.received,
+        }
+    }
+}
+
+impl AddAssign for Traffic {
+    fn add_assign(&mut self, o: Traffic) {
+        *self = *self + o;
+    }
+}
+
+impl Sub for Traffic {
+    type Output = Traffic;
+    /// Difference of two readings of the same counters (later minus earlier).
+    fn sub(self, o: Traffic) -> Traffic {
+        Traffic {
+            sent: self.sent - o.sent,
+            received: self.received - o.received,
+        }
+    }
 }
 
 /// Exclusive prefix sums of `counts` with the total appended (`len + 1`
@@ -130,12 +197,31 @@ impl Comm for SerialComm {
 /// communicator, nothing is freed).
 pub struct MpiComm {
     comm: SimpleCommunicator,
+    sent: Cell<u64>,
+    received: Cell<u64>,
 }
 
 impl MpiComm {
     /// Wraps a communicator octmesh owns (the world, or a duplicate).
     pub fn new(comm: SimpleCommunicator) -> MpiComm {
-        MpiComm { comm }
+        MpiComm {
+            comm,
+            sent: Cell::new(0),
+            received: Cell::new(0),
+        }
+    }
+
+    fn count(&self, sent: usize, received: usize) {
+        self.sent.set(self.sent.get() + sent as u64);
+        self.received.set(self.received.get() + received as u64);
+    }
+
+    /// Counts a reduction or all-gather: this rank's `bytes` go to the others
+    /// and as many come back, when there are other ranks.
+    fn count_symmetric(&self, bytes: usize) {
+        if self.size() > 1 {
+            self.count(bytes, bytes);
+        }
     }
 
     /// The underlying rsmpi communicator.
@@ -165,20 +251,24 @@ impl Comm for MpiComm {
         let send = values.to_vec();
         self.comm
             .all_reduce_into(&send[..], values, SystemOperation::max());
+        self.count_symmetric(8 * values.len());
     }
     fn sum_u64(&self, values: &mut [u64]) {
         let send = values.to_vec();
         self.comm
             .all_reduce_into(&send[..], values, SystemOperation::sum());
+        self.count_symmetric(8 * values.len());
     }
     fn max_f64(&self, values: &mut [f64]) {
         let send = values.to_vec();
         self.comm
             .all_reduce_into(&send[..], values, SystemOperation::max());
+        self.count_symmetric(8 * values.len());
     }
     fn allgather_u64(&self, value: u64) -> Vec<u64> {
         let mut out = vec![0u64; self.size()];
         self.comm.all_gather_into(&value, &mut out[..]);
+        self.count_symmetric(8 * (self.size() - 1));
         out
     }
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
@@ -197,6 +287,13 @@ impl Comm for MpiComm {
             let mut rbuf = PartitionMut::new(&mut recv[..], &recv_counts[..], &rdispl[..]);
             self.comm.all_to_all_varcount_into(&sbuf, &mut rbuf);
         }
+        // Blocks a rank addresses to itself never leave it.
+        let me = self.rank();
+        let others = 4 * (p - 1);
+        self.count(
+            others + 8 * (counts.iter().sum::<usize>() - counts[me]),
+            others + 8 * (roff[p] - rc[me]),
+        );
         (recv, rc)
     }
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>) {
@@ -206,6 +303,19 @@ impl Comm for MpiComm {
         bytes.resize(len as usize, 0);
         if len > 0 {
             proc.broadcast_into(&mut bytes[..]);
+        }
+        let others = self.size() - 1;
+        let message = 8 + bytes.len();
+        if self.rank() == root {
+            self.count(message * others, 0);
+        } else {
+            self.count(0, message);
+        }
+    }
+    fn traffic(&self) -> Traffic {
+        Traffic {
+            sent: self.sent.get(),
+            received: self.received.get(),
         }
     }
 }
@@ -217,6 +327,36 @@ mod tests {
     #[test]
     fn offsets_are_exclusive_prefix_sums() {
         assert_eq!(offsets(&[3, 0, 2]), vec![0, 3, 3, 5]);
+    }
+
+    #[test]
+    fn serial_comm_exchanges_nothing() {
+        let c = SerialComm;
+        let (recv, _) = c.alltoallv_u64(&[1, 2, 3], &[3]);
+        assert_eq!(recv, vec![1, 2, 3]);
+        let mut v = vec![0u8; 10];
+        c.broadcast_bytes(0, &mut v);
+        assert_eq!(c.traffic(), Traffic::default());
+    }
+
+    #[test]
+    fn traffic_differences_and_sums() {
+        let a = Traffic {
+            sent: 10,
+            received: 4,
+        };
+        let b = Traffic {
+            sent: 25,
+            received: 9,
+        };
+        assert_eq!(
+            b - a,
+            Traffic {
+                sent: 15,
+                received: 5
+            }
+        );
+        assert_eq!((a + b).total(), 48);
     }
 
     #[test]

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::rc::Rc;
 
 use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::comm::{agree, CommRef, MpiComm};
+use octmesh::comm::{agree, Comm, CommRef, MpiComm, Traffic};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::diagnostics::{clean, diagnose, SurfaceReport};
 use octmesh::geometry::{load_surface, Aabb};
@@ -296,6 +296,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     let root = comm.rank() == 0 && !o.quiet;
     let table = Table { on: root };
     let mut timer = PhaseTimer::new();
+    // Memory before and after the surface is loaded, so benchmarks can tell
+    // the surface (held whole on every rank) from the octree and mesh.
+    let rss_start = peak_rss_bytes();
 
     let loaded = timer.time(
         &*comm,
@@ -324,6 +327,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         },
     );
     let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
+    let rss_read = peak_rss_bytes();
     if root {
         let what = match o.command {
             Command::Octree => "octree".to_string(),
@@ -466,6 +470,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             };
             table.row(&timer, count);
         }
+        for (name, bytes) in mesh.traffic() {
+            timer.record_traffic(name, *bytes);
+        }
         if let Some(out) = &o.out {
             timer.time(&*comm, "write", || write_mesh(&*comm, out, &mesh, &[]))?;
             table.row(&timer, None);
@@ -520,7 +527,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         stats.obj("surface", &s);
     }
 
-    let mut rss = [peak_rss_bytes()];
+    let mut rss = [peak_rss_bytes(), rss_start, rss_read];
     comm.max_u64(&mut rss);
     if root {
         let total: f64 = timer.phases().iter().map(|p| p.1).sum();
@@ -533,9 +540,21 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     }
     if let Some(path) = &o.stats {
         let mut t = JsonObject::new();
-        for k in phase_keys {
+        for k in &phase_keys {
             t.num(k, timer.get(k));
         }
+        // The partition after refinement and the one after balance, apart.
+        let mut steps = JsonObject::new();
+        let partitions: Vec<f64> = timer
+            .phases()
+            .iter()
+            .filter(|p| p.0 == "partition")
+            .map(|p| p.1)
+            .collect();
+        for (key, secs) in ["refined", "balanced"].iter().zip(&partitions) {
+            steps.num(key, *secs);
+        }
+        let (bytes, bytes_sent, bytes_sum) = comm_stats(&*comm, &timer, &phase_keys);
         let mut j = JsonObject::new();
         j.str(
             "command",
@@ -554,7 +573,13 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         .int("octants_balanced", balanced)
         .merge(&stats)
         .obj("timings", &t)
+        .obj("partition_timings", &steps)
+        .obj("comm_bytes", &bytes)
+        .obj("comm_bytes_sent", &bytes_sent)
+        .obj("comm_bytes_sum", &bytes_sum)
         .int("peak_rss_bytes", rss[0])
+        .int("rss_start_bytes", rss[1])
+        .int("rss_after_read_bytes", rss[2])
         .num("domain_side", domain.side);
         let written = if comm.rank() == 0 {
             std::fs::write(path, j.to_json())
@@ -568,6 +593,37 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         Some(e) => Err(e),
         None => Ok(()),
     }
+}
+
+/// Bytes exchanged with other ranks per phase, for `--stats`: the maximum
+/// over ranks of sent + received, the maximum of sent alone, and the sums
+/// over all ranks of sent and received (equal when every message arrived).
+/// Collective.
+fn comm_stats(
+    comm: &dyn Comm,
+    timer: &PhaseTimer,
+    keys: &[&str],
+) -> (JsonObject, JsonObject, JsonObject) {
+    let total = timer
+        .traffic()
+        .iter()
+        .fold(Traffic::default(), |acc, p| acc + p.1);
+    let per_phase: Vec<Traffic> = keys
+        .iter()
+        .map(|k| timer.traffic_of(k))
+        .chain([total])
+        .collect();
+    let mut max: Vec<u64> = per_phase.iter().flat_map(|t| [t.total(), t.sent]).collect();
+    comm.max_u64(&mut max);
+    let mut sums = [total.sent, total.received];
+    comm.sum_u64(&mut sums);
+    let (mut both, mut sent, mut sum) = (JsonObject::new(), JsonObject::new(), JsonObject::new());
+    for (i, k) in keys.iter().chain(&["total"]).enumerate() {
+        both.int(k, max[2 * i]);
+        sent.int(k, max[2 * i + 1]);
+    }
+    sum.int("sent", sums[0]).int("received", sums[1]);
+    (both, sent, sum)
 }
 
 /// The `check` command: every rank diagnoses the surface (it is cheap) and

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use crate::comm::Comm;
+use crate::comm::{Comm, Traffic};
 
 /// Peak resident set size of this process in bytes (`getrusage`).
 pub fn peak_rss_bytes() -> u64 {
@@ -18,10 +18,12 @@ pub fn peak_rss_bytes() -> u64 {
     }
 }
 
-/// Wall-clock phases, each reported as the maximum over ranks.
+/// Wall-clock phases, each reported as the maximum over ranks, and the bytes
+/// this rank exchanged with other ranks in each phase ([`Traffic`]).
 #[derive(Default)]
 pub struct PhaseTimer {
     phases: Vec<(String, f64)>,
+    traffic: Vec<(String, Traffic)>,
 }
 
 impl PhaseTimer {
@@ -34,17 +36,41 @@ impl PhaseTimer {
     /// collective time of the phase. Collective.
     pub fn time<T>(&mut self, comm: &dyn Comm, name: &str, f: impl FnOnce() -> T) -> T {
         comm.barrier();
+        let bytes0 = comm.traffic();
         let t0 = Instant::now();
         let r = f();
-        let mut dt = [t0.elapsed().as_secs_f64()];
+        let elapsed = t0.elapsed().as_secs_f64();
+        // Read before the reduction below, which is bookkeeping, not the phase.
+        let bytes = comm.traffic() - bytes0;
+        let mut dt = [elapsed];
         comm.max_f64(&mut dt);
         self.phases.push((name.to_string(), dt[0]));
+        self.traffic.push((name.to_string(), bytes));
         r
     }
 
     /// Adds a phase timed elsewhere (already the maximum over ranks).
     pub fn record(&mut self, name: &str, secs: f64) {
         self.phases.push((name.to_string(), secs));
+    }
+
+    /// Adds the bytes this rank exchanged in a phase measured elsewhere.
+    pub fn record_traffic(&mut self, name: &str, bytes: Traffic) {
+        self.traffic.push((name.to_string(), bytes));
+    }
+
+    /// Bytes this rank exchanged in phase `name`, summed over the phases of
+    /// that name (zero if it did not run). Rank-local, not reduced.
+    pub fn traffic_of(&self, name: &str) -> Traffic {
+        self.traffic
+            .iter()
+            .filter(|p| p.0 == name)
+            .fold(Traffic::default(), |acc, p| acc + p.1)
+    }
+
+    /// This rank's bytes per phase, in the order the phases ran.
+    pub fn traffic(&self) -> &[(String, Traffic)] {
+        &self.traffic
     }
 
     /// Seconds of phase `name` (0 if it did not run).
@@ -164,5 +190,30 @@ mod tests {
         assert!(s.contains("\"a\\\"b\""));
         assert!(s.contains("\"bad\": null"));
         assert!(peak_rss_bytes() > 0);
+    }
+
+    #[test]
+    fn traffic_is_summed_by_phase_name() {
+        let mut t = PhaseTimer::new();
+        let c = crate::comm::SerialComm;
+        t.time(&c, "partition", || ());
+        t.record_traffic(
+            "partition",
+            Traffic {
+                sent: 3,
+                received: 5,
+            },
+        );
+        t.record_traffic(
+            "ghost",
+            Traffic {
+                sent: 7,
+                received: 0,
+            },
+        );
+        assert_eq!(t.traffic_of("partition").total(), 8);
+        assert_eq!(t.traffic_of("ghost").sent, 7);
+        assert_eq!(t.traffic_of("balance"), Traffic::default());
+        assert_eq!(t.traffic().len(), 3);
     }
 }

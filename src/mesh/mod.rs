@@ -42,7 +42,7 @@ pub(crate) mod dual;
 pub(crate) mod numbering;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass};
-use crate::comm::Comm;
+use crate::comm::{Comm, Traffic};
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::ghost::{build_ghost_layer, GhostLayer};
@@ -155,6 +155,7 @@ pub struct Mesh {
     first_global: u64,
     counts: MeshCounts,
     timings: Vec<(String, f64)>,
+    traffic: Vec<(String, Traffic)>,
 }
 
 impl Mesh {
@@ -258,6 +259,7 @@ impl Mesh {
         mesh.counts.elements_with_hanging = sums[3];
         mesh.counts.ghosts = sums[4];
         mesh.timings = timer.phases().to_vec();
+        mesh.traffic = timer.traffic().to_vec();
         Ok(mesh)
     }
 
@@ -285,6 +287,12 @@ impl Mesh {
     /// each the maximum over ranks.
     pub fn timings(&self) -> &[(String, f64)] {
         &self.timings
+    }
+
+    /// Bytes this rank exchanged with other ranks in each of the phases of
+    /// [`Mesh::timings`] (rank-local, see [`crate::comm::Traffic`]).
+    pub fn traffic(&self) -> &[(String, Traffic)] {
+        &self.traffic
     }
 
     /// The local elements, in Morton order.
@@ -674,5 +682,6 @@ fn assemble(
             ..MeshCounts::default()
         },
         timings: Vec::new(),
+        traffic: Vec::new(),
     })
 }

@@ -16,6 +16,7 @@ python3 "$here/gen_test_leaves.py" "$tmp/t.bin" >/dev/null
 counts() {
   python3 -c 'import json,sys; d=json.load(open(sys.argv[1]))
 for k in ("tool","timings","peak_rss_bytes","ranks","repeat"): d.pop(k,None)
+for k in [k for k in d if k.startswith("rss_")]: d.pop(k)
 print(json.dumps(d, sort_keys=True))' "$1"
 }
 

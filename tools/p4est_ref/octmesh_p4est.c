@@ -4,7 +4,15 @@
  * reference and benchmark baseline for octmesh.
  *
  * Usage: mpirun -np P octmesh_p4est --in LEAVES --balance face|edge|corner|none
- *          [--out LEAVES_OUT] [--nodes] [--json FILE] [--repeat K]
+ *          [--out LEAVES_OUT] [--nodes] [--lnodes-only] [--json FILE]
+ *          [--repeat K]
+ *
+ * --nodes times p8est_ghost_new, then p8est_lnodes_new (degree 1), then
+ * p8est_nodes_new (corner balance only); --lnodes-only leaves out
+ * p8est_nodes_new.  Memory (maximum over ranks, bytes): the peak RSS after
+ * MPI and p4est start, after the leaf file is read (every rank holds the
+ * whole list, which the refine callback searches), after p8est_lnodes_new
+ * and after p8est_nodes_new in the first repeat, and at the end.
  *
  * Leaf files: text "x y z level" lines ('#' comments) or binary (.bin):
  * "OCTLEAF1", u64 LE count, count * 4 LE int32 (x, y, z, level).
@@ -72,7 +80,8 @@ usage_error (const char *msg)
       fprintf (stderr, "octmesh_p4est: %s\n", msg);
     fprintf (stderr,
              "usage: octmesh_p4est --in LEAVES --balance face|edge|corner|none"
-             " [--out LEAVES_OUT] [--nodes] [--json FILE] [--repeat K]\n");
+             " [--out LEAVES_OUT] [--nodes] [--lnodes-only] [--json FILE]"
+             " [--repeat K]\n");
   }
   finish (1);
 }
@@ -363,6 +372,23 @@ refine_fn (p8est_t * p8est, p4est_topidx_t which_tree, p8est_quadrant_t * q)
   return p8est_quadrant_is_ancestor (q, &t);
 }
 
+/* Peak RSS of this process so far, bytes. */
+static long long
+peak_rss (void)
+{
+  struct rusage       ru;
+  getrusage (RUSAGE_SELF, &ru);
+  return (long long) ru.ru_maxrss * 1024;
+}
+
+static long long
+max_over_ranks (MPI_Comm comm, long long v)
+{
+  long long           m;
+  MPI_Allreduce (&v, &m, 1, MPI_LONG_LONG, MPI_MAX, comm);
+  return m;
+}
+
 static double
 phase_begin (MPI_Comm comm)
 {
@@ -566,7 +592,8 @@ main (int argc, char **argv)
 {
   MPI_Comm            comm = MPI_COMM_WORLD;
   const char         *in = NULL, *out = NULL, *json = NULL, *bal = NULL;
-  int                 want_nodes = 0, repeat = 1, minlevel = 0, i, rep, ph;
+  int                 want_nodes = 0, lnodes_only = 0, repeat = 1;
+  int                 minlevel = 0, i, rep, ph;
   int                 do_balance, do_nodes = 0, do_lnodes = 0;
   p8est_connect_type_t btype = P8EST_CONNECT_FULL;
   leaf_vec_t          leaves = { NULL, 0, 0 };
@@ -579,14 +606,15 @@ main (int argc, char **argv)
   long long           n_bal = 0, indep = -1, face_hang = -1, edge_hang = -1;
   long long           ln_global = -1, ln_hang = -1;
   int                 dedup_skipped = 0;
-  long long           rss, max_rss;
-  struct rusage       ru;
+  long long           max_rss, rss_start, rss_read;
+  long long           rss_lnodes = -1, rss_nodes = -1;
 
   MPI_Init (&argc, &argv);
   MPI_Comm_rank (comm, &g_rank);
   MPI_Comm_size (comm, &g_size);
   sc_init (comm, 1, 1, NULL, SC_LP_ESSENTIAL);
   p4est_init (NULL, SC_LP_ESSENTIAL);
+  rss_start = max_over_ranks (comm, peak_rss ());
 
   for (i = 1; i < argc; ++i) {
     const char         *a = argv[i];
@@ -608,6 +636,8 @@ main (int argc, char **argv)
     }
     else if (!strcmp (a, "--nodes"))
       want_nodes = 1;
+    else if (!strcmp (a, "--lnodes-only"))
+      lnodes_only = 1;
     else if (!strcmp (a, "--help") || !strcmp (a, "-h"))
       usage_error (NULL);
     else {
@@ -634,8 +664,10 @@ main (int argc, char **argv)
       usage_error ("--nodes needs --balance edge (lnodes) or corner"
                    " (nodes and lnodes)");
     do_lnodes = 1;
-    do_nodes = btype == P8EST_CONNECT_FULL;
+    do_nodes = btype == P8EST_CONNECT_FULL && !lnodes_only;
   }
+  else if (lnodes_only)
+    usage_error ("--lnodes-only needs --nodes");
 
   bad = read_leaves (in, &leaves, err, sizeof err) != 0;
   if (!bad)
@@ -650,6 +682,7 @@ main (int argc, char **argv)
   }
   g_leaves = leaves.a;
   g_nleaves = leaves.n;
+  rss_read = max_over_ranks (comm, peak_rss ());
 
   for (ph = 0; ph < PH_NUM; ++ph)
     times[ph] = calloc (repeat, sizeof (double));
@@ -696,11 +729,32 @@ main (int argc, char **argv)
       ghost = p8est_ghost_new (p8est, P8EST_CONNECT_FULL);
       times[PH_GHOST][rep] = phase_end (comm, t0);
     }
+    if (do_lnodes) {
+      p8est_lnodes_t     *ln;
+      t0 = phase_begin (comm);
+      ln = p8est_lnodes_new (p8est, ghost, 1);
+      times[PH_LNODES][rep] = phase_end (comm, t0);
+      /* Before p8est_nodes_new runs: the peak of the lnodes pipeline. */
+      if (rep == 0)
+        rss_lnodes = max_over_ranks (comm, peak_rss ());
+      if (last) {
+        long long           own = ln->owned_count, hang = 0;
+        p4est_locidx_t      e;
+        for (e = 0; e < ln->num_local_elements; ++e)
+          hang += ln->face_code[e] != 0;
+        MPI_Allreduce (&own, &ln_global, 1, MPI_LONG_LONG, MPI_SUM, comm);
+        MPI_Allreduce (&hang, &ln_hang, 1, MPI_LONG_LONG, MPI_SUM, comm);
+      }
+      p8est_lnodes_destroy (ln);
+    }
     if (do_nodes) {
       p8est_nodes_t      *nodes;
       t0 = phase_begin (comm);
       nodes = p8est_nodes_new (p8est, ghost);
       times[PH_NODES][rep] = phase_end (comm, t0);
+      /* Before the hanging-node census, which gathers on rank 0. */
+      if (rep == 0)
+        rss_nodes = max_over_ranks (comm, peak_rss ());
       if (last) {
         long long           own = nodes->num_owned_indeps;
         MPI_Allreduce (&own, &indep, 1, MPI_LONG_LONG, MPI_SUM, comm);
@@ -713,21 +767,6 @@ main (int argc, char **argv)
       }
       p8est_nodes_destroy (nodes);
     }
-    if (do_lnodes) {
-      p8est_lnodes_t     *ln;
-      t0 = phase_begin (comm);
-      ln = p8est_lnodes_new (p8est, ghost, 1);
-      times[PH_LNODES][rep] = phase_end (comm, t0);
-      if (last) {
-        long long           own = ln->owned_count, hang = 0;
-        p4est_locidx_t      e;
-        for (e = 0; e < ln->num_local_elements; ++e)
-          hang += ln->face_code[e] != 0;
-        MPI_Allreduce (&own, &ln_global, 1, MPI_LONG_LONG, MPI_SUM, comm);
-        MPI_Allreduce (&hang, &ln_hang, 1, MPI_LONG_LONG, MPI_SUM, comm);
-      }
-      p8est_lnodes_destroy (ln);
-    }
     if (ghost != NULL)
       p8est_ghost_destroy (ghost);
     if (!last) {
@@ -739,9 +778,7 @@ main (int argc, char **argv)
   if (out != NULL)
     write_leaves (comm, p8est, out);
 
-  getrusage (RUSAGE_SELF, &ru);
-  rss = (long long) ru.ru_maxrss * 1024;
-  MPI_Reduce (&rss, &max_rss, 1, MPI_LONG_LONG, MPI_MAX, 0, comm);
+  max_rss = max_over_ranks (comm, peak_rss ());
 
   if (g_rank == 0) {
     double              med[PH_NUM];
@@ -768,6 +805,12 @@ main (int argc, char **argv)
       printf ("  %-22s %lld\n", "lnodes_hanging_elements", ln_hang);
     }
     printf ("  %-22s %lld\n", "peak_rss_bytes", max_rss);
+    printf ("  %-22s %lld\n", "rss_start_bytes", rss_start);
+    printf ("  %-22s %lld\n", "rss_after_read_bytes", rss_read);
+    if (do_lnodes)
+      printf ("  %-22s %lld\n", "rss_lnodes_bytes", rss_lnodes);
+    if (do_nodes)
+      printf ("  %-22s %lld\n", "rss_nodes_bytes", rss_nodes);
 
     if (json != NULL) {
       FILE               *f = fopen (json, "w");
@@ -799,6 +842,12 @@ main (int argc, char **argv)
         if (do_lnodes)
           fprintf (f, ", \"lnodes_global\": %lld, "
                    "\"lnodes_hanging_elements\": %lld", ln_global, ln_hang);
+        fprintf (f, ", \"rss_start_bytes\": %lld, "
+                 "\"rss_after_read_bytes\": %lld", rss_start, rss_read);
+        if (do_lnodes)
+          fprintf (f, ", \"rss_lnodes_bytes\": %lld", rss_lnodes);
+        if (do_nodes)
+          fprintf (f, ", \"rss_nodes_bytes\": %lld", rss_nodes);
         fprintf (f, ", \"peak_rss_bytes\": %lld}\n", max_rss);
         bad = fclose (f) != 0;
       }

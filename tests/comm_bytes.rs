@@ -1,0 +1,104 @@
+//! The `comm_bytes` fields of `--stats`: nothing crosses ranks on one rank;
+//! on two and three ranks every phase that exchanges leaves or nodes reports
+//! bytes, and the bytes sent over all ranks equal those received. Also the
+//! memory marks and the two partition timings the benchmarks read.
+
+mod common;
+
+use common::{octmesh_ok, scratch};
+
+fn stats(np: usize, dir: &std::path::Path) -> serde_json::Value {
+    let path = dir.join(format!("np{np}.json"));
+    octmesh_ok(
+        np,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "5",
+            "--quiet",
+            "--stats",
+            path.to_str().unwrap(),
+        ],
+    );
+    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
+}
+
+const PHASES: [&str; 10] = [
+    "read",
+    "construct",
+    "refine",
+    "partition",
+    "balance",
+    "classify",
+    "ghost",
+    "nodes",
+    "numbering",
+    "connectivity",
+];
+
+#[test]
+fn one_rank_exchanges_nothing() {
+    let j = stats(1, &scratch("comm_bytes_1"));
+    for k in PHASES.iter().chain(&["total"]) {
+        assert_eq!(j["comm_bytes"][k].as_u64(), Some(0), "phase {k}");
+        assert_eq!(j["comm_bytes_sent"][k].as_u64(), Some(0), "phase {k}");
+    }
+    assert_eq!(j["comm_bytes_sum"]["sent"].as_u64(), Some(0));
+    assert_eq!(j["comm_bytes_sum"]["received"].as_u64(), Some(0));
+}
+
+#[test]
+fn memory_marks_and_partition_steps() {
+    let j = stats(2, &scratch("comm_bytes_marks"));
+    // High-water marks taken in this order cannot decrease.
+    let start = j["rss_start_bytes"].as_u64().unwrap();
+    let read = j["rss_after_read_bytes"].as_u64().unwrap();
+    let peak = j["peak_rss_bytes"].as_u64().unwrap();
+    assert!(
+        0 < start && start <= read && read <= peak,
+        "{start} {read} {peak}"
+    );
+    // The two partitions, apart, add up to the partition timing.
+    let a = j["partition_timings"]["refined"].as_f64().unwrap();
+    let b = j["partition_timings"]["balanced"].as_f64().unwrap();
+    let sum = j["timings"]["partition"].as_f64().unwrap();
+    assert!(a >= 0.0 && b >= 0.0);
+    assert!(
+        (a + b - sum).abs() <= 1e-9 * sum.max(1.0),
+        "{a} + {b} != {sum}"
+    );
+}
+
+#[test]
+fn sent_equals_received_on_2_and_3_ranks() {
+    let dir = scratch("comm_bytes_23");
+    for np in [2, 3] {
+        let j = stats(np, &dir);
+        let sent = j["comm_bytes_sum"]["sent"].as_u64().unwrap();
+        let received = j["comm_bytes_sum"]["received"].as_u64().unwrap();
+        assert!(sent > 0, "np {np}: nothing sent");
+        assert_eq!(sent, received, "np {np}");
+        // Balance probes, ghost leaves and shared nodes cross the partition
+        // boundaries whenever there is more than one rank.
+        for k in ["balance", "ghost", "numbering"] {
+            let both = j["comm_bytes"][k].as_u64().unwrap();
+            let out = j["comm_bytes_sent"][k].as_u64().unwrap();
+            assert!(both > 0 && out > 0, "np {np}: no bytes in {k}");
+            assert!(
+                out <= both,
+                "np {np}: {k} sent {out} > sent+received {both}"
+            );
+        }
+        // Each rank's total is at most the sum over ranks and at least an
+        // equal share of it.
+        let per_rank = j["comm_bytes"]["total"].as_u64().unwrap();
+        assert!(per_rank <= sent + received, "np {np}");
+        assert!(per_rank * np as u64 >= sent + received, "np {np}");
+        let phase_sum: u64 = PHASES
+            .iter()
+            .map(|k| j["comm_bytes"][k].as_u64().unwrap())
+            .sum();
+        assert!(phase_sum >= per_rank, "np {np}: phases below the total");
+    }
+}

@@ -1,0 +1,115 @@
+//! The byte counters of `MpiComm` against counts worked out by hand for each
+//! collective, on 1 to 4 ranks.
+//!
+//! Run by `cargo test`, this program launches itself under `mpirun`; each
+//! launched copy checks its own counters and exits non-zero on a mismatch.
+
+mod common;
+
+use std::rc::Rc;
+use std::time::Duration;
+
+use octmesh::comm::{CommRef, MpiComm, Traffic};
+
+const CHILD: &str = "OCTMESH_MPI_COMM_CHILD";
+
+fn main() {
+    if std::env::var(CHILD).is_ok() {
+        child();
+        return;
+    }
+    common::run_self_on_1_to_4_ranks(
+        "mpi_comm",
+        CHILD,
+        "comm counters agree",
+        Duration::from_secs(120),
+    );
+}
+
+fn check(what: &str, got: Traffic, sent: u64, received: u64) {
+    assert_eq!(
+        got,
+        Traffic { sent, received },
+        "{what}: counted {got:?}, expected sent {sent} received {received}"
+    );
+}
+
+fn child() {
+    let universe = mpi::initialize().expect("MPI init");
+    let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
+    let (r, p) = (comm.rank() as u64, comm.size() as u64);
+    check("fresh communicator", comm.traffic(), 0, 0);
+
+    // Rank r sends q + 1 values to rank q (itself included) and so receives
+    // r + 1 values from every rank; 4-byte counts go to every other rank first.
+    let counts: Vec<usize> = (0..p as usize).map(|q| q + 1).collect();
+    let send: Vec<u64> = counts
+        .iter()
+        .enumerate()
+        .flat_map(|(q, &c)| std::iter::repeat_n(100 * r + q as u64, c))
+        .collect();
+    let t0 = comm.traffic();
+    let (recv, rc) = comm.alltoallv_u64(&send, &counts);
+    assert_eq!(recv.len() as u64, (r + 1) * p);
+    assert!(rc.iter().all(|&c| c as u64 == r + 1));
+    let all_out: u64 = (1..=p).sum();
+    check(
+        "alltoallv",
+        comm.traffic() - t0,
+        4 * (p - 1) + 8 * (all_out - (r + 1)),
+        4 * (p - 1) + 8 * (r + 1) * (p - 1),
+    );
+
+    let t0 = comm.traffic();
+    let mut v = [r, 2 * r, 3];
+    comm.max_u64(&mut v);
+    assert_eq!(v, [p - 1, 2 * (p - 1), 3]);
+    let others = if p > 1 { 24 } else { 0 };
+    check("max_u64 of 3 values", comm.traffic() - t0, others, others);
+
+    let t0 = comm.traffic();
+    let gathered = comm.allgather_u64(r * r);
+    assert_eq!(gathered, (0..p).map(|q| q * q).collect::<Vec<_>>());
+    check(
+        "allgather_u64",
+        comm.traffic() - t0,
+        8 * (p - 1),
+        8 * (p - 1),
+    );
+
+    // A broadcast of 5 bytes: the 8-byte length and the bytes, once per
+    // receiving rank at the root.
+    let root = (p - 1) as usize;
+    let t0 = comm.traffic();
+    let mut msg = if r as usize == root {
+        b"hello".to_vec()
+    } else {
+        Vec::new()
+    };
+    comm.broadcast_bytes(root, &mut msg);
+    assert_eq!(msg, b"hello");
+    if r as usize == root {
+        check(
+            "broadcast at the root",
+            comm.traffic() - t0,
+            13 * (p - 1),
+            0,
+        );
+    } else {
+        check("broadcast at a receiver", comm.traffic() - t0, 0, 13);
+    }
+
+    let t0 = comm.traffic();
+    comm.barrier();
+    check("barrier", comm.traffic() - t0, 0, 0);
+
+    // Over all ranks, what was sent arrived.
+    let total = comm.traffic();
+    let mut sums = [total.sent, total.received];
+    comm.sum_u64(&mut sums);
+    assert_eq!(sums[0], sums[1], "sent and received differ over the ranks");
+    assert_eq!(sums[0] == 0, p == 1);
+    if r == 0 {
+        println!("comm counters agree on {p} rank(s)");
+    }
+}
