@@ -259,8 +259,9 @@ typedef int32_t (*octmesh_refine_fn)(void *ctx, const octmesh_octant_t *o);
 typedef int32_t octmesh_connect_t;
 
 /**
- * Weight callback for partitioning: the weight of a leaf (the sum over all
- * leaves must fit in 64 bits). Must not unwind or longjmp.
+ * Weight callback for partitioning: the weight of a leaf. When the sum
+ * over all leaves does not fit in 64 bits, `octmesh_partition` fails with
+ * `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or longjmp.
  */
 typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 

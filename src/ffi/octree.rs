@@ -19,8 +19,9 @@ use crate::{Connectivity, Octant, MAX_LEVEL};
 pub type octmesh_refine_fn =
     Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> i32>;
 
-/// Weight callback for partitioning: the weight of a leaf (the sum over all
-/// leaves must fit in 64 bits). Must not unwind or longjmp.
+/// Weight callback for partitioning: the weight of a leaf. When the sum
+/// over all leaves does not fit in 64 bits, `octmesh_partition` fails with
+/// `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or longjmp.
 pub type octmesh_weight_fn =
     Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> u64>;
 
