@@ -161,8 +161,8 @@ typedef struct {
    */
   double fit;
   /**
-   * Largest number of leaves (over all ranks) a refinement may create;
-   * 0 means unlimited (default). Exceeding it fails with
+   * Largest number of leaves (over all ranks) a refinement or a balance
+   * may create; 0 means unlimited (default). Exceeding it fails with
    * `OCTMESH_STATUS_LIMIT`.
    */
   uint64_t max_octants;
@@ -264,8 +264,9 @@ typedef int32_t (*octmesh_refine_fn)(void *ctx, const octmesh_octant_t *o);
 typedef int32_t octmesh_connect_t;
 
 /**
- * Weight callback for partitioning: the weight of a leaf (the sum over all
- * leaves must fit in 64 bits). Must not unwind or longjmp.
+ * Weight callback for partitioning: the weight of a leaf. When the sum
+ * over all leaves does not fit in 64 bits, `octmesh_partition` fails with
+ * `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or longjmp.
  */
 typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 
@@ -473,7 +474,11 @@ octmesh_status_t octmesh_surface_builtin(octmesh_t *h, const char *name);
  * at `level` (0 to 18) and whose other leaves are as coarse as possible,
  * in the cube of `octmesh_set_domain` or fitted around the
  * surface. Replaces any previous octree and mesh. Needs a surface.
- * Collective.
+ * With an octant limit (option `max_octants`), fails with
+ * `OCTMESH_STATUS_LIMIT` before refining when the size estimated from the
+ * surface area is more than twice the limit (the message gives the
+ * estimate and the finest level that would fit), and otherwise as soon as
+ * the count exceeds the limit. Collective.
  */
 octmesh_status_t octmesh_refine_surface(octmesh_t *h, int32_t level);
 
@@ -495,7 +500,9 @@ octmesh_status_t octmesh_refine_callback(octmesh_t *h,
  * 2:1-balances the octree for `connect` contacts (one of
  * `octmesh_connect`). Leaves stay on their ranks; call
  * `octmesh_partition` afterwards to even out the counts. Drops the mesh.
- * Needs an octree. Collective.
+ * Needs an octree. Fails with `OCTMESH_STATUS_LIMIT`, leaving the octree
+ * as it was, when the balanced octree would exceed the octant limit.
+ * Collective.
  */
 octmesh_status_t octmesh_balance(octmesh_t *h, octmesh_connect_t connect);
 

@@ -38,6 +38,7 @@
 use crate::error::Result;
 use crate::octant::{morton_encode, Connectivity, Octant, MAX_LEVEL, ROOT_LEN};
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
+use crate::refine::{limit_error, NO_LIMIT};
 use crate::sort::radix_sort_bits;
 
 /// What a balance did.
@@ -57,28 +58,54 @@ impl LinearOctree {
     /// in the Morton order; call [`LinearOctree::partition`] afterwards to
     /// even out the counts.
     pub fn balance(&mut self, conn: Connectivity) -> Result<BalanceStats> {
+        self.balance_with_limit(conn, NO_LIMIT)
+    }
+
+    /// [`LinearOctree::balance`] that fails with an
+    /// [`crate::ErrorKind::Limit`] error, on every rank, instead of creating
+    /// more than `limit` leaves over all ranks. The growth is checked
+    /// before each batch of splits is applied, so a rank never holds much
+    /// more than `limit` leaves (the whole tree could grow several times
+    /// over). On failure the octree is left as it was; for that it keeps a
+    /// copy of the local leaves while it works (8 bytes per leaf), but only
+    /// when there is a limit. Collective.
+    pub fn balance_with_limit(&mut self, conn: Connectivity, limit: u64) -> Result<BalanceStats> {
         let comm = self.comm().clone();
         let before = self.local_len();
+        let was_balanced = self.balanced();
+        let backup = (limit != NO_LIMIT).then(|| self.leaves().to_vec());
         // Balancing for a weaker contact keeps a stronger balance.
-        let strongest = self.balanced().map_or(conn, |b| b.max(conn));
-        let mut b = Balancer::new(self, conn);
+        let strongest = was_balanced.map_or(conn, |b| b.max(conn));
+        let mut b = Balancer::new(self, conn, limit);
         let mut stats = BalanceStats::default();
-        loop {
+        let over = loop {
             stats.rounds += 1;
             b.local_pass();
             let sent: usize = b.outbox.iter().map(|o| o.len()).sum();
-            let mut total = [sent as u64];
+            // One reduction: probes to send, leaves, and ranks over the limit.
+            let mut total = [sent as u64, b.leaves.len() as u64, u64::from(b.over)];
             comm.sum_u64(&mut total);
+            if total[2] > 0 || total[1] > limit {
+                break true;
+            }
             if total[0] == 0 {
-                break;
+                break false;
             }
             stats.probes_sent += sent as u64;
             let (send, counts) = b.take_outbox();
             let (recv, _) = comm.alltoallv_u64(&send, &counts);
             b.apply_probes(recv.into_iter().map(Octant::from_key).collect());
-        }
+        };
         let mut leaves = std::mem::take(&mut b.leaves);
         drop(b);
+        if over {
+            // Every rank gets here in the same round (the decision is on
+            // reduced values); nothing was published, so the ranges and
+            // offsets are still those of the backup.
+            *self.leaves_mut() = backup.unwrap_or_default();
+            self.set_balanced(was_balanced);
+            return Err(limit_error(limit, "2:1 balancing"));
+        }
         // The work vector was sized for the worst case; the octree is kept
         // for the rest of the pipeline, so give the slack back.
         leaves.shrink_to_fit();
@@ -120,10 +147,14 @@ struct Balancer {
     /// `pending[l]`: parents of families at level `l` still to process.
     pending: Vec<Vec<Octant>>,
     outbox: Vec<Vec<u64>>,
+    /// Most leaves the rank may hold (the global limit).
+    limit: usize,
+    /// Set when applying the splits would exceed `limit`; the pass stops.
+    over: bool,
 }
 
 impl Balancer {
-    fn new(tree: &mut LinearOctree, conn: Connectivity) -> Balancer {
+    fn new(tree: &mut LinearOctree, conn: Connectivity, limit: u64) -> Balancer {
         let (begin, end) = tree.local_cells();
         let p = tree.comm().size();
         let mut leaves = std::mem::take(tree.leaves_mut());
@@ -144,6 +175,8 @@ impl Balancer {
             leaves,
             pending,
             outbox: vec![Vec::new(); p],
+            limit: limit.min(usize::MAX as u64) as usize,
+            over: false,
         }
     }
 
@@ -153,6 +186,9 @@ impl Balancer {
         let mut probes: Vec<u64> = Vec::new();
         let mut tmp: Vec<u64> = Vec::new();
         for l in (2..=MAX_LEVEL as usize).rev() {
+            if self.over {
+                return;
+            }
             let mut fams = std::mem::take(&mut self.pending[l]);
             if fams.is_empty() {
                 continue;
@@ -242,6 +278,12 @@ impl Balancer {
     /// that covers every required octant inside it.
     fn apply_splits(&mut self, splits: &mut [(usize, Octant)]) {
         splits.sort_unstable();
+        // Each split leaf becomes at least 8: refuse before allocating.
+        let split_leaves = 1 + splits.windows(2).filter(|w| w[0].0 != w[1].0).count();
+        if self.leaves.len().saturating_add(7 * split_leaves) > self.limit {
+            self.over = true;
+            return;
+        }
         let mut out = std::mem::take(&mut self.spare);
         out.clear();
         let need = self.leaves.len() + 8 * splits.len();
@@ -402,6 +444,39 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn limit_fails_and_keeps_the_octree() {
+        let comm: CommRef = Rc::new(SerialComm);
+        let p = [157_286u32, 91_000, 200_001];
+        let contains =
+            |o: Octant| (0..3).all(|k| o.coords()[k] <= p[k] && p[k] < o.coords()[k] + o.side());
+        let mut t = build_from_callback(comm, 9, contains, NO_LIMIT).unwrap();
+        let before = t.leaves().to_vec();
+        let mut full = build_from_callback(Rc::new(SerialComm), 9, contains, NO_LIMIT).unwrap();
+        full.balance(Connectivity::Corner).unwrap();
+        let balanced = full.global_len();
+        assert!(balanced > before.len() as u64 + 8);
+        for limit in [before.len() as u64, balanced - 1] {
+            let e = t
+                .balance_with_limit(Connectivity::Corner, limit)
+                .unwrap_err();
+            assert_eq!(e.kind(), crate::ErrorKind::Limit);
+            assert!(e.message().contains("balancing"), "{e}");
+            assert_eq!(t.leaves(), &before[..]);
+            assert_eq!(t.balanced(), None);
+            t.check().unwrap();
+        }
+        t.balance_with_limit(Connectivity::Corner, balanced)
+            .unwrap();
+        assert_eq!(t.leaves(), full.leaves());
+        assert_eq!(t.balanced(), Some(Connectivity::Corner));
+        // A balanced octree keeps its flag when a later balance fails.
+        let e = t.balance_with_limit(Connectivity::Face, balanced - 1);
+        assert!(e.is_err());
+        assert_eq!(t.leaves(), full.leaves());
+        assert_eq!(t.balanced(), Some(Connectivity::Corner));
     }
 
     #[test]

@@ -15,7 +15,9 @@ use octmesh::io::leaves::write_leaves;
 use octmesh::io::vtu::write_mesh;
 use octmesh::leak::find_leak;
 use octmesh::mesh::{Mesh, MeshOptions};
-use octmesh::refine::{construct_for_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::refine::{
+    check_estimate, construct_for_surface, estimate_leaves, SurfaceIndex, NO_LIMIT,
+};
 use octmesh::report::{peak_rss_bytes, JsonObject, PhaseTimer};
 use octmesh::{Connectivity, Error, Result};
 
@@ -328,6 +330,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     );
     let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
     let rss_read = peak_rss_bytes();
+    let estimate = estimate_leaves(&index, o.level);
     if root {
         let what = match o.command {
             Command::Octree => "octree".to_string(),
@@ -352,9 +355,14 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             "  cube: origin ({:.6}, {:.6}, {:.6}), side {:.6}",
             domain.origin[0], domain.origin[1], domain.origin[2], domain.side
         );
+        println!(
+            "  estimated octants: {} refined, {} balanced",
+            estimate.refined, estimate.balanced
+        );
         println!("  {:<12} {:>10} {:>14}", "phase", "time [s]", "count");
     }
     table.row(&timer, None);
+    check_estimate(&comm, &index, o.level, o.max_octants)?;
 
     let mut tree = timer.time(&*comm, "construct", || {
         construct_for_surface(comm.clone(), &index, o.level)
@@ -371,7 +379,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         write_leaves(&tree, p, "refined leaves")?;
     }
     if let Some(conn) = o.balance {
-        timer.time(&*comm, "balance", || tree.balance(conn))?;
+        timer.time(&*comm, "balance", || {
+            tree.balance_with_limit(conn, o.max_octants)
+        })?;
         table.row(&timer, Some(tree.global_len()));
         timer.time(&*comm, "partition", || tree.partition())?;
         table.row(&timer, Some(tree.global_len()));
@@ -571,6 +581,15 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         .str("balance", o.balance.map_or("none", |c| c.name()))
         .int("octants_refined", refined)
         .int("octants_balanced", balanced)
+        .int(
+            "estimated_octants",
+            if o.balance.is_some() {
+                estimate.balanced
+            } else {
+                estimate.refined
+            },
+        )
+        .int("estimated_octants_refined", estimate.refined)
         .merge(&stats)
         .obj("timings", &t)
         .obj("partition_timings", &steps)

@@ -7,7 +7,7 @@
 //! depends only on the global sequence of weights, never on the current
 //! partition: partitioning twice gives the same result as once.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::octant::Octant;
 use crate::octree::LinearOctree;
 
@@ -68,13 +68,30 @@ impl LinearOctree {
     }
 
     /// Gives every rank about the same total weight; `weight` is called once
-    /// per local leaf. Collective.
+    /// per local leaf. The sum of the weights over all leaves must fit in a
+    /// `u64`; otherwise every rank fails with an
+    /// [`crate::ErrorKind::InvalidArgument`] error and nothing moves.
+    /// Collective.
     pub fn partition_weighted(&mut self, weight: impl Fn(Octant) -> u64) -> Result<PartitionStats> {
         let w: Vec<u64> = self.leaves().iter().map(|&o| weight(o)).collect();
-        let local: u64 = w.iter().sum();
+        // u64::MAX stands for a local sum that overflows; it makes the
+        // total overflow too, on every rank alike.
+        let local = w
+            .iter()
+            .try_fold(0u64, |a, &x| a.checked_add(x))
+            .unwrap_or(u64::MAX);
         let sums = self.comm().allgather_u64(local);
         let r = self.comm().rank();
-        let total: u64 = sums.iter().sum();
+        let total = sums
+            .iter()
+            .try_fold(0u64, |a, &x| a.checked_add(x))
+            .filter(|&t| t < u64::MAX)
+            .ok_or_else(|| {
+                Error::invalid(
+                    "the partition weights add up to more than 2^64 - 2 over all leaves; \
+                     use smaller weights",
+                )
+            })?;
         let mut prefix: Vec<u64> = Vec::with_capacity(w.len());
         let mut acc: u64 = sums[..r].iter().sum();
         for &x in &w {

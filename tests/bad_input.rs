@@ -1,9 +1,11 @@
-//! Bad input through the command on 1 and 3 ranks: a clear message on every
-//! rank, a non-zero exit, no panic text, no hang.
+//! Bad input on 1 and 3 ranks, through the command (a clear message on every
+//! rank, a non-zero exit, no panic text, no hang) and through the C API
+//! (`tests/c/bad_input.c`: the expected status on every rank, the handle
+//! intact and still working), and octant limits.
 
 mod common;
 use common::*;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 fn expect_failure(np: usize, args: &[&str], needle: &str) {
@@ -27,27 +29,28 @@ fn expect_failure(np: usize, args: &[&str], needle: &str) {
     }
 }
 
-fn bad_files() -> Vec<(PathBuf, &'static str)> {
+/// The bad files: path, words of the message, and the C API status.
+fn bad_files() -> Vec<(PathBuf, &'static str, &'static str)> {
     let dir = scratch("bad_input");
     let tri = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let mut v = Vec::new();
 
     let p = dir.join("empty.stl");
     std::fs::write(&p, b"").unwrap();
-    v.push((p, "empty"));
+    v.push((p, "empty", "OCTMESH_STATUS_FORMAT"));
 
     let p = dir.join("truncated.stl");
     write_stl(&p, &[tri, tri, tri], b"binary");
     let b = std::fs::read(&p).unwrap();
     std::fs::write(&p, &b[..b.len() - 20]).unwrap();
-    v.push((p, "truncated"));
+    v.push((p, "truncated", "OCTMESH_STATUS_FORMAT"));
 
     let p = dir.join("count.stl");
     write_stl(&p, &[tri], b"binary");
     let mut b = std::fs::read(&p).unwrap();
     b[80..84].copy_from_slice(&1000u32.to_le_bytes());
     std::fs::write(&p, &b).unwrap();
-    v.push((p, "1000 triangles"));
+    v.push((p, "1000 triangles", "OCTMESH_STATUS_FORMAT"));
 
     let p = dir.join("noendloop.stl");
     std::fs::write(
@@ -55,7 +58,7 @@ fn bad_files() -> Vec<(PathBuf, &'static str)> {
         "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendfacet\nendsolid t\n",
     )
     .unwrap();
-    v.push((p, "malformed ASCII STL"));
+    v.push((p, "malformed ASCII STL", "OCTMESH_STATUS_FORMAT"));
 
     let p = dir.join("nan.stl");
     write_stl(
@@ -66,7 +69,7 @@ fn bad_files() -> Vec<(PathBuf, &'static str)> {
         ],
         b"binary",
     );
-    v.push((p, "non-finite"));
+    v.push((p, "non-finite", "OCTMESH_STATUS_GEOMETRY"));
 
     let p = dir.join("inf.stl");
     write_stl(
@@ -74,20 +77,20 @@ fn bad_files() -> Vec<(PathBuf, &'static str)> {
         &[[[0.0, 0.0, f32::INFINITY], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]],
         b"binary",
     );
-    v.push((p, "non-finite"));
+    v.push((p, "non-finite", "OCTMESH_STATUS_GEOMETRY"));
 
     let p = dir.join("degenerate.stl");
     write_stl(&p, &[[[1.0, 1.0, 1.0]; 3], [[2.0, 2.0, 2.0]; 3]], b"binary");
-    v.push((p, "degenerate"));
+    v.push((p, "degenerate", "OCTMESH_STATUS_GEOMETRY"));
 
-    v.push((dir.join("missing.stl"), "No such file"));
-    v.push((dir.clone(), "directory"));
+    v.push((dir.join("missing.stl"), "No such file", "OCTMESH_STATUS_IO"));
+    v.push((dir.clone(), "directory", "OCTMESH_STATUS_IO"));
     v
 }
 
 #[test]
 fn bad_surfaces_fail_cleanly_on_every_rank() {
-    for (path, needle) in bad_files() {
+    for (path, needle, _) in bad_files() {
         for np in [1, 3] {
             expect_failure(
                 np,
@@ -126,6 +129,65 @@ fn bad_arguments_fail_cleanly_on_every_rank() {
             np,
             &["octree", "sphere", "--level", "7", "--max-octants", "1000"],
             "limit of 1000 octants",
+        );
+    }
+}
+
+/// The C test program, built against this build's library.
+fn c_program(dir: &Path) -> PathBuf {
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    compile_c_test("bad_input", &lib, dir)
+}
+
+fn c_ok(np: usize, exe: &Path, args: &[&str]) {
+    let out = mpirun(np, exe, args, Duration::from_secs(120));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.status.success(),
+        "bad_input {args:?} on {np} ranks failed:\n{text}"
+    );
+    assert_eq!(
+        text.matches("BAD INPUT OK").count(),
+        np,
+        "bad_input {args:?} on {np} ranks:\n{text}"
+    );
+}
+
+#[test]
+fn bad_files_through_the_c_api_on_1_and_3_ranks() {
+    let exe = c_program(&scratch("bad_input_c_files"));
+    for (path, needle, status) in bad_files() {
+        for np in [1, 3] {
+            c_ok(np, &exe, &["file", path.to_str().unwrap(), status, needle]);
+        }
+    }
+}
+
+#[test]
+fn faults_through_the_c_api_on_1_and_3_ranks() {
+    let dir = scratch("bad_input_c_cases");
+    let exe = c_program(&dir);
+    let good = dir.join("sphere.stl");
+    octmesh::geometry::stl::write_stl_binary(&good, &octmesh::geometry::shapes::default_sphere())
+        .unwrap();
+    let missing = dir.join("missing.stl");
+    let sub = dir.join("a-directory.stl");
+    std::fs::create_dir_all(&sub).unwrap();
+    for np in [1, 3] {
+        c_ok(
+            np,
+            &exe,
+            &[
+                "cases",
+                good.to_str().unwrap(),
+                missing.to_str().unwrap(),
+                sub.to_str().unwrap(),
+            ],
         );
     }
 }

@@ -29,8 +29,8 @@ pub struct octmesh_options_t {
     /// side when the cube is fitted around the surface, in (0, 1]
     /// (default 0.7). Not used after `octmesh_set_domain`.
     pub fit: f64,
-    /// Largest number of leaves (over all ranks) a refinement may create;
-    /// 0 means unlimited (default). Exceeding it fails with
+    /// Largest number of leaves (over all ranks) a refinement or a balance
+    /// may create; 0 means unlimited (default). Exceeding it fails with
     /// `OCTMESH_STATUS_LIMIT`.
     pub max_octants: u64,
     /// 0 (default) prints nothing; 1 also prints the message of every

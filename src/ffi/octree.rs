@@ -10,7 +10,7 @@ use super::{
 use crate::error::{Error, Result};
 use crate::geometry::{shapes, stl, Surface, Triangle};
 use crate::octree::LinearOctree;
-use crate::refine::{construct_for_callback, construct_for_surface, SurfaceIndex};
+use crate::refine::{check_estimate, construct_for_callback, construct_for_surface, SurfaceIndex};
 use crate::{Connectivity, Octant, MAX_LEVEL};
 
 /// Refinement callback: returns non-zero to refine the octant. It must give
@@ -19,8 +19,9 @@ use crate::{Connectivity, Octant, MAX_LEVEL};
 pub type octmesh_refine_fn =
     Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> i32>;
 
-/// Weight callback for partitioning: the weight of a leaf (the sum over all
-/// leaves must fit in 64 bits). Must not unwind or longjmp.
+/// Weight callback for partitioning: the weight of a leaf. When the sum
+/// over all leaves does not fit in 64 bits, `octmesh_partition` fails with
+/// `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or longjmp.
 pub type octmesh_weight_fn =
     Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> u64>;
 
@@ -124,7 +125,11 @@ fn level_arg(level: i32, name: &str) -> Result<u8> {
 /// at `level` (0 to 18) and whose other leaves are as coarse as possible,
 /// in the cube of `octmesh_set_domain` or fitted around the
 /// surface. Replaces any previous octree and mesh. Needs a surface.
-/// Collective.
+/// With an octant limit (option `max_octants`), fails with
+/// `OCTMESH_STATUS_LIMIT` before refining when the size estimated from the
+/// surface area is more than twice the limit (the message gives the
+/// estimate and the finest level that would fit), and otherwise as soon as
+/// the count exceeds the limit. Collective.
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_refine_surface(h: *mut octmesh_t, level: i32) -> octmesh_status_t {
     with_mut(h, |h| {
@@ -136,6 +141,7 @@ pub unsafe extern "C" fn octmesh_refine_surface(h: *mut octmesh_t, level: i32) -
         let (level, domain) = h.agree(checked)?;
         let (comm, limit) = (h.comm.clone(), h.limit());
         let index = h.index_for(&domain)?;
+        check_estimate(&comm, index, level, limit)?;
         let mut tree = construct_for_surface(comm, index, level)?;
         tree.refine_surface(index, level, limit)?;
         h.tree = Some((tree, domain));
@@ -188,7 +194,9 @@ pub unsafe extern "C" fn octmesh_refine_callback(
 /// 2:1-balances the octree for `connect` contacts (one of
 /// `octmesh_connect`). Leaves stay on their ranks; call
 /// `octmesh_partition` afterwards to even out the counts. Drops the mesh.
-/// Needs an octree. Collective.
+/// Needs an octree. Fails with `OCTMESH_STATUS_LIMIT`, leaving the octree
+/// as it was, when the balanced octree would exceed the octant limit.
+/// Collective.
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_balance(
     h: *mut octmesh_t,
@@ -205,8 +213,9 @@ pub unsafe extern "C" fn octmesh_balance(
         };
         let checked = conn.and_then(|c| h.tree_or_state().map(|_| c));
         let conn = h.agree(checked)?;
+        let limit = h.limit();
         let (tree, _) = h.tree_mut_or_state()?;
-        tree.balance(conn)?;
+        tree.balance_with_limit(conn, limit)?;
         h.mesh = None;
         Ok(())
     })

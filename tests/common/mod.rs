@@ -297,3 +297,54 @@ pub fn run_self_on_1_to_4_ranks(name: &str, child_var: &str, marker: &str, limit
     }
     println!("{name}: 4 passed, 0 failed");
 }
+
+/// `target/<profile>/deps`, where `cargo test` puts the `liboctmesh.so`
+/// built with this test (`cargo build` also copies it one level up).
+pub fn deps_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    exe.parent().expect("target/<profile>/deps").to_path_buf()
+}
+
+/// Copies `liboctmesh.so` from `from` into `dir` under its SONAME too.
+pub fn stage_library(from: &Path, dir: &Path) {
+    let so = from.join("liboctmesh.so");
+    assert!(
+        so.is_file(),
+        "{} not found: the cdylib is built with the library (crate-type in Cargo.toml)",
+        so.display()
+    );
+    std::fs::create_dir_all(dir).unwrap();
+    for name in ["liboctmesh.so", "liboctmesh.so.0"] {
+        std::fs::copy(&so, dir.join(name)).expect("copy liboctmesh.so");
+    }
+}
+
+/// Compiles `tests/c/<name>.c` with mpicc against `include/octmesh.h` and
+/// the library in `lib`.
+pub fn compile_c_test(name: &str, lib: &Path, out_dir: &Path) -> PathBuf {
+    let root = repo();
+    let exe = out_dir.join(name);
+    let mut cmd = Command::new("mpicc");
+    cmd.arg("-std=c11")
+        .arg("-Wall")
+        .arg("-Wextra")
+        .arg("-Werror")
+        .arg("-I")
+        .arg(root.join("include"))
+        .arg("-I")
+        .arg(root.join("tests/c"))
+        .arg(root.join("tests/c").join(format!("{name}.c")))
+        .arg("-o")
+        .arg(&exe)
+        .arg("-L")
+        .arg(lib)
+        .arg(format!("-Wl,-rpath,{}", lib.display()))
+        .arg("-loctmesh");
+    let out = run_with_limit(cmd, Duration::from_secs(120));
+    assert!(
+        out.status.success(),
+        "mpicc {name}.c failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    exe
+}
