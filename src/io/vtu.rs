@@ -574,7 +574,7 @@ pub fn write_mesh(
     let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level()).collect();
     let ni = mesh.num_independent();
     let global: Vec<i64> = (0..mesh.num_nodes())
-        .map(|i| if i < mesh.num_independent() { mesh.global_id(i) as i64 } else { -1 })
+        .map(|i| if i < ni { mesh.global_id(i) as i64 } else { -1 })
         .collect();
     let hanging: Vec<u8> = (0..mesh.num_nodes())
         .map(|i| match i.checked_sub(ni) {

@@ -352,7 +352,9 @@ impl Mesh {
 
     /// Global numbers of all independent local nodes (a new vector).
     pub fn global_ids(&self) -> Vec<u64> {
-        (0..self.num_independent).map(|i| self.global_id(i)).collect()
+        (0..self.num_independent)
+            .map(|i| self.global_id(i))
+            .collect()
     }
 
     /// Owner ranks of all independent local nodes (a new vector).
