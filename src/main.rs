@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::rc::Rc;
 
-use octmesh::classify::{classify_leaves, CutRule, Keep};
+use octmesh::classify::{CutRule, InsideClassifier, InsideRule, Keep, LeafClass};
 use octmesh::comm::{agree, CommRef, MpiComm};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::diagnostics::{clean, diagnose, SurfaceReport};
@@ -31,7 +31,8 @@ hanging nodes, global numbering) of the kept elements, and writes it.
 check: prints the surface diagnostics (welded vertices, boundary,
 non-manifold and inconsistently oriented edges, edge-connected components,
 degenerate and duplicate facets, Euler characteristic, genus, volume);
---json FILE also writes them as JSON.
+--json FILE also writes them as JSON. It also says which inside rule auto
+would pick.
 
 options:
   --level L             refinement level of the leaves touching the surface
@@ -47,6 +48,12 @@ options:
   --write-refined FILE  write the leaves before balance, same format
   --drop-degenerate     remove zero-area facets after loading
   --drop-duplicates     remove facets repeating the vertices of an earlier one
+  --inside RULE         how leaf centres are found inside: parity (ray
+                        parity), winding (generalized winding number above
+                        1/2: holes, overlapping parts, flipped facets) or
+                        auto (parity for one closed, consistently oriented
+                        component, else winding; the default for mesh). With
+                        octree, also classifies the leaves and counts them
   --quiet               print nothing but errors
 
 mesh options:
@@ -72,6 +79,7 @@ struct Options {
     quiet: bool,
     keep: Keep,
     cut_rule: CutRule,
+    inside: Option<InsideRule>,
     out: Option<PathBuf>,
     drop_degenerate: bool,
     drop_duplicates: bool,
@@ -113,6 +121,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
         quiet: false,
         keep: Keep::All,
         cut_rule: CutRule::Center,
+        inside: None,
         out: None,
         drop_degenerate: false,
         drop_duplicates: false,
@@ -186,6 +195,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
             "--write-refined" => o.write_refined = Some(value(i, a)?.into()),
             "--keep" if command == Command::Mesh => o.keep = Keep::parse(&value(i, a)?)?,
             "--cut-rule" if command == Command::Mesh => o.cut_rule = CutRule::parse(&value(i, a)?)?,
+            "--inside" => o.inside = Some(InsideRule::parse(&value(i, a)?)?),
             "--out" if command == Command::Mesh => {
                 let v = value(i, a)?;
                 if !v.ends_with(".pvtu") {
@@ -266,6 +276,11 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     let root = comm.rank() == 0 && !o.quiet;
     let table = Table { on: root };
     let mut timer = PhaseTimer::new();
+    // Meshes always classify (auto by default); octrees only when asked.
+    let inside_rule = match o.command {
+        Command::Mesh => Some(o.inside.unwrap_or_default()),
+        _ => o.inside,
+    };
 
     let loaded = timer.time(
         &*comm,
@@ -276,7 +291,8 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             if o.drop_degenerate || o.drop_duplicates {
                 (surface, dropped) = clean(&surface, o.drop_degenerate, o.drop_duplicates)?;
             }
-            let report = o.stats.is_some().then(|| diagnose(&surface));
+            let report = (o.stats.is_some() || inside_rule == Some(InsideRule::Auto))
+                .then(|| diagnose(&surface));
             let b = surface.bbox();
             let domain = match o.domain {
                 Some(d) => d,
@@ -294,13 +310,28 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         },
     );
     let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
+    // The rule actually used, and for auto why.
+    let inside = inside_rule.map(|r| match (r, &report) {
+        (InsideRule::Auto, Some(rep)) => {
+            let (rule, why) = InsideRule::auto_choice(rep);
+            (rule, format!(" (auto: {why})"))
+        }
+        (r, _) => (r, String::new()),
+    });
     if root {
+        let rule = inside
+            .as_ref()
+            .map(|(r, why)| format!("inside {}{why}", r.name()));
         let what = match o.command {
-            Command::Octree => "octree".to_string(),
+            Command::Octree => match &rule {
+                Some(r) => format!("octree ({r})"),
+                None => "octree".to_string(),
+            },
             Command::Mesh => format!(
-                "mesh (keep {}, cut rule {})",
+                "mesh (keep {}, cut rule {}, {})",
                 o.keep.name(),
-                o.cut_rule.name()
+                o.cut_rule.name(),
+                rule.unwrap_or_default()
             ),
             Command::Check => unreachable!("check does not build an octree"),
         };
@@ -349,19 +380,54 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
 
     let mut stats = JsonObject::new();
     let mut phase_keys = vec!["read", "construct", "refine", "partition", "balance"];
+    let classes = match inside {
+        Some((rule, _)) => {
+            phase_keys.push("classify");
+            let (classes, summary) = timer.time(&*comm, "classify", || {
+                let c = InsideClassifier::new(&index, rule);
+                (c.classify(tree.leaves()), c.summary().cloned())
+            });
+            table.row(&timer, None);
+            if let (true, Some(w)) = (root, &summary) {
+                println!(
+                    "  winding: {} component(s), {} facet(s) reversed, {} boundary loop(s) \
+                     closed by {} cap triangle(s)",
+                    w.components, w.reversed_facets, w.boundary_loops, w.cap_triangles
+                );
+            }
+            stats.str("inside_rule", rule.name());
+            if let Some(w) = &summary {
+                stats
+                    .int("reversed_facets", w.reversed_facets as u64)
+                    .int("boundary_loops", w.boundary_loops as u64);
+            }
+            Some(classes)
+        }
+        None => None,
+    };
+    if let (Command::Octree, Some(classes)) = (o.command, &classes) {
+        // Leaves per class, over all ranks.
+        let mut n = [0u64; 3];
+        for &b in classes {
+            n[LeafClass::from_bits(b) as usize] += 1;
+        }
+        comm.sum_u64(&mut n);
+        if root {
+            println!(
+                "  leaves inside {} | outside {} | cut {}",
+                n[LeafClass::Inside as usize],
+                n[LeafClass::Outside as usize],
+                n[LeafClass::Cut as usize]
+            );
+        }
+        stats
+            .int("inside_leaves", n[LeafClass::Inside as usize])
+            .int("outside_leaves", n[LeafClass::Outside as usize])
+            .int("cut_leaves", n[LeafClass::Cut as usize]);
+    }
     if o.command == Command::Mesh {
-        phase_keys.extend([
-            "classify",
-            "ghost",
-            "nodes",
-            "numbering",
-            "connectivity",
-            "write",
-        ]);
-        let classes = timer.time(&*comm, "classify", || {
-            classify_leaves(tree.leaves(), &index)
-        });
-        table.row(&timer, None);
+        phase_keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
+        let classes = classes.unwrap_or_default();
         let opts = MeshOptions {
             keep: o.keep,
             cut_rule: o.cut_rule,
