@@ -553,17 +553,27 @@ fn run_check(comm: CommRef, o: &Options) -> Result<()> {
     let read = start.elapsed().as_secs_f64();
     let report = diagnose(&surface);
     let diagnosed = start.elapsed().as_secs_f64() - read;
+    let (rule, why) = InsideRule::auto_choice(&report);
     if comm.rank() == 0 && !o.quiet {
         println!(
             "octmesh check: {} ({} triangles)",
             o.surface, report.triangles
         );
         println!("{report}");
+        println!("  inside rule auto: {} ({why})", rule.name());
         println!("  read {read:.3} s | diagnose {diagnosed:.3} s (rank 0)");
     }
     if let Some(path) = &o.json {
+        // The report's object with the rule auto picks as a last field.
+        let mut json = report.to_json();
+        if let Some(end) = json.rfind("\n}") {
+            json.insert_str(
+                end,
+                &format!(",\n  \"auto_inside_rule\": \"{}\"", rule.name()),
+            );
+        }
         let written = if comm.rank() == 0 {
-            std::fs::write(path, report.to_json())
+            std::fs::write(path, json)
                 .map_err(|e| Error::io(format!("cannot write '{}': {e}", path.display())))
         } else {
             Ok(())
