@@ -45,8 +45,9 @@
 //! distance `d > r` the dipole term errs by at most `2 A r / (d - r)^3` and
 //! the second-order expansion by at most `3 A r^2 / (d - r)^4`, and the
 //! node's solid angle changes by at most `2 A rho / (d - r - rho)^3` over a
-//! ball of radius `rho` around `p`. It returns the value with an error bound
-//! valid over the whole ball, which lets a caller classify a region at once.
+//! ball of radius `rho` around `p` (for a single triangle, `d - r` is its
+//! exact distance to `p`). It returns the value with an error bound valid
+//! over the whole ball, which lets a caller classify a region at once.
 //!
 //! # Orientation
 //!
@@ -482,8 +483,13 @@ impl WindingTree {
             let gap = d2.sqrt() - n.radius;
             if gap > rho {
                 // Remainder of the expansion of order k: (k + 1) A r^k / gap^(k + 2).
-                let k = self.order as i32;
-                let approx = (k + 1) as f64 * n.area * (n.radius / gap).powi(k) / (gap * gap);
+                let q = n.radius / gap;
+                let qk = match self.order {
+                    1 => q,
+                    2 => q * q,
+                    _ => q * q * q,
+                };
+                let approx = (self.order + 1) as f64 * n.area * qk / (gap * gap);
                 let g = gap - rho;
                 let e = (approx + 2.0 * n.area * rho / (g * g * g)) / FOUR_PI;
                 if e <= tol {
