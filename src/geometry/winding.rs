@@ -63,8 +63,8 @@
 //! # Caps
 //!
 //! The boundary of an oriented soup, as a chain, is the set of directed edges
-//! whose two directions are not used equally often. [`boundary_loops`]
-//! splits it into closed loops, and a fan from each loop's centroid over the
+//! whose two directions are not used equally often. It splits into closed
+//! loops (every vertex has as many boundary edges in as out), and a fan from each loop's centroid over the
 //! loop, oriented against it, closes the soup ([`close_boundary`]): the soup
 //! plus its caps has no boundary, so its winding number is an integer
 //! everywhere off it, and the soup's own is that integer minus the caps'.
@@ -701,7 +701,7 @@ pub(crate) fn orient_welded(tris: &[Triangle], ids: &[[u64; 3]]) -> Orientation 
 /// the boundary as many times as the facets use it more often in that
 /// direction than in the other. Facets with a repeated vertex have no edges.
 /// Deterministic: the loops depend on the ids only.
-pub fn boundary_loops(ids: &[[u64; 3]], flipped: &[bool]) -> Vec<Vec<u64>> {
+pub(crate) fn boundary_loops(ids: &[[u64; 3]], flipped: &[bool]) -> Vec<Vec<u64>> {
     let mut half: Vec<(u64, u64, i64)> = Vec::new();
     for (f, &rev) in ids.iter().zip(flipped) {
         if f[0] == f[1] || f[1] == f[2] || f[2] == f[0] {
@@ -771,9 +771,10 @@ pub fn boundary_loops(ids: &[[u64; 3]], flipped: &[bool]) -> Vec<Vec<u64>> {
 }
 
 /// Caps closing the boundary of `tris` (taken as oriented): for every loop
-/// of [`boundary_loops`], the fan of triangles `(u_{i+1}, u_i, z)` with `z`
-/// the mean of the loop's vertices. `tris` plus the caps has no boundary
-/// edge; empty when `tris` has none.
+/// `u_0 -> u_1 -> ..` of the boundary (see the module documentation), the
+/// fan of triangles `(u_{i+1}, u_i, z)` with `z` the mean of the loop's
+/// vertices. `tris` plus the caps has no boundary edge; empty when `tris`
+/// has none.
 pub fn close_boundary(tris: &[Triangle]) -> Vec<Triangle> {
     let (ids, nv) = weld(tris);
     let mut pos = vec![[0.0; 3]; nv];
