@@ -118,19 +118,23 @@
 //!   the tree exactly like the parity (same segments, same candidates, same
 //!   exact predicates and perturbation, caps included as candidates but
 //!   never making a leaf cut), with the sign of each crossing;
-//! * `w = count - w_caps`. The caps are few (one fan per hole; none for a
-//!   closed surface, where `w` is the count itself), and their winding
-//!   number is evaluated with [`WindingTree::eval_bounded`], which gives a
-//!   guaranteed error: a centre is decided when `|count - w_caps - 1/2|`
-//!   exceeds it, else the caps are summed exactly. Near a cap, where the
+//! * `w = count - w_caps`. The caps are usually few (one fan per hole; none
+//!   for a closed surface, where `w` is the count itself; three per facet
+//!   for a soup without shared vertices). A centre is decided by Barill et
+//!   al.'s estimate of `w_caps` ([`WindingTree::eval`], beta 2, third
+//!   order) when it puts `w` more than 0.05 from 1/2, ten
+//!   times the largest error measured for that setting; closer ones by
+//!   [`WindingTree::eval_bounded`], whose error is guaranteed, and if that
+//!   cannot tell, by summing the caps exactly. Near a cap, where the
 //!   floating-point numerator of a solid angle is within its rounding error
 //!   of zero, its sign is taken from the exact predicate (with the
 //!   perturbation), so the jump of `w_caps` across a cap is exactly where
 //!   the count jumps.
 //!
-//! Coherence: at every octant on the way down (before it has one) the walk
-//! asks for a bound of `w_caps` over the ball around the octant; when no cap
-//! comes near, the interval is passed to all descendants, and a leaf whose
+//! Coherence: at every octant on the way down without a cap among its
+//! candidates (and before it has one) the walk asks for a guaranteed bound
+//! of `w_caps` over the ball around the octant; when no cap comes near, the
+//! interval is passed to all descendants, and a leaf whose
 //! count puts `count - w_caps` on one side of 1/2 for the whole interval is
 //! decided without evaluating anything; a subtree without candidate
 //! triangles is filled at once. Every decision depends on the leaf and its
@@ -533,9 +537,19 @@ struct Classifier<'a> {
     summary: Option<WindingSummary>,
 }
 
-/// Error shares at which a node of the caps' tree is approximated, tried in
-/// turn until the bound decides.
-const CAP_NODE_TOLS: [f64; 2] = [1e-2, 1e-4];
+/// Margin by which Barill et al.'s estimate of the caps' winding number
+/// (beta 2, third order) must put a centre away from 1/2 to decide it: ten
+/// times the largest error measured for that setting (5e-3, see the tests
+/// of [`crate::geometry::winding`]).
+const CAP_ESTIMATE_MARGIN: f64 = 0.05;
+/// Error budget of the bounded evaluation for centres within the margin
+/// (then the caps are summed exactly).
+const CAP_POINT_BUDGET: f64 = 1e-3;
+/// The same for a region.
+const CAP_REGION_BUDGET: f64 = 0.1;
+/// Nodes and triangles a region's bound may visit: a bound that needs more
+/// (a region near many caps) would cost more than it saves.
+const CAP_REGION_WORK: usize = 512;
 /// Largest error of a region's bound on the caps' winding number for it to
 /// be kept: wider intervals rarely decide a leaf.
 const CAP_REGION_ERR: f64 = 0.25;
@@ -927,13 +941,21 @@ impl<'a> Classifier<'a> {
         let p = pf.map(|c| c as f64);
         // The jump across a cap goes where the exact crossing test puts it.
         let side = |id: u32| !self.fixed[self.cap_ids[id as usize] as usize].positive_side(pf);
-        // Coarse first: most centres are far from 1/2.
-        for tol in CAP_NODE_TOLS {
-            if let Some((v, e)) = caps.eval_bounded(p, 0.0, tol, f64::INFINITY, Some(&side)) {
-                let x = w - v - 0.5;
-                if x.abs() > e {
-                    return x > 0.0;
-                }
+        let x = w - caps.eval(p) - 0.5;
+        if x.abs() > CAP_ESTIMATE_MARGIN {
+            return x > 0.0;
+        }
+        if let Some((v, e)) = caps.eval_bounded(
+            p,
+            0.0,
+            CAP_POINT_BUDGET,
+            f64::INFINITY,
+            usize::MAX,
+            Some(&side),
+        ) {
+            let x = w - v - 0.5;
+            if x.abs() > e {
+                return x > 0.0;
             }
         }
         w - caps.eval_exact(p, Some(&side)) > 0.5
@@ -947,7 +969,14 @@ impl<'a> Classifier<'a> {
         let p = self.center(o).map(|c| c as f64);
         // Half the diagonal, and a unit for rounded centres (shift < 0).
         let rho = self.to_fixed(o.side() as u64) as f64 * 0.866_025_403_784_438_7 + 1.0;
-        let (v, e) = caps.eval_bounded(p, rho, CAP_NODE_TOLS[0], CAP_REGION_ERR, None)?;
+        let (v, e) = caps.eval_bounded(
+            p,
+            rho,
+            CAP_REGION_BUDGET,
+            CAP_REGION_ERR,
+            CAP_REGION_WORK,
+            None,
+        )?;
         Some((v - e, v + e))
     }
 
@@ -1026,10 +1055,15 @@ impl<'a> Classifier<'a> {
             return;
         }
         assert!(o.level() < MAX_LEVEL, "classify_leaves: the leaves overlap");
-        let interval = if self.caps.is_some() {
-            interval.or_else(|| self.region_interval(o))
-        } else {
-            None
+        // A cap among the candidates is likely to reach the ball around the
+        // octant: do not try for an interval then.
+        let interval = match interval {
+            None if self.caps.is_some()
+                && buf[lo..hi].iter().all(|&t| (t as usize) < self.surface_len) =>
+            {
+                self.region_interval(o)
+            }
+            i => i,
         };
         let bounds = split_by_child(o, leaves);
         let (mut present, mut leafy) = (0u8, 0u8);
@@ -2187,5 +2221,36 @@ mod tests {
         for k in (0..n).step_by(97) {
             assert_eq!(c.classify(&leaves[k..k + 1]), [whole[k]], "{:?}", leaves[k]);
         }
+    }
+
+    #[test]
+    fn winding_on_an_unwelded_soup() {
+        // A sphere whose facets share no vertex (each corner moved by up to
+        // 1e-6): every facet is a component with its own boundary, capped
+        // by a fan of three, and keeps its (outward) orientation. The
+        // cracks are far below the leaves, so the classes are parity's.
+        let s = sphere([0.0; 3], 1.0, 3);
+        let mut k = 0u64;
+        let soup: Vec<Triangle> = s
+            .triangles()
+            .iter()
+            .map(|t| Triangle {
+                v: t.v.map(|p| {
+                    p.map(|c| {
+                        k += 1;
+                        c + 1e-9 * ((k * 2_654_435_761) % 1000) as f64
+                    })
+                }),
+            })
+            .collect();
+        let soup = Surface::new(soup).unwrap();
+        let (_, index) = fitted(&soup);
+        let leaves = leaves_of(&index, 6, true);
+        let c = InsideClassifier::new(&index, InsideRule::Auto);
+        assert_eq!(c.rule(), InsideRule::Winding);
+        let sum = c.summary().unwrap();
+        assert_eq!((sum.components, sum.reversed_facets), (s.len(), 0));
+        assert_eq!(sum.cap_triangles, 3 * s.len());
+        assert_eq!(c.classify(&leaves), classify_leaves(&leaves, &index));
     }
 }

@@ -56,7 +56,8 @@
 //! component connected through manifold edges (exactly two facets) and
 //! flips facets so that the two facets of each such edge traverse it in
 //! opposite directions, then reverses a whole component when its signed
-//! volume about its own centroid is negative. Non-orientable components keep
+//! volume about its own centroid is negative (beyond rounding: a lone facet
+//! or a flat patch keeps its orientation). Non-orientable components keep
 //! the orientation the walk reached; the number of edges left inconsistent is
 //! reported.
 //!
@@ -452,9 +453,13 @@ impl WindingTree {
     /// The winding number near `p` with a guaranteed error: returns `(v,
     /// e)` such that `|w(x) - v| <= e` for every `x` with `|x - p| <= rho`
     /// (up to floating-point rounding), or `None` when a triangle may come
-    /// within `rho` of `p` (the winding number may jump in the ball) or the
-    /// bound exceeds `max_err`. A node is approximated when its share of the
-    /// bound is at most `tol`; triangles of near leaves are summed exactly.
+    /// within `rho` of `p` (the winding number may jump in the ball), the
+    /// bound exceeds `max_err`, or more than `max_work` nodes and triangles
+    /// would be visited. A node is approximated when its part of the
+    /// bound is at most `budget` times its share of the total area, so the
+    /// approximations together err by at most `budget`; triangles of near
+    /// leaves are summed exactly (over a ball, their variation adds to the
+    /// bound).
     ///
     /// `side`, given the index of a triangle (in the slice the tree was
     /// built from), decides on which side of its plane `p` is (true: the
@@ -465,18 +470,25 @@ impl WindingTree {
         &self,
         p: [f64; 3],
         rho: f64,
-        tol: f64,
+        budget: f64,
         max_err: f64,
+        max_work: usize,
         side: Option<&dyn Fn(u32) -> bool>,
     ) -> Option<(f64, f64)> {
         if self.nodes.is_empty() {
             return Some((0.0, 0.0));
         }
+        let per_area = budget / self.nodes[0].area;
+        let mut work = 0usize;
         let mut stack = [0u32; STACK];
         let mut sp = 1;
         let (mut sum, mut err) = (0.0, 0.0);
         while sp > 0 {
             sp -= 1;
+            work += 1 + self.nodes[stack[sp] as usize].count as usize;
+            if work > max_work {
+                return None;
+            }
             let n = &self.nodes[stack[sp] as usize];
             let r = sub(n.center, p);
             let d2 = dot(r, r);
@@ -492,7 +504,7 @@ impl WindingTree {
                 let approx = (self.order + 1) as f64 * n.area * qk / (gap * gap);
                 let g = gap - rho;
                 let e = (approx + 2.0 * n.area * rho / (g * g * g)) / FOUR_PI;
-                if e <= tol {
+                if e <= per_area * n.area {
                     sum += self.far(n, r, d2);
                     err += e;
                     if err > max_err {
@@ -669,7 +681,10 @@ pub(crate) fn orient_welded(tris: &[Triangle], ids: &[[u64; 3]]) -> Orientation 
             }
         })
         .collect();
-    let mut volume = vec![0.0f64; nc];
+    // The volume, and the sum of the magnitudes of its terms: a component
+    // whose volume is zero up to rounding (a lone facet, a flat patch) says
+    // nothing about its orientation and keeps it.
+    let mut volume = vec![(0.0f64, 0.0f64); nc];
     for (i, t) in tris.iter().enumerate() {
         if comp[i] != NONE {
             let c = centroid[comp[i] as usize];
@@ -677,12 +692,18 @@ pub(crate) fn orient_welded(tris: &[Triangle], ids: &[[u64; 3]]) -> Orientation 
             if flipped[i] {
                 std::mem::swap(&mut b, &mut d);
             }
-            volume[comp[i] as usize] += dot(a, cross(b, d));
+            let bd = cross(b, d);
+            let v = &mut volume[comp[i] as usize];
+            v.0 += dot(a, bd);
+            v.1 += norm(a) * norm(bd);
         }
     }
     for i in 0..n {
-        if comp[i] != NONE && volume[comp[i] as usize] < 0.0 {
-            flipped[i] = !flipped[i];
+        if comp[i] != NONE {
+            let (v, magnitude) = volume[comp[i] as usize];
+            if v < -1e-9 * magnitude {
+                flipped[i] = !flipped[i];
+            }
         }
     }
     let reversed_facets = flipped.iter().filter(|&&f| f).count();
@@ -886,7 +907,7 @@ mod tests {
             );
             // The bounded evaluation meets its (pessimistic) bound.
             let (v, e) = tree
-                .eval_bounded(p, 0.0, 1e-5, f64::INFINITY, None)
+                .eval_bounded(p, 0.0, 1e-5, f64::INFINITY, usize::MAX, None)
                 .unwrap();
             assert!((v - want).abs() <= e.min(1e-3), "{p:?}: {v} +- {e}");
             if n_in + n_out < 300 {
@@ -1024,12 +1045,12 @@ mod tests {
         for _ in 0..300 {
             let p = rng.in_box(-2.0, 2.0);
             let (v, e) = tree
-                .eval_bounded(p, 0.0, 1e-3, f64::INFINITY, None)
+                .eval_bounded(p, 0.0, 1e-3, f64::INFINITY, usize::MAX, None)
                 .unwrap();
             assert!((v - winding_number(&tris, p)).abs() <= e, "{p:?}");
             points += 1;
             let rho = 0.2 * rng.unit();
-            if let Some((v, e)) = tree.eval_bounded(p, rho, 1e-3, f64::INFINITY, None) {
+            if let Some((v, e)) = tree.eval_bounded(p, rho, 1e-3, f64::INFINITY, usize::MAX, None) {
                 balls += 1;
                 for _ in 0..5 {
                     let d = rng.in_box(-1.0, 1.0);
@@ -1045,10 +1066,14 @@ mod tests {
         assert!(balls > 100 && points == 300, "{balls}");
         // A ball reaching the surface has no bound.
         assert!(tree
-            .eval_bounded([0.0, 0.0, 0.95], 0.1, 1e-3, f64::INFINITY, None)
+            .eval_bounded([0.0, 0.0, 0.95], 0.1, 1e-3, f64::INFINITY, usize::MAX, None)
             .is_none());
         assert!(tree
-            .eval_bounded([0.0, 0.0, 0.5], 0.2, 1e-3, 1e-9, None)
+            .eval_bounded([0.0, 0.0, 0.5], 0.2, 1e-3, 1e-9, usize::MAX, None)
+            .is_none());
+        // Nor one that needs more work than allowed.
+        assert!(tree
+            .eval_bounded([0.0, 0.0, 0.5], 0.0, 1e-3, 1.0, 3, None)
             .is_none());
     }
 
@@ -1089,6 +1114,38 @@ mod tests {
         assert!(r.closed && r.signed_volume.unwrap() > 0.0, "{r}");
         assert!((winding_number(&fixed, [5.0, 0.1, 0.0]) - 1.0).abs() < 1e-9);
         assert!((winding_number(&fixed, [0.0, 0.1, 0.0]) - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn flat_components_keep_their_orientation() {
+        // Facets sharing no vertex, and a flat square of two facets, facing
+        // either way: nothing to reverse.
+        let s = default_sphere();
+        let mut rng = Rng(8);
+        let lone: Vec<Triangle> = s
+            .triangles()
+            .iter()
+            .step_by(7)
+            .enumerate()
+            .map(|(i, t)| {
+                let v = t.v.map(|p| [p[0] + 3.0 * i as f64, p[1], p[2]]);
+                if rng.next() % 2 == 0 {
+                    Triangle::new(v[0], v[2], v[1])
+                } else {
+                    Triangle { v }
+                }
+            })
+            .collect();
+        let o = orient(&lone);
+        assert_eq!(o.reversed_facets, 0);
+        let (p, q, r, u) = ([0.0; 3], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]);
+        for square in [
+            vec![Triangle::new(p, q, r), Triangle::new(p, r, u)],
+            vec![Triangle::new(p, r, q), Triangle::new(p, u, r)],
+        ] {
+            let o = orient(&square);
+            assert_eq!((o.components, o.reversed_facets), (1, 0));
+        }
     }
 
     #[test]
@@ -1202,7 +1259,7 @@ mod tests {
         assert!(empty.is_empty());
         assert_eq!(empty.eval([0.0; 3]), 0.0);
         assert_eq!(
-            empty.eval_bounded([0.0; 3], 1.0, 1e-3, 1.0, None),
+            empty.eval_bounded([0.0; 3], 1.0, 1e-3, 1.0, 0, None),
             Some((0.0, 0.0))
         );
         let t = Triangle::new([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
