@@ -38,6 +38,9 @@ module octmesh
   ! Cut leaves (octmesh_cut_rule).
   integer(c_int32_t), parameter, public :: OCTMESH_CUT_RULE_CENTER = 0, &
        OCTMESH_CUT_RULE_ALL = 1, OCTMESH_CUT_RULE_NONE = 2
+  ! Inside rules (octmesh_inside_rule).
+  integer(c_int32_t), parameter, public :: OCTMESH_INSIDE_RULE_AUTO = 0, &
+       OCTMESH_INSIDE_RULE_PARITY = 1, OCTMESH_INSIDE_RULE_WINDING = 2
   ! Element classes (octmesh_class).
   integer(c_int8_t), parameter, public :: OCTMESH_CLASS_OUTSIDE = 0, &
        OCTMESH_CLASS_INSIDE = 1, OCTMESH_CLASS_CUT = 2
@@ -70,6 +73,7 @@ module octmesh
   public :: octmesh_refine_surface, octmesh_refine_callback, octmesh_balance, octmesh_partition
   public :: octmesh_get_num_leaves, octmesh_get_leaves, octmesh_check_leak
   public :: octmesh_mesh, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
+  public :: octmesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
@@ -124,6 +128,20 @@ module octmesh
        real(c_double), intent(in) :: point(3)
        integer(c_int) :: octmesh_check_leak
      end function octmesh_check_leak
+
+     function octmesh_set_inside_rule(h, rule) bind(c, name="octmesh_set_inside_rule")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: rule
+       integer(c_int) :: octmesh_set_inside_rule
+     end function octmesh_set_inside_rule
+
+     function octmesh_mesh_get_inside_rule(h, rule) bind(c, name="octmesh_mesh_get_inside_rule")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), intent(out) :: rule
+       integer(c_int) :: octmesh_mesh_get_inside_rule
+     end function octmesh_mesh_get_inside_rule
 
      function octmesh_get_domain(h, origin, side) bind(c, name="octmesh_get_domain")
        import :: c_ptr, c_double, c_int

@@ -123,6 +123,29 @@ typedef enum {
 } octmesh_cut_rule;
 
 /**
+ * How a leaf's centre is found inside the surface when meshing (values of
+ * `octmesh_inside_rule_t`, set by `octmesh_set_inside_rule`).
+ */
+typedef enum {
+  /**
+   * Parity for a surface made of one closed, consistently oriented
+   * component, winding number otherwise (the default).
+   */
+  OCTMESH_INSIDE_RULE_AUTO = 0,
+  /**
+   * Parity of surface crossings along a ray: exact for one closed surface,
+   * the exclusive or of overlapping parts, unreliable near holes.
+   */
+  OCTMESH_INSIDE_RULE_PARITY = 1,
+  /**
+   * Generalized winding number above 1/2, after orienting each component:
+   * the union of overlapping parts, holes closed smoothly, reversed
+   * facets repaired.
+   */
+  OCTMESH_INSIDE_RULE_WINDING = 2,
+} octmesh_inside_rule;
+
+/**
  * Class of an element, as stored in the array of
  * `octmesh_mesh_get_element_class`.
  */
@@ -182,6 +205,11 @@ typedef int32_t octmesh_keep_t;
  * One of the `octmesh_cut_rule` constants.
  */
 typedef int32_t octmesh_cut_rule_t;
+
+/**
+ * One of the `octmesh_inside_rule` constants.
+ */
+typedef int32_t octmesh_inside_rule_t;
 
 /**
  * Sizes of the mesh: this rank's part and global totals (the same on
@@ -337,12 +365,30 @@ octmesh_status_t octmesh_get_domain(const octmesh_t *h, double *origin, double *
 /**
  * Builds the mesh of the octree, replacing any previous one. `keep` (one
  * of `octmesh_keep`) selects the elements among the leaves, classified
- * against the surface; without a surface only `OCTMESH_KEEP_ALL` is
- * allowed. `rule` (one of `octmesh_cut_rule`) decides for leaves
- * touching the surface. The octree must be balanced for edge or corner
- * contacts (`octmesh_balance`). Collective.
+ * against the surface (by the rule of `octmesh_set_inside_rule`); without
+ * a surface only `OCTMESH_KEEP_ALL` is allowed. `rule` (one of
+ * `octmesh_cut_rule`) decides for leaves touching the surface. The octree
+ * must be balanced for edge or corner contacts (`octmesh_balance`).
+ * Collective.
  */
 octmesh_status_t octmesh_mesh(octmesh_t *h, octmesh_keep_t keep, octmesh_cut_rule_t rule);
+
+/**
+ * Sets how the following `octmesh_mesh` calls decide whether a leaf's
+ * centre is inside the surface: one of `octmesh_inside_rule`
+ * (`OCTMESH_INSIDE_RULE_AUTO` until set). Every rank must pass the same
+ * rule. The current mesh is kept. Collective.
+ */
+octmesh_status_t octmesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_t rule);
+
+/**
+ * Writes to `*out` the rule the current mesh was classified with:
+ * `OCTMESH_INSIDE_RULE_PARITY` or `OCTMESH_INSIDE_RULE_WINDING` (what
+ * `OCTMESH_INSIDE_RULE_AUTO` chose), or `OCTMESH_INSIDE_RULE_AUTO` when it
+ * was built without a surface (nothing classified). Needs a mesh. Not
+ * collective.
+ */
+octmesh_status_t octmesh_mesh_get_inside_rule(const octmesh_t *h, octmesh_inside_rule_t *out);
 
 /**
  * Writes the mesh sizes to `*out`. Needs a mesh. Not collective.

@@ -139,6 +139,16 @@ class Mesher {
             octmesh_cut_rule_t rule = OCTMESH_CUT_RULE_CENTER) {
     detail::check(octmesh_mesh(h_, keep, rule), h_, "octmesh_mesh");
   }
+  /// How the next meshes find leaf centres inside (octmesh_inside_rule).
+  void set_inside_rule(octmesh_inside_rule_t rule) {
+    detail::check(octmesh_set_inside_rule(h_, rule), h_, "octmesh_set_inside_rule");
+  }
+  /// The rule the current mesh was classified with.
+  octmesh_inside_rule_t inside_rule() const {
+    octmesh_inside_rule_t r = OCTMESH_INSIDE_RULE_AUTO;
+    detail::check(octmesh_mesh_get_inside_rule(h_, &r), h_, "octmesh_mesh_get_inside_rule");
+    return r;
+  }
   octmesh_mesh_counts_t counts() const {
     octmesh_mesh_counts_t c;
     detail::check(octmesh_mesh_get_counts(h_, &c), h_, "octmesh_mesh_get_counts");

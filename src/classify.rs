@@ -1,4 +1,4 @@
-//! Inside/outside classification of leaves against a closed surface.
+//! Inside/outside classification of leaves against a surface.
 //!
 //! Every leaf gets a class byte made of two bits:
 //!
@@ -6,8 +6,9 @@
 //!   rule refinement uses ([`triangle_box_overlap`] on closed sets, as
 //!   [`SurfaceIndex::touches`]); contact at a face, edge or corner counts.
 //! * [`CENTER_INSIDE`]: the leaf's centre lies inside the surface, decided
-//!   by the parity of the number of surface crossings along a segment from a
-//!   point known to be outside.
+//!   by an [`InsideRule`]: the parity of the number of surface crossings
+//!   along a segment from a point known to be outside, or the generalized
+//!   winding number above 1/2 (see "Winding number" below).
 //!
 //! [`LeafClass`] names the three combinations that matter, and [`keeps`]
 //! turns the bits into the decision "is this element in the mesh" for a
@@ -89,16 +90,64 @@
 //! crossing test for children whose centre is clearly on the parent centre's
 //! side.
 //!
-//! The surface is expected to be closed (every edge shared by an even number
-//! of triangles). For an open surface the classification is still
+//! Parity expects a closed surface (every edge shared by an even number of
+//! triangles). For an open surface the classification is still
 //! deterministic and rank-independent, but meaningless near the holes. A
 //! surface reaching more than about `2^20` domain sides away needs `k < 0`:
 //! centres are then rounded too, which keeps the result deterministic and
 //! rank-independent but no longer exact for leaves next to the surface.
+//!
+//! # Winding number
+//!
+//! Under [`InsideRule::Winding`] a centre is inside when the generalized
+//! winding number `w` of the surface ([`crate::geometry::winding`]) is
+//! above 1/2: overlapping closed parts give their union, holes are closed
+//! smoothly. The surface is first oriented: every component connected
+//! through manifold edges consistently, then outward (positive volume about
+//! its centroid). Evaluating `w` at every leaf would cost a tree traversal
+//! per leaf; instead `w` is split into an exact integer part and a small
+//! smooth part:
+//!
+//! * the boundary of the oriented surface, as a chain of directed edges, is
+//!   split into loops, and each loop is closed by a fan of *cap* triangles
+//!   from the mean of its vertices (in fixed point, after rounding, so that
+//!   the rounded surface plus the caps has no boundary at all);
+//! * the surface plus the caps is closed, so its winding number at a point
+//!   is the signed number of times a path from outside crosses it: +1 when
+//!   entering a triangle from its positive side. That count is carried down
+//!   the tree exactly like the parity (same segments, same candidates, same
+//!   exact predicates and perturbation, caps included as candidates but
+//!   never making a leaf cut), with the sign of each crossing;
+//! * `w = count - w_caps`. The caps are usually few (one fan per hole; none
+//!   for a closed surface, where `w` is the count itself; three per facet
+//!   for a soup without shared vertices). A centre is decided by Barill et
+//!   al.'s estimate of `w_caps` ([`WindingTree::eval`], beta 2, third
+//!   order) when it puts `w` more than 0.05 from 1/2, ten
+//!   times the largest error measured for that setting; closer ones by
+//!   [`WindingTree::eval_bounded`], whose error is guaranteed, and if that
+//!   cannot tell, by summing the caps exactly. Near a cap, where the
+//!   floating-point numerator of a solid angle is within its rounding error
+//!   of zero, its sign is taken from the exact predicate (with the
+//!   perturbation), so the jump of `w_caps` across a cap is exactly where
+//!   the count jumps.
+//!
+//! Coherence: at every octant on the way down without a cap among its
+//! candidates (and before it has one) the walk asks for a guaranteed bound
+//! of `w_caps` over the ball around the octant; when no cap comes near, the
+//! interval is passed to all descendants, and a leaf whose
+//! count puts `count - w_caps` on one side of 1/2 for the whole interval is
+//! decided without evaluating anything; a subtree without candidate
+//! triangles is filled at once. Every decision depends on the leaf and its
+//! ancestors only, so the classes are the same on any number of ranks.
+
+use std::borrow::Cow;
+use std::collections::HashMap;
 
 use crate::error::{Error, Result};
+use crate::geometry::diagnostics::{diagnose, weld, SurfaceReport};
 use crate::geometry::intersect::triangle_box_overlap;
-use crate::geometry::Triangle;
+use crate::geometry::winding::{boundary_loops, orient_welded, WindingTree};
+use crate::geometry::{Surface, Triangle};
 use crate::octant::{Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
 use crate::refine::SurfaceIndex;
 
@@ -212,6 +261,102 @@ impl CutRule {
     }
 }
 
+/// How the centre of a leaf is found inside or outside the surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum InsideRule {
+    /// Parity of surface crossings: exact for one closed surface (of any
+    /// genus or orientation), the exclusive or of several overlapping ones,
+    /// meaningless near holes.
+    Parity,
+    /// Generalized winding number above 1/2, after orienting every
+    /// component: the union of overlapping parts, holes closed smoothly.
+    Winding,
+    /// Parity for one closed, consistently oriented component, winding
+    /// number otherwise (the default).
+    #[default]
+    Auto,
+}
+
+impl InsideRule {
+    /// Parses `parity`, `winding` or `auto`.
+    pub fn parse(s: &str) -> Result<InsideRule> {
+        match s {
+            "parity" => Ok(InsideRule::Parity),
+            "winding" => Ok(InsideRule::Winding),
+            "auto" => Ok(InsideRule::Auto),
+            _ => Err(Error::invalid(format!(
+                "unknown inside rule '{s}' (expected parity, winding or auto)"
+            ))),
+        }
+    }
+
+    /// The lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            InsideRule::Parity => "parity",
+            InsideRule::Winding => "winding",
+            InsideRule::Auto => "auto",
+        }
+    }
+
+    /// The rule [`InsideRule::Auto`] picks for a surface with this report,
+    /// and why: parity for one closed (no boundary, non-manifold or
+    /// inconsistently oriented edge, no degenerate facet), single component,
+    /// winding otherwise, since parts may overlap and holes leak.
+    pub fn auto_choice(report: &SurfaceReport) -> (InsideRule, String) {
+        if report.closed && report.components == 1 {
+            return (
+                InsideRule::Parity,
+                "one closed, consistently oriented component".to_string(),
+            );
+        }
+        let mut why = Vec::new();
+        if report.boundary_edges > 0 {
+            why.push(format!("{} boundary edges", report.boundary_edges));
+        }
+        if report.non_manifold_edges > 0 {
+            why.push(format!("{} non-manifold edges", report.non_manifold_edges));
+        }
+        if report.inconsistently_oriented_edges > 0 {
+            why.push(format!(
+                "{} inconsistently oriented edges",
+                report.inconsistently_oriented_edges
+            ));
+        }
+        if report.degenerate > 0 {
+            why.push(format!("{} degenerate facets", report.degenerate));
+        }
+        if report.components != 1 {
+            why.push(format!("{} components", report.components));
+        }
+        (InsideRule::Winding, why.join(", "))
+    }
+
+    /// The rule itself, or for [`InsideRule::Auto`] the choice of
+    /// [`InsideRule::auto_choice`] (computed only then).
+    pub fn resolve(self, report: impl FnOnce() -> SurfaceReport) -> InsideRule {
+        match self {
+            InsideRule::Auto => InsideRule::auto_choice(&report()).0,
+            r => r,
+        }
+    }
+}
+
+/// What the winding-number rule did to the surface before classifying.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct WindingSummary {
+    /// Components connected through manifold edges.
+    pub components: usize,
+    /// Facets reversed to orient the components consistently and outward.
+    pub reversed_facets: usize,
+    /// Manifold edges left inconsistent (non-orientable components).
+    pub conflicting_edges: usize,
+    /// Loops of the boundary (holes), each closed by a cap.
+    pub boundary_loops: usize,
+    /// Triangles of those caps.
+    pub cap_triangles: usize,
+}
+
 /// Whether a leaf with class byte `bits` is kept. [`Keep::All`] keeps
 /// everything; [`Keep::Inside`] keeps non-cut leaves whose centre is inside
 /// and [`Keep::Outside`] those whose centre is outside; cut leaves follow
@@ -233,46 +378,105 @@ pub fn keeps(keep: Keep, rule: CutRule, bits: u8) -> bool {
     }
 }
 
-/// Class byte of every leaf (bits [`CENTER_INSIDE`] | [`CUT`]), for a
-/// sorted run of disjoint leaves (one rank's part of a linear octree; it
-/// need not be complete). The result depends on each leaf and the surface
-/// only, not on which other leaves are in the slice. Not collective.
+/// Class byte of every leaf (bits [`CENTER_INSIDE`] | [`CUT`]) by ray
+/// parity, for a sorted run of disjoint leaves (one rank's part of a linear
+/// octree; it need not be complete). The result depends on each leaf and the
+/// surface only, not on which other leaves are in the slice. Not collective.
 ///
 /// # Panics
 /// If some leaves overlap (and, in debug builds, if they are not sorted).
 pub fn classify_leaves(leaves: &[Octant], index: &SurfaceIndex) -> Vec<u8> {
-    debug_assert!(
-        leaves
-            .windows(2)
-            .all(|w| w[0].cell_end() <= w[1].cell_begin()),
-        "leaves must be sorted and disjoint"
-    );
-    let mut out = vec![0u8; leaves.len()];
-    if leaves.is_empty() {
-        return out;
+    InsideClassifier::new(index, InsideRule::Parity).classify(leaves)
+}
+
+/// [`classify_leaves`] under `rule` ([`InsideRule::Auto`] diagnoses the
+/// surface in lattice units first). Not collective.
+pub fn classify_leaves_with(leaves: &[Octant], index: &SurfaceIndex, rule: InsideRule) -> Vec<u8> {
+    InsideClassifier::new(index, rule).classify(leaves)
+}
+
+/// A surface prepared for classification under an [`InsideRule`]: built
+/// once, it classifies any number of runs of leaves.
+///
+/// Under [`InsideRule::Winding`] the surface is first oriented (see
+/// [`crate::geometry::winding::orient`]) and its boundary closed by caps;
+/// the winding number at a leaf centre is then the signed count of
+/// crossings of the closed surface (exact, carried down the tree like the
+/// parity) minus the caps' winding number (a small soup, evaluated with a
+/// guaranteed error). See the module documentation.
+pub struct InsideClassifier<'a> {
+    c: Classifier<'a>,
+    rule: InsideRule,
+}
+
+impl<'a> InsideClassifier<'a> {
+    /// Prepares `index` for `rule`; [`InsideRule::Auto`] is resolved by
+    /// diagnosing the triangles (in lattice units) with
+    /// [`InsideRule::auto_choice`].
+    pub fn new(index: &'a SurfaceIndex, rule: InsideRule) -> InsideClassifier<'a> {
+        let rule = match rule {
+            InsideRule::Auto => match Surface::new(index.triangles().to_vec()) {
+                Ok(s) => InsideRule::auto_choice(&diagnose(&s)).0,
+                Err(_) => InsideRule::Winding,
+            },
+            r => r,
+        };
+        InsideClassifier {
+            c: Classifier::new(index, rule == InsideRule::Winding),
+            rule,
+        }
     }
-    let c = Classifier::new(index);
-    let root_inside = c.root_center_inside();
-    // Candidates of the root: whatever may touch its grown box.
-    let g = c.grow;
-    let lo = [-g; 3];
-    let hi = [ROOT_LEN as f64 + g; 3];
-    let mut buf: Vec<u32> = (0..c.tris.len() as u32)
-        .filter(|&t| triangle_box_overlap(&c.tris[t as usize], lo, hi))
-        .collect();
-    let n = buf.len();
-    let mut masks = Vec::new();
-    c.walk(
-        Octant::ROOT,
-        root_inside,
-        0,
-        n,
-        leaves,
-        &mut out,
-        &mut buf,
-        &mut masks,
-    );
-    out
+
+    /// The rule in use ([`InsideRule::Parity`] or [`InsideRule::Winding`]).
+    pub fn rule(&self) -> InsideRule {
+        self.rule
+    }
+
+    /// For the winding rule, what was done to the surface.
+    pub fn summary(&self) -> Option<&WindingSummary> {
+        self.c.summary.as_ref()
+    }
+
+    /// Class byte of every leaf, as [`classify_leaves`]: the result depends
+    /// on each leaf and the surface only. Not collective.
+    ///
+    /// # Panics
+    /// If some leaves overlap (and, in debug builds, if they are not sorted).
+    pub fn classify(&self, leaves: &[Octant]) -> Vec<u8> {
+        debug_assert!(
+            leaves
+                .windows(2)
+                .all(|w| w[0].cell_end() <= w[1].cell_begin()),
+            "leaves must be sorted and disjoint"
+        );
+        let mut out = vec![0u8; leaves.len()];
+        if leaves.is_empty() {
+            return out;
+        }
+        let c = &self.c;
+        let root_count = c.root_count();
+        // Candidates of the root: whatever may touch its grown box.
+        let g = c.grow;
+        let lo = [-g; 3];
+        let hi = [ROOT_LEN as f64 + g; 3];
+        let mut buf: Vec<u32> = (0..c.tris.len() as u32)
+            .filter(|&t| triangle_box_overlap(&c.tris[t as usize], lo, hi))
+            .collect();
+        let n = buf.len();
+        let mut masks = Vec::new();
+        c.walk(
+            Octant::ROOT,
+            root_count,
+            None,
+            0,
+            n,
+            leaves,
+            &mut out,
+            &mut buf,
+            &mut masks,
+        );
+        out
+    }
 }
 
 /// A triangle rounded to fixed point.
@@ -285,10 +489,33 @@ struct FixedTri {
     nsign: i8,
 }
 
+impl FixedTri {
+    fn new(v: [[i64; 3]; 3]) -> FixedTri {
+        let n = normal(&v);
+        let nsign = n.iter().find(|&&c| c != 0).map_or(0, |&c| c.signum() as i8);
+        FixedTri { v, nsign }
+    }
+
+    /// Whether `p` (perturbed) is on the side the normal points to.
+    #[inline]
+    fn positive_side(&self, p: [i64; 3]) -> bool {
+        let o = dot(normal(&self.v), sub(p, self.v[0]));
+        if o != 0 {
+            o > 0
+        } else {
+            self.nsign > 0
+        }
+    }
+}
+
 /// The surface prepared for classification.
 struct Classifier<'a> {
-    /// Triangles in lattice units (for the touching tests).
-    tris: &'a [Triangle],
+    /// Triangles in lattice units (for the touching tests): the surface's
+    /// `surface_len` first (oriented for the winding rule), then the caps.
+    tris: Cow<'a, [Triangle]>,
+    /// Triangles `0..surface_len` are the surface; the others are caps,
+    /// which count for crossings but never make a leaf cut.
+    surface_len: usize,
     /// Their normals `(v1 - v0) x (v2 - v1)`, in floating point.
     normals: Vec<[f64; 3]>,
     /// The same triangles in fixed point.
@@ -300,7 +527,32 @@ struct Classifier<'a> {
     /// Largest absolute coordinate of the triangles and the lattice: scales
     /// the floating-point error bounds.
     big: f64,
+    /// Winding rule (else parity).
+    winding: bool,
+    /// The caps with positive area in fixed-point units, their tree ids
+    /// indexing `cap_ids`; `None` when the surface has no boundary.
+    caps: Option<WindingTree>,
+    /// Index in `fixed` of each triangle of `caps`.
+    cap_ids: Vec<u32>,
+    summary: Option<WindingSummary>,
 }
+
+/// Margin by which Barill et al.'s estimate of the caps' winding number
+/// (beta 2, third order) must put a centre away from 1/2 to decide it: ten
+/// times the largest error measured for that setting (5e-3, see the tests
+/// of [`crate::geometry::winding`]).
+const CAP_ESTIMATE_MARGIN: f64 = 0.05;
+/// Error budget of the bounded evaluation for centres within the margin
+/// (then the caps are summed exactly).
+const CAP_POINT_BUDGET: f64 = 1e-3;
+/// The same for a region.
+const CAP_REGION_BUDGET: f64 = 0.1;
+/// Nodes and triangles a region's bound may visit: a bound that needs more
+/// (a region near many caps) would cost more than it saves.
+const CAP_REGION_WORK: usize = 512;
+/// Largest error of a region's bound on the caps' winding number for it to
+/// be kept: wider intervals rarely decide a leaf.
+const CAP_REGION_ERR: f64 = 0.25;
 
 /// Child masks: children whose bit `k` is set (`POS[k]`) or clear (`NEG[k]`).
 const POS: [u8; 3] = [0b1010_1010, 0b1100_1100, 0b1111_0000];
@@ -327,12 +579,21 @@ struct ChildMasks {
 }
 
 impl<'a> Classifier<'a> {
-    fn new(index: &'a SurfaceIndex) -> Classifier<'a> {
-        let tris = index.triangles();
+    fn new(index: &'a SurfaceIndex, winding: bool) -> Classifier<'a> {
+        let surface = index.triangles();
+        // Orientation first: it only swaps vertices, so the box tests and
+        // the fixed-point range are those of the input.
+        let (tris, ids, orientation) = if winding {
+            let (ids, _) = weld(surface);
+            let o = orient_welded(surface, &ids);
+            (Cow::Owned(o.apply(surface)), ids, Some(o))
+        } else {
+            (Cow::Borrowed(surface), Vec::new(), None)
+        };
         // The largest coordinate to represent: the lattice and every finite
         // vertex.
         let mut big = ROOT_LEN as f64;
-        for t in tris {
+        for t in tris.iter() {
             for c in t.v.iter().flatten() {
                 if c.is_finite() {
                     big = big.max(c.abs());
@@ -346,7 +607,8 @@ impl<'a> Classifier<'a> {
             shift -= 1;
         }
         let scale = 2f64.powi(shift);
-        let fixed = tris
+        let round = |p: [f64; 3]| p.map(|c| (c * scale).round() as i64);
+        let mut fixed: Vec<FixedTri> = tris
             .iter()
             .map(|t| {
                 if !t.is_finite() {
@@ -355,12 +617,61 @@ impl<'a> Classifier<'a> {
                         nsign: 0,
                     };
                 }
-                let v = t.v.map(|p| p.map(|c| (c * scale).round() as i64));
-                let n = normal(&v);
-                let nsign = n.iter().find(|&&c| c != 0).map_or(0, |&c| c.signum() as i8);
-                FixedTri { v, nsign }
+                FixedTri::new(t.v.map(round))
             })
             .collect();
+        let surface_len = tris.len();
+        let mut tris = tris;
+        let (mut caps, mut cap_ids, mut summary) = (None, Vec::new(), None);
+        if let Some(o) = orientation {
+            // Close every boundary loop with a fan from the mean of its
+            // rounded vertices, so that the rounded surface plus the caps
+            // has no boundary. The apex gets odd coordinates: centres are
+            // even (shift >= 1), so no centre is ever a cap's vertex.
+            let mut pos = HashMap::new();
+            for (t, f) in fixed.iter().zip(&ids) {
+                for (&id, &v) in f.iter().zip(&t.v) {
+                    pos.insert(id, v);
+                }
+            }
+            let loops = boundary_loops(&ids, &o.flipped);
+            let mut cap_tris = Vec::new();
+            let mut owned = tris.into_owned();
+            for lp in &loops {
+                let mut sum = [0i128; 3];
+                for u in lp {
+                    for k in 0..3 {
+                        sum[k] += pos[u][k] as i128;
+                    }
+                }
+                let z = sum.map(|c| (c.div_euclid(lp.len() as i128) as i64) | 1);
+                for i in 0..lp.len() {
+                    let (u, v) = (pos[&lp[i]], pos[&lp[(i + 1) % lp.len()]]);
+                    let ft = FixedTri::new([v, u, z]);
+                    if ft.nsign != 0 {
+                        cap_ids.push(fixed.len() as u32);
+                        cap_tris.push(Triangle {
+                            v: ft.v.map(|p| p.map(|c| c as f64)),
+                        });
+                    }
+                    fixed.push(ft);
+                    owned.push(Triangle {
+                        v: [v, u, z].map(|p| p.map(|c| c as f64 / scale)),
+                    });
+                }
+            }
+            tris = Cow::Owned(owned);
+            summary = Some(WindingSummary {
+                components: o.components,
+                reversed_facets: o.reversed_facets,
+                conflicting_edges: o.conflicting_edges,
+                boundary_loops: loops.len(),
+                cap_triangles: fixed.len() - surface_len,
+            });
+            if !cap_tris.is_empty() {
+                caps = Some(WindingTree::new(&cap_tris));
+            }
+        }
         let normals = tris
             .iter()
             .map(|t| {
@@ -376,6 +687,7 @@ impl<'a> Classifier<'a> {
             .collect();
         Classifier {
             tris,
+            surface_len,
             normals,
             fixed,
             shift,
@@ -383,6 +695,10 @@ impl<'a> Classifier<'a> {
             // leave room for the floating-point error of the box test.
             grow: 4.0 / scale,
             big,
+            winding,
+            caps,
+            cap_ids,
+            summary,
         }
     }
 
@@ -579,9 +895,10 @@ impl<'a> Classifier<'a> {
         }
     }
 
-    /// Whether the root's centre is inside: parity along a segment to a
-    /// point beyond every vertex in `+x`, over all triangles.
-    fn root_center_inside(&self) -> bool {
+    /// Signed count of surface crossings from a point beyond every vertex
+    /// in `+x` (where the winding number is 0) to the root's centre, over
+    /// all triangles: +1 for each entered from its positive side.
+    fn root_count(&self) -> i32 {
         let p = self.center(Octant::ROOT);
         let far_x = self
             .fixed
@@ -591,23 +908,129 @@ impl<'a> Classifier<'a> {
             .fold(p[0], i64::max)
             + 1;
         let q = [far_x, p[1], p[2]];
-        let mut inside = false;
+        let mut count = 0;
         for t in &self.fixed {
             if t.nsign != 0 && crosses(p, q, t) {
-                inside = !inside;
+                count += if t.positive_side(q) { 1 } else { -1 };
             }
         }
-        inside
+        count
     }
 
-    /// Classifies `leaves` (all inside `o`, written to `out`), given whether
-    /// the centre of `o` is inside and its candidate triangles
+    /// Whether the centre of `o` is inside, given the signed crossing count
+    /// `count` there and, under the winding rule with caps, an interval
+    /// holding the caps' winding number over a ball around `o`.
+    fn inside(&self, o: Octant, count: i32, interval: Option<(f64, f64)>) -> bool {
+        if !self.winding {
+            return count & 1 != 0;
+        }
+        let Some(caps) = &self.caps else {
+            // No boundary: the winding number is the count.
+            return count >= 1;
+        };
+        let w = count as f64;
+        if let Some((lo, hi)) = interval {
+            if w - hi > 0.5 {
+                return true;
+            }
+            if w - lo <= 0.5 {
+                return false;
+            }
+        }
+        let pf = self.center(o);
+        let p = pf.map(|c| c as f64);
+        // The jump across a cap goes where the exact crossing test puts it.
+        let side = |id: u32| !self.fixed[self.cap_ids[id as usize] as usize].positive_side(pf);
+        let x = w - caps.eval(p) - 0.5;
+        if x.abs() > CAP_ESTIMATE_MARGIN {
+            return x > 0.0;
+        }
+        if let Some((v, e)) = caps.eval_bounded(
+            p,
+            0.0,
+            CAP_POINT_BUDGET,
+            f64::INFINITY,
+            usize::MAX,
+            Some(&side),
+        ) {
+            let x = w - v - 0.5;
+            if x.abs() > e {
+                return x > 0.0;
+            }
+        }
+        w - caps.eval_exact(p, Some(&side)) > 0.5
+    }
+
+    /// An interval holding the caps' winding number over the ball around
+    /// `o` (under the winding rule with caps), if no cap comes near and it
+    /// is narrow enough to be worth passing down.
+    fn region_interval(&self, o: Octant) -> Option<(f64, f64)> {
+        let caps = self.caps.as_ref()?;
+        let p = self.center(o).map(|c| c as f64);
+        // Half the diagonal, and a unit for rounded centres (shift < 0).
+        let rho = self.to_fixed(o.side() as u64) as f64 * 0.866_025_403_784_438_7 + 1.0;
+        let (v, e) = caps.eval_bounded(
+            p,
+            rho,
+            CAP_REGION_BUDGET,
+            CAP_REGION_ERR,
+            CAP_REGION_WORK,
+            None,
+        )?;
+        Some((v - e, v + e))
+    }
+
+    /// Classifies `leaves` (all inside `o`, none touching the surface or a
+    /// cap, so that the count is `count` at every centre).
+    fn fill_uncut(
+        &self,
+        o: Octant,
+        count: i32,
+        interval: Option<(f64, f64)>,
+        leaves: &[Octant],
+        out: &mut [u8],
+    ) {
+        if self.caps.is_none() || !self.winding {
+            out.fill(self.inside(o, count, None) as u8);
+            return;
+        }
+        if leaves.len() == 1 && leaves[0] == o {
+            out[0] = self.inside(o, count, interval) as u8;
+            return;
+        }
+        let interval = interval.or_else(|| self.region_interval(o));
+        if let Some((lo, hi)) = interval {
+            let w = count as f64;
+            if w - hi > 0.5 || w - lo <= 0.5 {
+                out.fill((w - hi > 0.5) as u8);
+                return;
+            }
+        }
+        let bounds = split_by_child(o, leaves);
+        for i in 0..8 {
+            let (b, e) = (bounds[i], bounds[i + 1]);
+            if b < e {
+                self.fill_uncut(
+                    o.child(i as u32),
+                    count,
+                    interval,
+                    &leaves[b..e],
+                    &mut out[b..e],
+                );
+            }
+        }
+    }
+
+    /// Classifies `leaves` (all inside `o`, written to `out`), given the
+    /// signed crossing count at the centre of `o`, the caps' interval
+    /// inherited from an ancestor, and the candidate triangles
     /// `buf[lo..hi]`. `masks` is scratch space used as a stack.
     #[allow(clippy::too_many_arguments)]
     fn walk(
         &self,
         o: Octant,
-        inside: bool,
+        count: i32,
+        interval: Option<(f64, f64)>,
         lo: usize,
         hi: usize,
         leaves: &[Octant],
@@ -618,18 +1041,30 @@ impl<'a> Classifier<'a> {
         if lo == hi {
             // Nothing near: no leaf below is cut, and no segment below
             // crosses anything.
-            out.fill(inside as u8);
+            self.fill_uncut(o, count, interval, leaves, out);
             return;
         }
         if leaves[0] == o {
             // Only the root gets here; other leaves are done by their parent.
             assert_eq!(leaves.len(), 1, "classify_leaves: the leaves overlap");
             let (blo, bhi) = o.bounds_f64();
-            let cut = buf[lo..hi].iter().any(|&t| self.touches(t, blo, bhi));
-            out[0] = inside as u8 | if cut { CUT } else { 0 };
+            let cut = buf[lo..hi]
+                .iter()
+                .any(|&t| (t as usize) < self.surface_len && self.touches(t, blo, bhi));
+            out[0] = self.inside(o, count, interval) as u8 | if cut { CUT } else { 0 };
             return;
         }
         assert!(o.level() < MAX_LEVEL, "classify_leaves: the leaves overlap");
+        // A cap among the candidates is likely to reach the ball around the
+        // octant: do not try for an interval then.
+        let interval = match interval {
+            None if self.caps.is_some()
+                && buf[lo..hi].iter().all(|&t| (t as usize) < self.surface_len) =>
+            {
+                self.region_interval(o)
+            }
+            i => i,
+        };
         let bounds = split_by_child(o, leaves);
         let (mut present, mut leafy) = (0u8, 0u8);
         for i in 0..8 {
@@ -647,19 +1082,28 @@ impl<'a> Classifier<'a> {
         let p = self.center(o);
         let h = self.to_fixed((o.side() / 4) as u64);
         let mstart = masks.len();
-        let mut flips = 0u8;
+        let mut counts = [0i32; 8];
         // Leaf children certainly cut so far need no more box verdicts.
         let mut touched = 0u8;
         for &t in &buf[lo..hi] {
-            let m = self.child_masks(t, center, side, present, leafy & !touched);
-            touched |= m.touch;
+            let surface = (t as usize) < self.surface_len;
+            let decide = if surface { leafy & !touched } else { 0 };
+            let m = self.child_masks(t, center, side, present, decide);
+            if surface {
+                touched |= m.touch;
+            }
             masks.push(m);
             // Only a triangle near the child can cross the segment from the
             // parent's centre (a corner of the child) to the child's centre.
             let cross = m.near & m.plane;
             let ft = &self.fixed[t as usize];
             if cross != 0 && ft.nsign != 0 {
-                flips ^= self.crossings(o, p, h, ft, cross);
+                let (mut hit, entering) = self.crossings(o, p, h, ft, cross);
+                let d = if entering { 1 } else { -1 };
+                while hit != 0 {
+                    counts[hit.trailing_zeros() as usize] += d;
+                    hit &= hit - 1;
+                }
             }
         }
         for i in 0..8u32 {
@@ -668,7 +1112,7 @@ impl<'a> Classifier<'a> {
             }
             let bit = 1u8 << i;
             let c = o.child(i);
-            let ins = inside ^ (flips & bit != 0);
+            let n = count + counts[i as usize];
             let (b, e) = (bounds[i as usize], bounds[i as usize + 1]);
             if leafy & bit != 0 {
                 let mut cut = touched & bit != 0;
@@ -683,7 +1127,7 @@ impl<'a> Classifier<'a> {
                         masks[mstart + j - lo].unsure & bit != 0 && self.touches(buf[j], cmin, cmax)
                     });
                 }
-                out[b] = ins as u8 | if cut { CUT } else { 0 };
+                out[b] = self.inside(c, n, interval) as u8 | if cut { CUT } else { 0 };
                 continue;
             }
             let start = buf.len();
@@ -696,7 +1140,8 @@ impl<'a> Classifier<'a> {
             let end = buf.len();
             self.walk(
                 c,
-                ins,
+                n,
+                interval,
                 start,
                 end,
                 &leaves[b..e],
@@ -710,9 +1155,11 @@ impl<'a> Classifier<'a> {
     }
 
     /// Mask of the children in `mask` whose segment from the centre `p` of
-    /// `o` to their own centre (offset `h` per axis) crosses `t`.
+    /// `o` to their own centre (offset `h` per axis) crosses `t`, and
+    /// whether `p` is on the positive side of `t` (the segments then enter
+    /// the surface there).
     #[inline]
-    fn crossings(&self, o: Octant, p: [i64; 3], h: i64, t: &FixedTri, mask: u8) -> u8 {
+    fn crossings(&self, o: Octant, p: [i64; 3], h: i64, t: &FixedTri, mask: u8) -> (u8, bool) {
         if self.shift >= 0 {
             return crossings_from_center(p, h, t, mask);
         }
@@ -723,7 +1170,7 @@ impl<'a> Classifier<'a> {
                 out |= 1 << i;
             }
         }
-        out
+        (out, t.positive_side(p))
     }
 }
 
@@ -841,10 +1288,10 @@ fn crosses(p: [i64; 3], q: [i64; 3], t: &FixedTri) -> bool {
 
 /// [`crosses`] for the eight segments from `p` to `p + h s` (`s` in
 /// `{-1, 1}^3`, child `i` has `s_k = +1` iff bit `k` of `i` is set), for the
-/// children in `mask`; returns the mask of those crossing. Shares the work
-/// that does not depend on the child.
+/// children in `mask`; returns the mask of those crossing and whether `p` is
+/// on the positive side. Shares the work that does not depend on the child.
 #[inline]
-fn crossings_from_center(p: [i64; 3], h: i64, t: &FixedTri, mask: u8) -> u8 {
+fn crossings_from_center(p: [i64; 3], h: i64, t: &FixedTri, mask: u8) -> (u8, bool) {
     let [a, b, c] = t.v;
     let n = normal(&t.v);
     let op = dot(n, sub(p, a));
@@ -888,7 +1335,7 @@ fn crossings_from_center(p: [i64; 3], h: i64, t: &FixedTri, mask: u8) -> u8 {
             out |= 1 << i;
         }
     }
-    out
+    (out, pside)
 }
 
 #[cfg(test)]
@@ -896,9 +1343,13 @@ mod tests {
     use super::*;
     use crate::comm::{CommRef, SerialComm};
     use crate::domain::{Domain, DEFAULT_FIT};
-    use crate::geometry::shapes::{default_sphere, default_torus};
-    use crate::geometry::Surface;
+    use crate::geometry::shapes::{default_sphere, default_torus, sphere};
+    use crate::geometry::winding::winding_number;
     use crate::octant::CELLS;
+
+    fn norm(p: [f64; 3]) -> f64 {
+        f_dot(p, p).sqrt()
+    }
     use crate::refine::{build_from_surface, NO_LIMIT};
     use crate::Connectivity;
     use std::rc::Rc;
@@ -1391,7 +1842,7 @@ mod tests {
                 let direct = tris.iter().filter(|t| crosses(origin, q, t)).count() % 2;
                 let batched = tris
                     .iter()
-                    .filter(|t| crossings_from_center(origin, h, t, 1 << i) != 0)
+                    .filter(|t| crossings_from_center(origin, h, t, 1 << i).0 != 0)
                     .count()
                     % 2;
                 assert_eq!(direct, batched, "child {i} at {h}");
@@ -1466,7 +1917,7 @@ mod tests {
                 Err(_) => continue,
             };
             let index = SurfaceIndex::new(&s, &d);
-            let cl = Classifier::new(&index);
+            let cl = Classifier::new(&index, false);
             let t = &cl.tris[0];
             let m = cl.child_masks(0, center, half, 0xff, 0xff);
             let pc = cl.center(o);
@@ -1488,7 +1939,7 @@ mod tests {
                 // A crossing needs the triangle near the child and its plane
                 // between the two centres.
                 let ft = &cl.fixed[0];
-                if ft.nsign != 0 && cl.crossings(o, pc, h, ft, bit) != 0 {
+                if ft.nsign != 0 && cl.crossings(o, pc, h, ft, bit).0 != 0 {
                     crossing += 1;
                     assert!(m.near & m.plane & bit != 0, "case {case} child {i}");
                 }
@@ -1525,5 +1976,281 @@ mod tests {
             assert_eq!(keeps(Keep::Inside, CutRule::All, bits), inside || cut);
             assert_eq!(keeps(Keep::Outside, CutRule::All, bits), !inside || cut);
         }
+    }
+
+    /// The surface with the facets `which` reversed.
+    fn reversed_where(s: &Surface, which: impl Fn(usize) -> bool) -> Surface {
+        let t = s
+            .triangles()
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                if which(i) {
+                    Triangle::new(t.v[0], t.v[2], t.v[1])
+                } else {
+                    *t
+                }
+            })
+            .collect();
+        Surface::new(t).unwrap()
+    }
+
+    /// A coarse unit sphere (1280 facets) without the facets whose centroid
+    /// is above `z`: one hole around the pole.
+    fn holed_sphere(z: f64) -> Surface {
+        let s = sphere([0.0; 3], 1.0, 3);
+        Surface::new(
+            s.triangles()
+                .iter()
+                .filter(|t| t.centroid()[2] < z)
+                .copied()
+                .collect(),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn inside_rule_names_and_auto_choice() {
+        assert_eq!(InsideRule::parse("parity").unwrap(), InsideRule::Parity);
+        assert_eq!(InsideRule::parse("winding").unwrap().name(), "winding");
+        assert_eq!(InsideRule::parse("auto").unwrap(), InsideRule::default());
+        assert!(InsideRule::parse("wind").is_err());
+        let report = |s: &Surface| diagnose(s);
+        let (r, why) = InsideRule::auto_choice(&report(&default_torus()));
+        assert_eq!(r, InsideRule::Parity, "{why}");
+        let (r, why) = InsideRule::auto_choice(&report(&holed_sphere(0.8)));
+        assert_eq!(r, InsideRule::Winding);
+        assert!(why.contains("boundary edges"), "{why}");
+        let s = default_sphere();
+        let (r, why) = InsideRule::auto_choice(&report(&reversed_where(&s, |i| i == 3)));
+        assert_eq!(r, InsideRule::Winding);
+        assert!(why.contains("3 inconsistently oriented edges"), "{why}");
+        let mut two = s.triangles().to_vec();
+        two.extend(sphere([3.0, 0.0, 0.0], 1.0, 2).triangles());
+        let (r, why) = InsideRule::auto_choice(&report(&Surface::new(two).unwrap()));
+        assert_eq!((r, why.as_str()), (InsideRule::Winding, "2 components"));
+        assert_eq!(
+            InsideRule::Parity.resolve(|| unreachable!()),
+            InsideRule::Parity
+        );
+        assert_eq!(InsideRule::Auto.resolve(|| report(&s)), InsideRule::Parity);
+    }
+
+    #[test]
+    fn winding_equals_parity_on_one_closed_surface() {
+        // One closed, outward surface: the winding number is 0 or 1, the
+        // parity of the crossings.
+        for s in [default_sphere(), default_torus()] {
+            let (_, index) = fitted(&s);
+            let leaves = leaves_of(&index, 6, true);
+            let parity = classify_leaves(&leaves, &index);
+            let w = InsideClassifier::new(&index, InsideRule::Winding);
+            assert_eq!(w.rule(), InsideRule::Winding);
+            let sum = w.summary().unwrap();
+            assert_eq!(
+                (sum.components, sum.reversed_facets, sum.cap_triangles),
+                (1, 0, 0)
+            );
+            assert_eq!(w.classify(&leaves), parity);
+            let auto = InsideClassifier::new(&index, InsideRule::Auto);
+            assert_eq!(auto.rule(), InsideRule::Parity);
+            assert!(auto.summary().is_none());
+        }
+    }
+
+    #[test]
+    fn winding_ignores_reversed_facets() {
+        // Half the facets at random, or all of them, reversed: classified
+        // like the clean sphere, leaf by leaf.
+        let s = default_sphere();
+        let mut rng = Rng(77);
+        let coin: Vec<bool> = (0..s.len()).map(|_| rng.next() % 2 == 0).collect();
+        let (_, clean) = fitted(&s);
+        let leaves = leaves_of(&clean, 6, true);
+        let expect = classify_leaves(&leaves, &clean);
+        for (name, messy) in [
+            ("half", reversed_where(&s, |i| coin[i])),
+            ("all", reversed_where(&s, |_| true)),
+        ] {
+            let (_, index) = fitted(&messy);
+            // Auto: an inward but consistent sphere is closed, for parity.
+            let auto = InsideClassifier::new(&index, InsideRule::Auto).rule();
+            let want = if name == "all" {
+                InsideRule::Parity
+            } else {
+                InsideRule::Winding
+            };
+            assert_eq!(auto, want, "{name}");
+            let c = InsideClassifier::new(&index, InsideRule::Winding);
+            let reversed = c.summary().unwrap().reversed_facets;
+            let want = if name == "all" {
+                s.len()
+            } else {
+                coin.iter().filter(|&&b| b).count()
+            };
+            assert_eq!(reversed, want, "{name}");
+            assert_eq!(c.classify(&leaves), expect, "{name}");
+        }
+    }
+
+    /// Every leaf's centre bit against the winding number summed directly
+    /// over the (outward) surface; returns the number of leaves whose
+    /// winding number is away from 0 and 1 (where holes matter). Centres are
+    /// moved by `(1e-3, 1e-6, 1e-9)` lattice units, which is what the
+    /// classification's infinitesimal perturbation does to centres on the
+    /// surface.
+    fn check_against_direct_winding(index: &SurfaceIndex, leaves: &[Octant], bits: &[u8]) -> usize {
+        let tris = index.triangles();
+        let parity = classify_leaves(leaves, index);
+        let (mut mid, mut ties) = (0, 0);
+        for (i, (&l, &b)) in leaves.iter().zip(bits).enumerate() {
+            assert_eq!(b & CUT, parity[i] & CUT, "{l:?}: cut differs");
+            let c = center_f64(l);
+            let w = winding_number(tris, [c[0] + 1e-3, c[1] + 1e-6, c[2] + 1e-9]);
+            if (w - 0.5).abs() < 1e-6 {
+                ties += 1;
+                continue;
+            }
+            assert_eq!(b & CENTER_INSIDE != 0, w > 0.5, "{l:?}: w = {w}");
+            mid += (0.02..0.98).contains(&w) as usize;
+        }
+        assert!(ties * 100 < leaves.len(), "{ties} ties");
+        mid
+    }
+
+    #[test]
+    fn winding_on_open_surfaces_matches_direct_summation() {
+        for (name, s) in [
+            ("small hole", holed_sphere(0.9)),
+            ("large hole", holed_sphere(0.3)),
+            ("bowl", holed_sphere(-0.2)),
+        ] {
+            let (_, index) = fitted(&s);
+            let leaves = leaves_of(&index, 6, true);
+            let c = InsideClassifier::new(&index, InsideRule::Auto);
+            assert_eq!(c.rule(), InsideRule::Winding);
+            let sum = c.summary().unwrap();
+            assert_eq!(sum.boundary_loops, 1, "{name}");
+            let bits = c.classify(&leaves);
+            let mid = check_against_direct_winding(&index, &leaves, &bits);
+            assert!(mid > 100, "{name}: {mid}");
+            // Parity is wrong somewhere near the hole.
+            let parity = classify_leaves(&leaves, &index);
+            assert_ne!(parity, bits, "{name}");
+        }
+    }
+
+    #[test]
+    fn winding_on_an_open_lattice_aligned_box() {
+        // A box on level-5 planes without its top face: centres of coarser
+        // leaves lie in the plane of the opening (ties, w = 1/2) and the cap
+        // is a fan in that plane.
+        let d = Domain::cube([0.0; 3], ROOT_LEN as f64).unwrap();
+        let u = (ROOT_LEN >> 5) as f64;
+        let m = (ROOT_LEN / 2) as f64;
+        let b = box_surface(
+            [m - 5.0 * u, m - 3.0 * u, m - 4.0 * u],
+            [m + 2.0 * u, m + 6.0 * u, m + 6.0 * u],
+            false,
+        );
+        // Faces are facets 2k, 2k + 1 of -x, +x, -y, +y, -z, +z: drop +z.
+        let open = Surface::new(b.triangles()[..10].to_vec()).unwrap();
+        let index = SurfaceIndex::new(&open, &d);
+        let c = InsideClassifier::new(&index, InsideRule::Winding);
+        assert_eq!(c.summary().unwrap().cap_triangles, 4);
+        for level in [4u8, 6] {
+            let leaves = leaves_of(&index, level, true);
+            let bits = c.classify(&leaves);
+            check_against_direct_winding(&index, &leaves, &bits);
+        }
+    }
+
+    #[test]
+    fn winding_gives_the_union_of_overlapping_parts() {
+        // Two unit spheres with centres 1 apart, as one soup: the winding
+        // number is 2 where they overlap, which parity calls outside.
+        let a = sphere([0.0; 3], 1.0, 3);
+        let b = sphere([1.0, 0.0, 0.0], 1.0, 3);
+        let mut t = a.triangles().to_vec();
+        t.extend(b.triangles());
+        let s = Surface::new(t).unwrap();
+        let (d, index) = fitted(&s);
+        let leaves = leaves_of(&index, 6, false);
+        let c = InsideClassifier::new(&index, InsideRule::Auto);
+        assert_eq!(c.rule(), InsideRule::Winding);
+        let wb = c.classify(&leaves);
+        let pb = classify_leaves(&leaves, &index);
+        let (mut both, mut one) = (0, 0);
+        for (i, &l) in leaves.iter().enumerate() {
+            if wb[i] & CUT != 0 {
+                assert_eq!(pb[i] & CUT, CUT, "{l:?}");
+                continue;
+            }
+            // Uncut centres are at least half a leaf from the facets, far
+            // more than the facets are from the spheres.
+            let p = d.from_lattice(center_f64(l));
+            let ina = norm(p) < 1.0;
+            let inb = norm([p[0] - 1.0, p[1], p[2]]) < 1.0;
+            assert_eq!(wb[i] & CENTER_INSIDE != 0, ina || inb, "{l:?}");
+            assert_eq!(pb[i] & CENTER_INSIDE != 0, ina != inb, "{l:?}");
+            both += (ina && inb) as usize;
+            one += (ina != inb) as usize;
+        }
+        assert!(both > 50 && one > 50, "{both} {one}");
+    }
+
+    #[test]
+    fn winding_slices_match_whole_run() {
+        let s = holed_sphere(0.5);
+        let (_, index) = fitted(&s);
+        let leaves = leaves_of(&index, 7, true);
+        let c = InsideClassifier::new(&index, InsideRule::Winding);
+        let whole = c.classify(&leaves);
+        let n = leaves.len();
+        for parts in [2, 3, 7] {
+            let mut joined = Vec::new();
+            for k in 0..parts {
+                joined.extend(c.classify(&leaves[k * n / parts..(k + 1) * n / parts]));
+            }
+            assert_eq!(joined, whole, "{parts} parts");
+        }
+        let sparse: Vec<Octant> = leaves.iter().copied().step_by(3).collect();
+        let expect: Vec<u8> = whole.iter().copied().step_by(3).collect();
+        assert_eq!(c.classify(&sparse), expect);
+        // Alone, through its own chain of ancestors.
+        for k in (0..n).step_by(97) {
+            assert_eq!(c.classify(&leaves[k..k + 1]), [whole[k]], "{:?}", leaves[k]);
+        }
+    }
+
+    #[test]
+    fn winding_on_an_unwelded_soup() {
+        // A sphere whose facets share no vertex (each corner moved by up to
+        // 1e-6): every facet is a component with its own boundary, capped
+        // by a fan of three, and keeps its (outward) orientation. The
+        // cracks are far below the leaves, so the classes are parity's.
+        let s = sphere([0.0; 3], 1.0, 3);
+        let mut k = 0u64;
+        let soup: Vec<Triangle> = s
+            .triangles()
+            .iter()
+            .map(|t| Triangle {
+                v: t.v.map(|p| {
+                    p.map(|c| {
+                        k += 1;
+                        c + 1e-9 * ((k * 2_654_435_761) % 1000) as f64
+                    })
+                }),
+            })
+            .collect();
+        let soup = Surface::new(soup).unwrap();
+        let (_, index) = fitted(&soup);
+        let leaves = leaves_of(&index, 6, true);
+        let c = InsideClassifier::new(&index, InsideRule::Auto);
+        assert_eq!(c.rule(), InsideRule::Winding);
+        let sum = c.summary().unwrap();
+        assert_eq!((sum.components, sum.reversed_facets), (s.len(), 0));
+        assert_eq!(sum.cap_triangles, 3 * s.len());
+        assert_eq!(c.classify(&leaves), classify_leaves(&leaves, &index));
     }
 }

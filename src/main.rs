@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::rc::Rc;
 
-use octmesh::classify::{classify_leaves, CutRule, Keep};
+use octmesh::classify::{CutRule, InsideClassifier, InsideRule, Keep, LeafClass};
 use octmesh::comm::{agree, Comm, CommRef, MpiComm, Traffic};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::diagnostics::{clean, diagnose, SurfaceReport};
@@ -34,7 +34,8 @@ hanging nodes, global numbering) of the kept elements, and writes it.
 check: prints the surface diagnostics (welded vertices, boundary,
 non-manifold and inconsistently oriented edges, edge-connected components,
 degenerate and duplicate facets, Euler characteristic, genus, volume);
---json FILE also writes them as JSON.
+--json FILE also writes them as JSON. It also says which inside rule auto
+would pick.
 
 options:
   --level L             refinement level of the leaves touching the surface
@@ -50,6 +51,12 @@ options:
   --write-refined FILE  write the leaves before balance, same format
   --drop-degenerate     remove zero-area facets after loading
   --drop-duplicates     remove facets repeating the vertices of an earlier one
+  --inside RULE         how leaf centres are found inside: parity (ray
+                        parity), winding (generalized winding number above
+                        1/2: holes, overlapping parts, flipped facets) or
+                        auto (parity for one closed, consistently oriented
+                        component, else winding; the default for mesh). With
+                        octree, also classifies the leaves and counts them
   --inside-point X,Y,Z  a point inside the body: after balance, fail with a
                         leak report if the region outside the surface
                         reaches it through leaves touching no triangle
@@ -80,6 +87,7 @@ struct Options {
     quiet: bool,
     keep: Keep,
     cut_rule: CutRule,
+    inside: Option<InsideRule>,
     out: Option<PathBuf>,
     drop_degenerate: bool,
     drop_duplicates: bool,
@@ -123,6 +131,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
         quiet: false,
         keep: Keep::All,
         cut_rule: CutRule::Center,
+        inside: None,
         out: None,
         drop_degenerate: false,
         drop_duplicates: false,
@@ -215,6 +224,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
             "--write-refined" => o.write_refined = Some(value(i, a)?.into()),
             "--keep" if command == Command::Mesh => o.keep = Keep::parse(&value(i, a)?)?,
             "--cut-rule" if command == Command::Mesh => o.cut_rule = CutRule::parse(&value(i, a)?)?,
+            "--inside" => o.inside = Some(InsideRule::parse(&value(i, a)?)?),
             "--out" if command == Command::Mesh => {
                 let v = value(i, a)?;
                 if !v.ends_with(".pvtu") {
@@ -301,6 +311,11 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     // Memory before and after the surface is loaded, so benchmarks can tell
     // the surface (held whole on every rank) from the octree and mesh.
     let rss_start = peak_rss_bytes();
+    // Meshes always classify (auto by default); octrees only when asked.
+    let inside_rule = match o.command {
+        Command::Mesh => Some(o.inside.unwrap_or_default()),
+        _ => o.inside,
+    };
 
     let loaded = timer.time(
         &*comm,
@@ -311,7 +326,8 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             if o.drop_degenerate || o.drop_duplicates {
                 (surface, dropped) = clean(&surface, o.drop_degenerate, o.drop_duplicates)?;
             }
-            let report = o.stats.is_some().then(|| diagnose(&surface));
+            let report = (o.stats.is_some() || inside_rule == Some(InsideRule::Auto))
+                .then(|| diagnose(&surface));
             let b = surface.bbox();
             let domain = match o.domain {
                 Some(d) => d,
@@ -331,13 +347,28 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     let (ntri, surface_volume, domain, index, dropped, report) = agree(&*comm, loaded)?;
     let rss_read = peak_rss_bytes();
     let estimate = estimate_leaves(&index, o.level);
+    // The rule actually used, and for auto why.
+    let inside = inside_rule.map(|r| match (r, &report) {
+        (InsideRule::Auto, Some(rep)) => {
+            let (rule, why) = InsideRule::auto_choice(rep);
+            (rule, format!(" (auto: {why})"))
+        }
+        (r, _) => (r, String::new()),
+    });
     if root {
+        let rule = inside
+            .as_ref()
+            .map(|(r, why)| format!("inside {}{why}", r.name()));
         let what = match o.command {
-            Command::Octree => "octree".to_string(),
+            Command::Octree => match &rule {
+                Some(r) => format!("octree ({r})"),
+                None => "octree".to_string(),
+            },
             Command::Mesh => format!(
-                "mesh (keep {}, cut rule {})",
+                "mesh (keep {}, cut rule {}, {})",
                 o.keep.name(),
-                o.cut_rule.name()
+                o.cut_rule.name(),
+                rule.unwrap_or_default()
             ),
             Command::Check => unreachable!("check does not build an octree"),
         };
@@ -393,22 +424,66 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
 
     let mut stats = JsonObject::new();
     let mut phase_keys = vec!["read", "construct", "refine", "partition", "balance"];
-    if o.command == Command::Mesh || o.inside_point.is_some() {
-        phase_keys.push("classify");
+    // Meshes and leak checks need the leaf classes (a leak check only their
+    // cut bits, which every rule computes the same way).
+    let classify_rule = inside
+        .as_ref()
+        .map(|(r, _)| *r)
+        .or(o.inside_point.map(|_| InsideRule::Parity));
+    let classes = match classify_rule {
+        Some(rule) => {
+            phase_keys.push("classify");
+            let (classes, summary) = timer.time(&*comm, "classify", || {
+                let c = InsideClassifier::new(&index, rule);
+                (c.classify(tree.leaves()), c.summary().cloned())
+            });
+            table.row(&timer, None);
+            if let (true, Some(w)) = (root, &summary) {
+                println!(
+                    "  winding: {} component(s), {} facet(s) reversed, {} boundary loop(s) \
+                     closed by {} cap triangle(s)",
+                    w.components, w.reversed_facets, w.boundary_loops, w.cap_triangles
+                );
+            }
+            if inside.is_some() {
+                stats.str("inside_rule", rule.name());
+            }
+            if let Some(w) = &summary {
+                stats
+                    .int("reversed_facets", w.reversed_facets as u64)
+                    .int("boundary_loops", w.boundary_loops as u64);
+            }
+            Some(classes)
+        }
+        None => None,
+    };
+    if let (Command::Octree, Some(classes), true) = (o.command, &classes, o.inside.is_some()) {
+        // Leaves per class, over all ranks.
+        let mut n = [0u64; 3];
+        for &b in classes {
+            n[LeafClass::from_bits(b) as usize] += 1;
+        }
+        comm.sum_u64(&mut n);
+        if root {
+            println!(
+                "  leaves inside {} | outside {} | cut {}",
+                n[LeafClass::Inside as usize],
+                n[LeafClass::Outside as usize],
+                n[LeafClass::Cut as usize]
+            );
+        }
+        stats
+            .int("inside_leaves", n[LeafClass::Inside as usize])
+            .int("outside_leaves", n[LeafClass::Outside as usize])
+            .int("cut_leaves", n[LeafClass::Cut as usize]);
     }
-    let mut classes = None;
     let mut leak_error = None;
     let mut leak = JsonObject::new();
     leak.bool("checked", o.inside_point.is_some());
     if let Some(point) = o.inside_point {
         phase_keys.push("leak_check");
-        let c = timer.time(&*comm, "classify", || {
-            classify_leaves(tree.leaves(), &index)
-        });
-        table.row(&timer, None);
-        let found = timer.time(&*comm, "leak_check", || {
-            find_leak(&tree, &c, &domain, point)
-        })?;
+        let c = classes.as_deref().unwrap_or_default();
+        let found = timer.time(&*comm, "leak_check", || find_leak(&tree, c, &domain, point))?;
         table.row(&timer, None);
         let n = found.as_ref().map_or(0, |p| p.len());
         leak.bool("found", found.is_some())
@@ -449,21 +524,11 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
                 leak_error = Some(path.to_error(&domain, Some(&bbox)));
             }
         }
-        classes = Some(c);
     }
     stats.obj("leak", &leak);
     if o.command == Command::Mesh && leak_error.is_none() {
         phase_keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
-        let classes = match classes {
-            Some(c) => c,
-            None => {
-                let c = timer.time(&*comm, "classify", || {
-                    classify_leaves(tree.leaves(), &index)
-                });
-                table.row(&timer, None);
-                c
-            }
-        };
+        let classes = classes.unwrap_or_default();
         let opts = MeshOptions {
             keep: o.keep,
             cut_rule: o.cut_rule,
@@ -653,17 +718,27 @@ fn run_check(comm: CommRef, o: &Options) -> Result<()> {
     let read = start.elapsed().as_secs_f64();
     let report = diagnose(&surface);
     let diagnosed = start.elapsed().as_secs_f64() - read;
+    let (rule, why) = InsideRule::auto_choice(&report);
     if comm.rank() == 0 && !o.quiet {
         println!(
             "octmesh check: {} ({} triangles)",
             o.surface, report.triangles
         );
         println!("{report}");
+        println!("  inside rule auto: {} ({why})", rule.name());
         println!("  read {read:.3} s | diagnose {diagnosed:.3} s (rank 0)");
     }
     if let Some(path) = &o.json {
+        // The report's object with the rule auto picks as a last field.
+        let mut json = report.to_json();
+        if let Some(end) = json.rfind("\n}") {
+            json.insert_str(
+                end,
+                &format!(",\n  \"auto_inside_rule\": \"{}\"", rule.name()),
+            );
+        }
         let written = if comm.rank() == 0 {
-            std::fs::write(path, report.to_json())
+            std::fs::write(path, json)
                 .map_err(|e| Error::io(format!("cannot write '{}': {e}", path.display())))
         } else {
             Ok(())

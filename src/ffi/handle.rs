@@ -1,7 +1,7 @@
 //! The handle: creation over the caller's communicator, options, errors,
 //! the domain cube, destruction.
 
-use std::cell::{Cell, RefCell};
+use std::cell::{Cell, OnceCell, RefCell};
 use std::ffi::{c_char, CString};
 use std::rc::Rc;
 
@@ -12,6 +12,7 @@ use super::{
     c_string, catch, fail_without_handle, no_handle_error, non_null, octmesh_status_t, with_mut,
     with_ref, write_out,
 };
+use crate::classify::InsideRule;
 use crate::comm::{agree, CommRef, MpiComm};
 use crate::domain::{Domain, DEFAULT_FIT};
 use crate::error::{Error, ErrorKind, Result};
@@ -53,11 +54,15 @@ pub(crate) struct SurfaceState {
     pub(crate) surface: Surface,
     pub(crate) index: SurfaceIndex,
     pub(crate) index_domain: Domain,
+    /// The rule `InsideRule::Auto` picks for it, once diagnosed.
+    pub(crate) auto_rule: OnceCell<InsideRule>,
 }
 
 /// The mesh and the C arrays made from it on demand.
 pub(crate) struct MeshState {
     pub(crate) mesh: Mesh,
+    /// The rule its leaves were classified with (none without a surface).
+    pub(crate) inside_rule: Option<InsideRule>,
     pub(crate) cache: super::mesh::MeshArrays,
 }
 
@@ -72,6 +77,8 @@ pub struct octmesh_t {
     /// The octree and the domain it was built in.
     pub(crate) tree: Option<(LinearOctree, Domain)>,
     pub(crate) mesh: Option<MeshState>,
+    /// The inside rule of the next meshes.
+    pub(crate) inside_rule: InsideRule,
     last_error: RefCell<CString>,
     poisoned: Cell<bool>,
 }
@@ -232,6 +239,7 @@ fn create(comm: mpi_sys::MPI_Comm, opts: *const octmesh_options_t) -> Result<Box
         surface: None,
         tree: None,
         mesh: None,
+        inside_rule: InsideRule::Auto,
         last_error: RefCell::new(CString::default()),
         poisoned: Cell::new(false),
     }))

@@ -13,11 +13,13 @@ use std::ffi::{c_char, CStr};
 
 use super::handle::{octmesh_t, MeshState};
 use super::{
-    non_null, octmesh_cut_rule, octmesh_cut_rule_t, octmesh_keep, octmesh_keep_t, octmesh_status_t,
-    path_arg, with_mut, with_ref, write_out,
+    inside_rule_of, inside_rule_value, non_null, octmesh_cut_rule, octmesh_cut_rule_t,
+    octmesh_inside_rule_t, octmesh_keep, octmesh_keep_t, octmesh_status_t, path_arg, with_mut,
+    with_ref, write_out,
 };
-use crate::classify::{classify_leaves, CutRule, Keep};
+use crate::classify::{classify_leaves_with, CutRule, InsideRule, Keep};
 use crate::error::{Error, ErrorKind, Result};
+use crate::geometry::diagnostics::diagnose;
 use crate::io::vtu::write_mesh;
 use crate::mesh::{Mesh, MeshOptions};
 
@@ -61,10 +63,11 @@ pub(crate) struct MeshArrays {
 
 /// Builds the mesh of the octree, replacing any previous one. `keep` (one
 /// of `octmesh_keep`) selects the elements among the leaves, classified
-/// against the surface; without a surface only `OCTMESH_KEEP_ALL` is
-/// allowed. `rule` (one of `octmesh_cut_rule`) decides for leaves
-/// touching the surface. The octree must be balanced for edge or corner
-/// contacts (`octmesh_balance`). Collective.
+/// against the surface (by the rule of `octmesh_set_inside_rule`); without
+/// a surface only `OCTMESH_KEEP_ALL` is allowed. `rule` (one of
+/// `octmesh_cut_rule`) decides for leaves touching the surface. The octree
+/// must be balanced for edge or corner contacts (`octmesh_balance`).
+/// Collective.
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh(
     h: *mut octmesh_t,
@@ -96,16 +99,67 @@ pub unsafe extern "C" fn octmesh_mesh(
             h.index_for(&domain)?;
         }
         let (tree, _) = h.tree_or_state()?;
-        let classes = h
-            .surface
-            .as_ref()
-            .map(|s| classify_leaves(tree.leaves(), &s.index));
+        let chosen = h.inside_rule;
+        let classified = h.surface.as_ref().map(|s| {
+            let rule = match chosen {
+                InsideRule::Auto => *s
+                    .auto_rule
+                    .get_or_init(|| InsideRule::auto_choice(&diagnose(&s.surface)).0),
+                r => r,
+            };
+            (classify_leaves_with(tree.leaves(), &s.index, rule), rule)
+        });
+        let (classes, inside_rule) = match classified {
+            Some((c, r)) => (Some(c), Some(r)),
+            None => (None, None),
+        };
         let opts = MeshOptions { keep, cut_rule };
         let mesh = Mesh::build(tree, &domain, classes.as_deref(), &opts)?;
         h.mesh = Some(MeshState {
             mesh,
+            inside_rule,
             cache: MeshArrays::default(),
         });
+        Ok(())
+    })
+}
+
+/// Sets how the following `octmesh_mesh` calls decide whether a leaf's
+/// centre is inside the surface: one of `octmesh_inside_rule`
+/// (`OCTMESH_INSIDE_RULE_AUTO` until set). Every rank must pass the same
+/// rule. The current mesh is kept. Collective.
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_set_inside_rule(
+    h: *mut octmesh_t,
+    rule: octmesh_inside_rule_t,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let rule = h.agree(inside_rule_of(rule))?;
+        let all = h.comm.allgather_u64(inside_rule_value(rule) as u64);
+        if all.iter().any(|&r| r != all[0]) {
+            return Err(Error::invalid(
+                "the ranks passed different inside rules to octmesh_set_inside_rule",
+            ));
+        }
+        h.inside_rule = rule;
+        Ok(())
+    })
+}
+
+/// Writes to `*out` the rule the current mesh was classified with:
+/// `OCTMESH_INSIDE_RULE_PARITY` or `OCTMESH_INSIDE_RULE_WINDING` (what
+/// `OCTMESH_INSIDE_RULE_AUTO` chose), or `OCTMESH_INSIDE_RULE_AUTO` when it
+/// was built without a surface (nothing classified). Needs a mesh. Not
+/// collective.
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_mesh_get_inside_rule(
+    h: *const octmesh_t,
+    out: *mut octmesh_inside_rule_t,
+) -> octmesh_status_t {
+    with_ref(h, |h| {
+        non_null(out, "out")?;
+        let rule = mesh_of(h)?.inside_rule.unwrap_or(InsideRule::Auto);
+        write_out(out, inside_rule_value(rule));
         Ok(())
     })
 }

@@ -145,6 +145,50 @@ pub enum octmesh_cut_rule {
 /// One of the `octmesh_cut_rule` constants.
 pub type octmesh_cut_rule_t = i32;
 
+/// How a leaf's centre is found inside the surface when meshing (values of
+/// `octmesh_inside_rule_t`, set by `octmesh_set_inside_rule`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_inside_rule {
+    /// Parity for a surface made of one closed, consistently oriented
+    /// component, winding number otherwise (the default).
+    OCTMESH_INSIDE_RULE_AUTO = 0,
+    /// Parity of surface crossings along a ray: exact for one closed surface,
+    /// the exclusive or of overlapping parts, unreliable near holes.
+    OCTMESH_INSIDE_RULE_PARITY = 1,
+    /// Generalized winding number above 1/2, after orienting each component:
+    /// the union of overlapping parts, holes closed smoothly, reversed
+    /// facets repaired.
+    OCTMESH_INSIDE_RULE_WINDING = 2,
+}
+
+/// One of the `octmesh_inside_rule` constants.
+pub type octmesh_inside_rule_t = i32;
+
+/// The Rust rule of an `octmesh_inside_rule_t`.
+pub(crate) fn inside_rule_of(x: octmesh_inside_rule_t) -> Result<crate::classify::InsideRule> {
+    use crate::classify::InsideRule;
+    use octmesh_inside_rule::*;
+    match x {
+        x if x == OCTMESH_INSIDE_RULE_AUTO as i32 => Ok(InsideRule::Auto),
+        x if x == OCTMESH_INSIDE_RULE_PARITY as i32 => Ok(InsideRule::Parity),
+        x if x == OCTMESH_INSIDE_RULE_WINDING as i32 => Ok(InsideRule::Winding),
+        x => Err(Error::invalid(format!(
+            "inside rule {x} is not one of OCTMESH_INSIDE_RULE_AUTO, _PARITY, _WINDING"
+        ))),
+    }
+}
+
+/// The `octmesh_inside_rule_t` of a Rust rule.
+pub(crate) fn inside_rule_value(r: crate::classify::InsideRule) -> octmesh_inside_rule_t {
+    use crate::classify::InsideRule;
+    match r {
+        InsideRule::Auto => octmesh_inside_rule::OCTMESH_INSIDE_RULE_AUTO as i32,
+        InsideRule::Parity => octmesh_inside_rule::OCTMESH_INSIDE_RULE_PARITY as i32,
+        InsideRule::Winding => octmesh_inside_rule::OCTMESH_INSIDE_RULE_WINDING as i32,
+    }
+}
+
 /// Class of an element, as stored in the array of
 /// `octmesh_mesh_get_element_class`.
 #[repr(C)]

@@ -44,6 +44,7 @@ fn set_surface(h: &mut octmesh_t, loaded: Result<Surface>) -> Result<()> {
         surface,
         index,
         index_domain: domain,
+        auto_rule: Default::default(),
     });
     Ok(())
 }

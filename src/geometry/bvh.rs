@@ -114,6 +114,24 @@ impl Bvh {
         }
     }
 
+    /// Number of nodes (0 for an empty tree; node 0 is the root).
+    pub(crate) fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Shape of node `i`, for trees that carry more per node: `(first, 0)`
+    /// for an internal node whose children are `first` and `first + 1`
+    /// (always after `i`), `(first, count)` for a leaf holding the
+    /// triangles `order()[first..first + count]`.
+    pub(crate) fn node_shape(&self, i: usize) -> (u32, u32) {
+        (self.nodes[i].first, self.nodes[i].count)
+    }
+
+    /// Triangle indices in leaf order.
+    pub(crate) fn order(&self) -> &[u32] {
+        &self.order
+    }
+
     /// Bounding box of all triangles (empty for an empty tree).
     pub fn bbox(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::empty(), |n| n.bbox)

@@ -165,7 +165,9 @@ impl fmt::Display for SurfaceReport {
 }
 
 /// Welded vertex ids of every facet's corners, and the number of vertices.
-fn weld(tris: &[Triangle]) -> (Vec<[u64; 3]>, usize) {
+/// Ids are assigned in the order of the coordinates' bits, so they depend on
+/// the facets' vertices only.
+pub(crate) fn weld(tris: &[Triangle]) -> (Vec<[u64; 3]>, usize) {
     // -0.0 and 0.0 are equal as f64 but differ in their bits.
     let bits = |c: f64| if c == 0.0 { 0 } else { c.to_bits() };
     let mut corners: Vec<([u64; 3], usize)> = Vec::with_capacity(3 * tris.len());

@@ -11,6 +11,7 @@ pub mod diagnostics;
 pub mod intersect;
 pub mod shapes;
 pub mod stl;
+pub mod winding;
 
 use std::path::Path;
 

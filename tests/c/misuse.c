@@ -56,6 +56,16 @@ int main(int argc, char **argv) {
   octmesh_mesh_counts_t c;
   CHECK_STATUS(octmesh_mesh_get_counts(h, &c), OCTMESH_STATUS_STATE, h);
   CHECK(contains(octmesh_last_error(h), "octmesh_mesh"), h);
+  octmesh_inside_rule_t ir = -1;
+  CHECK_STATUS(octmesh_mesh_get_inside_rule(h, &ir), OCTMESH_STATUS_STATE, h);
+  CHECK(ir == -1, h);
+  CHECK_STATUS(octmesh_set_inside_rule(h, 3), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK(contains(octmesh_last_error(h), "inside rule"), h);
+  if (size > 1) /* different rules on different ranks: every rank fails */
+    CHECK_STATUS(octmesh_set_inside_rule(h, rank == 0 ? OCTMESH_INSIDE_RULE_PARITY
+                                                      : OCTMESH_INSIDE_RULE_WINDING),
+                 OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  OK(octmesh_set_inside_rule(h, OCTMESH_INSIDE_RULE_WINDING), h);
 
   /* Missing file: IO with the path in the message. */
   CHECK_STATUS(octmesh_surface_from_stl(h, missing), OCTMESH_STATUS_IO, h);
@@ -102,6 +112,9 @@ int main(int argc, char **argv) {
   CHECK_STATUS(octmesh_mesh(h, 7, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK_STATUS(octmesh_mesh(h, OCTMESH_KEEP_OUTSIDE, -1), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   OK(octmesh_mesh(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_NONE), h);
+  CHECK_STATUS(octmesh_mesh_get_inside_rule(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  OK(octmesh_mesh_get_inside_rule(h, &ir), h);
+  CHECK(ir == OCTMESH_INSIDE_RULE_WINDING, h);
   OK(octmesh_mesh_get_counts(h, &c), h);
   CHECK(c.global_elements > 0, h);
   CHECK_STATUS(octmesh_mesh_get_connectivity(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);

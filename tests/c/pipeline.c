@@ -147,6 +147,20 @@ int main(int argc, char **argv) {
     printf("SPHERE elements=%lld independent=%lld face=%lld edge=%lld leaves=%lld\n",
            (long long)c.global_elements, (long long)c.global_independent,
            (long long)c.global_face_hanging, (long long)c.global_edge_hanging, (long long)ng);
+  /* The inside rule: auto chose parity for the closed sphere; the winding
+   * number classifies it the same way. */
+  octmesh_inside_rule_t used = -1;
+  OK(octmesh_mesh_get_inside_rule(h, &used), h);
+  CHECK(used == OCTMESH_INSIDE_RULE_PARITY, h);
+  int64_t parity_elements = c.global_elements;
+  OK(octmesh_set_inside_rule(h, OCTMESH_INSIDE_RULE_WINDING), h);
+  OK(octmesh_mesh_get_inside_rule(h, &used), h);
+  CHECK(used == OCTMESH_INSIDE_RULE_PARITY, h); /* until the next octmesh_mesh */
+  OK(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
+  OK(octmesh_mesh_get_inside_rule(h, &used), h);
+  CHECK(used == OCTMESH_INSIDE_RULE_WINDING, h);
+  OK(octmesh_mesh_get_counts(h, &c), h);
+  CHECK(c.global_elements == parity_elements, h);
   double origin[3], side;
   OK(octmesh_get_domain(h, origin, &side), h);
   CHECK(side > 2.0 && origin[0] < -1.0, h);
@@ -169,6 +183,8 @@ int main(int argc, char **argv) {
   CHECK_STATUS(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER),
                OCTMESH_STATUS_INVALID_ARGUMENT, h); /* no surface */
   OK(octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), h);
+  OK(octmesh_mesh_get_inside_rule(h, &used), h);
+  CHECK(used == OCTMESH_INSIDE_RULE_AUTO, h); /* nothing classified */
   OK(octmesh_mesh_get_counts(h, &c), h);
   OK(octmesh_get_num_leaves(h, &nl, &ng), h);
   CHECK(c.global_elements == ng, h);
