@@ -40,3 +40,6 @@ pub mod sort;
 pub use error::{Error, ErrorKind, Result};
 pub use octant::{Connectivity, Octant, MAX_LEVEL};
 pub use octree::LinearOctree;
+
+#[cfg(test)]
+mod testutil;

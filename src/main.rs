@@ -181,19 +181,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
                     .map_err(|_| Error::invalid(format!("--fit expects a number, got '{v}'")))?;
             }
             "--domain" => {
-                let v = value(i, a)?;
-                let n: Vec<f64> = v
-                    .split(',')
-                    .map(|s| s.trim().parse::<f64>())
-                    .collect::<std::result::Result<_, _>>()
-                    .map_err(|_| {
-                        Error::invalid(format!("--domain expects X,Y,Z,SIDE, got '{v}'"))
-                    })?;
-                if n.len() != 4 {
-                    return Err(Error::invalid(format!(
-                        "--domain expects X,Y,Z,SIDE, got '{v}'"
-                    )));
-                }
+                let n = numbers(&value(i, a)?, 4, "--domain", "X,Y,Z,SIDE")?;
                 o.domain = Some(Domain::cube([n[0], n[1], n[2]], n[3])?);
             }
             "--max-octants" => {
@@ -204,19 +192,7 @@ fn parse_args(args: &[String]) -> Result<Options> {
             }
             "--stats" => o.stats = Some(value(i, a)?.into()),
             "--inside-point" => {
-                let v = value(i, a)?;
-                let n: Vec<f64> = v
-                    .split(',')
-                    .map(|s| s.trim().parse::<f64>())
-                    .collect::<std::result::Result<_, _>>()
-                    .map_err(|_| {
-                        Error::invalid(format!("--inside-point expects X,Y,Z, got '{v}'"))
-                    })?;
-                if n.len() != 3 || n.iter().any(|c| !c.is_finite()) {
-                    return Err(Error::invalid(format!(
-                        "--inside-point expects X,Y,Z, got '{v}'"
-                    )));
-                }
+                let n = numbers(&value(i, a)?, 3, "--inside-point", "X,Y,Z")?;
                 o.inside_point = Some([n[0], n[1], n[2]]);
             }
             "--leak-path" => o.leak_path = Some(value(i, a)?.into()),
@@ -302,6 +278,20 @@ impl Table {
             println!("  {name:<12} {secs:>10.3} {c:>14}");
         }
     }
+}
+
+/// `n` finite comma-separated numbers, the value of `option`.
+fn numbers(v: &str, n: usize, option: &str, form: &str) -> Result<Vec<f64>> {
+    let bad = || Error::invalid(format!("{option} expects {form}, got '{v}'"));
+    let x: Vec<f64> = v
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad())?;
+    if x.len() != n || x.iter().any(|c| !c.is_finite()) {
+        return Err(bad());
+    }
+    Ok(x)
 }
 
 fn run(comm: CommRef, o: &Options) -> Result<()> {

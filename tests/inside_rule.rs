@@ -28,16 +28,6 @@ fn stats(np: usize, command: &str, surface: &Path, args: &[&str], tag: &str) -> 
     json_file(&file)
 }
 
-fn int(v: &serde_json::Value, k: &str) -> u64 {
-    v[k].as_u64()
-        .unwrap_or_else(|| panic!("no integer '{k}' in {v}"))
-}
-
-fn num(v: &serde_json::Value, k: &str) -> f64 {
-    v[k].as_f64()
-        .unwrap_or_else(|| panic!("no number '{k}' in {v}"))
-}
-
 /// Kept volume of `mesh --keep inside` as a fraction of the cube.
 fn solid_fraction(v: &serde_json::Value) -> f64 {
     num(v, "kept_volume") / num(v, "domain_side").powi(3)

@@ -35,16 +35,6 @@ fn mesh_stats(
     json_file(&stats)
 }
 
-fn int(v: &serde_json::Value, k: &str) -> u64 {
-    v[k].as_u64()
-        .unwrap_or_else(|| panic!("no integer '{k}' in {v}"))
-}
-
-fn num(v: &serde_json::Value, k: &str) -> f64 {
-    v[k].as_f64()
-        .unwrap_or_else(|| panic!("no number '{k}' in {v}"))
-}
-
 #[test]
 fn inside_and_outside_tile_the_cube() {
     let dir = scratch("mesh_tile");

@@ -825,23 +825,7 @@ mod tests {
     use crate::geometry::shapes::{default_sphere, default_torus};
     use crate::geometry::Surface;
 
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            // splitmix64
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        fn unit(&mut self) -> f64 {
-            (self.next() >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn in_box(&mut self, lo: f64, hi: f64) -> [f64; 3] {
-            std::array::from_fn(|_| lo + (hi - lo) * self.unit())
-        }
-    }
+    use crate::testutil::Rng;
 
     /// The upper unit hemisphere `z >= 0` (open, outward): `rings` rings of
     /// `segments` vertices from the equator (exactly in `z = 0`) to the pole.

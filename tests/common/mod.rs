@@ -348,3 +348,15 @@ pub fn compile_c_test(name: &str, lib: &Path, out_dir: &Path) -> PathBuf {
     );
     exe
 }
+
+/// Integer field `k` of a stats object.
+pub fn int(v: &serde_json::Value, k: &str) -> u64 {
+    v[k].as_u64()
+        .unwrap_or_else(|| panic!("no integer '{k}' in {v}"))
+}
+
+/// Number field `k` of a stats object.
+pub fn num(v: &serde_json::Value, k: &str) -> f64 {
+    v[k].as_f64()
+        .unwrap_or_else(|| panic!("no number '{k}' in {v}"))
+}
