@@ -317,16 +317,13 @@ impl Graph<'_> {
         out.clear();
         let c = leaf.coords();
         let side = leaf.side();
-        for f in 0..6 {
+        for (f, n) in leaf.face_neighbors().into_iter().enumerate() {
+            let Some(n) = n else {
+                continue; // the cube's boundary
+            };
             let axis = f / 2;
             let plus = f % 2 == 1;
             let plane = if plus { c[axis] + side } else { c[axis] };
-            if (!plus && plane == 0) || (plus && plane == ROOT_LEN) {
-                continue; // the cube's boundary
-            }
-            let mut nc = c;
-            nc[axis] = if plus { plane } else { plane - side };
-            let n = Octant::from_parts(morton_encode(nc[0], nc[1], nc[2]), leaf.level());
             // A leaf overlapping `n` touches the face if it contains `n` or
             // lies against the face plane inside it.
             let faces = |m: Octant| {

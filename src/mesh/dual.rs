@@ -73,11 +73,10 @@ pub(crate) fn extract_nodes(leaves: &[Octant], kept: &[bool]) -> DualNodes {
     w.out
 }
 
-/// Lattice coordinates of corner `c` (Morton order) of `o`.
+/// Lattice coordinates of corner `c` (Morton order) of the octant with
+/// anchor `a` and side `s` (decoded once by the caller, not per corner).
 #[inline]
-pub(crate) fn corner_coords(o: Octant, c: usize) -> [u32; 3] {
-    let a = o.coords();
-    let s = o.side();
+fn corner_coords(a: [u32; 3], s: u32, c: usize) -> [u32; 3] {
     std::array::from_fn(|d| a[d] + if c >> d & 1 == 1 { s } else { 0 })
 }
 
@@ -101,10 +100,11 @@ impl DualNodes {
                 continue;
             }
             let o = leaf(i);
+            let (a, s) = (o.coords(), o.side());
             for (c, &n) in cs.iter().enumerate() {
                 let m = map[n as usize];
                 if m != UNSET {
-                    out[m as usize] = corner_coords(o, c);
+                    out[m as usize] = corner_coords(a, s, c);
                 }
             }
         }
@@ -115,9 +115,10 @@ impl DualNodes {
     pub fn hanging_coords(q: Octant, mask: u8) -> [u32; 3] {
         let mut sum = [0u32; 3];
         let k = mask.count_ones();
+        let (a, s) = (q.coords(), q.side());
         for c in 0..8 {
             if mask >> c & 1 == 1 {
-                let x = corner_coords(q, c);
+                let x = corner_coords(a, s, c);
                 for d in 0..3 {
                     sum[d] += x[d];
                 }
