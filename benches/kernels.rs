@@ -270,7 +270,7 @@ fn bench_mesh(c: &mut Criterion, s: &Sphere) {
         tree.local_len(),
         mesh.elements().len(),
         mesh.num_nodes(),
-        mesh.hanging().len()
+        mesh.num_hanging()
     );
     drop(mesh);
 

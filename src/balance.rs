@@ -102,14 +102,14 @@ impl LinearOctree {
             // Every rank gets here in the same round (the decision is on
             // reduced values); nothing was published, so the ranges and
             // offsets are still those of the backup.
-            *self.leaves_mut() = backup.unwrap_or_default();
+            self.set_leaves(backup.unwrap_or_default());
             self.set_balanced(was_balanced);
             return Err(limit_error(limit, "2:1 balancing"));
         }
         // The work vector was sized for the worst case; the octree is kept
         // for the rest of the pipeline, so give the slack back.
         leaves.shrink_to_fit();
-        *self.leaves_mut() = leaves;
+        self.set_leaves(leaves);
         stats.leaves_added = (self.local_len() - before) as u64;
         self.refresh()?;
         self.set_balanced(Some(strongest));
@@ -157,7 +157,7 @@ impl Balancer {
     fn new(tree: &mut LinearOctree, conn: Connectivity, limit: u64) -> Balancer {
         let (begin, end) = tree.local_cells();
         let p = tree.comm().size();
-        let mut leaves = std::mem::take(tree.leaves_mut());
+        let mut leaves = tree.take_leaves();
         // Headroom for the balance's growth, so the leaf buffers are not
         // reallocated (and their pages faulted in again) at every level.
         leaves.reserve(leaves.len() / 4);

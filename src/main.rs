@@ -538,6 +538,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         for (name, bytes) in mesh.traffic() {
             timer.record_traffic(name, *bytes);
         }
+        for (name, bytes) in mesh.peaks() {
+            timer.record_peak(name, *bytes);
+        }
         if let Some(out) = &o.out {
             timer.time(&*comm, "write", || write_mesh(&*comm, out, &mesh, &[]))?;
             table.row(&timer, None);
@@ -620,6 +623,20 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             steps.num(key, *secs);
         }
         let (bytes, bytes_sent, bytes_sum) = comm_stats(&*comm, &timer, &phase_keys);
+        // Peak RSS at the end of each phase (its last run), max over ranks:
+        // the phase where it grows set the peak.
+        let mut after: Vec<u64> = phase_keys
+            .iter()
+            .map(|k| {
+                let last = timer.peaks().iter().rev().find(|p| p.0 == *k);
+                last.map_or(0, |p| p.1)
+            })
+            .collect();
+        comm.max_u64(&mut after);
+        let mut peaks = JsonObject::new();
+        for (k, b) in phase_keys.iter().zip(&after) {
+            peaks.int(k, *b);
+        }
         let mut j = JsonObject::new();
         j.str(
             "command",
@@ -652,6 +669,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         .obj("comm_bytes_sent", &bytes_sent)
         .obj("comm_bytes_sum", &bytes_sum)
         .int("peak_rss_bytes", rss[0])
+        .obj("peak_rss_after", &peaks)
         .int("rss_start_bytes", rss[1])
         .int("rss_after_read_bytes", rss[2])
         .num("domain_side", domain.side);

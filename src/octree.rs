@@ -7,6 +7,8 @@
 //! `global_first_position`) let any rank find the owner of any point without
 //! communication.
 
+use std::sync::Arc;
+
 use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
 use crate::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
@@ -14,7 +16,8 @@ use crate::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
 /// A distributed, complete, linear octree (see the module documentation).
 pub struct LinearOctree {
     comm: CommRef,
-    leaves: Vec<Octant>,
+    // Shared with meshes that keep every leaf, so they need no copy.
+    leaves: Arc<Vec<Octant>>,
     first_cell: Vec<u64>,
     offsets: Vec<u64>,
     balanced: Option<Connectivity>,
@@ -40,7 +43,7 @@ impl LinearOctree {
         agree(&*comm, local)?;
         let mut t = LinearOctree {
             comm,
-            leaves,
+            leaves: Arc::new(leaves),
             first_cell: Vec::new(),
             offsets: Vec::new(),
             balanced: None,
@@ -99,11 +102,24 @@ impl LinearOctree {
     }
 
     /// Replaces the local leaves (crate internal: callers refresh after).
-    pub(crate) fn leaves_mut(&mut self) -> &mut Vec<Octant> {
+    pub(crate) fn set_leaves(&mut self, leaves: Vec<Octant>) {
         // Any change of the leaf set may break balance; `balance` and
         // `partition` restore the flag themselves.
         self.balanced = None;
-        &mut self.leaves
+        self.leaves = Arc::new(leaves);
+    }
+
+    /// Takes the local leaves out, leaving none (copied only if a mesh
+    /// still shares them). Crate internal: callers set them back.
+    pub(crate) fn take_leaves(&mut self) -> Vec<Octant> {
+        self.balanced = None;
+        let shared = std::mem::take(&mut self.leaves);
+        Arc::try_unwrap(shared).unwrap_or_else(|a| (*a).clone())
+    }
+
+    /// The local leaves, shared rather than copied.
+    pub(crate) fn shared_leaves(&self) -> Arc<Vec<Octant>> {
+        Arc::clone(&self.leaves)
     }
 
     /// Number of leaves on this rank.

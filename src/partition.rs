@@ -126,7 +126,7 @@ impl LinearOctree {
             .alltoallv_u64(Octant::as_keys(self.leaves()), &counts);
         let received = (recv.len() - rc[me]) as u64;
         let balanced = self.balanced();
-        *self.leaves_mut() = recv.into_iter().map(Octant::from_key).collect();
+        self.set_leaves(recv.into_iter().map(Octant::from_key).collect());
         self.set_balanced(balanced);
         self.refresh()?;
         Ok(PartitionStats { sent, received })

@@ -400,7 +400,7 @@ impl LinearOctree {
         // too, or the ranks would call different collectives.
         let global = global_limit(&comm, w.out.len(), limit);
         agree(&*comm, result.and(global))?;
-        *self.leaves_mut() = w.out;
+        self.set_leaves(w.out);
         self.refresh()
     }
 }
@@ -533,7 +533,7 @@ impl LinearOctree {
         // Collective on every rank, as in `refine_surface`.
         let global = global_limit(&comm, out.len(), limit);
         agree(&*comm, result.and(global))?;
-        *self.leaves_mut() = out;
+        self.set_leaves(out);
         self.refresh()
     }
 }

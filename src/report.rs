@@ -24,6 +24,7 @@ pub fn peak_rss_bytes() -> u64 {
 pub struct PhaseTimer {
     phases: Vec<(String, f64)>,
     traffic: Vec<(String, Traffic)>,
+    peaks: Vec<(String, u64)>,
 }
 
 impl PhaseTimer {
@@ -46,7 +47,21 @@ impl PhaseTimer {
         comm.max_f64(&mut dt);
         self.phases.push((name.to_string(), dt[0]));
         self.traffic.push((name.to_string(), bytes));
+        self.peaks.push((name.to_string(), peak_rss_bytes()));
         r
+    }
+
+    /// This rank's peak resident set size (bytes) at the end of each phase,
+    /// in the order the phases ran: the phase where it grows is the one that
+    /// set the peak. Rank-local, not reduced.
+    pub fn peaks(&self) -> &[(String, u64)] {
+        &self.peaks
+    }
+
+    /// Adds the peak resident set size at the end of a phase measured
+    /// elsewhere.
+    pub fn record_peak(&mut self, name: &str, bytes: u64) {
+        self.peaks.push((name.to_string(), bytes));
     }
 
     /// Adds a phase timed elsewhere (already the maximum over ranks).

@@ -57,18 +57,19 @@ fn flatten(m: &Mesh) -> Vec<u64> {
     let mut v = vec![m.elements().len() as u64];
     v.extend(m.elements().iter().map(|e| e.key()));
     v.push(m.num_independent() as u64);
-    for i in 0..m.num_independent() {
-        let x = m.node_lattice()[i];
+    let lattice = m.node_lattice();
+    for (i, &x) in lattice[..m.num_independent()].iter().enumerate() {
         v.extend([x[0] as u64, x[1] as u64, x[2] as u64]);
         v.push(m.global_id(i));
         v.push(m.owner(i) as u64);
     }
-    v.push(m.hanging().len() as u64);
-    for (k, h) in m.hanging().iter().enumerate() {
-        let x = m.node_lattice()[m.num_independent() + k];
-        v.extend([x[0] as u64, x[1] as u64, x[2] as u64, h.count() as u64]);
-        for &d in h.deps() {
-            let y = m.node_lattice()[d as usize];
+    v.push(m.num_hanging() as u64);
+    for k in 0..m.num_hanging() {
+        let deps = m.hanging_deps(k);
+        let x = lattice[m.num_independent() + k];
+        v.extend([x[0] as u64, x[1] as u64, x[2] as u64, deps.len() as u64]);
+        for &d in deps {
+            let y = lattice[d as usize];
             v.extend([y[0] as u64, y[1] as u64, y[2] as u64]);
         }
     }
@@ -160,6 +161,15 @@ fn unflatten(parts: &[Vec<u64>], tag: &str) -> GlobalMesh {
             assert!(
                 g.independent.contains(d),
                 "{tag}: {x:?} depends on a hanging node"
+            );
+        }
+        // The point is the mean of the points it depends on.
+        for ax in 0..3 {
+            let sum: u64 = deps.iter().map(|d| d[ax] as u64).sum();
+            assert_eq!(
+                sum,
+                x[ax] as u64 * deps.len() as u64,
+                "{tag}: {x:?} is not the mean of its dependencies {deps:?}"
             );
         }
     }
@@ -403,8 +413,9 @@ fn expand(mesh: &Mesh, n: u32) -> Vec<(usize, f64)> {
     if (n as usize) < ni {
         vec![(n as usize, 1.0)]
     } else {
-        let h = mesh.hanging()[n as usize - ni];
-        h.deps().iter().map(|&d| (d as usize, h.weight())).collect()
+        let deps = mesh.hanging_deps(n as usize - ni);
+        let w = 1.0 / deps.len() as f64;
+        deps.iter().map(|&d| (d as usize, w)).collect()
     }
 }
 
@@ -439,8 +450,10 @@ fn patch_test(world: &impl Communicator, mesh: &Mesh, tag: &str) {
     let (a, b, c, d) = (0.7, -1.3, 2.1, 0.4);
     let exact = |p: [f64; 3]| a + b * p[0] + c * p[1] + d * p[2];
     let root = octmesh::octant::ROOT_LEN;
+    let lattice = mesh.node_lattice();
+    let coords = mesh.coordinates();
     let on_boundary: Vec<bool> = (0..ni)
-        .map(|i| mesh.node_lattice()[i].iter().any(|&q| q == 0 || q == root))
+        .map(|i| lattice[i].iter().any(|&q| q == 0 || q == root))
         .collect();
     let owned = mesh.num_owned();
     let dot = |u: &[f64], v: &[f64]| -> f64 {
@@ -466,7 +479,7 @@ fn patch_test(world: &impl Communicator, mesh: &Mesh, tag: &str) {
     let mut u: Vec<f64> = (0..ni)
         .map(|i| {
             if on_boundary[i] {
-                exact(mesh.node_coordinates(i))
+                exact(coords[i])
             } else {
                 0.0
             }
@@ -506,7 +519,7 @@ fn patch_test(world: &impl Communicator, mesh: &Mesh, tag: &str) {
     let mut err = 0.0f64;
     for n in 0..mesh.num_nodes() as u32 {
         let v: f64 = expand(mesh, n).iter().map(|&(i, w)| w * u[i]).sum();
-        err = err.max((v - exact(mesh.node_coordinates(n as usize))).abs() / scale);
+        err = err.max((v - exact(coords[n as usize])).abs() / scale);
     }
     let mut e = 0.0;
     world.all_reduce_into(&err, &mut e, SystemOperation::max());

@@ -51,7 +51,6 @@ pub struct octmesh_mesh_counts_t {
 /// C arrays derived from the mesh, made on first request.
 #[derive(Default)]
 pub(crate) struct MeshArrays {
-    conn: OnceCell<Vec<i32>>,
     coords: OnceCell<Vec<f64>>,
     global_ids: OnceCell<Vec<i64>>,
     owners: OnceCell<Vec<i32>>,
@@ -227,12 +226,9 @@ pub unsafe extern "C" fn octmesh_mesh_get_connectivity(
     h: *const octmesh_t,
     out: *mut *const i32,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m| {
-        m.cache
-            .conn
-            .get_or_init(|| i32_of(m.mesh.connectivity().iter().flatten().copied()))
-            .as_ptr()
-    })
+    // Local node numbers are below 2^31 (checked when meshing), so the
+    // stored u32 array reads as int32 without a copy.
+    get_ptr(h, out, |m| m.mesh.connectivity().as_ptr().cast::<i32>())
 }
 
 /// Sets `*out` to the node coordinates: x, y, z per local node, user
@@ -364,11 +360,11 @@ pub unsafe extern "C" fn octmesh_mesh_get_hanging(
         non_null(deps, "deps")?;
         let m = mesh_of(h)?;
         let (c, d) = m.cache.hanging.get_or_init(|| {
-            let hang = m.mesh.hanging();
-            let c = hang.iter().map(|x| x.count() as i32).collect();
+            let mesh = &m.mesh;
+            let hang = (0..mesh.num_hanging()).map(|k| mesh.hanging_deps(k));
+            let c = hang.clone().map(|x| x.len() as i32).collect();
             let d = hang
-                .iter()
-                .flat_map(|x| (0..4).map(move |j| x.deps().get(j).map_or(-1, |&n| n as i32)))
+                .flat_map(|x| (0..4).map(move |j| x.get(j).map_or(-1, |&n| n as i32)))
                 .collect();
             (c, d)
         });

@@ -579,8 +579,8 @@ pub fn write_mesh(
     let hanging: Vec<u8> = (0..mesh.num_nodes())
         .map(|i| match i.checked_sub(ni) {
             None => 0,
-            Some(k) if mesh.hanging()[k].count() == 2 => 1,
-            Some(_) => 2,
+            Some(k) if k < mesh.face_hanging().len() => 2,
+            Some(_) => 1,
         })
         .collect();
     let piece = VtuPiece {

@@ -15,6 +15,7 @@
 //! (it then depends on that face's 4 corners) or edge (its 2 ends). With an
 //! edge- or corner-balanced octree those corners never hang themselves.
 
+use crate::error::{Error, ErrorKind, Result};
 use crate::octant::Octant;
 
 /// Reference to a pointer-tree entry: an internal node index, `LEAF | i`
@@ -24,34 +25,173 @@ const LEAF: u32 = 1 << 31;
 const VOID: u32 = u32::MAX;
 /// Marks a corner slot not yet given a node.
 pub(crate) const UNSET: u32 = u32::MAX;
+/// Corner-table entries carry the node's kind in their two top bits: none
+/// for an independent node, [`FACE`] or [`EDGE`] for the index of a
+/// face- or edge-hanging node in its own list.
+pub(crate) const TAG: u32 = 0xC000_0000;
+/// Tag of a face-hanging node.
+pub(crate) const FACE: u32 = 0x8000_0000;
+/// Tag of an edge-hanging node.
+pub(crate) const EDGE: u32 = 0x4000_0000;
+
+/// Node flag: a corner of a kept local leaf.
+pub(crate) const CORNER: u8 = 1;
+/// Node flag: a dependency of a used hanging node.
+pub(crate) const DEP: u8 = 2;
+/// Node flag: another rank may use it (a kept ghost leaf around it, or a
+/// dependency of such a hanging node); only these need the directory.
+pub(crate) const BOUNDARY: u8 = 4;
+/// Used here: a corner of a local element or a dependency of one's hanging
+/// corner.
+pub(crate) const USED: u8 = CORNER | DEP;
+
+/// The merged run of leaves the traversal works on: ghosts of lower ranks,
+/// the local leaves, the other ghosts, without copying them into one array.
+#[derive(Clone, Copy)]
+pub(crate) struct Merged<'a> {
+    /// Ghosts before the local range.
+    pub before: &'a [Octant],
+    /// The local leaves.
+    pub local: &'a [Octant],
+    /// Ghosts after it.
+    pub after: &'a [Octant],
+}
+
+impl Merged<'_> {
+    /// Number of leaves.
+    pub fn len(&self) -> usize {
+        self.before.len() + self.local.len() + self.after.len()
+    }
+
+    /// Leaf `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> Octant {
+        let b = self.before.len();
+        if i < b {
+            self.before[i]
+        } else if i < b + self.local.len() {
+            self.local[i - b]
+        } else {
+            self.after[i - b - self.local.len()]
+        }
+    }
+
+    /// Merged indices of the local leaves.
+    pub fn local_range(&self) -> std::ops::Range<usize> {
+        self.before.len()..self.before.len() + self.local.len()
+    }
+}
+
+/// One bit per entry.
+pub(crate) struct Bits {
+    words: Vec<u64>,
+}
+
+impl Bits {
+    /// `n` entries from `f`.
+    pub fn from_fn(n: usize, mut f: impl FnMut(usize) -> bool) -> Bits {
+        let mut words = vec![0u64; n.div_ceil(64)];
+        for (w, word) in words.iter_mut().enumerate() {
+            for b in 0..64.min(n - 64 * w) {
+                *word |= (f(64 * w + b) as u64) << b;
+            }
+        }
+        Bits { words }
+    }
+
+    /// Entry `i`.
+    #[inline]
+    pub fn get(&self, i: usize) -> bool {
+        self.words[i >> 6] >> (i & 63) & 1 == 1
+    }
+}
+
+/// A set of entries numbered in order: `rank(i)` is the number of members
+/// before `i`. One bit and half a byte per entry instead of a `u32` map.
+pub(crate) struct Ranks {
+    bits: Bits,
+    before: Vec<u32>,
+    count: u32,
+}
+
+impl Ranks {
+    /// The members among `n` entries, given by `f`.
+    pub fn from_fn(n: usize, f: impl FnMut(usize) -> bool) -> Ranks {
+        let bits = Bits::from_fn(n, f);
+        let mut before = Vec::with_capacity(bits.words.len());
+        let mut count = 0u32;
+        for w in &bits.words {
+            before.push(count);
+            count += w.count_ones();
+        }
+        Ranks {
+            bits,
+            before,
+            count,
+        }
+    }
+
+    /// Whether `i` is a member.
+    #[inline]
+    pub fn contains(&self, i: usize) -> bool {
+        self.bits.get(i)
+    }
+
+    /// Members before `i`.
+    #[inline]
+    pub fn rank(&self, i: usize) -> u32 {
+        let w = self.bits.words[i >> 6] & ((1u64 << (i & 63)) - 1);
+        self.before[i >> 6] + w.count_ones()
+    }
+
+    /// Number of members.
+    pub fn count(&self) -> u32 {
+        self.count
+    }
+}
 
 /// What the traversal produced for the merged (ghost + local) leaves.
 pub(crate) struct DualNodes {
-    /// 0 independent, 1 edge-hanging, 2 face-hanging, per node found. Node
-    /// coordinates are not stored: every node is a corner of a kept leaf, so
-    /// [`DualNodes::scatter_coords`] recovers them when they are needed.
-    pub kind: Vec<u8>,
+    /// Flags ([`CORNER`], [`DEP`], [`BOUNDARY`]) per independent node, in
+    /// the order the traversal found them. Coordinates are not stored: every
+    /// node is a corner of a kept leaf, so [`DualNodes::scatter_coords`]
+    /// recovers them when they are needed.
+    pub flags: Vec<u8>,
     /// Node at each Morton corner of each merged leaf that is kept
-    /// ([`UNSET`] for leaves that are not kept).
+    /// ([`UNSET`] for leaves that are not kept): an independent node's
+    /// index, or [`FACE`] / [`EDGE`] with a hanging node's index.
     pub corners: Vec<[u32; 8]>,
-    /// For each hanging node: (node, coarse leaf, its corners the node
-    /// depends on, as a bit mask over the 8 Morton corners).
-    pub hanging: Vec<(u32, u32, u8)>,
+    /// Face-hanging nodes: `[coarse leaf, mask | flags << 8, 0, 0]`, where
+    /// the mask has a bit for each of the leaf's Morton corners the node
+    /// depends on. Sized to become the 4 dependencies in place.
+    pub face: Vec<[u32; 4]>,
+    /// Edge-hanging nodes: `[coarse leaf, mask | flags << 8]`.
+    pub edge: Vec<[u32; 2]>,
 }
 
 /// Runs the traversal over `leaves` (sorted, disjoint, possibly with gaps),
-/// counting only leaves with `kept[i]`.
-pub(crate) fn extract_nodes(leaves: &[Octant], kept: &[bool]) -> DualNodes {
-    assert!(leaves.len() < LEAF as usize, "too many leaves for one rank");
-    let mut tree = Vec::with_capacity(leaves.len() / 6 + 1);
-    let root = build(leaves, Octant::ROOT, 0, leaves.len(), &mut tree);
+/// counting only leaves with `kept[i]`; the leaves in `leaves.local_range()`
+/// are this rank's.
+pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
+    let n = leaves.len();
+    if n >= LEAF as usize {
+        return Err(Error::new(
+            ErrorKind::Limit,
+            format!("{n} leaves and ghosts on one rank: at most 2^31 - 1 can be meshed"),
+        ));
+    }
+    let mut tree = Vec::with_capacity(n / 6 + 1);
+    let root = build(&leaves, Octant::ROOT, 0, n, &mut tree);
     let mut w = Walker {
         tree: &tree,
         kept,
+        local: leaves.local_range(),
+        overflow: false,
         out: DualNodes {
-            kind: Vec::with_capacity(leaves.len() + leaves.len() / 2),
-            corners: vec![[UNSET; 8]; leaves.len()],
-            hanging: Vec::with_capacity(leaves.len() / 2),
+            flags: Vec::with_capacity(n),
+            corners: vec![[UNSET; 8]; n],
+            face: Vec::with_capacity(n / 4),
+            edge: Vec::with_capacity(n / 2),
         },
     };
     w.start(0, [root; 8]);
@@ -68,41 +208,97 @@ pub(crate) fn extract_nodes(leaves: &[Octant], kept: &[bool]) -> DualNodes {
             b = (b - 1) & m;
         }
     }
-    w.out.kind.shrink_to_fit();
-    w.out.hanging.shrink_to_fit();
-    w.out
+    let Walker { overflow, out, .. } = w;
+    drop(tree);
+    if overflow {
+        return Err(Error::new(
+            ErrorKind::Limit,
+            "more than 2^30 - 1 nodes of one kind on one rank",
+        ));
+    }
+    let mut out = out;
+    out.flags.shrink_to_fit();
+    out.face.shrink_to_fit();
+    out.edge.shrink_to_fit();
+    out.propagate()?;
+    Ok(out)
 }
 
 /// Lattice coordinates of corner `c` (Morton order) of the octant with
 /// anchor `a` and side `s` (decoded once by the caller, not per corner).
 #[inline]
-fn corner_coords(a: [u32; 3], s: u32, c: usize) -> [u32; 3] {
+pub(crate) fn corner_coords(a: [u32; 3], s: u32, c: usize) -> [u32; 3] {
     std::array::from_fn(|d| a[d] + if c >> d & 1 == 1 { s } else { 0 })
 }
 
+/// The flags byte of a hanging-node entry.
+#[inline]
+pub(crate) fn entry_flags(word: u32) -> u8 {
+    (word >> 8) as u8
+}
+
+/// The dependency mask of a hanging-node entry.
+#[inline]
+pub(crate) fn entry_mask(word: u32) -> u8 {
+    word as u8
+}
+
 impl DualNodes {
-    /// Number of nodes found.
-    pub fn num_nodes(&self) -> usize {
-        self.kind.len()
+    /// Number of independent nodes found.
+    #[cfg(test)]
+    pub fn num_independent(&self) -> usize {
+        self.flags.len()
     }
 
-    /// Writes the lattice coordinates of node `n` to `out[map[n]]` for every
-    /// node with `map[n] != UNSET`. `leaf(i)` is merged leaf `i`.
+    /// Marks the dependencies of hanging nodes: used when the hanging node
+    /// is, boundary when it is.
+    fn propagate(&mut self) -> Result<()> {
+        let corners = &self.corners;
+        let flags = &mut self.flags;
+        let face = self.face.iter().map(|e| (e[0], e[1]));
+        let edge = self.edge.iter().map(|e| (e[0], e[1]));
+        for (q, word) in face.chain(edge) {
+            let f = entry_flags(word);
+            let add = (if f & USED != 0 { DEP } else { 0 }) | (f & BOUNDARY);
+            if add == 0 {
+                continue;
+            }
+            let mask = entry_mask(word);
+            for (c, &dep) in corners[q as usize].iter().enumerate() {
+                if mask >> c & 1 == 1 {
+                    if dep & TAG != 0 {
+                        return Err(Error::new(
+                            ErrorKind::Internal,
+                            "a hanging node depends on a node that is not independent",
+                        ));
+                    }
+                    flags[dep as usize] |= add;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the lattice coordinates of independent node `n` to
+    /// `out[map(n)]` for every node with `map(n) != UNSET`.
     pub fn scatter_coords(
         &self,
-        leaf: impl Fn(usize) -> Octant,
-        kept: &[bool],
-        map: &[u32],
+        leaves: Merged,
+        kept: &Bits,
+        map: impl Fn(u32) -> u32,
         out: &mut [[u32; 3]],
     ) {
         for (i, cs) in self.corners.iter().enumerate() {
-            if !kept[i] {
+            if !kept.get(i) {
                 continue;
             }
-            let o = leaf(i);
+            let o = leaves.get(i);
             let (a, s) = (o.coords(), o.side());
             for (c, &n) in cs.iter().enumerate() {
-                let m = map[n as usize];
+                if n & TAG != 0 {
+                    continue;
+                }
+                let m = map(n);
                 if m != UNSET {
                     out[m as usize] = corner_coords(a, s, c);
                 }
@@ -110,8 +306,8 @@ impl DualNodes {
         }
     }
 
-    /// Lattice coordinates of hanging node entry `(_, q, mask)`: the mean
-    /// of the corners of leaf `q` it depends on.
+    /// Lattice coordinates of a hanging node depending on the corners
+    /// `mask` of leaf `q`: their mean.
     pub fn hanging_coords(q: Octant, mask: u8) -> [u32; 3] {
         let mut sum = [0u32; 3];
         let k = mask.count_ones();
@@ -129,11 +325,11 @@ impl DualNodes {
 }
 
 /// Links `leaves[lo..hi]` (the leaves inside `o`) into the pointer tree.
-fn build(leaves: &[Octant], o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32; 8]>) -> u32 {
+fn build(leaves: &Merged, o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32; 8]>) -> u32 {
     if lo == hi {
         return VOID;
     }
-    if leaves[lo].level() <= o.level() {
+    if leaves.get(lo).level() <= o.level() {
         // The first leaf overlapping `o` is at most its size: it contains it.
         return LEAF | lo as u32;
     }
@@ -143,15 +339,23 @@ fn build(leaves: &[Octant], o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32
     for c in 0..8u32 {
         let child = o.child(c);
         let end = child.cell_end();
-        let b = if hi - a <= 16 {
-            let mut b = a;
-            while b < hi && leaves[b].cell_begin() < end {
+        let mut b = a;
+        if hi - a > 16 {
+            // Binary search for the first leaf beginning at or after `end`.
+            let mut h = hi;
+            while b < h {
+                let mid = b + (h - b) / 2;
+                if leaves.get(mid).cell_begin() < end {
+                    b = mid + 1;
+                } else {
+                    h = mid;
+                }
+            }
+        } else {
+            while b < hi && leaves.get(b).cell_begin() < end {
                 b += 1;
             }
-            b
-        } else {
-            a + leaves[a..hi].partition_point(|l| l.cell_begin() < end)
-        };
+        }
         let r = build(leaves, child, a, b, tree);
         tree[idx][c as usize] = r;
         a = b;
@@ -170,7 +374,9 @@ fn grow<T>(v: &mut Vec<T>) {
 
 struct Walker<'a> {
     tree: &'a [[u32; 8]],
-    kept: &'a [bool],
+    kept: &'a Bits,
+    local: std::ops::Range<usize>,
+    overflow: bool,
     out: DualNodes,
 }
 
@@ -276,20 +482,37 @@ impl Walker<'_> {
                 *r = self.child(*r, !(p as u32) & 7);
             }
         }
-        let kept = |r: u32| r != VOID && self.kept[(r & !LEAF) as usize];
+        let kept = |r: u32| r != VOID && self.kept.get((r & !LEAF) as usize);
+        let local = |r: u32| self.local.contains(&((r & !LEAF) as usize));
         let mut count = [0u8; 8];
         let mut corner = false;
+        let mut flags = 0u8;
         for p in 0..8 {
             if kept(refs[p]) {
                 count[p] = refs.iter().filter(|&&q| q == refs[p]).count() as u8;
                 corner |= count[p] == 1;
+                if !local(refs[p]) {
+                    flags |= BOUNDARY;
+                } else if count[p] == 1 {
+                    flags |= CORNER;
+                }
             }
         }
         if !corner {
             return;
         }
-        let id = self.out.kind.len() as u32;
-        let mut kind = 0u8;
+        let most = self
+            .out
+            .flags
+            .len()
+            .max(self.out.face.len())
+            .max(self.out.edge.len());
+        if most >= 1 << 30 {
+            // The tag bits leave 30 bits for the index.
+            self.overflow = true;
+            return;
+        }
+        let id;
         if let Some(p) = (0..8).find(|&p| count[p] == 4) {
             // Face interior of the coarse leaf: its 4 positions span two
             // axes; the third, across which it does not extend, is the
@@ -299,15 +522,17 @@ impl Walker<'_> {
                 .find(|&d| refs[p ^ (1 << d)] != q)
                 .expect("a face leaf lies on one side of the point");
             let side = (p >> n) & 1;
-            let mut mask = 0u8;
+            let mut mask = 0u32;
             for c in 0..8 {
                 if (c >> n) & 1 != side {
                     mask |= 1 << c;
                 }
             }
-            kind = 2;
-            grow(&mut self.out.hanging);
-            self.out.hanging.push((id, q & !LEAF, mask));
+            id = FACE | self.out.face.len() as u32;
+            grow(&mut self.out.face);
+            self.out
+                .face
+                .push([q & !LEAF, mask | (flags as u32) << 8, 0, 0]);
         } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
             let q = refs[p];
             let e = (0..3)
@@ -316,13 +541,15 @@ impl Walker<'_> {
             // The edge of the coarse leaf through the point: opposite side
             // of the point on the two other axes, both ends along `e`.
             let base = !p & 7 & !(1 << e);
-            let mask = (1u8 << base) | (1u8 << (base | (1 << e)));
-            kind = 1;
-            grow(&mut self.out.hanging);
-            self.out.hanging.push((id, q & !LEAF, mask));
+            let mask = (1u32 << base) | (1u32 << (base | (1 << e)));
+            id = EDGE | self.out.edge.len() as u32;
+            grow(&mut self.out.edge);
+            self.out.edge.push([q & !LEAF, mask | (flags as u32) << 8]);
+        } else {
+            id = self.out.flags.len() as u32;
+            grow(&mut self.out.flags);
+            self.out.flags.push(flags);
         }
-        grow(&mut self.out.kind);
-        self.out.kind.push(kind);
         for p in 0..8 {
             if count[p] == 1 {
                 let leaf = (refs[p] & !LEAF) as usize;
@@ -344,77 +571,135 @@ mod tests {
             .collect()
     }
 
-    fn coords(d: &DualNodes, leaves: &[Octant], kept: &[bool]) -> Vec<[u32; 3]> {
-        let map: Vec<u32> = (0..d.num_nodes() as u32).collect();
-        let mut out = vec![[u32::MAX; 3]; d.num_nodes()];
-        d.scatter_coords(|i| leaves[i], kept, &map, &mut out);
-        assert!(
-            out.iter().all(|x| x[0] != u32::MAX),
-            "a node is no kept leaf's corner"
-        );
-        out
+    fn whole(leaves: &[Octant]) -> Merged<'_> {
+        Merged {
+            before: &[],
+            local: leaves,
+            after: &[],
+        }
+    }
+
+    /// Lattice coordinates of every corner-table entry, found independently
+    /// from the leaves: (entry, point) pairs, checked to agree.
+    fn points(d: &DualNodes, leaves: &[Octant]) -> std::collections::BTreeMap<u32, [u32; 3]> {
+        let mut at = std::collections::BTreeMap::new();
+        for (l, cs) in leaves.iter().zip(&d.corners) {
+            for (c, &n) in cs.iter().enumerate() {
+                let x = corner_coords(l.coords(), l.side(), c);
+                assert_eq!(*at.entry(n).or_insert(x), x, "entry {n:#x} at two points");
+            }
+        }
+        at
     }
 
     #[test]
     fn uniform_grid_has_every_lattice_point_once() {
         let leaves = uniform(2);
-        let kept = vec![true; leaves.len()];
-        let d = extract_nodes(&leaves, &kept);
-        let coords = coords(&d, &leaves, &kept);
-        assert_eq!(coords.len(), 125);
-        let mut c = coords.clone();
-        c.sort_unstable();
-        c.dedup();
-        assert_eq!(c.len(), 125);
-        assert!(d.kind.iter().all(|&k| k == 0));
-        for (l, cs) in leaves.iter().zip(&d.corners) {
-            let a = l.coords();
-            let s = l.side();
-            for (j, &n) in cs.iter().enumerate() {
-                let want = [
-                    a[0] + s * (j as u32 & 1),
-                    a[1] + s * (j as u32 >> 1 & 1),
-                    a[2] + s * (j as u32 >> 2 & 1),
-                ];
-                assert_eq!(coords[n as usize], want);
-            }
+        let kept = Bits::from_fn(leaves.len(), |_| true);
+        let d = extract_nodes(whole(&leaves), &kept).unwrap();
+        assert_eq!(d.num_independent(), 125);
+        assert!(d.face.is_empty() && d.edge.is_empty());
+        let at = points(&d, &leaves);
+        assert_eq!(at.len(), 125);
+        let distinct: std::collections::BTreeSet<_> = at.values().collect();
+        assert_eq!(distinct.len(), 125);
+        // Scattering reproduces the same coordinates.
+        let mut out = vec![[u32::MAX; 3]; 125];
+        d.scatter_coords(whole(&leaves), &kept, |n| n, &mut out);
+        for (n, x) in at {
+            assert_eq!(out[n as usize], x);
         }
+        assert!(d.flags.iter().all(|&f| f == CORNER));
     }
 
     #[test]
     fn one_refined_octant_hangs_on_its_neighbours() {
-        // Root split once, child 0 split again: the 19 new points on child
-        // 0's three inner faces hang (3 face centres, 6 edge midpoints on
-        // those faces... counted below by brute force).
+        // Root split once, child 0 split again.
         let mut leaves: Vec<Octant> = Octant::ROOT.child(0).children().to_vec();
         leaves.extend((1..8).map(|c| Octant::ROOT.child(c)));
-        let kept = vec![true; leaves.len()];
-        let d = extract_nodes(&leaves, &kept);
-        let coords = coords(&d, &leaves, &kept);
+        let kept = Bits::from_fn(leaves.len(), |_| true);
+        let d = extract_nodes(whole(&leaves), &kept).unwrap();
+        let at = points(&d, &leaves);
         // 27 coarse points + 27 fine points of child 0, 8 of them shared.
-        assert_eq!(coords.len(), 27 + 27 - 8);
-        let face = d.kind.iter().filter(|&&k| k == 2).count();
-        let edge = d.kind.iter().filter(|&&k| k == 1).count();
+        assert_eq!(at.len(), 27 + 27 - 8);
         // Child 0's faces towards its siblings: 3 centres; its edges inside
         // the root: 3 whole edges, and halves of 6 face-boundary edges.
-        assert_eq!(face, 3);
-        assert_eq!(edge, 3 + 6);
-        for &(n, q, mask) in &d.hanging {
-            let corners: Vec<[u32; 3]> = (0..8)
+        assert_eq!(d.face.len(), 3);
+        assert_eq!(d.edge.len(), 3 + 6);
+        assert_eq!(d.num_independent(), 27 + 8 - 1);
+        let entries = d.face.iter().map(|e| (FACE, e[0], e[1]));
+        let entries = entries.chain(d.edge.iter().map(|e| (EDGE, e[0], e[1])));
+        let mut k = [0u32; 2];
+        for (tag, q, word) in entries {
+            let id = tag | k[(tag == EDGE) as usize];
+            k[(tag == EDGE) as usize] += 1;
+            let mask = entry_mask(word);
+            assert_eq!(mask.count_ones(), if tag == FACE { 4 } else { 2 });
+            assert_eq!(entry_flags(word), CORNER);
+            let deps: Vec<[u32; 3]> = (0..8)
                 .filter(|c| mask >> c & 1 == 1)
-                .map(|c| coords[d.corners[q as usize][c] as usize])
+                .map(|c| {
+                    let n = d.corners[q as usize][c];
+                    assert_eq!(n & TAG, 0, "dependencies are independent");
+                    at[&n]
+                })
                 .collect();
-            let k = d.kind[n as usize];
-            assert_eq!(corners.len(), if k == 2 { 4 } else { 2 });
             // The hanging node is the average of what it depends on.
             for ax in 0..3 {
-                let sum: u32 = corners.iter().map(|c| c[ax]).sum();
-                assert_eq!(sum, coords[n as usize][ax] * corners.len() as u32);
+                let sum: u32 = deps.iter().map(|c| c[ax]).sum();
+                assert_eq!(sum, at[&id][ax] * deps.len() as u32);
             }
-            assert_eq!(
-                DualNodes::hanging_coords(leaves[q as usize], mask),
-                coords[n as usize]
-            );
+            assert_eq!(DualNodes::hanging_coords(leaves[q as usize], mask), at[&id]);
         }
+        // Every independent node is a corner; 8 coarse corners of child 0's
+        // faces and edges are also dependencies.
+        assert!(d
+            .flags
+            .iter()
+            .all(|&f| f & CORNER != 0 && f & BOUNDARY == 0));
+        assert!(d.flags.iter().filter(|&&f| f & DEP != 0).count() >= 7);
+    }
+
+    #[test]
+    fn ghosts_mark_boundary_nodes_and_their_dependencies() {
+        // Child 0 refined; only its fine child 1 is local, the rest ghosts.
+        let fine = Octant::ROOT.child(0).children();
+        let mut after: Vec<Octant> = fine[2..].to_vec();
+        after.extend((1..8).map(|c| Octant::ROOT.child(c)));
+        let m = Merged {
+            before: &fine[..1],
+            local: &fine[1..2],
+            after: &after,
+        };
+        let kept = Bits::from_fn(m.len(), |_| true);
+        let d = extract_nodes(m, &kept).unwrap();
+        let all: Vec<Octant> = (0..m.len()).map(|i| m.get(i)).collect();
+        let at = points(&d, &all);
+        let mine = fine[1];
+        let is_corner =
+            |x: [u32; 3]| (0..8).any(|c| corner_coords(mine.coords(), mine.side(), c) == x);
+        for (n, &f) in d.flags.iter().enumerate() {
+            let x = at[&(n as u32)];
+            // Every point touches a ghost here.
+            assert!(f & BOUNDARY != 0, "node at {x:?}");
+            assert_eq!(f & CORNER != 0, is_corner(x), "node at {x:?}");
+        }
+        // The centre of coarse child 1's face is a corner of the local leaf
+        // and hangs on that face; the face's far corner (h, h, h) is used
+        // only as its dependency.
+        let h = mine.side() * 2;
+        let far = at
+            .iter()
+            .find(|(_, &x)| x == [h, h, h])
+            .map(|(&n, _)| n)
+            .unwrap();
+        assert_eq!(d.flags[far as usize] & USED, DEP);
+        let used = d
+            .face
+            .iter()
+            .map(|e| e[1])
+            .chain(d.edge.iter().map(|e| e[1]));
+        assert!(used.clone().any(|w| entry_flags(w) == CORNER | BOUNDARY));
+        assert!(used.clone().all(|w| entry_flags(w) & BOUNDARY != 0));
     }
 }

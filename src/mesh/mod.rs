@@ -23,12 +23,25 @@
 //! is independent, since no element there asks for continuity.
 //!
 //! Each rank numbers its nodes locally as
-//! `[owned independent | other independent | hanging]`. Owned nodes have the
-//! global numbers `first_global..first_global + num_owned`, in the order the
-//! dual traversal meets them (a space-filling order, deterministic for a
-//! given partition); the other independent nodes are sorted by global
-//! number; hanging nodes follow in traversal order. The owner of a node is
-//! the lowest rank using it (directly or through a hanging dependency).
+//! `[owned independent | other independent | face-hanging | edge-hanging]`.
+//! Owned nodes have the global numbers `first_global..first_global +
+//! num_owned`, in the order the dual traversal meets them (a space-filling
+//! order, deterministic for a given partition); the other independent nodes
+//! are sorted by global number; hanging nodes follow in traversal order,
+//! face-hanging first. The owner of a node is the lowest rank using it
+//! (directly or through a hanging dependency). Only nodes that a leaf of
+//! another rank touches (or that such a hanging node depends on) can have
+//! another user, so only those are exchanged.
+//!
+//! # Memory
+//!
+//! A mesh stores the connectivity (32 bytes per element), the hanging
+//! nodes' dependencies (16 bytes per face-hanging, 8 per edge-hanging
+//! node), a class byte per element, and the numbers and sharers of the
+//! nodes on partition boundaries. The elements are the octree's own leaves
+//! when all are kept (shared, not copied). Node coordinates are not stored:
+//! [`Mesh::node_lattice`] and [`Mesh::coordinates`] compute them from the
+//! elements' corners.
 //!
 //! # Orderings and units
 //!
@@ -45,12 +58,14 @@ use crate::classify::{keeps, CutRule, Keep, LeafClass};
 use crate::comm::{Comm, Traffic};
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
-use crate::ghost::{build_ghost_layer, GhostLayer};
+use crate::ghost::build_ghost_layer;
 use crate::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::report::PhaseTimer;
 
-use dual::UNSET;
+use std::sync::Arc;
+
+use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
 
 /// VTK hexahedron corner `v` is Morton corner `VTK_TO_MORTON[v]`
 /// (Morton corner bits: x, y, z).
@@ -75,42 +90,21 @@ impl Default for MeshOptions {
     }
 }
 
-/// A node constrained by 2 or 4 independent nodes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct HangingNode {
-    /// Local indices of the independent nodes it depends on; an
-    /// edge-hanging node has only two, and `u32::MAX` in the last two
-    /// entries (16 bytes per node instead of 20 with a separate count).
-    deps: [u32; 4],
+/// The local elements: the octree's own leaves when every one is kept
+/// (shared, not copied), else the kept ones.
+#[derive(Debug)]
+enum Elements {
+    Shared(Arc<Vec<Octant>>),
+    Own(Vec<Octant>),
 }
 
-impl HangingNode {
-    /// A constraint on the given 2 or 4 independent nodes.
-    pub fn new(deps: &[u32]) -> HangingNode {
-        assert!(deps.len() == 2 || deps.len() == 4, "2 or 4 dependencies");
-        let mut d = [u32::MAX; 4];
-        d[..deps.len()].copy_from_slice(deps);
-        HangingNode { deps: d }
-    }
-
-    /// 2 for an edge-hanging node (weights 1/2), 4 for a face-hanging one
-    /// (weights 1/4).
-    pub fn count(&self) -> usize {
-        if self.deps[2] == u32::MAX {
-            2
-        } else {
-            4
+impl std::ops::Deref for Elements {
+    type Target = [Octant];
+    fn deref(&self) -> &[Octant] {
+        match self {
+            Elements::Shared(v) => v,
+            Elements::Own(v) => v,
         }
-    }
-
-    /// The nodes it depends on.
-    pub fn deps(&self) -> &[u32] {
-        &self.deps[..self.count()]
-    }
-
-    /// The weight of each dependency.
-    pub fn weight(&self) -> f64 {
-        1.0 / self.count() as f64
     }
 }
 
@@ -137,10 +131,9 @@ pub struct Mesh {
     rank: usize,
     size: usize,
     domain: Domain,
-    elements: Vec<Octant>,
+    elements: Elements,
     element_class: Vec<u8>,
     connectivity: Vec<[u32; 8]>,
-    node_lattice: Vec<[u32; 3]>,
     num_owned: usize,
     num_independent: usize,
     /// Global numbers of the independent nodes this rank does not own
@@ -148,7 +141,11 @@ pub struct Mesh {
     other_global: Vec<u64>,
     /// Owners of the independent nodes this rank does not own.
     other_owner: Vec<u32>,
-    hanging: Vec<HangingNode>,
+    face_hanging: Vec<[u32; 4]>,
+    edge_hanging: Vec<[u32; 2]>,
+    // Independent nodes that are no local element's corner (only a
+    // dependency of a hanging corner), with their lattice points, by node.
+    dep_only: Vec<(u32, [u32; 3])>,
     shared_nodes: Vec<u32>,
     shared_offsets: Vec<u32>,
     shared_ranks: Vec<u32>,
@@ -156,6 +153,7 @@ pub struct Mesh {
     counts: MeshCounts,
     timings: Vec<(String, f64)>,
     traffic: Vec<(String, Traffic)>,
+    peaks: Vec<(String, u64)>,
 }
 
 impl Mesh {
@@ -185,59 +183,37 @@ impl Mesh {
         let keep = |bits: u8| keeps(opts.keep, opts.cut_rule, bits);
 
         let ghosts = timer.time(comm, "ghost", || build_ghost_layer(tree, local_class));
+        let b = ghosts.before;
+        let merged = Merged {
+            before: &ghosts.leaves[..b],
+            local: tree.leaves(),
+            after: &ghosts.leaves[b..],
+        };
 
-        let nodes_phase = timer.time(comm, "nodes", || {
-            // Merged run: ghosts of lower ranks, local leaves, the rest.
-            let local = tree.leaves();
-            let nl = local.len();
-            let b = ghosts.before;
-            let mut merged = Vec::with_capacity(nl + ghosts.len());
-            merged.extend_from_slice(&ghosts.leaves[..b]);
-            merged.extend_from_slice(local);
-            merged.extend_from_slice(&ghosts.leaves[b..]);
-            let mut kept = Vec::with_capacity(merged.len());
-            kept.extend(ghosts.data[..b].iter().map(|&c| keep(c)));
-            kept.extend(local_class.iter().map(|&c| keep(c)));
-            kept.extend(ghosts.data[b..].iter().map(|&c| keep(c)));
-            let d = dual::extract_nodes(&merged, &kept);
-            let local_range = b..b + nl;
-            let counted = count_hanging(comm, tree.first_cells(), &d, &merged);
-            (d, local_range, kept, counted)
+        let nodes = timer.time(comm, "nodes", || {
+            let nl = merged.local.len();
+            let kept = Bits::from_fn(merged.len(), |i| {
+                keep(if i < b {
+                    ghosts.data[i]
+                } else if i < b + nl {
+                    local_class[i - b]
+                } else {
+                    ghosts.data[i - nl]
+                })
+            });
+            let d = dual::extract_nodes(merged, &kept)?;
+            let counted = count_hanging(comm, tree.first_cells(), &d, merged);
+            Ok((d, kept, counted))
         });
-        let (d, local_range, kept, (face_hanging, edge_hanging)) = nodes_phase;
-        let leaf_at = |i: usize| merged_leaf(&ghosts, tree.leaves(), i);
+        let (d, kept, (face_hanging, edge_hanging)) = crate::comm::agree(comm, nodes)?;
 
-        let (used, slot, numbering) = timer.time(comm, "numbering", || {
-            let used = used_nodes(&d, &local_range, &kept);
-            // slot[n]: the index of used independent node n among them.
-            let mut slot = vec![UNSET; d.num_nodes()];
-            let mut ni = 0u32;
-            for (n, s) in slot.iter_mut().enumerate() {
-                if used[n] && d.kind[n] == 0 {
-                    *s = ni;
-                    ni += 1;
-                }
-            }
-            let mut icoords = vec![[0u32; 3]; ni as usize];
-            d.scatter_coords(leaf_at, &kept, &slot, &mut icoords);
-            let numbering = numbering::number_nodes(comm, tree.first_cells(), &icoords);
-            (used, slot, numbering)
+        let numbering = timer.time(comm, "numbering", || {
+            number_independent(comm, tree.first_cells(), &d, merged, &kept)
         });
         let numbering = crate::comm::agree(comm, numbering)?;
 
         let mesh = timer.time(comm, "connectivity", || {
-            assemble(
-                tree,
-                domain,
-                d,
-                leaf_at,
-                &local_range,
-                &kept,
-                local_class,
-                used,
-                slot,
-                numbering,
-            )
+            assemble(tree, domain, d, merged, &kept, local_class, numbering)
         });
         let mut mesh = crate::comm::agree(comm, mesh)?;
         let with_hanging = mesh
@@ -260,6 +236,7 @@ impl Mesh {
         mesh.counts.ghosts = sums[4];
         mesh.timings = timer.phases().to_vec();
         mesh.traffic = timer.traffic().to_vec();
+        mesh.peaks = timer.peaks().to_vec();
         Ok(mesh)
     }
 
@@ -295,6 +272,12 @@ impl Mesh {
         &self.traffic
     }
 
+    /// This rank's peak resident set size (bytes) at the end of each phase
+    /// of [`Mesh::build`].
+    pub fn peaks(&self) -> &[(String, u64)] {
+        &self.peaks
+    }
+
     /// The local elements, in Morton order.
     pub fn elements(&self) -> &[Octant] {
         &self.elements
@@ -312,7 +295,7 @@ impl Mesh {
 
     /// Number of local nodes (independent and hanging).
     pub fn num_nodes(&self) -> usize {
-        self.node_lattice.len()
+        self.num_independent + self.num_hanging()
     }
 
     /// Local nodes `0..num_owned()` are owned by this rank.
@@ -362,27 +345,61 @@ impl Mesh {
         (0..self.num_independent).map(|i| self.owner(i)).collect()
     }
 
-    /// Hanging nodes: entry `k` is local node `num_independent() + k`.
-    pub fn hanging(&self) -> &[HangingNode] {
-        &self.hanging
+    /// Number of hanging local nodes: the face-hanging ones, then the
+    /// edge-hanging ones.
+    pub fn num_hanging(&self) -> usize {
+        self.face_hanging.len() + self.edge_hanging.len()
     }
 
-    /// Lattice coordinates of each local node.
-    pub fn node_lattice(&self) -> &[[u32; 3]] {
-        &self.node_lattice
+    /// Face-hanging nodes: entry `k` is local node `num_independent() + k`,
+    /// the mean of the 4 independent local nodes given (weights 1/4).
+    pub fn face_hanging(&self) -> &[[u32; 4]] {
+        &self.face_hanging
     }
 
-    /// Coordinates of local node `i` in user units.
-    pub fn node_coordinates(&self, i: usize) -> [f64; 3] {
-        let q = self.node_lattice[i];
-        self.domain
-            .from_lattice([q[0] as f64, q[1] as f64, q[2] as f64])
+    /// Edge-hanging nodes: entry `k` is local node `num_independent() +
+    /// face_hanging().len() + k`, the mean of the 2 independent local nodes
+    /// given (weights 1/2).
+    pub fn edge_hanging(&self) -> &[[u32; 2]] {
+        &self.edge_hanging
     }
 
-    /// Coordinates of all local nodes in user units.
+    /// The independent local nodes hanging node `k` (local node
+    /// `num_independent() + k`) is the mean of: 4 for a face-hanging node,
+    /// 2 for an edge-hanging one.
+    pub fn hanging_deps(&self, k: usize) -> &[u32] {
+        let f = self.face_hanging.len();
+        if k < f {
+            &self.face_hanging[k]
+        } else {
+            &self.edge_hanging[k - f]
+        }
+    }
+
+    /// Lattice coordinates of each local node (a new vector: they are not
+    /// stored, but recovered from the elements' corners).
+    pub fn node_lattice(&self) -> Vec<[u32; 3]> {
+        let mut out = vec![[0u32; 3]; self.num_nodes()];
+        for (e, c) in self.elements.iter().zip(&self.connectivity) {
+            let (a, s) = (e.coords(), e.side());
+            for (v, &n) in c.iter().enumerate() {
+                out[n as usize] = dual::corner_coords(a, s, VTK_TO_MORTON[v]);
+            }
+        }
+        for &(n, x) in &self.dep_only {
+            out[n as usize] = x;
+        }
+        out
+    }
+
+    /// Coordinates of all local nodes in user units (a new vector).
     pub fn coordinates(&self) -> Vec<[f64; 3]> {
-        (0..self.num_nodes())
-            .map(|i| self.node_coordinates(i))
+        self.node_lattice()
+            .into_iter()
+            .map(|q| {
+                self.domain
+                    .from_lattice([q[0] as f64, q[1] as f64, q[2] as f64])
+            })
             .collect()
     }
 
@@ -470,196 +487,288 @@ fn check_inputs(tree: &LinearOctree, classes: Option<&[u8]>, opts: &MeshOptions)
     }
 }
 
-/// This rank's share of the face- and edge-hanging nodes: each node is
-/// counted by its directory rank, which sees every leaf around it.
+/// Face- and edge-hanging nodes found here whose directory is this rank,
+/// so that each is counted once over all ranks (unused ones included).
 fn count_hanging(
     comm: &dyn Comm,
     first_cell: &[u64],
     d: &dual::DualNodes,
-    leaves: &[Octant],
+    leaves: Merged,
 ) -> (u64, u64) {
     let me = comm.rank();
-    let mut c = [0u64; 2];
-    for &(n, q, mask) in &d.hanging {
-        let x = dual::DualNodes::hanging_coords(leaves[q as usize], mask);
-        if numbering::directory_rank(first_cell, x) == me {
-            c[if d.kind[n as usize] == 2 { 0 } else { 1 }] += 1;
-        }
-    }
-    (c[0], c[1])
+    let mine = |q: u32, word: u32| {
+        let x = dual::DualNodes::hanging_coords(leaves.get(q as usize), dual::entry_mask(word));
+        numbering::directory_rank(first_cell, x) == me
+    };
+    let face = d.face.iter().filter(|e| mine(e[0], e[1])).count();
+    let edge = d.edge.iter().filter(|e| mine(e[0], e[1])).count();
+    (face as u64, edge as u64)
 }
 
-/// Nodes this rank uses: corners of its kept elements and what their
-/// hanging corners depend on.
-fn used_nodes(d: &dual::DualNodes, local: &std::ops::Range<usize>, kept: &[bool]) -> Vec<bool> {
-    let mut used = vec![false; d.num_nodes()];
-    for i in local.clone() {
-        if kept[i] {
-            for &n in &d.corners[i] {
-                used[n as usize] = true;
-            }
+/// Owners and global numbers of the used independent nodes.
+struct Independent {
+    /// Used independent nodes this rank owns; local number = rank among
+    /// them (traversal order), global number = `first_global` + that.
+    owned: Ranks,
+    /// The used independent nodes owned elsewhere, by global number:
+    /// (global number, owner, node).
+    others: Vec<(u64, u32, u32)>,
+    /// Used boundary nodes, in traversal order.
+    boundary: Vec<u32>,
+    /// Their users (see [`numbering::Sharing`]).
+    sharing: numbering::Sharing,
+    first_global: u64,
+    global_count: u64,
+}
+
+/// Numbers the used independent nodes: interior ones are this rank's alone;
+/// only those on partition boundaries go through the directory. Collective.
+fn number_independent(
+    comm: &dyn Comm,
+    first_cell: &[u64],
+    d: &dual::DualNodes,
+    leaves: Merged,
+    kept: &Bits,
+) -> Result<Independent> {
+    let me = comm.rank() as u32;
+    let on_boundary = |f: u8| f & dual::USED != 0 && f & dual::BOUNDARY != 0;
+    let boundary: Vec<u32> = (0..d.flags.len() as u32)
+        .filter(|&n| on_boundary(d.flags[n as usize]))
+        .collect();
+    let mut bcoords = vec![[0u32; 3]; boundary.len()];
+    let slot = |n: u32| {
+        if on_boundary(d.flags[n as usize]) {
+            boundary.binary_search(&n).map_or(UNSET, |k| k as u32)
+        } else {
+            UNSET
         }
-    }
-    for &(n, q, mask) in &d.hanging {
-        if used[n as usize] {
-            for c in 0..8 {
-                if mask >> c & 1 == 1 {
-                    let dep = d.corners[q as usize][c];
-                    debug_assert_ne!(dep, UNSET);
-                    used[dep as usize] = true;
+    };
+    d.scatter_coords(leaves, kept, slot, &mut bcoords);
+    // Dependency-only boundary nodes may have no kept corner here; they are
+    // corners of the coarse leaf they hang on.
+    for (q, word) in d
+        .face
+        .iter()
+        .map(|e| (e[0], e[1]))
+        .chain(d.edge.iter().map(|e| (e[0], e[1])))
+    {
+        let o = leaves.get(q as usize);
+        for c in 0..8 {
+            if dual::entry_mask(word) >> c & 1 == 1 {
+                let k = slot(d.corners[q as usize][c]);
+                if k != UNSET {
+                    bcoords[k as usize] = dual::corner_coords(o.coords(), o.side(), c);
                 }
             }
         }
     }
-    used
-}
+    let sharing = numbering::find_users(comm, first_cell, &bcoords)?;
 
-/// Leaf `i` of the merged run (lower ghosts, local leaves, upper ghosts).
-fn merged_leaf(ghosts: &GhostLayer, local: &[Octant], i: usize) -> Octant {
-    let b = ghosts.before;
-    if i < b {
-        ghosts.leaves[i]
-    } else if i < b + local.len() {
-        local[i - b]
-    } else {
-        ghosts.leaves[i - local.len()]
+    let mut j = 0;
+    let owned = Ranks::from_fn(d.flags.len(), |n| {
+        let f = d.flags[n];
+        if f & dual::USED == 0 {
+            return false;
+        }
+        if f & dual::BOUNDARY == 0 {
+            return true;
+        }
+        j += 1;
+        sharing.owner[j - 1] == me
+    });
+    let all = comm.allgather_u64(owned.count() as u64);
+    let first_global: u64 = all[..me as usize].iter().sum();
+    let global_count: u64 = all.iter().sum();
+    let mut bglobal: Vec<u64> = boundary
+        .iter()
+        .map(|&n| {
+            if owned.contains(n as usize) {
+                first_global + owned.rank(n as usize) as u64
+            } else {
+                u64::MAX
+            }
+        })
+        .collect();
+    numbering::exchange_numbers(comm, &bcoords, &sharing, &mut bglobal)?;
+    let mut others = Vec::new();
+    for (k, &n) in boundary.iter().enumerate() {
+        if !owned.contains(n as usize) {
+            if bglobal[k] == u64::MAX {
+                return Err(Error::new(
+                    ErrorKind::Internal,
+                    "a shared node's owner sent no global number",
+                ));
+            }
+            others.push((bglobal[k], sharing.owner[k], n));
+        }
     }
+    others.sort_unstable();
+    Ok(Independent {
+        owned,
+        others,
+        boundary,
+        sharing,
+        first_global,
+        global_count,
+    })
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Turns the traversal's output into the mesh, in place where it can: the
+/// corner table becomes the connectivity, the hanging-node entries their
+/// dependencies.
 fn assemble(
     tree: &LinearOctree,
     domain: &Domain,
-    mut d: dual::DualNodes,
-    leaf_at: impl Fn(usize) -> Octant,
-    local_range: &std::ops::Range<usize>,
-    kept: &[bool],
+    d: dual::DualNodes,
+    leaves: Merged,
+    kept: &Bits,
     local_class: &[u8],
-    used: Vec<bool>,
-    slot: Vec<u32>,
-    num: numbering::Numbering,
+    num: Independent,
 ) -> Result<Mesh> {
     let comm: &dyn Comm = &**tree.comm();
-    let me = comm.rank() as u32;
-    let ni = num.owner.len();
-    // Final local order: owned (by global number), other independent (by
-    // global number), hanging (in traversal order). Owned nodes are already
-    // in global order; the others are few.
-    let mut pos = vec![UNSET; ni];
-    let mut others: Vec<(u64, u32, u32)> = Vec::new();
-    let mut next = 0u32;
-    for (k, p) in pos.iter_mut().enumerate() {
-        if num.owner[k] == me {
-            // Owned numbers are contiguous from first_global, so they are
-            // not stored.
-            if num.global[k] != num.first_global + next as u64 {
-                return Err(Error::new(
-                    ErrorKind::Internal,
-                    "owned node numbers are not contiguous",
-                ));
-            }
-            *p = next;
-            next += 1;
+    let dual::DualNodes {
+        flags,
+        corners,
+        mut face,
+        mut edge,
+    } = d;
+    // Local order: owned (traversal order), others (by global number),
+    // face-hanging, edge-hanging (each in traversal order).
+    let num_owned = num.owned.count() as usize;
+    let num_independent = num_owned + num.others.len();
+    let mut other_of: Vec<(u32, u32)> = num
+        .others
+        .iter()
+        .enumerate()
+        .map(|(k, o)| (o.2, (num_owned + k) as u32))
+        .collect();
+    other_of.sort_unstable();
+    let independent = |n: u32| -> u32 {
+        if num.owned.contains(n as usize) {
+            num.owned.rank(n as usize)
         } else {
-            others.push((num.global[k], num.owner[k], k as u32));
+            other_of
+                .binary_search_by_key(&n, |o| o.0)
+                .map_or(UNSET, |k| other_of[k].1)
         }
+    };
+    let used = |word: u32| dual::entry_flags(word) & CORNER != 0;
+    let face_used = Ranks::from_fn(face.len(), |k| used(face[k][1]));
+    let edge_used = Ranks::from_fn(edge.len(), |k| used(edge[k][1]));
+    let nf = face_used.count() as usize;
+    let total = num_independent + nf + edge_used.count() as usize;
+    if total > i32::MAX as usize {
+        return Err(Error::new(
+            ErrorKind::Limit,
+            format!("{total} nodes on rank {}: at most 2^31 - 1", comm.rank()),
+        ));
     }
-    let num_owned = next as usize;
-    drop(num.global);
-    drop(num.owner);
-    others.sort_unstable();
-    let mut other_global = Vec::with_capacity(others.len());
-    let mut other_owner = Vec::with_capacity(others.len());
-    for &(g, o, k) in &others {
-        pos[k as usize] = next;
-        other_global.push(g);
-        other_owner.push(o);
-        next += 1;
-    }
-    drop(others);
-    let num_independent = next as usize;
+    let new_of = |id: u32| -> u32 {
+        match id & TAG {
+            0 => independent(id),
+            FACE => (num_independent as u32) + face_used.rank((id & !TAG) as usize),
+            EDGE => (num_independent + nf) as u32 + edge_used.rank((id & !TAG) as usize),
+            _ => UNSET,
+        }
+    };
 
-    // slot becomes the new local number of every used node, in place.
-    let mut new_of = slot;
-    for s in new_of.iter_mut() {
-        if *s != UNSET {
-            *s = pos[*s as usize];
-        }
-    }
-    let used_hanging = d.hanging.iter().filter(|h| used[h.0 as usize]).count();
-    for &(n, _, _) in &d.hanging {
-        if used[n as usize] {
-            new_of[n as usize] = next;
-            next += 1;
-        }
-    }
-    drop(used);
-    d.kind = Vec::new();
-    // The constraints first: the traversal's list is released before the
-    // coordinates are allocated.
-    let mut hanging = Vec::with_capacity(used_hanging);
-    for &(n, q, mask) in &d.hanging {
-        if new_of[n as usize] == UNSET {
-            continue;
-        }
-        let mut deps = [0u32; 4];
-        let mut count = 0u8;
-        for c in 0..8 {
-            if mask >> c & 1 == 1 {
-                let dep = new_of[d.corners[q as usize][c] as usize];
+    // Hanging entries become their dependencies, in place, before the
+    // corner table they read is overwritten.
+    let mut dep_only = Vec::new();
+    let mut deps_of = |q: u32, word: u32, out: &mut [u32]| -> Result<()> {
+        let o = leaves.get(q as usize);
+        let mut k = 0;
+        for (c, &raw) in corners[q as usize].iter().enumerate() {
+            if dual::entry_mask(word) >> c & 1 == 1 {
+                let dep = independent(raw);
                 if dep == UNSET || dep as usize >= num_independent {
                     return Err(Error::new(
                         ErrorKind::Internal,
                         "a hanging node depends on a node that is not independent",
                     ));
                 }
-                deps[count as usize] = dep;
-                count += 1;
+                if flags[raw as usize] & CORNER == 0 {
+                    dep_only.push((dep, dual::corner_coords(o.coords(), o.side(), c)));
+                }
+                out[k] = dep;
+                k += 1;
             }
         }
-        hanging.push(HangingNode::new(&deps[..count as usize]));
+        Ok(())
+    };
+    let mut w = 0;
+    for k in 0..face.len() {
+        let [q, word, _, _] = face[k];
+        if used(word) {
+            let mut out = [0u32; 4];
+            deps_of(q, word, &mut out)?;
+            face[w] = out;
+            w += 1;
+        }
     }
-    d.hanging = Vec::new();
-    let mut node_lattice = vec![[0u32; 3]; next as usize];
-    d.scatter_coords(&leaf_at, kept, &new_of, &mut node_lattice);
+    face.truncate(w);
+    let mut w = 0;
+    for k in 0..edge.len() {
+        let [q, word] = edge[k];
+        if used(word) {
+            let mut out = [0u32; 2];
+            deps_of(q, word, &mut out)?;
+            edge[w] = out;
+            w += 1;
+        }
+    }
+    edge.truncate(w);
+    dep_only.sort_unstable();
+    dep_only.dedup();
+    drop(flags);
 
     // The corner table becomes the connectivity in place: local kept leaves
     // move to the front (never past their own slot), renumbered.
-    let nkept = kept[local_range.clone()].iter().filter(|&&k| k).count();
-    let mut elements = Vec::with_capacity(nkept);
+    let local_range = leaves.local_range();
+    let nkept = local_range.clone().filter(|&i| kept.get(i)).count();
     let mut element_class = Vec::with_capacity(nkept);
-    let mut connectivity = d.corners;
+    let mut connectivity = corners;
     let mut w = 0;
     for (j, i) in local_range.clone().enumerate() {
-        if !kept[i] {
+        if !kept.get(i) {
             continue;
         }
-        elements.push(tree.leaves()[j]);
         element_class.push(LeafClass::from_bits(local_class[j]) as u8);
         let c = connectivity[i];
-        connectivity[w] = std::array::from_fn(|v| new_of[c[VTK_TO_MORTON[v]] as usize]);
+        connectivity[w] = std::array::from_fn(|v| new_of(c[VTK_TO_MORTON[v]]));
         w += 1;
     }
     connectivity.truncate(w);
     if w < connectivity.capacity() / 2 {
         connectivity.shrink_to_fit();
     }
+    let elements = if nkept == leaves.local.len() {
+        Elements::Shared(tree.shared_leaves())
+    } else {
+        Elements::Own(
+            local_range
+                .filter(|&i| kept.get(i))
+                .map(|i| leaves.get(i))
+                .collect(),
+        )
+    };
 
-    let mut shared_nodes = Vec::with_capacity(num.shared.len());
-    let mut order: Vec<(u32, usize)> = num
+    let sh = &num.sharing;
+    let mut order: Vec<(u32, usize)> = sh
         .shared
         .iter()
         .enumerate()
-        .map(|(s, &k)| (pos[k as usize], s))
+        .map(|(s, &k)| (independent(num.boundary[k as usize]), s))
         .collect();
     order.sort_unstable();
+    let mut shared_nodes = Vec::with_capacity(order.len());
     let mut shared_offsets = vec![0u32];
-    let mut shared_ranks = Vec::with_capacity(num.users.len());
+    let mut shared_ranks = Vec::with_capacity(sh.users.len());
     for (n, s) in order {
         shared_nodes.push(n);
-        let a = num.user_offsets[s] as usize;
-        let b = num.user_offsets[s + 1] as usize;
-        shared_ranks.extend_from_slice(&num.users[a..b]);
+        let a = sh.user_offsets[s] as usize;
+        let b = sh.user_offsets[s + 1] as usize;
+        shared_ranks.extend_from_slice(&sh.users[a..b]);
         shared_offsets.push(shared_ranks.len() as u32);
     }
     Ok(Mesh {
@@ -669,12 +778,13 @@ fn assemble(
         elements,
         element_class,
         connectivity,
-        node_lattice,
         num_owned,
         num_independent,
-        other_global,
-        other_owner,
-        hanging,
+        other_global: num.others.iter().map(|o| o.0).collect(),
+        other_owner: num.others.iter().map(|o| o.1).collect(),
+        face_hanging: face,
+        edge_hanging: edge,
+        dep_only,
         shared_nodes,
         shared_offsets,
         shared_ranks,
@@ -685,5 +795,6 @@ fn assemble(
         },
         timings: Vec::new(),
         traffic: Vec::new(),
+        peaks: Vec::new(),
     })
 }

@@ -37,12 +37,10 @@ pub(crate) fn directory_rank(first_cell: &[u64], x: [u32; 3]) -> usize {
     owner_of_cell(first_cell, directory_cell(x))
 }
 
-/// Result of [`number_nodes`], indexed like its input.
-pub(crate) struct Numbering {
+/// Result of [`find_users`], indexed like its input.
+pub(crate) struct Sharing {
     /// Owner rank of each node.
     pub owner: Vec<u32>,
-    /// Global number of each node.
-    pub global: Vec<u64>,
     /// Nodes used by more than one rank (input indices, increasing), with
     /// their users: `users[user_offsets[k]..user_offsets[k + 1]]`, sorted.
     pub shared: Vec<u32>,
@@ -50,18 +48,15 @@ pub(crate) struct Numbering {
     pub user_offsets: Vec<u32>,
     /// See `shared`.
     pub users: Vec<u32>,
-    /// Global number of this rank's first owned node.
-    pub first_global: u64,
-    /// Number of independent nodes over all ranks.
-    pub global_count: u64,
 }
 
-/// Numbers the independent nodes `coords` used on this rank. Collective.
-pub(crate) fn number_nodes(
+/// Finds the users and the owner of each node `coords` used on this rank
+/// that other ranks may use too. Collective.
+pub(crate) fn find_users(
     comm: &dyn Comm,
     first_cell: &[u64],
     coords: &[[u32; 3]],
-) -> Result<Numbering> {
+) -> Result<Sharing> {
     let p = comm.size();
     let me = comm.rank();
     let n = coords.len();
@@ -187,20 +182,46 @@ pub(crate) fn number_nodes(
     // A node used only here is not shared.
     users_of.retain(|u| u.1.len() > 1);
 
-    // 4. Number owned nodes in the given order, after lower ranks' nodes.
-    let owned = owner.iter().filter(|&&o| o as usize == me).count() as u64;
-    let all = comm.allgather_u64(owned);
-    let first_global: u64 = all[..me].iter().sum();
-    let global_count: u64 = all.iter().sum();
-    let mut global = vec![u64::MAX; n];
-    let mut next = first_global;
-    for (g, &o) in global.iter_mut().zip(&owner) {
-        if o as usize == me {
-            *g = next;
-            next += 1;
-        }
+    let mut shared = Vec::with_capacity(users_of.len());
+    let mut user_offsets = Vec::with_capacity(users_of.len() + 1);
+    let mut users = Vec::new();
+    user_offsets.push(0);
+    for (i, u) in users_of {
+        shared.push(i);
+        users.extend_from_slice(&u);
+        user_offsets.push(users.len() as u32);
     }
+    Ok(Sharing {
+        owner,
+        shared,
+        user_offsets,
+        users,
+    })
+}
 
+/// A small open-addressing set of keys, each with a slot number.
+/// Sends the global numbers of the owned shared nodes to their other users
+/// and fills in `global` for the shared nodes owned elsewhere; `global` has
+/// the owned nodes' numbers on entry. Collective.
+pub(crate) fn exchange_numbers(
+    comm: &dyn Comm,
+    coords: &[[u32; 3]],
+    sharing: &Sharing,
+    global: &mut [u64],
+) -> Result<()> {
+    let p = comm.size();
+    let me = comm.rank();
+    let owner = &sharing.owner;
+    let users_of: Vec<(u32, &[u32])> = sharing
+        .shared
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            let a = sharing.user_offsets[k] as usize;
+            let b = sharing.user_offsets[k + 1] as usize;
+            (i, &sharing.users[a..b])
+        })
+        .collect();
     // 5. Owners send the numbers to the other users, in Morton order of
     // the (few) shared nodes, which both sides can reproduce.
     let mut owned_shared: Vec<(u64, usize)> = users_of
@@ -212,10 +233,10 @@ pub(crate) fn number_nodes(
     owned_shared.sort_unstable();
     let mut out: Vec<Vec<u64>> = vec![Vec::new(); p];
     for &(_, k) in &owned_shared {
-        let (i, users) = &users_of[k];
+        let (i, users) = users_of[k];
         for &r in users {
             if r as usize != me {
-                out[r as usize].push(global[*i as usize]);
+                out[r as usize].push(global[i as usize]);
             }
         }
     }
@@ -247,28 +268,9 @@ pub(crate) fn number_nodes(
         }
         at += icounts[o];
     }
-
-    let mut shared = Vec::with_capacity(users_of.len());
-    let mut user_offsets = Vec::with_capacity(users_of.len() + 1);
-    let mut users = Vec::new();
-    user_offsets.push(0);
-    for (i, u) in users_of {
-        shared.push(i);
-        users.extend_from_slice(&u);
-        user_offsets.push(users.len() as u32);
-    }
-    Ok(Numbering {
-        owner,
-        global,
-        shared,
-        user_offsets,
-        users,
-        first_global,
-        global_count,
-    })
+    Ok(())
 }
 
-/// A small open-addressing set of keys, each with a slot number.
 struct KeyTable {
     keys: Vec<u64>,
     mask: usize,
