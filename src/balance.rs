@@ -98,6 +98,7 @@ impl LinearOctree {
         };
         let mut leaves = std::mem::take(&mut b.leaves);
         drop(b);
+        crate::report::trim_heap();
         if over {
             // Every rank gets here in the same round (the decision is on
             // reduced values); nothing was published, so the ranges and

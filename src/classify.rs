@@ -2051,7 +2051,7 @@ mod tests {
         // like the clean sphere, leaf by leaf.
         let s = default_sphere();
         let mut rng = Rng(77);
-        let coin: Vec<bool> = (0..s.len()).map(|_| rng.next() % 2 == 0).collect();
+        let coin: Vec<bool> = (0..s.len()).map(|_| rng.next().is_multiple_of(2)).collect();
         let (_, clean) = fitted(&s);
         let leaves = leaves_of(&clean, 6, true);
         let expect = classify_leaves(&leaves, &clean);

@@ -74,7 +74,7 @@ impl Bytes<'_> {
 
     /// One chance in `n` (n > 0).
     fn one_in(&mut self, n: u8) -> bool {
-        self.u8() % n == 0
+        self.u8().is_multiple_of(n)
     }
 
     /// A double: mostly small numbers on a 1/64 grid, sometimes a special

@@ -1069,7 +1069,7 @@ mod tests {
         let mut messy = tris.to_vec();
         let mut flips = 0;
         for t in messy.iter_mut() {
-            if rng.next() % 2 == 0 {
+            if rng.next().is_multiple_of(2) {
                 *t = Triangle::new(t.v[0], t.v[2], t.v[1]);
                 flips += 1;
             }
@@ -1113,7 +1113,7 @@ mod tests {
             .enumerate()
             .map(|(i, t)| {
                 let v = t.v.map(|p| [p[0] + 3.0 * i as f64, p[1], p[2]]);
-                if rng.next() % 2 == 0 {
+                if rng.next().is_multiple_of(2) {
                     Triangle::new(v[0], v[2], v[1])
                 } else {
                     Triangle { v }
@@ -1141,7 +1141,7 @@ mod tests {
         let messy: Vec<Triangle> = tris
             .iter()
             .map(|t| {
-                if rng.next() % 3 != 0 {
+                if !rng.next().is_multiple_of(3) {
                     Triangle::new(t.v[0], t.v[2], t.v[1])
                 } else {
                     *t

@@ -112,6 +112,9 @@ pub(crate) struct Ranks {
     bits: Bits,
     before: Vec<u32>,
     count: u32,
+    // Every entry a member: the rank is the index (the usual case on one
+    // rank), without touching the bits.
+    full: bool,
 }
 
 impl Ranks {
@@ -128,18 +131,22 @@ impl Ranks {
             bits,
             before,
             count,
+            full: count as usize == n,
         }
     }
 
     /// Whether `i` is a member.
     #[inline]
     pub fn contains(&self, i: usize) -> bool {
-        self.bits.get(i)
+        self.full || self.bits.get(i)
     }
 
     /// Members before `i`.
     #[inline]
     pub fn rank(&self, i: usize) -> u32 {
+        if self.full {
+            return i as u32;
+        }
         let w = self.bits.words[i >> 6] & ((1u64 << (i & 63)) - 1);
         self.before[i >> 6] + w.count_ones()
     }
@@ -153,20 +160,24 @@ impl Ranks {
 /// What the traversal produced for the merged (ghost + local) leaves.
 pub(crate) struct DualNodes {
     /// Flags ([`CORNER`], [`DEP`], [`BOUNDARY`]) per independent node, in
-    /// the order the traversal found them. Coordinates are not stored: every
-    /// node is a corner of a kept leaf, so [`DualNodes::scatter_coords`]
-    /// recovers them when they are needed.
+    /// the order the traversal found them. Coordinates are not stored
+    /// (every node is a corner of a kept leaf), except for the few in
+    /// `boundary_points`.
     pub flags: Vec<u8>,
     /// Node at each Morton corner of each merged leaf that is kept
     /// ([`UNSET`] for leaves that are not kept): an independent node's
     /// index, or [`FACE`] / [`EDGE`] with a hanging node's index.
     pub corners: Vec<[u32; 8]>,
-    /// Face-hanging nodes: `[coarse leaf, mask | flags << 8, 0, 0]`, where
-    /// the mask has a bit for each of the leaf's Morton corners the node
-    /// depends on. Sized to become the 4 dependencies in place.
-    pub face: Vec<[u32; 4]>,
-    /// Edge-hanging nodes: `[coarse leaf, mask | flags << 8]`.
-    pub edge: Vec<[u32; 2]>,
+    /// Face-hanging nodes, two words each: the coarse leaf and
+    /// `mask | flags << 8`, where the mask has a bit for each of the leaf's
+    /// Morton corners the node depends on. Flat, so that it can grow in
+    /// place into the 4 dependencies per node.
+    pub face: Vec<u32>,
+    /// Edge-hanging nodes, in the same form.
+    pub edge: Vec<u32>,
+    /// Independent nodes with a kept ghost leaf around them, and their
+    /// lattice points, in node order (few: partition boundaries only).
+    pub boundary_points: Vec<(u32, [u32; 3])>,
 }
 
 /// Runs the traversal over `leaves` (sorted, disjoint, possibly with gaps),
@@ -185,13 +196,15 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
     let mut w = Walker {
         tree: &tree,
         kept,
+        leaves,
         local: leaves.local_range(),
         overflow: false,
         out: DualNodes {
             flags: Vec::with_capacity(n),
             corners: vec![[UNSET; 8]; n],
-            face: Vec::with_capacity(n / 4),
-            edge: Vec::with_capacity(n / 2),
+            face: Vec::with_capacity(n / 2),
+            edge: Vec::with_capacity(n),
+            boundary_points: Vec::new(),
         },
     };
     w.start(0, [root; 8]);
@@ -255,9 +268,9 @@ impl DualNodes {
     fn propagate(&mut self) -> Result<()> {
         let corners = &self.corners;
         let flags = &mut self.flags;
-        let face = self.face.iter().map(|e| (e[0], e[1]));
-        let edge = self.edge.iter().map(|e| (e[0], e[1]));
-        for (q, word) in face.chain(edge) {
+        let entries = self.face.chunks_exact(2).chain(self.edge.chunks_exact(2));
+        for e in entries {
+            let (q, word) = (e[0], e[1]);
             let f = entry_flags(word);
             let add = (if f & USED != 0 { DEP } else { 0 }) | (f & BOUNDARY);
             if add == 0 {
@@ -281,6 +294,7 @@ impl DualNodes {
 
     /// Writes the lattice coordinates of independent node `n` to
     /// `out[map(n)]` for every node with `map(n) != UNSET`.
+    #[cfg(test)]
     pub fn scatter_coords(
         &self,
         leaves: Merged,
@@ -375,6 +389,7 @@ fn grow<T>(v: &mut Vec<T>) {
 struct Walker<'a> {
     tree: &'a [[u32; 8]],
     kept: &'a Bits,
+    leaves: Merged<'a>,
     local: std::ops::Range<usize>,
     overflow: bool,
     out: DualNodes,
@@ -528,11 +543,10 @@ impl Walker<'_> {
                     mask |= 1 << c;
                 }
             }
-            id = FACE | self.out.face.len() as u32;
+            id = FACE | (self.out.face.len() / 2) as u32;
             grow(&mut self.out.face);
-            self.out
-                .face
-                .push([q & !LEAF, mask | (flags as u32) << 8, 0, 0]);
+            self.out.face.push(q & !LEAF);
+            self.out.face.push(mask | (flags as u32) << 8);
         } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
             let q = refs[p];
             let e = (0..3)
@@ -542,13 +556,20 @@ impl Walker<'_> {
             // of the point on the two other axes, both ends along `e`.
             let base = !p & 7 & !(1 << e);
             let mask = (1u32 << base) | (1u32 << (base | (1 << e)));
-            id = EDGE | self.out.edge.len() as u32;
+            id = EDGE | (self.out.edge.len() / 2) as u32;
             grow(&mut self.out.edge);
-            self.out.edge.push([q & !LEAF, mask | (flags as u32) << 8]);
+            self.out.edge.push(q & !LEAF);
+            self.out.edge.push(mask | (flags as u32) << 8);
         } else {
             id = self.out.flags.len() as u32;
             grow(&mut self.out.flags);
             self.out.flags.push(flags);
+            if flags & BOUNDARY != 0 {
+                let p = (0..8).find(|&p| count[p] == 1).unwrap_or(0);
+                let o = self.leaves.get((refs[p] & !LEAF) as usize);
+                let x = corner_coords(o.coords(), o.side(), !p & 7);
+                self.out.boundary_points.push((id, x));
+            }
         }
         for p in 0..8 {
             if count[p] == 1 {
@@ -624,11 +645,11 @@ mod tests {
         assert_eq!(at.len(), 27 + 27 - 8);
         // Child 0's faces towards its siblings: 3 centres; its edges inside
         // the root: 3 whole edges, and halves of 6 face-boundary edges.
-        assert_eq!(d.face.len(), 3);
-        assert_eq!(d.edge.len(), 3 + 6);
+        assert_eq!(d.face.len(), 2 * 3);
+        assert_eq!(d.edge.len(), 2 * (3 + 6));
         assert_eq!(d.num_independent(), 27 + 8 - 1);
-        let entries = d.face.iter().map(|e| (FACE, e[0], e[1]));
-        let entries = entries.chain(d.edge.iter().map(|e| (EDGE, e[0], e[1])));
+        let entries = d.face.chunks_exact(2).map(|e| (FACE, e[0], e[1]));
+        let entries = entries.chain(d.edge.chunks_exact(2).map(|e| (EDGE, e[0], e[1])));
         let mut k = [0u32; 2];
         for (tag, q, word) in entries {
             let id = tag | k[(tag == EDGE) as usize];
@@ -694,11 +715,8 @@ mod tests {
             .map(|(&n, _)| n)
             .unwrap();
         assert_eq!(d.flags[far as usize] & USED, DEP);
-        let used = d
-            .face
-            .iter()
-            .map(|e| e[1])
-            .chain(d.edge.iter().map(|e| e[1]));
+        let used =
+            (d.face.chunks_exact(2).map(|e| e[1])).chain(d.edge.chunks_exact(2).map(|e| e[1]));
         assert!(used.clone().any(|w| entry_flags(w) == CORNER | BOUNDARY));
         assert!(used.clone().all(|w| entry_flags(w) & BOUNDARY != 0));
     }

@@ -141,8 +141,9 @@ pub struct Mesh {
     other_global: Vec<u64>,
     /// Owners of the independent nodes this rank does not own.
     other_owner: Vec<u32>,
-    face_hanging: Vec<[u32; 4]>,
-    edge_hanging: Vec<[u32; 2]>,
+    // Dependencies, 4 per face-hanging node, 2 per edge-hanging node.
+    face_hanging: Vec<u32>,
+    edge_hanging: Vec<u32>,
     // Independent nodes that are no local element's corner (only a
     // dependency of a hanging corner), with their lattice points, by node.
     dep_only: Vec<(u32, [u32; 3])>,
@@ -172,6 +173,9 @@ impl Mesh {
         let check = check_inputs(tree, classes, opts);
         crate::comm::agree(comm, check)?;
         let mut timer = PhaseTimer::new();
+        // Whatever earlier phases freed must not stay resident under the
+        // mesh.
+        crate::report::trim_heap();
         let unclassified;
         let local_class: &[u8] = match classes {
             Some(c) => c,
@@ -208,7 +212,7 @@ impl Mesh {
         let (d, kept, (face_hanging, edge_hanging)) = crate::comm::agree(comm, nodes)?;
 
         let numbering = timer.time(comm, "numbering", || {
-            number_independent(comm, tree.first_cells(), &d, merged, &kept)
+            number_independent(comm, tree.first_cells(), &d, merged)
         });
         let numbering = crate::comm::agree(comm, numbering)?;
 
@@ -348,31 +352,31 @@ impl Mesh {
     /// Number of hanging local nodes: the face-hanging ones, then the
     /// edge-hanging ones.
     pub fn num_hanging(&self) -> usize {
-        self.face_hanging.len() + self.edge_hanging.len()
+        self.face_hanging.len() / 4 + self.edge_hanging.len() / 2
     }
 
     /// Face-hanging nodes: entry `k` is local node `num_independent() + k`,
     /// the mean of the 4 independent local nodes given (weights 1/4).
     pub fn face_hanging(&self) -> &[[u32; 4]] {
-        &self.face_hanging
+        self.face_hanging.as_chunks().0
     }
 
     /// Edge-hanging nodes: entry `k` is local node `num_independent() +
     /// face_hanging().len() + k`, the mean of the 2 independent local nodes
     /// given (weights 1/2).
     pub fn edge_hanging(&self) -> &[[u32; 2]] {
-        &self.edge_hanging
+        self.edge_hanging.as_chunks().0
     }
 
     /// The independent local nodes hanging node `k` (local node
     /// `num_independent() + k`) is the mean of: 4 for a face-hanging node,
     /// 2 for an edge-hanging one.
     pub fn hanging_deps(&self, k: usize) -> &[u32] {
-        let f = self.face_hanging.len();
+        let f = self.face_hanging.len() / 4;
         if k < f {
-            &self.face_hanging[k]
+            &self.face_hanging[4 * k..4 * k + 4]
         } else {
-            &self.edge_hanging[k - f]
+            &self.edge_hanging[2 * (k - f)..2 * (k - f) + 2]
         }
     }
 
@@ -495,13 +499,17 @@ fn count_hanging(
     d: &dual::DualNodes,
     leaves: Merged,
 ) -> (u64, u64) {
+    let (nf, ne) = ((d.face.len() / 2) as u64, (d.edge.len() / 2) as u64);
+    if comm.size() == 1 {
+        return (nf, ne);
+    }
     let me = comm.rank();
-    let mine = |q: u32, word: u32| {
-        let x = dual::DualNodes::hanging_coords(leaves.get(q as usize), dual::entry_mask(word));
+    let mine = |e: &&[u32]| {
+        let x = dual::DualNodes::hanging_coords(leaves.get(e[0] as usize), dual::entry_mask(e[1]));
         numbering::directory_rank(first_cell, x) == me
     };
-    let face = d.face.iter().filter(|e| mine(e[0], e[1])).count();
-    let edge = d.edge.iter().filter(|e| mine(e[0], e[1])).count();
+    let face = d.face.chunks_exact(2).filter(mine).count();
+    let edge = d.edge.chunks_exact(2).filter(mine).count();
     (face as u64, edge as u64)
 }
 
@@ -528,40 +536,44 @@ fn number_independent(
     first_cell: &[u64],
     d: &dual::DualNodes,
     leaves: Merged,
-    kept: &Bits,
 ) -> Result<Independent> {
     let me = comm.rank() as u32;
     let on_boundary = |f: u8| f & dual::USED != 0 && f & dual::BOUNDARY != 0;
     let boundary: Vec<u32> = (0..d.flags.len() as u32)
         .filter(|&n| on_boundary(d.flags[n as usize]))
         .collect();
+    // Points of boundary nodes: recorded by the traversal where a ghost is
+    // around them, else (a dependency of such a hanging node) a corner of
+    // the coarse leaf it hangs on.
     let mut bcoords = vec![[0u32; 3]; boundary.len()];
-    let slot = |n: u32| {
-        if on_boundary(d.flags[n as usize]) {
-            boundary.binary_search(&n).map_or(UNSET, |k| k as u32)
-        } else {
-            UNSET
+    let mut set = vec![false; boundary.len()];
+    let mut put = |n: u32, x: [u32; 3]| {
+        if let Ok(k) = boundary.binary_search(&n) {
+            bcoords[k] = x;
+            set[k] = true;
         }
     };
-    d.scatter_coords(leaves, kept, slot, &mut bcoords);
-    // Dependency-only boundary nodes may have no kept corner here; they are
-    // corners of the coarse leaf they hang on.
-    for (q, word) in d
-        .face
-        .iter()
-        .map(|e| (e[0], e[1]))
-        .chain(d.edge.iter().map(|e| (e[0], e[1])))
-    {
-        let o = leaves.get(q as usize);
-        for c in 0..8 {
-            if dual::entry_mask(word) >> c & 1 == 1 {
-                let k = slot(d.corners[q as usize][c]);
-                if k != UNSET {
-                    bcoords[k as usize] = dual::corner_coords(o.coords(), o.side(), c);
-                }
+    for &(n, x) in &d.boundary_points {
+        put(n, x);
+    }
+    for e in d.face.chunks_exact(2).chain(d.edge.chunks_exact(2)) {
+        if dual::entry_flags(e[1]) & dual::BOUNDARY == 0 {
+            continue;
+        }
+        let o = leaves.get(e[0] as usize);
+        for (c, &n) in d.corners[e[0] as usize].iter().enumerate() {
+            if dual::entry_mask(e[1]) >> c & 1 == 1 {
+                put(n, dual::corner_coords(o.coords(), o.side(), c));
             }
         }
     }
+    if set.iter().any(|&s| !s) {
+        return Err(Error::new(
+            ErrorKind::Internal,
+            "a node on a partition boundary has no known point",
+        ));
+    }
+    drop(set);
     let sharing = numbering::find_users(comm, first_cell, &bcoords)?;
 
     let mut j = 0;
@@ -631,6 +643,7 @@ fn assemble(
         corners,
         mut face,
         mut edge,
+        ..
     } = d;
     // Local order: owned (traversal order), others (by global number),
     // face-hanging, edge-hanging (each in traversal order).
@@ -653,10 +666,11 @@ fn assemble(
         }
     };
     let used = |word: u32| dual::entry_flags(word) & CORNER != 0;
-    let face_used = Ranks::from_fn(face.len(), |k| used(face[k][1]));
-    let edge_used = Ranks::from_fn(edge.len(), |k| used(edge[k][1]));
+    let face_used = Ranks::from_fn(face.len() / 2, |k| used(face[2 * k + 1]));
+    let edge_used = Ranks::from_fn(edge.len() / 2, |k| used(edge[2 * k + 1]));
     let nf = face_used.count() as usize;
-    let total = num_independent + nf + edge_used.count() as usize;
+    let ne = edge_used.count() as usize;
+    let total = num_independent + nf + ne;
     if total > i32::MAX as usize {
         return Err(Error::new(
             ErrorKind::Limit,
@@ -673,15 +687,31 @@ fn assemble(
     };
 
     // Hanging entries become their dependencies, in place, before the
-    // corner table they read is overwritten.
+    // corner table they read is overwritten: used entries move to the
+    // front, the list grows to 4 (face) or stays at 2 (edge) words per
+    // node, and is filled from the back so nothing unread is overwritten.
     let mut dep_only = Vec::new();
-    let mut deps_of = |q: u32, word: u32, out: &mut [u32]| -> Result<()> {
-        let o = leaves.get(q as usize);
-        let mut k = 0;
-        for (c, &raw) in corners[q as usize].iter().enumerate() {
-            if dual::entry_mask(word) >> c & 1 == 1 {
+    let mut convert = |list: &mut Vec<u32>, per: usize, count: usize| -> Result<()> {
+        let mut w = 0;
+        for k in 0..list.len() / 2 {
+            if used(list[2 * k + 1]) {
+                list.copy_within(2 * k..2 * k + 2, 2 * w);
+                w += 1;
+            }
+        }
+        debug_assert_eq!(w, count);
+        list.truncate(2 * count);
+        list.resize(per * count, 0);
+        for k in (0..count).rev() {
+            let (q, word) = (list[2 * k], list[2 * k + 1]);
+            let o = leaves.get(q as usize);
+            let mut at = per * k;
+            for (c, &raw) in corners[q as usize].iter().enumerate() {
+                if dual::entry_mask(word) >> c & 1 == 0 {
+                    continue;
+                }
                 let dep = independent(raw);
-                if dep == UNSET || dep as usize >= num_independent {
+                if dep == UNSET || dep as usize >= num_independent || at == per * (k + 1) {
                     return Err(Error::new(
                         ErrorKind::Internal,
                         "a hanging node depends on a node that is not independent",
@@ -690,34 +720,14 @@ fn assemble(
                 if flags[raw as usize] & CORNER == 0 {
                     dep_only.push((dep, dual::corner_coords(o.coords(), o.side(), c)));
                 }
-                out[k] = dep;
-                k += 1;
+                list[at] = dep;
+                at += 1;
             }
         }
         Ok(())
     };
-    let mut w = 0;
-    for k in 0..face.len() {
-        let [q, word, _, _] = face[k];
-        if used(word) {
-            let mut out = [0u32; 4];
-            deps_of(q, word, &mut out)?;
-            face[w] = out;
-            w += 1;
-        }
-    }
-    face.truncate(w);
-    let mut w = 0;
-    for k in 0..edge.len() {
-        let [q, word] = edge[k];
-        if used(word) {
-            let mut out = [0u32; 2];
-            deps_of(q, word, &mut out)?;
-            edge[w] = out;
-            w += 1;
-        }
-    }
-    edge.truncate(w);
+    convert(&mut face, 4, nf)?;
+    convert(&mut edge, 2, ne)?;
     dep_only.sort_unstable();
     dep_only.dedup();
     drop(flags);
