@@ -516,6 +516,8 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         }
     }
     stats.obj("leak", &leak);
+    // The surface is not needed to mesh: its memory goes before the mesh's.
+    drop(index);
     if o.command == Command::Mesh && leak_error.is_none() {
         phase_keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
         let classes = classes.unwrap_or_default();
