@@ -576,6 +576,10 @@ struct ChildMasks {
     /// The child's centre may lie on the other side of the triangle's
     /// plane than the parent's centre.
     plane: u8,
+    /// The triangle's grown box meets the box spanned by the segment from
+    /// the parent's centre to the child's centre: only then can the segment
+    /// cross it (most candidates of a large octant are far from its centre).
+    seg: u8,
 }
 
 impl<'a> Classifier<'a> {
@@ -745,6 +749,8 @@ impl<'a> Classifier<'a> {
         let g = self.grow;
         let mut exact = want & leafy;
         let mut near = want;
+        let mut seg = 0xffu8;
+        let quarter = 0.5 * side;
         for k in 0..3 {
             let lo = v[0][k].min(v[1][k]).min(v[2][k]);
             let hi = v[0][k].max(v[1][k]).max(v[2][k]);
@@ -771,9 +777,28 @@ impl<'a> Classifier<'a> {
                 0
             };
             near &= pos | neg;
+            let pos = if lo <= ck + quarter + g && hi >= ck - g {
+                POS[k]
+            } else {
+                0
+            };
+            let neg = if lo <= ck + g && hi >= ck - quarter - g {
+                NEG[k]
+            } else {
+                0
+            };
+            seg &= pos | neg;
         }
         if near == 0 {
             return ChildMasks::default();
+        }
+        if exact == 0 && near & seg == 0 {
+            // No box verdict wanted and no segment to cross: the boxes alone
+            // give `near` (a superset is enough), without the projections.
+            return ChildMasks {
+                near,
+                ..ChildMasks::default()
+            };
         }
         let r = v.map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
         let rho = r.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -892,6 +917,7 @@ impl<'a> Classifier<'a> {
             touch: open & !unsure,
             unsure: open & unsure,
             plane,
+            seg,
         }
     }
 
@@ -1095,7 +1121,7 @@ impl<'a> Classifier<'a> {
             masks.push(m);
             // Only a triangle near the child can cross the segment from the
             // parent's centre (a corner of the child) to the child's centre.
-            let cross = m.near & m.plane;
+            let cross = m.near & m.plane & m.seg;
             let ft = &self.fixed[t as usize];
             if cross != 0 && ft.nsign != 0 {
                 let (mut hit, entering) = self.crossings(o, p, h, ft, cross);
