@@ -127,7 +127,6 @@ impl LinearOctree {
         let received = (recv.len() - rc[me]) as u64;
         let balanced = self.balanced();
         self.set_leaves(recv.into_iter().map(Octant::from_key).collect());
-        crate::report::trim_heap();
         self.set_balanced(balanced);
         self.refresh()?;
         Ok(PartitionStats { sent, received })

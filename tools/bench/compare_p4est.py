@@ -77,7 +77,7 @@ MIN_RATED = 1e-4  # seconds; faster phases are shown but not rated
 
 # Rough peak memory per balanced leaf over all ranks (from earlier runs of
 # this script at 20-30 M leaves), used to skip what cannot fit.
-OCTMESH_B_PER_LEAF = 140
+OCTMESH_B_PER_LEAF = 70
 P4EST_LNODES_B_PER_LEAF = 120
 P4EST_NODES_B_PER_LEAF = 180
 
