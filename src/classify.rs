@@ -754,40 +754,25 @@ impl<'a> Classifier<'a> {
         for k in 0..3 {
             let lo = v[0][k].min(v[1][k]).min(v[2][k]);
             let hi = v[0][k].max(v[1][k]).max(v[2][k]);
-            let ck = c[k];
-            let pos = if lo <= ck + side && hi >= ck {
-                POS[k]
-            } else {
-                0
+            // The children on the positive / negative side along `k` whose
+            // slab `[ck, ck + extent]` / `[ck - extent, ck]`, grown by `m`,
+            // meets the triangle's extent.
+            let meets = |extent: f64, m: f64| {
+                let pos = if lo <= c[k] + extent + m && hi >= c[k] - m {
+                    POS[k]
+                } else {
+                    0
+                };
+                let neg = if lo <= c[k] + m && hi >= c[k] - extent - m {
+                    NEG[k]
+                } else {
+                    0
+                };
+                pos | neg
             };
-            let neg = if lo <= ck && hi >= ck - side {
-                NEG[k]
-            } else {
-                0
-            };
-            exact &= pos | neg;
-            let pos = if lo <= ck + side + g && hi >= ck - g {
-                POS[k]
-            } else {
-                0
-            };
-            let neg = if lo <= ck + g && hi >= ck - side - g {
-                NEG[k]
-            } else {
-                0
-            };
-            near &= pos | neg;
-            let pos = if lo <= ck + quarter + g && hi >= ck - g {
-                POS[k]
-            } else {
-                0
-            };
-            let neg = if lo <= ck + g && hi >= ck - quarter - g {
-                NEG[k]
-            } else {
-                0
-            };
-            seg &= pos | neg;
+            exact &= meets(side, 0.0);
+            near &= meets(side, g);
+            seg &= meets(quarter, g);
         }
         if near == 0 {
             return ChildMasks::default();

@@ -244,6 +244,21 @@ pub(crate) fn corner_coords(a: [u32; 3], s: u32, c: usize) -> [u32; 3] {
     std::array::from_fn(|d| a[d] + if c >> d & 1 == 1 { s } else { 0 })
 }
 
+/// The dependencies of a hanging-node entry `word` on leaf `o`, whose row
+/// of the corner table is `row`: (node, its lattice point), in Morton corner
+/// order. The leaf's anchor is decoded once.
+pub(crate) fn entry_deps(
+    o: Octant,
+    row: &[u32; 8],
+    word: u32,
+) -> impl Iterator<Item = (u32, [u32; 3])> + '_ {
+    let (a, s) = (o.coords(), o.side());
+    let mask = entry_mask(word);
+    (row.iter().enumerate())
+        .filter(move |&(c, _)| mask >> c & 1 == 1)
+        .map(move |(c, &n)| (n, corner_coords(a, s, c)))
+}
+
 /// The flags byte of a hanging-node entry.
 #[inline]
 pub(crate) fn entry_flags(word: u32) -> u8 {

@@ -560,11 +560,9 @@ fn number_independent(
         if dual::entry_flags(e[1]) & dual::BOUNDARY == 0 {
             continue;
         }
-        let o = leaves.get(e[0] as usize);
-        for (c, &n) in d.corners[e[0] as usize].iter().enumerate() {
-            if dual::entry_mask(e[1]) >> c & 1 == 1 {
-                put(n, dual::corner_coords(o.coords(), o.side(), c));
-            }
+        let q = e[0] as usize;
+        for (n, x) in dual::entry_deps(leaves.get(q), &d.corners[q], e[1]) {
+            put(n, x);
         }
     }
     if set.iter().any(|&s| !s) {
@@ -704,24 +702,21 @@ fn assemble(
         list.resize(per * count, 0);
         for k in (0..count).rev() {
             let (q, word) = (list[2 * k], list[2 * k + 1]);
-            let o = leaves.get(q as usize);
-            let mut at = per * k;
-            for (c, &raw) in corners[q as usize].iter().enumerate() {
-                if dual::entry_mask(word) >> c & 1 == 0 {
-                    continue;
-                }
+            let row = &corners[q as usize];
+            debug_assert_eq!(dual::entry_mask(word).count_ones() as usize, per);
+            let deps = dual::entry_deps(leaves.get(q as usize), row, word);
+            for (at, (raw, x)) in (per * k..per * (k + 1)).zip(deps) {
                 let dep = independent(raw);
-                if dep == UNSET || dep as usize >= num_independent || at == per * (k + 1) {
+                if dep == UNSET || dep as usize >= num_independent {
                     return Err(Error::new(
                         ErrorKind::Internal,
                         "a hanging node depends on a node that is not independent",
                     ));
                 }
                 if flags[raw as usize] & CORNER == 0 {
-                    dep_only.push((dep, dual::corner_coords(o.coords(), o.side(), c)));
+                    dep_only.push((dep, x));
                 }
                 list[at] = dep;
-                at += 1;
             }
         }
         Ok(())
