@@ -459,8 +459,18 @@ impl<'a> InsideClassifier<'a> {
         let g = c.grow;
         let lo = [-g; 3];
         let hi = [ROOT_LEN as f64 + g; 3];
+        // A superset is all the walk needs: compare bounding boxes only.
         let mut buf: Vec<u32> = (0..c.tris.len() as u32)
-            .filter(|&t| triangle_box_overlap(&c.tris[t as usize], lo, hi))
+            .filter(|&t| {
+                let v = &c.tris[t as usize].v;
+                (0..3).all(|k| {
+                    let (a, b) = (
+                        v[0][k].min(v[1][k]).min(v[2][k]),
+                        v[0][k].max(v[1][k]).max(v[2][k]),
+                    );
+                    a <= hi[k] && b >= lo[k]
+                })
+            })
             .collect();
         let n = buf.len();
         let mut masks = Vec::new();
@@ -751,9 +761,11 @@ impl<'a> Classifier<'a> {
         let mut near = want;
         let mut seg = 0xffu8;
         let quarter = 0.5 * side;
+        let (mut lo3, mut hi3) = ([0.0; 3], [0.0; 3]);
         for k in 0..3 {
             let lo = v[0][k].min(v[1][k]).min(v[2][k]);
             let hi = v[0][k].max(v[1][k]).max(v[2][k]);
+            (lo3[k], hi3[k]) = (lo, hi);
             // The children on the positive / negative side along `k` whose
             // slab `[ck, ck + extent]` / `[ck - extent, ck]`, grown by `m`,
             // meets the triangle's extent.
@@ -776,6 +788,9 @@ impl<'a> Classifier<'a> {
         }
         if near == 0 {
             return ChildMasks::default();
+        }
+        if near & seg != 0 {
+            seg &= segments_meeting_box(c, quarter, lo3, hi3, g);
         }
         if exact == 0 && near & seg == 0 {
             // No box verdict wanted and no segment to cross: the boxes alone
@@ -921,7 +936,15 @@ impl<'a> Classifier<'a> {
         let q = [far_x, p[1], p[2]];
         let mut count = 0;
         for t in &self.fixed {
-            if t.nsign != 0 && crosses(p, q, t) {
+            // Only a triangle whose box meets the ray can cross it.
+            let meets = (1..3).all(|k| {
+                let (a, b) = (
+                    t.v[0][k].min(t.v[1][k]).min(t.v[2][k]),
+                    t.v[0][k].max(t.v[1][k]).max(t.v[2][k]),
+                );
+                a <= p[k] && p[k] <= b
+            }) && t.v.iter().any(|v| v[0] >= p[0]);
+            if meets && t.nsign != 0 && crosses(p, q, t) {
                 count += if t.positive_side(q) { 1 } else { -1 };
             }
         }
@@ -1095,15 +1118,24 @@ impl<'a> Classifier<'a> {
         let mstart = masks.len();
         let mut counts = [0i32; 8];
         // Leaf children certainly cut so far need no more box verdicts.
-        let mut touched = 0u8;
+        let (mut touched, mut unsure) = (0u8, 0u8);
+        // Candidates of each child walked into.
+        let mut sizes = [0usize; 8];
+        let inner = present & !leafy;
         for &t in &buf[lo..hi] {
             let surface = (t as usize) < self.surface_len;
             let decide = if surface { leafy & !touched } else { 0 };
             let m = self.child_masks(t, center, side, present, decide);
             if surface {
                 touched |= m.touch;
+                unsure |= m.unsure;
             }
             masks.push(m);
+            let mut near = m.near & inner;
+            while near != 0 {
+                sizes[near.trailing_zeros() as usize] += 1;
+                near &= near - 1;
+            }
             // Only a triangle near the child can cross the segment from the
             // parent's centre (a corner of the child) to the child's centre.
             let cross = m.near & m.plane & m.seg;
@@ -1117,52 +1149,75 @@ impl<'a> Classifier<'a> {
                 }
             }
         }
+        // Leaf children: cut if touched, or if a triangle too close to call
+        // touches by the exact test.
+        let mut cut = touched;
+        let mut ask = leafy & unsure & !touched;
+        while ask != 0 {
+            let i = ask.trailing_zeros();
+            ask &= ask - 1;
+            let bit = 1u8 << i;
+            let cmin = [
+                omin[0] + if i & 1 != 0 { side } else { 0.0 },
+                omin[1] + if i & 2 != 0 { side } else { 0.0 },
+                omin[2] + if i & 4 != 0 { side } else { 0.0 },
+            ];
+            let cmax = [cmin[0] + side, cmin[1] + side, cmin[2] + side];
+            if (lo..hi).any(|j| {
+                masks[mstart + j - lo].unsure & bit != 0 && self.touches(buf[j], cmin, cmax)
+            }) {
+                cut |= bit;
+            }
+        }
+        // The candidate lists of the children walked into, one after the
+        // other on top of the stack, in one pass.
+        let base = buf.len();
+        let mut ends = [0usize; 8];
+        let mut at = base;
+        for i in 0..8 {
+            at += sizes[i];
+            ends[i] = at;
+        }
+        let mut fill: [usize; 8] = std::array::from_fn(|i| ends[i] - sizes[i]);
+        buf.resize(at, 0);
+        for j in lo..hi {
+            let mut near = masks[mstart + j - lo].near & inner;
+            let t = buf[j];
+            while near != 0 {
+                let i = near.trailing_zeros() as usize;
+                near &= near - 1;
+                buf[fill[i]] = t;
+                fill[i] += 1;
+            }
+        }
+        masks.truncate(mstart);
         for i in 0..8u32 {
-            if present & (1 << i) == 0 {
+            let bit = 1u8 << i;
+            if present & bit == 0 {
                 continue;
             }
-            let bit = 1u8 << i;
             let c = o.child(i);
             let n = count + counts[i as usize];
             let (b, e) = (bounds[i as usize], bounds[i as usize + 1]);
             if leafy & bit != 0 {
-                let mut cut = touched & bit != 0;
-                if !cut {
-                    let cmin = [
-                        omin[0] + if i & 1 != 0 { side } else { 0.0 },
-                        omin[1] + if i & 2 != 0 { side } else { 0.0 },
-                        omin[2] + if i & 4 != 0 { side } else { 0.0 },
-                    ];
-                    let cmax = [cmin[0] + side, cmin[1] + side, cmin[2] + side];
-                    cut = (lo..hi).any(|j| {
-                        masks[mstart + j - lo].unsure & bit != 0 && self.touches(buf[j], cmin, cmax)
-                    });
-                }
-                out[b] = self.inside(c, n, interval) as u8 | if cut { CUT } else { 0 };
+                let cut = if cut & bit != 0 { CUT } else { 0 };
+                out[b] = self.inside(c, n, interval) as u8 | cut;
                 continue;
             }
-            let start = buf.len();
-            for j in lo..hi {
-                if masks[mstart + j - lo].near & bit != 0 {
-                    let t = buf[j];
-                    buf.push(t);
-                }
-            }
-            let end = buf.len();
+            let end = ends[i as usize];
             self.walk(
                 c,
                 n,
                 interval,
-                start,
+                end - sizes[i as usize],
                 end,
                 &leaves[b..e],
                 &mut out[b..e],
                 buf,
                 masks,
             );
-            buf.truncate(start);
         }
-        masks.truncate(mstart);
+        buf.truncate(base);
     }
 
     /// Mask of the children in `mask` whose segment from the centre `p` of
@@ -1183,6 +1238,35 @@ impl<'a> Classifier<'a> {
         }
         (out, t.positive_side(p))
     }
+}
+
+/// Children whose segment from the parent's centre `c` to their own centre
+/// (`quarter` away on each axis) meets the box `[lo, hi]` grown by `g`: the
+/// parameter intervals of the three slabs along the diagonal must overlap.
+/// Rounding is covered by a margin far below `g` in space.
+#[inline]
+fn segments_meeting_box(c: [f64; 3], quarter: f64, lo: [f64; 3], hi: [f64; 3], g: f64) -> u8 {
+    const SLACK: f64 = 1e-9;
+    let inv = 1.0 / quarter;
+    // Along axis k, the positive children enter the slab at `u[k]` and leave
+    // at `w[k]`; the negative ones over `[-w[k], -u[k]]`.
+    let u: [f64; 3] = std::array::from_fn(|k| (lo[k] - g - c[k]) * inv);
+    let w: [f64; 3] = std::array::from_fn(|k| (hi[k] + g - c[k]) * inv);
+    let mut out = 0u8;
+    for i in 0..8 {
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for k in 0..3 {
+            let (a, b) = if i >> k & 1 != 0 {
+                (u[k], w[k])
+            } else {
+                (-w[k], -u[k])
+            };
+            t0 = t0.max(a);
+            t1 = t1.min(b);
+        }
+        out |= ((t0 <= t1 + SLACK) as u8) << i;
+    }
+    out
 }
 
 /// Start of each child's leaves in `leaves` (all strictly inside `o`):

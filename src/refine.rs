@@ -105,6 +105,13 @@ impl SurfaceIndex {
         self.bvh.any_overlap(&self.tris, lo, hi)
     }
 
+    /// Whether the closed box of `o` meets the bounding box of some
+    /// triangle (true whenever [`SurfaceIndex::touches`] is).
+    pub fn may_touch(&self, o: Octant) -> bool {
+        let (lo, hi) = o.bounds_f64();
+        self.bvh.any_candidate(lo, hi)
+    }
+
     /// Indices of the triangles touching the closed box of `o`.
     pub fn touching(&self, o: Octant, out: &mut Vec<u32>) {
         let (lo, hi) = o.bounds_f64();
@@ -288,26 +295,29 @@ pub fn check_estimate(
 }
 
 /// Top of the tree: leaves of the rule down to `COARSE_LEVEL` with an
-/// estimate of the work below each, identical on every rank.
+/// estimate of the work below each, identical on every rank. At that level
+/// refinement decides what splits; `deep` only guesses it for the weight.
 fn coarse_top(
     max_level: u8,
     mut split: impl FnMut(Octant) -> bool,
+    mut deep: impl FnMut(Octant) -> bool,
     deep_weight: u64,
 ) -> Vec<(Octant, u64)> {
     let stop = max_level.min(COARSE_LEVEL);
     let mut out = Vec::new();
     let mut stack = vec![Octant::ROOT];
     while let Some(o) = stack.pop() {
-        let wants = o.level() < max_level && split(o);
-        if !wants {
+        if o.level() >= max_level {
             out.push((o, 1));
         } else if o.level() == stop {
-            out.push((o, deep_weight));
-        } else {
+            out.push((o, if deep(o) { deep_weight } else { 1 }));
+        } else if split(o) {
             // Reverse so that popping yields Morton order.
             for i in (0..8).rev() {
                 stack.push(o.child(i));
             }
+        } else {
+            out.push((o, 1));
         }
     }
     out
@@ -333,7 +343,17 @@ pub fn construct_for_surface(
 ) -> Result<LinearOctree> {
     agree(&*comm, check_level(level))?;
     let weight = 1u64 << (2 * (level.saturating_sub(COARSE_LEVEL)) as u32).min(60);
-    construct(comm, coarse_top(level, |o| surface.touches(o), weight))
+    // A box meeting some triangle's box is a good enough guess for the
+    // weight, and much cheaper than the exact test refinement repeats.
+    construct(
+        comm,
+        coarse_top(
+            level,
+            |o| surface.touches(o),
+            |o| surface.may_touch(o),
+            weight,
+        ),
+    )
 }
 
 /// Construction for refinement by a predicate (see
@@ -344,7 +364,16 @@ pub fn construct_for_callback(
     split: impl FnMut(Octant) -> bool,
 ) -> Result<LinearOctree> {
     agree(&*comm, check_level(max_level))?;
-    construct(comm, coarse_top(max_level, split, 8))
+    let split = std::cell::RefCell::new(split);
+    construct(
+        comm,
+        coarse_top(
+            max_level,
+            |o| split.borrow_mut()(o),
+            |o| split.borrow_mut()(o),
+            8,
+        ),
+    )
 }
 
 /// Builds the octree whose leaves touching `surface` are exactly at `level`
@@ -381,6 +410,19 @@ impl LinearOctree {
         for &o in self.leaves() {
             if o.level() >= level {
                 w.out.push(o);
+                continue;
+            }
+            if o.level() + 1 == level {
+                // Only whether it touches matters: the first hit decides.
+                if surface.touches(o) {
+                    w.out.extend_from_slice(&o.children());
+                } else {
+                    w.out.push(o);
+                }
+                if let Err(e) = w.check_limit() {
+                    result = Err(e);
+                    break;
+                }
                 continue;
             }
             w.buf.clear();
@@ -425,12 +467,10 @@ struct SurfaceWalker<'a> {
 }
 
 impl SurfaceWalker<'_> {
-    /// Refines `o`, which touches the triangles `buf[lo..hi]`.
+    /// Refines `o`, which touches the triangles `buf[lo..hi]` and is at
+    /// least two levels above the target.
     fn walk(&mut self, o: Octant, lo: usize, hi: usize) -> Result<()> {
-        if o.level() + 1 == self.level {
-            self.out.extend_from_slice(&o.children());
-            return self.check_limit();
-        }
+        let last = o.level() + 2 == self.level;
         let (min, _) = o.bounds_f64();
         let half = (o.side() / 2) as f64;
         for i in 0..8u32 {
@@ -441,18 +481,30 @@ impl SurfaceWalker<'_> {
                 min[2] + if i & 4 != 0 { half } else { 0.0 },
             ];
             let cmax = [cmin[0] + half, cmin[1] + half, cmin[2] + half];
-            let start = self.buf.len();
-            for j in lo..hi {
-                let t = self.buf[j];
+            let overlaps = |t: u32| {
                 let b = &self.boxes[t as usize];
-                if b[0] <= cmax[0]
+                b[0] <= cmax[0]
                     && b[3] >= cmin[0]
                     && b[1] <= cmax[1]
                     && b[4] >= cmin[1]
                     && b[2] <= cmax[2]
                     && b[5] >= cmin[2]
                     && triangle_box_overlap(&self.tris[t as usize], cmin, cmax)
-                {
+            };
+            if last {
+                // The child's children are leaves whatever they touch, so
+                // the first triangle touching the child decides.
+                if self.buf[lo..hi].iter().any(|&t| overlaps(t)) {
+                    self.out.extend_from_slice(&c.children());
+                } else {
+                    self.out.push(c);
+                }
+                continue;
+            }
+            let start = self.buf.len();
+            for j in lo..hi {
+                let t = self.buf[j];
+                if overlaps(t) {
                     self.buf.push(t);
                 }
             }
