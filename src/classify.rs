@@ -462,14 +462,8 @@ impl<'a> InsideClassifier<'a> {
         // A superset is all the walk needs: compare bounding boxes only.
         let mut buf: Vec<u32> = (0..c.tris.len() as u32)
             .filter(|&t| {
-                let v = &c.tris[t as usize].v;
-                (0..3).all(|k| {
-                    let (a, b) = (
-                        v[0][k].min(v[1][k]).min(v[2][k]),
-                        v[0][k].max(v[1][k]).max(v[2][k]),
-                    );
-                    a <= hi[k] && b >= lo[k]
-                })
+                let [a, b] = c.bounds[t as usize];
+                (0..3).all(|k| a[k] <= hi[k] && b[k] >= lo[k])
             })
             .collect();
         let n = buf.len();
@@ -528,6 +522,8 @@ struct Classifier<'a> {
     surface_len: usize,
     /// Their normals `(v1 - v0) x (v2 - v1)`, in floating point.
     normals: Vec<[f64; 3]>,
+    /// Their bounding boxes, lower then upper corner.
+    bounds: Vec<[[f64; 3]; 2]>,
     /// The same triangles in fixed point.
     fixed: Vec<FixedTri>,
     /// Fixed-point units per lattice unit is `2^shift`.
@@ -699,10 +695,21 @@ impl<'a> Classifier<'a> {
                 ]
             })
             .collect();
+        let bounds = tris
+            .iter()
+            .map(|t| {
+                let v = &t.v;
+                [
+                    std::array::from_fn(|k| v[0][k].min(v[1][k]).min(v[2][k])),
+                    std::array::from_fn(|k| v[0][k].max(v[1][k]).max(v[2][k])),
+                ]
+            })
+            .collect();
         Classifier {
             tris,
             surface_len,
             normals,
+            bounds,
             fixed,
             shift,
             // Rounding moves a vertex by at most half a unit; four units
@@ -755,32 +762,22 @@ impl<'a> Classifier<'a> {
     /// is all it needs to be.
     #[inline]
     fn child_masks(&self, t: u32, c: [f64; 3], side: f64, want: u8, leafy: u8) -> ChildMasks {
-        let v = &self.tris[t as usize].v;
         let g = self.grow;
         let mut exact = want & leafy;
         let mut near = want;
         let mut seg = 0xffu8;
         let quarter = 0.5 * side;
-        let (mut lo3, mut hi3) = ([0.0; 3], [0.0; 3]);
+        let [lo3, hi3] = self.bounds[t as usize];
         for k in 0..3 {
-            let lo = v[0][k].min(v[1][k]).min(v[2][k]);
-            let hi = v[0][k].max(v[1][k]).max(v[2][k]);
-            (lo3[k], hi3[k]) = (lo, hi);
+            let (lo, hi) = (lo3[k], hi3[k]);
             // The children on the positive / negative side along `k` whose
             // slab `[ck, ck + extent]` / `[ck - extent, ck]`, grown by `m`,
             // meets the triangle's extent.
+            // Branch-free: these verdicts are close to random.
+            let bits = |b: bool, m: u8| (b as u8).wrapping_neg() & m;
             let meets = |extent: f64, m: f64| {
-                let pos = if lo <= c[k] + extent + m && hi >= c[k] - m {
-                    POS[k]
-                } else {
-                    0
-                };
-                let neg = if lo <= c[k] + m && hi >= c[k] - extent - m {
-                    NEG[k]
-                } else {
-                    0
-                };
-                pos | neg
+                bits((lo <= c[k] + extent + m) & (hi >= c[k] - m), POS[k])
+                    | bits((lo <= c[k] + m) & (hi >= c[k] - extent - m), NEG[k])
             };
             exact &= meets(side, 0.0);
             near &= meets(side, g);
@@ -800,6 +797,7 @@ impl<'a> Classifier<'a> {
                 ..ChildMasks::default()
             };
         }
+        let v = &self.tris[t as usize].v;
         let r = v.map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
         let rho = r.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         let base = rho + side;

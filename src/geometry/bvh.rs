@@ -197,19 +197,25 @@ impl Bvh {
             min: box_min,
             max: box_max,
         };
+        if !self.nodes[0].bbox.overlaps(&query) {
+            return false;
+        }
+        // Only nodes whose box overlaps the query go on the stack: children
+        // are tested before they are pushed.
         let mut stack = [0u32; STACK];
         let mut sp = 1;
         while sp > 0 {
             sp -= 1;
             let node = &self.nodes[stack[sp] as usize];
-            if !node.bbox.overlaps(&query) {
-                continue;
-            }
             if node.count == 0 {
                 debug_assert!(sp + 2 <= STACK);
-                stack[sp] = node.first + 1;
-                stack[sp + 1] = node.first;
-                sp += 2;
+                let l = node.first;
+                let right = self.nodes[l as usize + 1].bbox.overlaps(&query);
+                let left = self.nodes[l as usize].bbox.overlaps(&query);
+                stack[sp] = l + 1;
+                sp += right as usize;
+                stack[sp] = l;
+                sp += left as usize;
                 continue;
             }
             let first = node.first as usize;
