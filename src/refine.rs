@@ -15,8 +15,9 @@
 //!
 //! An octant is refined while its level is below the target level and its
 //! closed box touches a triangle (see [`crate::geometry::intersect`] for the
-//! exact touching rule). Each child receives only the triangles that touched
-//! its parent, so a triangle is tested about once per level it spans. The
+//! exact touching rule). Each child receives the triangles whose bounding
+//! boxes meet its box, taken from its parent's; the exact test only has to
+//! find one that touches, so most candidates are only compared by boxes. The
 //! children of an octant one level above the target are leaves whatever they
 //! touch, so the most numerous level costs no geometric test at all.
 //!
@@ -110,6 +111,13 @@ impl SurfaceIndex {
     pub fn may_touch(&self, o: Octant) -> bool {
         let (lo, hi) = o.bounds_f64();
         self.bvh.any_candidate(lo, hi)
+    }
+
+    /// Indices of the triangles whose bounding boxes meet the closed box of
+    /// `o`: a superset of [`SurfaceIndex::touching`].
+    pub fn candidates(&self, o: Octant, out: &mut Vec<u32>) {
+        let (lo, hi) = o.bounds_f64();
+        self.bvh.query_candidates(lo, hi, out);
     }
 
     /// Indices of the triangles touching the closed box of `o`.
@@ -426,8 +434,13 @@ impl LinearOctree {
                 continue;
             }
             w.buf.clear();
-            surface.touching(o, &mut w.buf);
-            if w.buf.is_empty() {
+            surface.candidates(o, &mut w.buf);
+            let (lo, hi) = o.bounds_f64();
+            if !w
+                .buf
+                .iter()
+                .any(|&t| triangle_box_overlap(&w.tris[t as usize], lo, hi))
+            {
                 w.out.push(o);
                 continue;
             }
@@ -467,8 +480,9 @@ struct SurfaceWalker<'a> {
 }
 
 impl SurfaceWalker<'_> {
-    /// Refines `o`, which touches the triangles `buf[lo..hi]` and is at
-    /// least two levels above the target.
+    /// Refines `o`, which touches the surface and is at least two levels
+    /// above the target; `buf[lo..hi]` holds every triangle it touches, and
+    /// maybe others whose boxes meet its box.
     fn walk(&mut self, o: Octant, lo: usize, hi: usize) -> Result<()> {
         let last = o.level() + 2 == self.level;
         let (min, _) = o.bounds_f64();
@@ -481,40 +495,42 @@ impl SurfaceWalker<'_> {
                 min[2] + if i & 4 != 0 { half } else { 0.0 },
             ];
             let cmax = [cmin[0] + half, cmin[1] + half, cmin[2] + half];
-            let overlaps = |t: u32| {
+            let meets = |t: u32| {
                 let b = &self.boxes[t as usize];
-                b[0] <= cmax[0]
-                    && b[3] >= cmin[0]
-                    && b[1] <= cmax[1]
-                    && b[4] >= cmin[1]
-                    && b[2] <= cmax[2]
-                    && b[5] >= cmin[2]
-                    && triangle_box_overlap(&self.tris[t as usize], cmin, cmax)
+                (b[0] <= cmax[0])
+                    & (b[3] >= cmin[0])
+                    & (b[1] <= cmax[1])
+                    & (b[4] >= cmin[1])
+                    & (b[2] <= cmax[2])
+                    & (b[5] >= cmin[2])
             };
+            let touches = |t: u32| triangle_box_overlap(&self.tris[t as usize], cmin, cmax);
             if last {
                 // The child's children are leaves whatever they touch, so
                 // the first triangle touching the child decides.
-                if self.buf[lo..hi].iter().any(|&t| overlaps(t)) {
+                if self.buf[lo..hi].iter().any(|&t| meets(t) && touches(t)) {
                     self.out.extend_from_slice(&c.children());
                 } else {
                     self.out.push(c);
                 }
                 continue;
             }
+            // The child's candidates by boxes; the exact test only has to
+            // find one that touches.
             let start = self.buf.len();
             for j in lo..hi {
                 let t = self.buf[j];
-                if overlaps(t) {
+                if meets(t) {
                     self.buf.push(t);
                 }
             }
             let end = self.buf.len();
-            if end > start {
+            if self.buf[start..end].iter().any(|&t| touches(t)) {
                 self.walk(c, start, end)?;
-                self.buf.truncate(start);
             } else {
                 self.out.push(c);
             }
+            self.buf.truncate(start);
         }
         self.check_limit()
     }
