@@ -121,12 +121,29 @@ impl LinearOctree {
         if moving[0] == 0 {
             return Ok(PartitionStats::default());
         }
-        let (recv, rc) = self
-            .comm()
-            .alltoallv_u64(Octant::as_keys(self.leaves()), &counts);
-        let received = (recv.len() - rc[me]) as u64;
+        // Destinations grow with the Morton index, so this rank sends a
+        // prefix to lower ranks and a suffix to higher ones and keeps the
+        // middle in place: only moving leaves are copied.
+        let lo: usize = counts[..me].iter().sum();
+        let hi = lo + counts[me];
+        let keys = Octant::as_keys(self.leaves());
+        let mut send = Vec::with_capacity(keys.len() - counts[me]);
+        send.extend_from_slice(&keys[..lo]);
+        send.extend_from_slice(&keys[hi..]);
+        let mut out_counts = counts;
+        out_counts[me] = 0;
+        let (recv, rc) = self.comm().alltoallv_u64(&send, &out_counts);
+        drop(send);
+        let received = recv.len() as u64;
+        // Leaves from lower ranks come first in Morton order.
+        let before: usize = rc[..me].iter().sum();
         let balanced = self.balanced();
-        self.set_leaves(recv.into_iter().map(Octant::from_key).collect());
+        let mut leaves = self.take_leaves();
+        leaves.truncate(hi);
+        leaves.drain(..lo);
+        leaves.splice(0..0, recv[..before].iter().map(|&k| Octant::from_key(k)));
+        leaves.extend(recv[before..].iter().map(|&k| Octant::from_key(k)));
+        self.set_leaves(leaves);
         self.set_balanced(balanced);
         self.refresh()?;
         Ok(PartitionStats { sent, received })
