@@ -147,7 +147,7 @@ use crate::error::{Error, Result};
 use crate::geometry::diagnostics::{diagnose, weld, SurfaceReport};
 use crate::geometry::intersect::triangle_box_overlap;
 use crate::geometry::winding::{boundary_loops, orient_welded, WindingTree};
-use crate::geometry::{Surface, Triangle};
+use crate::geometry::{Aabb, Surface, Triangle};
 use crate::octant::{Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
 use crate::refine::SurfaceIndex;
 
@@ -461,10 +461,7 @@ impl<'a> InsideClassifier<'a> {
         let hi = [ROOT_LEN as f64 + g; 3];
         // A superset is all the walk needs: compare bounding boxes only.
         let mut buf: Vec<u32> = (0..c.tris.len() as u32)
-            .filter(|&t| {
-                let [a, b] = c.bounds[t as usize];
-                (0..3).all(|k| a[k] <= hi[k] && b[k] >= lo[k])
-            })
+            .filter(|&t| c.bounds[t as usize].overlaps(&Aabb { min: lo, max: hi }))
             .collect();
         let n = buf.len();
         let mut masks = Vec::new();
@@ -522,8 +519,8 @@ struct Classifier<'a> {
     surface_len: usize,
     /// Their normals `(v1 - v0) x (v2 - v1)`, in floating point.
     normals: Vec<[f64; 3]>,
-    /// Their bounding boxes, lower then upper corner.
-    bounds: Vec<[[f64; 3]; 2]>,
+    /// Their bounding boxes.
+    bounds: Vec<Aabb>,
     /// The same triangles in fixed point.
     fixed: Vec<FixedTri>,
     /// Fixed-point units per lattice unit is `2^shift`.
@@ -582,9 +579,9 @@ struct ChildMasks {
     /// The child's centre may lie on the other side of the triangle's
     /// plane than the parent's centre.
     plane: u8,
-    /// The triangle's grown box meets the box spanned by the segment from
-    /// the parent's centre to the child's centre: only then can the segment
-    /// cross it (most candidates of a large octant are far from its centre).
+    /// The triangle's grown box meets the segment from the parent's centre
+    /// to the child's centre: only then can the segment cross it (most
+    /// candidates of a large octant are far from its centre).
     seg: u8,
 }
 
@@ -695,16 +692,7 @@ impl<'a> Classifier<'a> {
                 ]
             })
             .collect();
-        let bounds = tris
-            .iter()
-            .map(|t| {
-                let v = &t.v;
-                [
-                    std::array::from_fn(|k| v[0][k].min(v[1][k]).min(v[2][k])),
-                    std::array::from_fn(|k| v[0][k].max(v[1][k]).max(v[2][k])),
-                ]
-            })
-            .collect();
+        let bounds = tris.iter().map(Triangle::aabb).collect();
         Classifier {
             tris,
             surface_len,
@@ -767,7 +755,7 @@ impl<'a> Classifier<'a> {
         let mut near = want;
         let mut seg = 0xffu8;
         let quarter = 0.5 * side;
-        let [lo3, hi3] = self.bounds[t as usize];
+        let Aabb { min: lo3, max: hi3 } = self.bounds[t as usize];
         for k in 0..3 {
             let (lo, hi) = (lo3[k], hi3[k]);
             // The children on the positive / negative side along `k` whose

@@ -140,8 +140,7 @@ impl LinearOctree {
         let balanced = self.balanced();
         let mut leaves = self.take_leaves();
         leaves.truncate(hi);
-        leaves.drain(..lo);
-        leaves.splice(0..0, recv[..before].iter().map(|&k| Octant::from_key(k)));
+        leaves.splice(..lo, recv[..before].iter().map(|&k| Octant::from_key(k)));
         leaves.extend(recv[before..].iter().map(|&k| Octant::from_key(k)));
         self.set_leaves(leaves);
         self.set_balanced(balanced);

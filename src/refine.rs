@@ -303,12 +303,12 @@ pub fn check_estimate(
 }
 
 /// Top of the tree: leaves of the rule down to `COARSE_LEVEL` with an
-/// estimate of the work below each, identical on every rank. At that level
-/// refinement decides what splits; `deep` only guesses it for the weight.
+/// estimate of the work below each, identical on every rank. `split(o,
+/// guess)` is the rule; at `COARSE_LEVEL` refinement decides what splits, so
+/// there it is asked with `guess` set, for the weight only.
 fn coarse_top(
     max_level: u8,
-    mut split: impl FnMut(Octant) -> bool,
-    mut deep: impl FnMut(Octant) -> bool,
+    mut split: impl FnMut(Octant, bool) -> bool,
     deep_weight: u64,
 ) -> Vec<(Octant, u64)> {
     let stop = max_level.min(COARSE_LEVEL);
@@ -318,8 +318,8 @@ fn coarse_top(
         if o.level() >= max_level {
             out.push((o, 1));
         } else if o.level() == stop {
-            out.push((o, if deep(o) { deep_weight } else { 1 }));
-        } else if split(o) {
+            out.push((o, if split(o, true) { deep_weight } else { 1 }));
+        } else if split(o, false) {
             // Reverse so that popping yields Morton order.
             for i in (0..8).rev() {
                 stack.push(o.child(i));
@@ -353,15 +353,14 @@ pub fn construct_for_surface(
     let weight = 1u64 << (2 * (level.saturating_sub(COARSE_LEVEL)) as u32).min(60);
     // A box meeting some triangle's box is a good enough guess for the
     // weight, and much cheaper than the exact test refinement repeats.
-    construct(
-        comm,
-        coarse_top(
-            level,
-            |o| surface.touches(o),
-            |o| surface.may_touch(o),
-            weight,
-        ),
-    )
+    let split = |o, guess| {
+        if guess {
+            surface.may_touch(o)
+        } else {
+            surface.touches(o)
+        }
+    };
+    construct(comm, coarse_top(level, split, weight))
 }
 
 /// Construction for refinement by a predicate (see
@@ -369,19 +368,10 @@ pub fn construct_for_surface(
 pub fn construct_for_callback(
     comm: CommRef,
     max_level: u8,
-    split: impl FnMut(Octant) -> bool,
+    mut split: impl FnMut(Octant) -> bool,
 ) -> Result<LinearOctree> {
     agree(&*comm, check_level(max_level))?;
-    let split = std::cell::RefCell::new(split);
-    construct(
-        comm,
-        coarse_top(
-            max_level,
-            |o| split.borrow_mut()(o),
-            |o| split.borrow_mut()(o),
-            8,
-        ),
-    )
+    construct(comm, coarse_top(max_level, |o, _| split(o), 8))
 }
 
 /// Builds the octree whose leaves touching `surface` are exactly at `level`
