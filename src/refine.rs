@@ -70,6 +70,11 @@ impl SurfaceIndex {
                 ],
             })
             .collect();
+        // Stored in the tree's leaf order, the triangles near an octant sit
+        // together in memory, which the walks down the octree feel: input
+        // files often list facets in no spatial order at all.
+        let mut bvh = Bvh::new(&tris);
+        let tris: Vec<Triangle> = bvh.renumber().iter().map(|&i| tris[i as usize]).collect();
         let boxes = tris
             .iter()
             .map(|t| {
@@ -77,7 +82,6 @@ impl SurfaceIndex {
                 [b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]]
             })
             .collect();
-        let bvh = Bvh::new(&tris);
         let projected_area = projected_area(&tris);
         SurfaceIndex {
             tris,

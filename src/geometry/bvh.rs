@@ -132,6 +132,15 @@ impl Bvh {
         &self.order
     }
 
+    /// Renumbers the triangles in leaf order: returns the old order (new
+    /// index `i` is old index `order[i]`) and makes the tree refer to the
+    /// triangles by their new indices. The caller must permute its
+    /// triangles the same way.
+    pub(crate) fn renumber(&mut self) -> Vec<u32> {
+        let identity = (0..self.order.len() as u32).collect();
+        std::mem::replace(&mut self.order, identity)
+    }
+
     /// Bounding box of all triangles (empty for an empty tree).
     pub fn bbox(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::empty(), |n| n.bbox)
