@@ -15,7 +15,9 @@ Phases: refine = construct + refine + the partition after it; balance =
 balance + the partition after it; mesh = ghost + nodes + numbering +
 connectivity; classify (inside/outside) apart; total = refine + balance +
 classify + mesh (reading the surface does not depend on the level and is
-left out). Times are seconds, max over ranks, medians of --repeat runs.
+left out). Times are seconds, max over ranks, medians of --repeat runs; the
+repeats are rounds over all the cases, so that a slow spell of the machine
+does not fall on a few sizes only.
 
 Before each level the peak memory is estimated from the level below (leaves
 x 4.2); a level that would not fit in --max-mem-gib (default 90% of RAM)
@@ -53,26 +55,30 @@ COLUMNS = [
 ]
 
 
-def measure(src, level, np_, repeat, fit, env, stats_path):
-    runs, leaves = [], set()
-    for _ in range(repeat):
-        s = octmesh_stats(np_, ["mesh", src, "--level", level, "--fit", fit,
-                                "--balance", "corner"], stats_path, env)
-        t, parts = s["timings"], s["partition_timings"]
-        r = {
-            "refine": t["construct"] + t["refine"] + parts["refined"],
-            "balance": t["balance"] + parts["balanced"],
-            "classify": t["classify"],
-            "mesh": t["ghost"] + t["nodes"] + t["numbering"] + t["connectivity"],
-            "peak": s["peak_rss_bytes"],
-            "base": s["rss_after_read_bytes"],
-        }
-        r["total"] = r["refine"] + r["balance"] + r["classify"] + r["mesh"]
-        runs.append(r)
-        leaves.add(s["octants_balanced"])
+def run_once(src, level, np_, fit, env, stats_path):
+    """One run of the pipeline: phase times (s), peak RSS and leaves."""
+    s = octmesh_stats(np_, ["mesh", src, "--level", level, "--fit", fit,
+                            "--balance", "corner"], stats_path, env)
+    t, parts = s["timings"], s["partition_timings"]
+    r = {
+        "refine": t["construct"] + t["refine"] + parts["refined"],
+        "balance": t["balance"] + parts["balanced"],
+        "classify": t["classify"],
+        "mesh": t["ghost"] + t["nodes"] + t["numbering"] + t["connectivity"],
+        "peak": s["peak_rss_bytes"],
+        "base": s["rss_after_read_bytes"],
+        "leaves": s["octants_balanced"],
+    }
+    r["total"] = r["refine"] + r["balance"] + r["classify"] + r["mesh"]
+    return r
+
+
+def summarize(runs):
+    """Medians over the runs of one case (whose leaf counts must agree)."""
+    leaves = {r["leaves"] for r in runs}
     if len(leaves) != 1:
         raise RunError("leaf counts differ between repeats: %s" % sorted(leaves))
-    out = {k: median([r[k] for r in runs]) for k in runs[0]}
+    out = {k: median([r[k] for r in runs]) for k in runs[0] if k != "leaves"}
     out["leaves"] = leaves.pop()
     return out
 
@@ -234,8 +240,13 @@ def run_all(ap, args):
     WORK.mkdir(parents=True, exist_ok=True)
     stats_path = WORK / "scaling_stats.json"
     progress = Progress(COLUMNS)
-    records, stopped = [], set()
+    # Repeats go round all the cases, rather than one case at a time, so
+    # that a slow spell of a shared machine spreads over every size instead
+    # of tilting the cost per leaf of a few.
+    runs, stopped = {}, set()
     try:
+        if args.repeat > 1:
+            print("round 1 of %d:" % args.repeat, flush=True)
         for surface, level in cases:
             name = surface_name(surface)
             src = surface_arg(surface)
@@ -245,10 +256,9 @@ def run_all(ap, args):
             for np_ in nps:
                 if (name, np_) in stopped:
                     continue
-                prev = [r for r in records if r["surface"] == name and r["np"] == np_
-                        and r["level"] == level - 1]
+                prev = runs.get((name, level - 1, np_))
                 if prev and limit:
-                    p = prev[0]
+                    p = prev[0][1]
                     need = np_ * (p["base"] + (p["peak"] - p["base"]) * GROWTH)
                     if need > limit:
                         print("note: %s np %d stops at level %d: level %d would need about "
@@ -256,10 +266,23 @@ def run_all(ap, args):
                                                         need / GIB, limit / GIB), flush=True)
                         stopped.add((name, np_))
                         continue
-                m = measure(src, level, np_, args.repeat, args.fit, env, stats_path)
-                r = {"surface": name, "level": level, "np": np_, **m}
-                records.append(r)
-                progress.add(table_row(r))
+                r = run_once(src, level, np_, args.fit, env, stats_path)
+                runs[(name, level, np_)] = [(src, r)]
+                progress.add(table_row({"surface": name, "level": level, "np": np_, **r}))
+        for k in range(1, args.repeat):
+            print("round %d of %d" % (k + 1, args.repeat), flush=True)
+            for (name, level, np_), done in runs.items():
+                src = done[0][0]
+                done.append((src, run_once(src, level, np_, args.fit, env, stats_path)))
+        records = []
+        for (name, level, np_), done in runs.items():
+            records.append({"surface": name, "level": level, "np": np_,
+                            **summarize([r for _, r in done])})
+        if args.repeat > 1:
+            print("medians of %d:" % args.repeat)
+            final = Progress(COLUMNS)
+            for r in records:
+                final.add(table_row(r))
     except (RunError, OSError, KeyError, ValueError) as e:
         print("FAILED: %s" % e)
         sys.exit(1)
