@@ -15,9 +15,10 @@ Phases: refine = construct + refine + the partition after it; balance =
 balance + the partition after it; mesh = ghost + nodes + numbering +
 connectivity; classify (inside/outside) apart; total = refine + balance +
 classify + mesh (reading the surface does not depend on the level and is
-left out). Times are seconds, max over ranks, medians of --repeat runs; the
-repeats are rounds over all the cases, so that a slow spell of the machine
-does not fall on a few sizes only.
+left out). Times are seconds, max over ranks, medians of --repeat runs, or
+more for short cases (--min-seconds); the repeats are rounds over all the
+cases, so that a slow spell of the machine does not fall on a few sizes
+only.
 
 Before each level the peak memory is estimated from the level below (leaves
 x 4.2); a level that would not fit in --max-mem-gib (default 90% of RAM)
@@ -32,6 +33,7 @@ run with /usr/bin/python3); --no-plot runs without it.
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -53,6 +55,10 @@ COLUMNS = [
     ("mesh", "mesh [s]"), ("total", "total [s]"), ("ns", "total ns/leaf"),
     ("peak", "peak MiB/rank"), ("bpl", "B/leaf"),
 ]
+
+
+# Most runs of one short case (see --min-seconds).
+MAX_RUNS = 15
 
 
 def run_once(src, level, np_, fit, env, stats_path):
@@ -188,6 +194,9 @@ def main():
     ap.add_argument("--np", default="1", help="rank counts (default 1)")
     ap.add_argument("--repeat", type=int, default=1, metavar="K",
                     help="runs per point, median reported (default 1)")
+    ap.add_argument("--min-seconds", type=float, default=2.0, metavar="S",
+                    help="give short cases more runs, up to S seconds of pipeline each "
+                    "(at most %d runs; default 2)" % MAX_RUNS)
     ap.add_argument("--fit", default="0.7", help="octmesh --fit (default 0.7)")
     ap.add_argument("--max-mem-gib", type=float,
                     help="stop a series before a level estimated to need more "
@@ -245,8 +254,7 @@ def run_all(ap, args):
     # of tilting the cost per leaf of a few.
     runs, stopped = {}, set()
     try:
-        if args.repeat > 1:
-            print("round 1 of %d:" % args.repeat, flush=True)
+        print("round 1:", flush=True)
         for surface, level in cases:
             name = surface_name(surface)
             src = surface_arg(surface)
@@ -269,17 +277,26 @@ def run_all(ap, args):
                 r = run_once(src, level, np_, args.fit, env, stats_path)
                 runs[(name, level, np_)] = [(src, r)]
                 progress.add(table_row({"surface": name, "level": level, "np": np_, **r}))
-        for k in range(1, args.repeat):
-            print("round %d of %d" % (k + 1, args.repeat), flush=True)
-            for (name, level, np_), done in runs.items():
-                src = done[0][0]
-                done.append((src, run_once(src, level, np_, args.fit, env, stats_path)))
+        # A short case gets more runs, up to --min-seconds of pipeline time
+        # (at most MAX_RUNS): a single descheduling moves a 60 ms run by
+        # more than the 1.5x band allows.
+        want = {key: max(args.repeat, min(MAX_RUNS, math.ceil(
+            args.min_seconds / max(done[0][1]["total"], 1e-3))))
+            for key, done in runs.items()}
+        rounds = max(want.values(), default=1)
+        for k in range(1, rounds):
+            print("round %d of %d" % (k + 1, rounds), flush=True)
+            for key, done in runs.items():
+                if len(done) < want[key]:
+                    src = done[0][0]
+                    name, level, np_ = key
+                    done.append((src, run_once(src, level, np_, args.fit, env, stats_path)))
         records = []
         for (name, level, np_), done in runs.items():
             records.append({"surface": name, "level": level, "np": np_,
                             **summarize([r for _, r in done])})
-        if args.repeat > 1:
-            print("medians of %d:" % args.repeat)
+        if rounds > 1:
+            print("medians of %d to %d runs:" % (min(want.values()), rounds))
             final = Progress(COLUMNS)
             for r in records:
                 final.add(table_row(r))
