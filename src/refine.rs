@@ -357,14 +357,138 @@ pub fn construct_for_surface(
     let weight = 1u64 << (2 * (level.saturating_sub(COARSE_LEVEL)) as u32).min(60);
     // A box meeting some triangle's box is a good enough guess for the
     // weight, and much cheaper than the exact test refinement repeats.
-    let split = |o, guess| {
-        if guess {
-            surface.may_touch(o)
-        } else {
-            surface.touches(o)
+    construct(comm, surface_top(surface, level, weight))
+}
+
+/// [`coarse_top`] for the surface rule (exact tests above `COARSE_LEVEL`,
+/// at it the guess "some triangle's box meets the box"), with the candidate
+/// triangles passed down as in refinement rather than one search of the
+/// bounding-box tree per octant: the same leaves and weights, at a fraction
+/// of the cost. At small levels the top is most of the tree.
+fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(Octant, u64)> {
+    struct Top<'a> {
+        surface: &'a SurfaceIndex,
+        stop: u8,
+        max_level: u8,
+        deep_weight: u64,
+        /// Stack of triangle lists; each octant's list is a suffix.
+        buf: Vec<u32>,
+        masks: Vec<u8>,
+        out: Vec<(Octant, u64)>,
+    }
+    impl Top<'_> {
+        /// `buf[lo..hi]`: the triangles whose boxes meet the box of `o`.
+        fn visit(&mut self, o: Octant, lo: usize, hi: usize) {
+            let (min, max) = o.bounds_f64();
+            let weight = if o.level() >= self.max_level {
+                Some(1)
+            } else if o.level() == self.stop {
+                Some(if lo < hi { self.deep_weight } else { 1 })
+            } else if self.buf[lo..hi]
+                .iter()
+                .any(|&t| triangle_box_overlap(&self.surface.tris[t as usize], min, max))
+            {
+                None
+            } else {
+                Some(1)
+            };
+            if let Some(w) = weight {
+                self.out.push((o, w));
+                return;
+            }
+            let half = (o.side() / 2) as f64;
+            let center = min.map(|x| x + half);
+            let b = split_candidates(
+                &self.surface.boxes,
+                &mut self.buf,
+                &mut self.masks,
+                lo,
+                hi,
+                center,
+            );
+            for i in 0..8 {
+                self.visit(o.child(i as u32), b[i], b[i + 1]);
+            }
+            self.buf.truncate(b[0]);
         }
+    }
+    let mut top = Top {
+        surface,
+        stop: max_level.min(COARSE_LEVEL),
+        max_level,
+        deep_weight,
+        buf: Vec::new(),
+        masks: Vec::new(),
+        out: Vec::new(),
     };
-    construct(comm, coarse_top(level, split, weight))
+    surface.candidates(Octant::ROOT, &mut top.buf);
+    let n = top.buf.len();
+    top.visit(Octant::ROOT, 0, n);
+    top.out
+}
+
+/// Children of an octant with centre `c` whose closed boxes meet the
+/// bounding box `b` (min then max) of a triangle known to meet the octant's
+/// closed box: bit `i` for child `i`. Along each axis the lower children
+/// meet it when it starts at or below the centre, the upper ones when it
+/// ends at or above it.
+#[inline]
+fn child_mask(b: &[f64; 6], c: [f64; 3]) -> u8 {
+    // Children whose bit `k` is set.
+    const UPPER: [u8; 3] = [0b1010_1010, 0b1100_1100, 0b1111_0000];
+    let mut m = 0xffu8;
+    for k in 0..3 {
+        let lower = ((b[k] <= c[k]) as u8).wrapping_neg() & !UPPER[k];
+        let upper = ((b[k + 3] >= c[k]) as u8).wrapping_neg() & UPPER[k];
+        m &= lower | upper;
+    }
+    m
+}
+
+/// [`child_mask`] of each triangle of `list`, into `masks`.
+fn child_masks(boxes: &[[f64; 6]], list: &[u32], c: [f64; 3], masks: &mut Vec<u8>) {
+    masks.clear();
+    masks.extend(list.iter().map(|&t| child_mask(&boxes[t as usize], c)));
+}
+
+/// Appends to `buf` the candidate lists of the eight children of an octant
+/// with centre `c` whose list is `buf[lo..hi]` (triangles whose boxes meet
+/// its closed box), one after the other, in one pass: child `i` gets
+/// `buf[b[i]..b[i + 1]]`. `masks` is scratch space.
+fn split_candidates(
+    boxes: &[[f64; 6]],
+    buf: &mut Vec<u32>,
+    masks: &mut Vec<u8>,
+    lo: usize,
+    hi: usize,
+    c: [f64; 3],
+) -> [usize; 9] {
+    child_masks(boxes, &buf[lo..hi], c, masks);
+    let mut sizes = [0usize; 8];
+    for &m in masks.iter() {
+        let mut x = m;
+        while x != 0 {
+            sizes[x.trailing_zeros() as usize] += 1;
+            x &= x - 1;
+        }
+    }
+    let mut b = [buf.len(); 9];
+    for i in 0..8 {
+        b[i + 1] = b[i] + sizes[i];
+    }
+    let mut fill: [usize; 8] = std::array::from_fn(|i| b[i]);
+    buf.resize(b[8], 0);
+    for j in lo..hi {
+        let t = buf[j];
+        let mut x = masks[j - lo];
+        while x != 0 {
+            let i = x.trailing_zeros() as usize;
+            buf[fill[i]] = t;
+            fill[i] += 1;
+            x &= x - 1;
+        }
+    }
+    b
 }
 
 /// Construction for refinement by a predicate (see
@@ -405,13 +529,39 @@ impl LinearOctree {
             boxes: &surface.boxes,
             level,
             buf: Vec::new(),
+            masks: Vec::new(),
             out: Vec::with_capacity(self.local_len()),
             limit: limit.min(usize::MAX as u64) as usize,
         };
         let mut result = Ok(());
-        for &o in self.leaves() {
+        let leaves = self.leaves();
+        let mut skip = 0;
+        for (i, &o) in leaves.iter().enumerate() {
+            if skip > 0 {
+                skip -= 1;
+                continue;
+            }
             if o.level() >= level {
                 w.out.push(o);
+                continue;
+            }
+            if o.level() + 1 == level
+                && o.child_id() == 0
+                && leaves.get(i + 7) == Some(&o.parent().child(7))
+            {
+                // A whole family (sorted and disjoint leaves: the eight in a
+                // row are siblings): one search for the parent's candidates
+                // serves all eight.
+                let p = o.parent();
+                w.buf.clear();
+                surface.candidates(p, &mut w.buf);
+                let n = w.buf.len();
+                w.last_level(p, 0, n);
+                if let Err(e) = w.check_limit() {
+                    result = Err(e);
+                    break;
+                }
+                skip = 7;
                 continue;
             }
             if o.level() + 1 == level {
@@ -469,6 +619,8 @@ struct SurfaceWalker<'a> {
     level: u8,
     /// Stack of triangle lists; each level's list is a suffix.
     buf: Vec<u32>,
+    /// Scratch: child masks of one list.
+    masks: Vec<u8>,
     out: Vec<Octant>,
     limit: usize,
 }
@@ -481,52 +633,65 @@ impl SurfaceWalker<'_> {
         let last = o.level() + 2 == self.level;
         let (min, _) = o.bounds_f64();
         let half = (o.side() / 2) as f64;
-        for i in 0..8u32 {
-            let c = o.child(i);
+        let center = min.map(|x| x + half);
+        let child_box = |i: u32| {
             let cmin = [
                 min[0] + if i & 1 != 0 { half } else { 0.0 },
                 min[1] + if i & 2 != 0 { half } else { 0.0 },
                 min[2] + if i & 4 != 0 { half } else { 0.0 },
             ];
-            let cmax = [cmin[0] + half, cmin[1] + half, cmin[2] + half];
-            let meets = |t: u32| {
-                let b = &self.boxes[t as usize];
-                (b[0] <= cmax[0])
-                    & (b[3] >= cmin[0])
-                    & (b[1] <= cmax[1])
-                    & (b[4] >= cmin[1])
-                    & (b[2] <= cmax[2])
-                    & (b[5] >= cmin[2])
-            };
-            let touches = |t: u32| triangle_box_overlap(&self.tris[t as usize], cmin, cmax);
-            if last {
-                // The child's children are leaves whatever they touch, so
-                // the first triangle touching the child decides.
-                if self.buf[lo..hi].iter().any(|&t| meets(t) && touches(t)) {
-                    self.out.extend_from_slice(&c.children());
-                } else {
-                    self.out.push(c);
-                }
-                continue;
-            }
-            // The child's candidates by boxes; the exact test only has to
-            // find one that touches.
-            let start = self.buf.len();
-            for j in lo..hi {
-                let t = self.buf[j];
-                if meets(t) {
-                    self.buf.push(t);
-                }
-            }
-            let end = self.buf.len();
-            if self.buf[start..end].iter().any(|&t| touches(t)) {
+            (cmin, cmin.map(|x| x + half))
+        };
+        if last {
+            self.last_level(o, lo, hi);
+            return self.check_limit();
+        }
+        // The children's candidates by boxes; the exact test only has to
+        // find one that touches.
+        let b = split_candidates(self.boxes, &mut self.buf, &mut self.masks, lo, hi, center);
+        for i in 0..8u32 {
+            let c = o.child(i);
+            let (cmin, cmax) = child_box(i);
+            let (start, end) = (b[i as usize], b[i as usize + 1]);
+            if self.buf[start..end]
+                .iter()
+                .any(|&t| triangle_box_overlap(&self.tris[t as usize], cmin, cmax))
+            {
                 self.walk(c, start, end)?;
             } else {
                 self.out.push(c);
             }
-            self.buf.truncate(start);
         }
+        self.buf.truncate(b[0]);
         self.check_limit()
+    }
+
+    /// Splits each child of `o` (one level above the target) that touches
+    /// the surface, given the candidates `buf[lo..hi]` of `o`: the
+    /// children's children are leaves whatever they touch, so the first
+    /// triangle touching a child decides.
+    fn last_level(&mut self, o: Octant, lo: usize, hi: usize) {
+        let (min, _) = o.bounds_f64();
+        let half = (o.side() / 2) as f64;
+        child_masks(
+            self.boxes,
+            &self.buf[lo..hi],
+            min.map(|x| x + half),
+            &mut self.masks,
+        );
+        for i in 0..8u32 {
+            let c = o.child(i);
+            let (cmin, cmax) = c.bounds_f64();
+            let touched = (lo..hi).any(|j| {
+                self.masks[j - lo] & (1 << i) != 0
+                    && triangle_box_overlap(&self.tris[self.buf[j] as usize], cmin, cmax)
+            });
+            if touched {
+                self.out.extend_from_slice(&c.children());
+            } else {
+                self.out.push(c);
+            }
+        }
     }
 
     fn check_limit(&self) -> Result<()> {
