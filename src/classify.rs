@@ -149,7 +149,7 @@ use crate::geometry::intersect::triangle_box_overlap;
 use crate::geometry::winding::{boundary_loops, orient_welded, WindingTree};
 use crate::geometry::{Aabb, Surface, Triangle};
 use crate::octant::{Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
-use crate::refine::SurfaceIndex;
+use crate::refine::{scatter_by_child, SurfaceIndex};
 
 /// Bit set in a leaf's class byte when its centre is inside the surface.
 pub const CENTER_INSIDE: u8 = 1;
@@ -519,8 +519,9 @@ struct Classifier<'a> {
     surface_len: usize,
     /// Their normals `(v1 - v0) x (v2 - v1)`, in floating point.
     normals: Vec<[f64; 3]>,
-    /// Their bounding boxes.
-    bounds: Vec<Aabb>,
+    /// Their bounding boxes (the index's, unless the winding rule added
+    /// caps).
+    bounds: Cow<'a, [Aabb]>,
     /// The same triangles in fixed point.
     fixed: Vec<FixedTri>,
     /// Fixed-point units per lattice unit is `2^shift`.
@@ -692,7 +693,10 @@ impl<'a> Classifier<'a> {
                 ]
             })
             .collect();
-        let bounds = tris.iter().map(Triangle::aabb).collect();
+        let bounds = match &tris {
+            Cow::Borrowed(_) => Cow::Borrowed(index.boxes()),
+            Cow::Owned(t) => Cow::Owned(t.iter().map(Triangle::aabb).collect()),
+        };
         Classifier {
             tris,
             surface_len,
@@ -1105,9 +1109,6 @@ impl<'a> Classifier<'a> {
         let mut counts = [0i32; 8];
         // Leaf children certainly cut so far need no more box verdicts.
         let (mut touched, mut unsure) = (0u8, 0u8);
-        // Candidates of each child walked into.
-        let mut sizes = [0usize; 8];
-        let inner = present & !leafy;
         for &t in &buf[lo..hi] {
             let surface = (t as usize) < self.surface_len;
             let decide = if surface { leafy & !touched } else { 0 };
@@ -1117,11 +1118,6 @@ impl<'a> Classifier<'a> {
                 unsure |= m.unsure;
             }
             masks.push(m);
-            let mut near = m.near & inner;
-            while near != 0 {
-                sizes[near.trailing_zeros() as usize] += 1;
-                near &= near - 1;
-            }
             // Only a triangle near the child can cross the segment from the
             // parent's centre (a corner of the child) to the child's centre.
             let cross = m.near & m.plane & m.seg;
@@ -1143,12 +1139,7 @@ impl<'a> Classifier<'a> {
             let i = ask.trailing_zeros();
             ask &= ask - 1;
             let bit = 1u8 << i;
-            let cmin = [
-                omin[0] + if i & 1 != 0 { side } else { 0.0 },
-                omin[1] + if i & 2 != 0 { side } else { 0.0 },
-                omin[2] + if i & 4 != 0 { side } else { 0.0 },
-            ];
-            let cmax = [cmin[0] + side, cmin[1] + side, cmin[2] + side];
+            let (cmin, cmax) = o.child(i).bounds_f64();
             if (lo..hi).any(|j| {
                 masks[mstart + j - lo].unsure & bit != 0 && self.touches(buf[j], cmin, cmax)
             }) {
@@ -1156,26 +1147,9 @@ impl<'a> Classifier<'a> {
             }
         }
         // The candidate lists of the children walked into, one after the
-        // other on top of the stack, in one pass.
-        let base = buf.len();
-        let mut ends = [0usize; 8];
-        let mut at = base;
-        for i in 0..8 {
-            at += sizes[i];
-            ends[i] = at;
-        }
-        let mut fill: [usize; 8] = std::array::from_fn(|i| ends[i] - sizes[i]);
-        buf.resize(at, 0);
-        for j in lo..hi {
-            let mut near = masks[mstart + j - lo].near & inner;
-            let t = buf[j];
-            while near != 0 {
-                let i = near.trailing_zeros() as usize;
-                near &= near - 1;
-                buf[fill[i]] = t;
-                fill[i] += 1;
-            }
-        }
+        // other on top of the stack.
+        let inner = present & !leafy;
+        let lists = scatter_by_child(buf, lo, hi, |j| masks[mstart + j - lo].near & inner);
         masks.truncate(mstart);
         for i in 0..8u32 {
             let bit = 1u8 << i;
@@ -1190,20 +1164,19 @@ impl<'a> Classifier<'a> {
                 out[b] = self.inside(c, n, interval) as u8 | cut;
                 continue;
             }
-            let end = ends[i as usize];
             self.walk(
                 c,
                 n,
                 interval,
-                end - sizes[i as usize],
-                end,
+                lists[i as usize],
+                lists[i as usize + 1],
                 &leaves[b..e],
                 &mut out[b..e],
                 buf,
                 masks,
             );
         }
-        buf.truncate(base);
+        buf.truncate(lists[0]);
     }
 
     /// Mask of the children in `mask` whose segment from the centre `p` of

@@ -35,7 +35,7 @@ use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::bvh::Bvh;
 use crate::geometry::intersect::triangle_box_overlap;
-use crate::geometry::{Surface, Triangle};
+use crate::geometry::{Aabb, Surface, Triangle};
 use crate::octant::{Octant, MAX_LEVEL};
 use crate::octree::LinearOctree;
 use crate::partition::split_by_weight;
@@ -50,7 +50,7 @@ pub const NO_LIMIT: u64 = u64::MAX;
 /// A surface in lattice units, ready for octant queries.
 pub struct SurfaceIndex {
     tris: Vec<Triangle>,
-    boxes: Vec<[f64; 6]>,
+    boxes: Vec<Aabb>,
     bvh: Bvh,
     projected_area: f64,
 }
@@ -75,13 +75,7 @@ impl SurfaceIndex {
         // files often list facets in no spatial order at all.
         let mut bvh = Bvh::new(&tris);
         let tris: Vec<Triangle> = bvh.renumber().iter().map(|&i| tris[i as usize]).collect();
-        let boxes = tris
-            .iter()
-            .map(|t| {
-                let b = t.aabb();
-                [b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]]
-            })
-            .collect();
+        let boxes = tris.iter().map(Triangle::aabb).collect();
         let projected_area = projected_area(&tris);
         SurfaceIndex {
             tris,
@@ -110,11 +104,9 @@ impl SurfaceIndex {
         self.bvh.any_overlap(&self.tris, lo, hi)
     }
 
-    /// Whether the closed box of `o` meets the bounding box of some
-    /// triangle (true whenever [`SurfaceIndex::touches`] is).
-    pub fn may_touch(&self, o: Octant) -> bool {
-        let (lo, hi) = o.bounds_f64();
-        self.bvh.any_candidate(lo, hi)
+    /// The triangles' bounding boxes, in the order of [`SurfaceIndex::triangles`].
+    pub(crate) fn boxes(&self) -> &[Aabb] {
+        &self.boxes
     }
 
     /// Indices of the triangles whose bounding boxes meet the closed box of
@@ -307,29 +299,26 @@ pub fn check_estimate(
 }
 
 /// Top of the tree: leaves of the rule down to `COARSE_LEVEL` with an
-/// estimate of the work below each, identical on every rank. `split(o,
-/// guess)` is the rule; at `COARSE_LEVEL` refinement decides what splits, so
-/// there it is asked with `guess` set, for the weight only.
+/// estimate of the work below each, identical on every rank.
 fn coarse_top(
     max_level: u8,
-    mut split: impl FnMut(Octant, bool) -> bool,
+    mut split: impl FnMut(Octant) -> bool,
     deep_weight: u64,
 ) -> Vec<(Octant, u64)> {
     let stop = max_level.min(COARSE_LEVEL);
     let mut out = Vec::new();
     let mut stack = vec![Octant::ROOT];
     while let Some(o) = stack.pop() {
-        if o.level() >= max_level {
+        let wants = o.level() < max_level && split(o);
+        if !wants {
             out.push((o, 1));
         } else if o.level() == stop {
-            out.push((o, if split(o, true) { deep_weight } else { 1 }));
-        } else if split(o, false) {
+            out.push((o, deep_weight));
+        } else {
             // Reverse so that popping yields Morton order.
             for i in (0..8).rev() {
                 stack.push(o.child(i));
             }
-        } else {
-            out.push((o, 1));
         }
     }
     out
@@ -355,16 +344,14 @@ pub fn construct_for_surface(
 ) -> Result<LinearOctree> {
     agree(&*comm, check_level(level))?;
     let weight = 1u64 << (2 * (level.saturating_sub(COARSE_LEVEL)) as u32).min(60);
-    // A box meeting some triangle's box is a good enough guess for the
-    // weight, and much cheaper than the exact test refinement repeats.
     construct(comm, surface_top(surface, level, weight))
 }
 
-/// [`coarse_top`] for the surface rule (exact tests above `COARSE_LEVEL`,
-/// at it the guess "some triangle's box meets the box"), with the candidate
-/// triangles passed down as in refinement rather than one search of the
-/// bounding-box tree per octant: the same leaves and weights, at a fraction
-/// of the cost. At small levels the top is most of the tree.
+/// [`coarse_top`] for the surface rule, with the candidate triangles passed
+/// down as in refinement rather than one search of the bounding-box tree
+/// per octant (at small levels the top is most of the tree). At
+/// `COARSE_LEVEL` refinement decides what splits, so the weight there only
+/// needs a guess: some triangle's box meets the octant's box.
 fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(Octant, u64)> {
     struct Top<'a> {
         surface: &'a SurfaceIndex,
@@ -396,15 +383,13 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
                 self.out.push((o, w));
                 return;
             }
-            let half = (o.side() / 2) as f64;
-            let center = min.map(|x| x + half);
             let b = split_candidates(
                 &self.surface.boxes,
                 &mut self.buf,
                 &mut self.masks,
                 lo,
                 hi,
-                center,
+                o,
             );
             for i in 0..8 {
                 self.visit(o.child(i as u32), b[i], b[i + 1]);
@@ -428,45 +413,61 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
 }
 
 /// Children of an octant with centre `c` whose closed boxes meet the
-/// bounding box `b` (min then max) of a triangle known to meet the octant's
-/// closed box: bit `i` for child `i`. Along each axis the lower children
-/// meet it when it starts at or below the centre, the upper ones when it
-/// ends at or above it.
+/// bounding box `b` of a triangle known to meet the octant's closed box:
+/// bit `i` for child `i`. Along each axis the lower children meet it when
+/// it starts at or below the centre, the upper ones when it ends at or
+/// above it.
 #[inline]
-fn child_mask(b: &[f64; 6], c: [f64; 3]) -> u8 {
+fn child_mask(b: &Aabb, c: [f64; 3]) -> u8 {
     // Children whose bit `k` is set.
     const UPPER: [u8; 3] = [0b1010_1010, 0b1100_1100, 0b1111_0000];
     let mut m = 0xffu8;
     for k in 0..3 {
-        let lower = ((b[k] <= c[k]) as u8).wrapping_neg() & !UPPER[k];
-        let upper = ((b[k + 3] >= c[k]) as u8).wrapping_neg() & UPPER[k];
+        let lower = ((b.min[k] <= c[k]) as u8).wrapping_neg() & !UPPER[k];
+        let upper = ((b.max[k] >= c[k]) as u8).wrapping_neg() & UPPER[k];
         m &= lower | upper;
     }
     m
 }
 
-/// [`child_mask`] of each triangle of `list`, into `masks`.
-fn child_masks(boxes: &[[f64; 6]], list: &[u32], c: [f64; 3], masks: &mut Vec<u8>) {
+/// [`child_mask`] of each triangle of `list` against the children of `o`,
+/// into `masks`.
+fn child_masks(boxes: &[Aabb], list: &[u32], o: Octant, masks: &mut Vec<u8>) {
+    let (min, _) = o.bounds_f64();
+    let half = (o.side() / 2) as f64;
+    let c = min.map(|x| x + half);
     masks.clear();
     masks.extend(list.iter().map(|&t| child_mask(&boxes[t as usize], c)));
 }
 
-/// Appends to `buf` the candidate lists of the eight children of an octant
-/// with centre `c` whose list is `buf[lo..hi]` (triangles whose boxes meet
-/// its closed box), one after the other, in one pass: child `i` gets
-/// `buf[b[i]..b[i + 1]]`. `masks` is scratch space.
+/// Appends to `buf` the candidate lists of the eight children of `o`, whose
+/// list is `buf[lo..hi]` (triangles whose boxes meet its closed box): child
+/// `i` gets `buf[b[i]..b[i + 1]]`. `masks` is scratch space.
 fn split_candidates(
-    boxes: &[[f64; 6]],
+    boxes: &[Aabb],
     buf: &mut Vec<u32>,
     masks: &mut Vec<u8>,
     lo: usize,
     hi: usize,
-    c: [f64; 3],
+    o: Octant,
 ) -> [usize; 9] {
-    child_masks(boxes, &buf[lo..hi], c, masks);
+    child_masks(boxes, &buf[lo..hi], o, masks);
+    scatter_by_child(buf, lo, hi, |j| masks[j - lo])
+}
+
+/// Appends to `buf`, one after the other, the lists of the eight children
+/// of an octant whose list is `buf[lo..hi]`, entry `j` going to the
+/// children in `mask(j)` (bit `i` for child `i`), in two passes and without
+/// allocating: child `i` gets `buf[b[i]..b[i + 1]]`.
+pub(crate) fn scatter_by_child(
+    buf: &mut Vec<u32>,
+    lo: usize,
+    hi: usize,
+    mask: impl Fn(usize) -> u8,
+) -> [usize; 9] {
     let mut sizes = [0usize; 8];
-    for &m in masks.iter() {
-        let mut x = m;
+    for j in lo..hi {
+        let mut x = mask(j);
         while x != 0 {
             sizes[x.trailing_zeros() as usize] += 1;
             x &= x - 1;
@@ -480,7 +481,7 @@ fn split_candidates(
     buf.resize(b[8], 0);
     for j in lo..hi {
         let t = buf[j];
-        let mut x = masks[j - lo];
+        let mut x = mask(j);
         while x != 0 {
             let i = x.trailing_zeros() as usize;
             buf[fill[i]] = t;
@@ -496,10 +497,10 @@ fn split_candidates(
 pub fn construct_for_callback(
     comm: CommRef,
     max_level: u8,
-    mut split: impl FnMut(Octant) -> bool,
+    split: impl FnMut(Octant) -> bool,
 ) -> Result<LinearOctree> {
     agree(&*comm, check_level(max_level))?;
-    construct(comm, coarse_top(max_level, |o, _| split(o), 8))
+    construct(comm, coarse_top(max_level, split, 8))
 }
 
 /// Builds the octree whose leaves touching `surface` are exactly at `level`
@@ -615,7 +616,7 @@ fn global_limit(comm: &CommRef, local: usize, limit: u64) -> Result<()> {
 
 struct SurfaceWalker<'a> {
     tris: &'a [Triangle],
-    boxes: &'a [[f64; 6]],
+    boxes: &'a [Aabb],
     level: u8,
     /// Stack of triangle lists; each level's list is a suffix.
     buf: Vec<u32>,
@@ -630,28 +631,16 @@ impl SurfaceWalker<'_> {
     /// above the target; `buf[lo..hi]` holds every triangle it touches, and
     /// maybe others whose boxes meet its box.
     fn walk(&mut self, o: Octant, lo: usize, hi: usize) -> Result<()> {
-        let last = o.level() + 2 == self.level;
-        let (min, _) = o.bounds_f64();
-        let half = (o.side() / 2) as f64;
-        let center = min.map(|x| x + half);
-        let child_box = |i: u32| {
-            let cmin = [
-                min[0] + if i & 1 != 0 { half } else { 0.0 },
-                min[1] + if i & 2 != 0 { half } else { 0.0 },
-                min[2] + if i & 4 != 0 { half } else { 0.0 },
-            ];
-            (cmin, cmin.map(|x| x + half))
-        };
-        if last {
+        if o.level() + 2 == self.level {
             self.last_level(o, lo, hi);
             return self.check_limit();
         }
         // The children's candidates by boxes; the exact test only has to
         // find one that touches.
-        let b = split_candidates(self.boxes, &mut self.buf, &mut self.masks, lo, hi, center);
+        let b = split_candidates(self.boxes, &mut self.buf, &mut self.masks, lo, hi, o);
         for i in 0..8u32 {
             let c = o.child(i);
-            let (cmin, cmax) = child_box(i);
+            let (cmin, cmax) = c.bounds_f64();
             let (start, end) = (b[i as usize], b[i as usize + 1]);
             if self.buf[start..end]
                 .iter()
@@ -671,14 +660,7 @@ impl SurfaceWalker<'_> {
     /// children's children are leaves whatever they touch, so the first
     /// triangle touching a child decides.
     fn last_level(&mut self, o: Octant, lo: usize, hi: usize) {
-        let (min, _) = o.bounds_f64();
-        let half = (o.side() / 2) as f64;
-        child_masks(
-            self.boxes,
-            &self.buf[lo..hi],
-            min.map(|x| x + half),
-            &mut self.masks,
-        );
+        child_masks(self.boxes, &self.buf[lo..hi], o, &mut self.masks);
         for i in 0..8u32 {
             let c = o.child(i);
             let (cmin, cmax) = c.bounds_f64();

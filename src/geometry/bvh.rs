@@ -175,12 +175,6 @@ impl Bvh {
         })
     }
 
-    /// True if some triangle's bounding box overlaps the closed box (true
-    /// whenever [`Bvh::any_overlap`] is).
-    pub fn any_candidate(&self, box_min: [f64; 3], box_max: [f64; 3]) -> bool {
-        self.visit(box_min, box_max, |_| true)
-    }
-
     /// Appends to `out` the indices of the triangles whose bounding box
     /// overlaps the closed box (a superset of [`Bvh::query_box`]).
     pub fn query_candidates(&self, box_min: [f64; 3], box_max: [f64; 3], out: &mut Vec<u32>) {
