@@ -241,7 +241,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_coordinates(
     get_ptr(h, out, |m| {
         m.cache
             .coords
-            .get_or_init(|| m.mesh.coordinates().into_iter().flatten().collect())
+            .get_or_init(|| m.mesh.coordinates().into_flattened())
             .as_ptr()
     })
 }

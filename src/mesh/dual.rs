@@ -46,18 +46,19 @@ pub(crate) const BOUNDARY: u8 = 4;
 pub(crate) const USED: u8 = CORNER | DEP;
 
 /// The merged run of leaves the traversal works on: ghosts of lower ranks,
-/// the local leaves, the other ghosts, without copying them into one array.
+/// the local leaves, the other ghosts, without copying them into one array
+/// (or the same for something per leaf, such as its class).
 #[derive(Clone, Copy)]
-pub(crate) struct Merged<'a> {
+pub(crate) struct Merged<'a, T: Copy = Octant> {
     /// Ghosts before the local range.
-    pub before: &'a [Octant],
+    pub before: &'a [T],
     /// The local leaves.
-    pub local: &'a [Octant],
+    pub local: &'a [T],
     /// Ghosts after it.
-    pub after: &'a [Octant],
+    pub after: &'a [T],
 }
 
-impl Merged<'_> {
+impl<T: Copy> Merged<'_, T> {
     /// Number of leaves.
     pub fn len(&self) -> usize {
         self.before.len() + self.local.len() + self.after.len()
@@ -65,7 +66,7 @@ impl Merged<'_> {
 
     /// Leaf `i`.
     #[inline]
-    pub fn get(&self, i: usize) -> Octant {
+    pub fn get(&self, i: usize) -> T {
         let b = self.before.len();
         if i < b {
             self.before[i]
@@ -74,6 +75,24 @@ impl Merged<'_> {
         } else {
             self.after[i - b - self.local.len()]
         }
+    }
+
+    /// The first index in `lo..hi` whose entry fails `pred`, which must
+    /// hold on a prefix of the range ([`slice::partition_point`] over the
+    /// three parts).
+    pub fn partition_point(&self, lo: usize, hi: usize, pred: impl Fn(&T) -> bool) -> usize {
+        let mut start = 0;
+        for part in [self.before, self.local, self.after] {
+            let (a, b) = (lo.max(start), hi.min(start + part.len()));
+            if a < b {
+                let k = part[a - start..b - start].partition_point(&pred);
+                if a + k < b {
+                    return a + k;
+                }
+            }
+            start += part.len();
+        }
+        hi
     }
 
     /// Merged indices of the local leaves.
@@ -272,12 +291,6 @@ pub(crate) fn entry_mask(word: u32) -> u8 {
 }
 
 impl DualNodes {
-    /// Number of independent nodes found.
-    #[cfg(test)]
-    pub fn num_independent(&self) -> usize {
-        self.flags.len()
-    }
-
     /// Marks the dependencies of hanging nodes: used when the hanging node
     /// is, boundary when it is.
     fn propagate(&mut self) -> Result<()> {
@@ -305,34 +318,6 @@ impl DualNodes {
             }
         }
         Ok(())
-    }
-
-    /// Writes the lattice coordinates of independent node `n` to
-    /// `out[map(n)]` for every node with `map(n) != UNSET`.
-    #[cfg(test)]
-    pub fn scatter_coords(
-        &self,
-        leaves: Merged,
-        kept: &Bits,
-        map: impl Fn(u32) -> u32,
-        out: &mut [[u32; 3]],
-    ) {
-        for (i, cs) in self.corners.iter().enumerate() {
-            if !kept.get(i) {
-                continue;
-            }
-            let o = leaves.get(i);
-            let (a, s) = (o.coords(), o.side());
-            for (c, &n) in cs.iter().enumerate() {
-                if n & TAG != 0 {
-                    continue;
-                }
-                let m = map(n);
-                if m != UNSET {
-                    out[m as usize] = corner_coords(a, s, c);
-                }
-            }
-        }
     }
 
     /// Lattice coordinates of a hanging node depending on the corners
@@ -368,23 +353,13 @@ fn build(leaves: &Merged, o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32; 
     for c in 0..8u32 {
         let child = o.child(c);
         let end = child.cell_end();
-        let mut b = a;
-        if hi - a > 16 {
-            // Binary search for the first leaf beginning at or after `end`.
-            let mut h = hi;
-            while b < h {
-                let mid = b + (h - b) / 2;
-                if leaves.get(mid).cell_begin() < end {
-                    b = mid + 1;
-                } else {
-                    h = mid;
-                }
-            }
+        let before_end = |l: &Octant| l.cell_begin() < end;
+        let b = if hi - a > 16 {
+            leaves.partition_point(a, hi, before_end)
         } else {
-            while b < hi && leaves.get(b).cell_begin() < end {
-                b += 1;
-            }
-        }
+            // Short runs (most of them, near the leaves): a scan.
+            (a..hi).find(|&j| !before_end(&leaves.get(j))).unwrap_or(hi)
+        };
         let r = build(leaves, child, a, b, tree);
         tree[idx][c as usize] = r;
         a = b;
@@ -531,12 +506,13 @@ impl Walker<'_> {
         if !corner {
             return;
         }
+        // Face and edge nodes take two words each.
         let most = self
             .out
             .flags
             .len()
-            .max(self.out.face.len())
-            .max(self.out.edge.len());
+            .max(self.out.face.len() / 2)
+            .max(self.out.edge.len() / 2);
         if most >= 1 << 30 {
             // The tag bits leave 30 bits for the index.
             self.overflow = true;
@@ -628,12 +604,39 @@ mod tests {
         at
     }
 
+    /// Writes the lattice coordinates of independent node `n` to
+    /// `out[map(n)]` for every node with `map(n) != UNSET`.
+    fn scatter_coords(
+        d: &DualNodes,
+        leaves: Merged,
+        kept: &Bits,
+        map: impl Fn(u32) -> u32,
+        out: &mut [[u32; 3]],
+    ) {
+        for (i, cs) in d.corners.iter().enumerate() {
+            if !kept.get(i) {
+                continue;
+            }
+            let o = leaves.get(i);
+            let (a, s) = (o.coords(), o.side());
+            for (c, &n) in cs.iter().enumerate() {
+                if n & TAG != 0 {
+                    continue;
+                }
+                let m = map(n);
+                if m != UNSET {
+                    out[m as usize] = corner_coords(a, s, c);
+                }
+            }
+        }
+    }
+
     #[test]
     fn uniform_grid_has_every_lattice_point_once() {
         let leaves = uniform(2);
         let kept = Bits::from_fn(leaves.len(), |_| true);
         let d = extract_nodes(whole(&leaves), &kept).unwrap();
-        assert_eq!(d.num_independent(), 125);
+        assert_eq!(d.flags.len(), 125);
         assert!(d.face.is_empty() && d.edge.is_empty());
         let at = points(&d, &leaves);
         assert_eq!(at.len(), 125);
@@ -641,7 +644,7 @@ mod tests {
         assert_eq!(distinct.len(), 125);
         // Scattering reproduces the same coordinates.
         let mut out = vec![[u32::MAX; 3]; 125];
-        d.scatter_coords(whole(&leaves), &kept, |n| n, &mut out);
+        scatter_coords(&d, whole(&leaves), &kept, |n| n, &mut out);
         for (n, x) in at {
             assert_eq!(out[n as usize], x);
         }
@@ -662,7 +665,7 @@ mod tests {
         // the root: 3 whole edges, and halves of 6 face-boundary edges.
         assert_eq!(d.face.len(), 2 * 3);
         assert_eq!(d.edge.len(), 2 * (3 + 6));
-        assert_eq!(d.num_independent(), 27 + 8 - 1);
+        assert_eq!(d.flags.len(), 27 + 8 - 1);
         let entries = d.face.chunks_exact(2).map(|e| (FACE, e[0], e[1]));
         let entries = entries.chain(d.edge.chunks_exact(2).map(|e| (EDGE, e[0], e[1])));
         let mut k = [0u32; 2];

@@ -195,16 +195,12 @@ impl Mesh {
         };
 
         let nodes = timer.time(comm, "nodes", || {
-            let nl = merged.local.len();
-            let kept = Bits::from_fn(merged.len(), |i| {
-                keep(if i < b {
-                    ghosts.data[i]
-                } else if i < b + nl {
-                    local_class[i - b]
-                } else {
-                    ghosts.data[i - nl]
-                })
-            });
+            let classes = Merged {
+                before: &ghosts.data[..b],
+                local: local_class,
+                after: &ghosts.data[b..],
+            };
+            let kept = Bits::from_fn(merged.len(), |i| keep(classes.get(i)));
             let d = dual::extract_nodes(merged, &kept)?;
             let counted = count_hanging(comm, tree.first_cells(), &d, merged);
             Ok((d, kept, counted))
@@ -771,9 +767,7 @@ fn assemble(
     let mut shared_ranks = Vec::with_capacity(sh.users.len());
     for (n, s) in order {
         shared_nodes.push(n);
-        let a = sh.user_offsets[s] as usize;
-        let b = sh.user_offsets[s + 1] as usize;
-        shared_ranks.extend_from_slice(&sh.users[a..b]);
+        shared_ranks.extend_from_slice(sh.users_of(s));
         shared_offsets.push(shared_ranks.len() as u32);
     }
     Ok(Mesh {

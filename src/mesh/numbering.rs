@@ -50,6 +50,13 @@ pub(crate) struct Sharing {
     pub users: Vec<u32>,
 }
 
+impl Sharing {
+    /// The users of shared node `k` (of `shared`).
+    pub fn users_of(&self, k: usize) -> &[u32] {
+        &self.users[self.user_offsets[k] as usize..self.user_offsets[k + 1] as usize]
+    }
+}
+
 /// Finds the users and the owner of each node `coords` used on this rank
 /// that other ranks may use too. Collective.
 pub(crate) fn find_users(
@@ -199,7 +206,6 @@ pub(crate) fn find_users(
     })
 }
 
-/// A small open-addressing set of keys, each with a slot number.
 /// Sends the global numbers of the owned shared nodes to their other users
 /// and fills in `global` for the shared nodes owned elsewhere; `global` has
 /// the owned nodes' numbers on entry. Collective.
@@ -212,29 +218,20 @@ pub(crate) fn exchange_numbers(
     let p = comm.size();
     let me = comm.rank();
     let owner = &sharing.owner;
-    let users_of: Vec<(u32, &[u32])> = sharing
+    // 5. Owners send the numbers to the other users, in Morton order of
+    // the (few) shared nodes, which both sides can reproduce.
+    let mut owned_shared: Vec<(u64, usize)> = sharing
         .shared
         .iter()
         .enumerate()
-        .map(|(k, &i)| {
-            let a = sharing.user_offsets[k] as usize;
-            let b = sharing.user_offsets[k + 1] as usize;
-            (i, &sharing.users[a..b])
-        })
-        .collect();
-    // 5. Owners send the numbers to the other users, in Morton order of
-    // the (few) shared nodes, which both sides can reproduce.
-    let mut owned_shared: Vec<(u64, usize)> = users_of
-        .iter()
-        .enumerate()
-        .filter(|(_, u)| owner[u.0 as usize] as usize == me)
-        .map(|(k, u)| (node_key(coords[u.0 as usize]), k))
+        .filter(|&(_, &i)| owner[i as usize] as usize == me)
+        .map(|(k, &i)| (node_key(coords[i as usize]), k))
         .collect();
     owned_shared.sort_unstable();
     let mut out: Vec<Vec<u64>> = vec![Vec::new(); p];
     for &(_, k) in &owned_shared {
-        let (i, users) = users_of[k];
-        for &r in users {
+        let i = sharing.shared[k];
+        for &r in sharing.users_of(k) {
             if r as usize != me {
                 out[r as usize].push(global[i as usize]);
             }
@@ -244,10 +241,10 @@ pub(crate) fn exchange_numbers(
     let send: Vec<u64> = out.concat();
     let (ids, icounts) = comm.alltoallv_u64(&send, &counts);
     let mut from: Vec<Vec<(u64, u32)>> = vec![Vec::new(); p];
-    for u in &users_of {
-        let o = owner[u.0 as usize] as usize;
+    for &i in &sharing.shared {
+        let o = owner[i as usize] as usize;
         if o != me {
-            from[o].push((node_key(coords[u.0 as usize]), u.0));
+            from[o].push((node_key(coords[i as usize]), i));
         }
     }
     let mut at = 0;
@@ -271,6 +268,7 @@ pub(crate) fn exchange_numbers(
     Ok(())
 }
 
+/// A small open-addressing set of keys, each with a slot number.
 struct KeyTable {
     keys: Vec<u64>,
     mask: usize,
