@@ -18,20 +18,31 @@ pub fn peak_rss_bytes() -> u64 {
     }
 }
 
-/// Returns memory freed by a finished phase to the operating system.
+/// Returns memory freed by a finished phase to the operating system, when
+/// there is enough of it to matter.
 ///
 /// glibc keeps freed blocks below its (adaptive, up to 32 MiB) mmap
 /// threshold in the heap, so the buffers of balance and partition would
 /// otherwise stay resident under the mesh built next: at sphere level 11
-/// that was 25 bytes per leaf of a 72-byte peak.
+/// that was 25 bytes per leaf of a 72-byte peak. Returned pages cost a page
+/// fault each when they are used again (about 2.3 us per 4 KiB on the
+/// benchmark machine, several times the cost of writing them), so a free
+/// heap below [`TRIM_MIN_FREE`] stays: it is small against any peak, and a
+/// small octree would otherwise pay those faults in every phase.
 pub fn trim_heap() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: malloc_trim only releases free heap pages; no pointer is
-    // involved.
+    // SAFETY: mallinfo2 only reads the allocator's statistics, and
+    // malloc_trim only releases free heap pages; no pointer is involved.
     unsafe {
-        libc::malloc_trim(0);
+        if libc::mallinfo2().fordblks >= TRIM_MIN_FREE {
+            libc::malloc_trim(0);
+        }
     }
 }
+
+/// Free heap bytes below which [`trim_heap`] keeps them (glibc's own
+/// dynamic trim threshold stops growing at the same 64 MiB).
+pub const TRIM_MIN_FREE: usize = 64 << 20;
 
 /// Wall-clock phases, each reported as the maximum over ranks, and the bytes
 /// this rank exchanged with other ranks in each phase ([`Traffic`]).
