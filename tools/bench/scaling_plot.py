@@ -194,9 +194,9 @@ def main():
     ap.add_argument("--np", default="1", help="rank counts (default 1)")
     ap.add_argument("--repeat", type=int, default=1, metavar="K",
                     help="runs per point, median reported (default 1)")
-    ap.add_argument("--min-seconds", type=float, default=2.0, metavar="S",
+    ap.add_argument("--min-seconds", type=float, default=5.0, metavar="S",
                     help="give short cases more runs, up to S seconds of pipeline each "
-                    "(at most %d runs; default 2)" % MAX_RUNS)
+                    "(at most %d runs; default 5)" % MAX_RUNS)
     ap.add_argument("--fit", default="0.7", help="octmesh --fit (default 0.7)")
     ap.add_argument("--max-mem-gib", type=float,
                     help="stop a series before a level estimated to need more "
