@@ -50,7 +50,6 @@ pub const NO_LIMIT: u64 = u64::MAX;
 /// A surface in lattice units, ready for octant queries.
 pub struct SurfaceIndex {
     tris: Vec<Triangle>,
-    boxes: Vec<Aabb>,
     bvh: Bvh,
     projected_area: f64,
 }
@@ -75,11 +74,9 @@ impl SurfaceIndex {
         // files often list facets in no spatial order at all.
         let mut bvh = Bvh::new(&tris);
         let tris: Vec<Triangle> = bvh.renumber().iter().map(|&i| tris[i as usize]).collect();
-        let boxes = tris.iter().map(Triangle::aabb).collect();
         let projected_area = projected_area(&tris);
         SurfaceIndex {
             tris,
-            boxes,
             bvh,
             projected_area,
         }
@@ -106,7 +103,8 @@ impl SurfaceIndex {
 
     /// The triangles' bounding boxes, in the order of [`SurfaceIndex::triangles`].
     pub(crate) fn boxes(&self) -> &[Aabb] {
-        &self.boxes
+        // The tree's own boxes: renumbered, its slots are the triangles.
+        self.bvh.slot_boxes()
     }
 
     /// Indices of the triangles whose bounding boxes meet the closed box of
@@ -384,7 +382,7 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
                 return;
             }
             let b = split_candidates(
-                &self.surface.boxes,
+                self.surface.boxes(),
                 &mut self.buf,
                 &mut self.masks,
                 lo,
@@ -527,7 +525,7 @@ impl LinearOctree {
         agree(&**self.comm(), check_level(level))?;
         let mut w = SurfaceWalker {
             tris: &surface.tris,
-            boxes: &surface.boxes,
+            boxes: surface.boxes(),
             level,
             buf: Vec::new(),
             masks: Vec::new(),

@@ -127,6 +127,12 @@ impl Bvh {
         (self.nodes[i].first, self.nodes[i].count)
     }
 
+    /// Bounding box of the triangle in each slot of [`Bvh::order`]; after
+    /// [`Bvh::renumber`], of triangle `i` at `i`.
+    pub(crate) fn slot_boxes(&self) -> &[Aabb] {
+        &self.boxes
+    }
+
     /// Triangle indices in leaf order.
     pub(crate) fn order(&self) -> &[u32] {
         &self.order
