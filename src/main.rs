@@ -16,7 +16,7 @@ use octmesh::io::vtu::write_mesh;
 use octmesh::leak::find_leak;
 use octmesh::mesh::{Mesh, MeshOptions};
 use octmesh::refine::{
-    check_estimate, construct_for_surface, estimate_leaves, SurfaceIndex, NO_LIMIT,
+    check_estimate, construct_top_for_surface, estimate_leaves, SurfaceIndex, NO_LIMIT,
 };
 use octmesh::report::{peak_rss_bytes, JsonObject, PhaseTimer};
 use octmesh::{Connectivity, Error, Result};
@@ -385,13 +385,11 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
     table.row(&timer, None);
     check_estimate(&comm, &index, o.level, o.max_octants)?;
 
-    let mut tree = timer.time(&*comm, "construct", || {
-        construct_for_surface(comm.clone(), &index, o.level)
+    let top = timer.time(&*comm, "construct", || {
+        construct_top_for_surface(comm.clone(), &index, o.level)
     })?;
-    table.row(&timer, Some(tree.global_len()));
-    timer.time(&*comm, "refine", || {
-        tree.refine_surface(&index, o.level, o.max_octants)
-    })?;
+    table.row(&timer, Some(top.tree().global_len()));
+    let mut tree = timer.time(&*comm, "refine", || top.refine(&index, o.max_octants))?;
     let refined = tree.global_len();
     table.row(&timer, Some(refined));
     timer.time(&*comm, "partition", || tree.partition())?;

@@ -11,6 +11,12 @@
 //! The global leaf set is therefore the same for every rank count: it is
 //! defined by the rule alone.
 //!
+//! For a surface, the walk down the top already knows which triangles'
+//! boxes meet each coarse leaf; [`construct_top_for_surface`] keeps those
+//! lists for this rank's chunk, so that [`SurfaceTop::refine`] starts from
+//! them instead of searching the bounding-box tree once per coarse leaf (a
+//! search costs about as much as refining a small octant below it).
+//!
 //! # Surface refinement
 //!
 //! An octant is refined while its level is below the target level and its
@@ -322,14 +328,17 @@ fn coarse_top(
     out
 }
 
-/// This rank's contiguous chunk of the coarse leaves, as a linear octree.
-fn construct(comm: CommRef, coarse: Vec<(Octant, u64)>) -> Result<LinearOctree> {
+/// This rank's contiguous chunk of the coarse leaves, by estimated work.
+fn chunk(comm: &CommRef, coarse: &[(Octant, u64)]) -> std::ops::Range<usize> {
     let w: Vec<u64> = coarse.iter().map(|c| c.1).collect();
     let b = split_by_weight(&w, comm.size());
-    let mine = coarse[b[comm.rank()]..b[comm.rank() + 1]]
-        .iter()
-        .map(|c| c.0)
-        .collect();
+    b[comm.rank()]..b[comm.rank() + 1]
+}
+
+/// This rank's contiguous chunk of the coarse leaves, as a linear octree.
+fn construct(comm: CommRef, coarse: Vec<(Octant, u64)>) -> Result<LinearOctree> {
+    let r = chunk(&comm, &coarse);
+    let mine = coarse[r].iter().map(|c| c.0).collect();
     LinearOctree::from_local_leaves(comm, mine)
 }
 
@@ -340,9 +349,70 @@ pub fn construct_for_surface(
     surface: &SurfaceIndex,
     level: u8,
 ) -> Result<LinearOctree> {
+    Ok(construct_top_for_surface(comm, surface, level)?.into_tree())
+}
+
+/// [`construct_for_surface`], keeping what the walk down the top of the
+/// tree found for [`SurfaceTop::refine`]. Collective.
+pub fn construct_top_for_surface(
+    comm: CommRef,
+    surface: &SurfaceIndex,
+    level: u8,
+) -> Result<SurfaceTop> {
     agree(&*comm, check_level(level))?;
     let weight = 1u64 << (2 * (level.saturating_sub(COARSE_LEVEL)) as u32).min(60);
-    construct(comm, surface_top(surface, level, weight))
+    let (coarse, lists) = surface_top(surface, level, weight);
+    let r = chunk(&comm, &coarse);
+    let lists = lists.slice(r.clone());
+    let mine = coarse[r].iter().map(|c| c.0).collect();
+    drop(coarse);
+    Ok(SurfaceTop {
+        tree: LinearOctree::from_local_leaves(comm, mine)?,
+        lists,
+        level,
+        triangles: surface.triangles().len(),
+    })
+}
+
+/// The top of a surface refinement on this rank ([`construct_for_surface`])
+/// with, for each of its leaves, the triangles that may touch it. Refining
+/// from it ([`SurfaceTop::refine`]) reuses those lists instead of searching
+/// the bounding-box tree once per leaf.
+pub struct SurfaceTop {
+    tree: LinearOctree,
+    lists: CoarseLists,
+    level: u8,
+    /// Of the surface the lists index.
+    triangles: usize,
+}
+
+impl SurfaceTop {
+    /// The octree of the top.
+    pub fn tree(&self) -> &LinearOctree {
+        &self.tree
+    }
+
+    /// The octree of the top, without the lists.
+    pub fn into_tree(self) -> LinearOctree {
+        self.tree
+    }
+
+    /// [`LinearOctree::refine_surface`] to the level the top was built for;
+    /// `surface` must be the one it was built from. Collective.
+    pub fn refine(self, surface: &SurfaceIndex, limit: u64) -> Result<LinearOctree> {
+        let SurfaceTop {
+            mut tree,
+            lists,
+            level,
+            triangles,
+        } = self;
+        // Another surface (or leaves changed since) cannot use the lists.
+        let lists = (triangles == surface.triangles().len()
+            && lists.ends.len() == tree.local_len())
+        .then_some(&lists);
+        tree.refine_surface_with(surface, level, limit, lists)?;
+        Ok(tree)
+    }
 }
 
 /// [`coarse_top`] for the surface rule, with the candidate triangles passed
@@ -350,7 +420,15 @@ pub fn construct_for_surface(
 /// per octant (at small levels the top is most of the tree). At
 /// `COARSE_LEVEL` refinement decides what splits, so the weight there only
 /// needs a guess: some triangle's box meets the octant's box.
-fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(Octant, u64)> {
+///
+/// Also returns, for each coarse leaf, a superset of the triangles touching
+/// it ([`CoarseLists`]): empty when it is known not to touch or is at
+/// `max_level`, the triangles whose boxes meet its box otherwise.
+fn surface_top(
+    surface: &SurfaceIndex,
+    max_level: u8,
+    deep_weight: u64,
+) -> (Vec<(Octant, u64)>, CoarseLists) {
     struct Top<'a> {
         surface: &'a SurfaceIndex,
         stop: u8,
@@ -360,6 +438,7 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
         buf: Vec<u32>,
         masks: Vec<u8>,
         out: Vec<(Octant, u64)>,
+        lists: CoarseLists,
     }
     impl Top<'_> {
         /// `buf[lo..hi]`: the triangles whose boxes meet the box of `o`.
@@ -368,7 +447,12 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
             let weight = if o.level() >= self.max_level {
                 Some(1)
             } else if o.level() == self.stop {
-                Some(if lo < hi { self.deep_weight } else { 1 })
+                if lo < hi {
+                    self.lists.tris.extend_from_slice(&self.buf[lo..hi]);
+                    Some(self.deep_weight)
+                } else {
+                    Some(1)
+                }
             } else if self.buf[lo..hi]
                 .iter()
                 .any(|&t| triangle_box_overlap(&self.surface.tris[t as usize], min, max))
@@ -379,6 +463,7 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
             };
             if let Some(w) = weight {
                 self.out.push((o, w));
+                self.lists.ends.push(self.lists.tris.len());
                 return;
             }
             let b = split_candidates(
@@ -403,11 +488,47 @@ fn surface_top(surface: &SurfaceIndex, max_level: u8, deep_weight: u64) -> Vec<(
         buf: Vec::new(),
         masks: Vec::new(),
         out: Vec::new(),
+        lists: CoarseLists::default(),
     };
     surface.candidates(Octant::ROOT, &mut top.buf);
     let n = top.buf.len();
     top.visit(Octant::ROOT, 0, n);
-    top.out
+    (top.out, top.lists)
+}
+
+/// Candidate triangles of a run of coarse leaves, as the top's walk found
+/// them: leaf `i` has `tris[ends[i - 1]..ends[i]]` (from 0 for the first),
+/// a superset of the triangles touching it.
+#[derive(Default)]
+struct CoarseLists {
+    ends: Vec<usize>,
+    tris: Vec<u32>,
+}
+
+impl CoarseLists {
+    /// The lists of leaves `range` only.
+    fn slice(&self, range: std::ops::Range<usize>) -> CoarseLists {
+        let start = if range.start == 0 {
+            0
+        } else {
+            self.ends[range.start - 1]
+        };
+        let end = if range.end == 0 {
+            0
+        } else {
+            self.ends[range.end - 1]
+        };
+        CoarseLists {
+            ends: self.ends[range].iter().map(|&e| e - start).collect(),
+            tris: self.tris[start..end].to_vec(),
+        }
+    }
+
+    /// Candidates of leaf `i`.
+    fn get(&self, i: usize) -> &[u32] {
+        let start = if i == 0 { 0 } else { self.ends[i - 1] };
+        &self.tris[start..self.ends[i]]
+    }
 }
 
 /// Children of an octant with centre `c` whose closed boxes meet the
@@ -513,15 +634,25 @@ pub fn build_from_surface(
     limit: u64,
 ) -> Result<LinearOctree> {
     check_estimate(&comm, surface, level, limit)?;
-    let mut t = construct_for_surface(comm, surface, level)?;
-    t.refine_surface(surface, level, limit)?;
-    Ok(t)
+    construct_top_for_surface(comm, surface, level)?.refine(surface, limit)
 }
 
 impl LinearOctree {
     /// Refines every leaf whose closed box touches the surface until the
     /// touching leaves are at `level`. Collective.
     pub fn refine_surface(&mut self, surface: &SurfaceIndex, level: u8, limit: u64) -> Result<()> {
+        self.refine_surface_with(surface, level, limit, None)
+    }
+
+    /// [`LinearOctree::refine_surface`], with the candidates of each leaf
+    /// given by `lists` when present (else searched for).
+    fn refine_surface_with(
+        &mut self,
+        surface: &SurfaceIndex,
+        level: u8,
+        limit: u64,
+        lists: Option<&CoarseLists>,
+    ) -> Result<()> {
         agree(&**self.comm(), check_level(level))?;
         let mut w = SurfaceWalker {
             tris: &surface.tris,
@@ -542,6 +673,31 @@ impl LinearOctree {
             }
             if o.level() >= level {
                 w.out.push(o);
+                continue;
+            }
+            if let Some(lists) = lists {
+                let cand = lists.get(i);
+                let (lo, hi) = o.bounds_f64();
+                if !cand
+                    .iter()
+                    .any(|&t| triangle_box_overlap(&w.tris[t as usize], lo, hi))
+                {
+                    w.out.push(o);
+                } else if o.level() + 1 == level {
+                    w.out.extend_from_slice(&o.children());
+                } else {
+                    w.buf.clear();
+                    w.buf.extend_from_slice(cand);
+                    if let Err(e) = w.walk(o, 0, cand.len()) {
+                        result = Err(e);
+                        break;
+                    }
+                    continue;
+                }
+                if let Err(e) = w.check_limit() {
+                    result = Err(e);
+                    break;
+                }
                 continue;
             }
             if o.level() + 1 == level
@@ -816,6 +972,31 @@ mod tests {
         );
         let err = build_from_surface(comm, &index, 8, limit).unwrap_err();
         assert!(err.message().contains("estimated"), "{err}");
+    }
+
+    /// Refining from the top's candidate lists gives the leaves that
+    /// searching the bounding-box tree per leaf gives, at levels above,
+    /// at and below the top's depth, for a surface partly outside the cube;
+    /// a top refined with another surface falls back to searching.
+    #[test]
+    fn refining_from_the_top_lists_matches_searching() {
+        let comm: CommRef = Rc::new(SerialComm);
+        let torus = crate::geometry::shapes::torus([0.55, 0.5, 0.45], 0.3, 0.1, 48, 24);
+        let sphere = crate::geometry::shapes::sphere([0.4, 0.5, 0.5], 0.35, 3);
+        let domain = Domain::cube([0.0; 3], 1.0).unwrap();
+        let torus = SurfaceIndex::new(&torus, &domain);
+        let sphere = SurfaceIndex::new(&sphere, &domain);
+        for level in [0, 3, COARSE_LEVEL, COARSE_LEVEL + 1, COARSE_LEVEL + 2] {
+            for (a, b) in [(&torus, &torus), (&torus, &sphere)] {
+                let mut searched = construct_for_surface(comm.clone(), a, level).unwrap();
+                searched.refine_surface(b, level, NO_LIMIT).unwrap();
+                let top = construct_top_for_surface(comm.clone(), a, level).unwrap();
+                let listed = top.refine(b, NO_LIMIT).unwrap();
+                listed.check().unwrap();
+                assert_eq!(listed.leaves(), searched.leaves(), "level {level}");
+                assert!(level < 3 || listed.local_len() > 8usize.pow(level as u32 / 2));
+            }
+        }
     }
 
     #[test]

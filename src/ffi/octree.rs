@@ -10,7 +10,9 @@ use super::{
 use crate::error::{Error, Result};
 use crate::geometry::{shapes, stl, Surface, Triangle};
 use crate::octree::LinearOctree;
-use crate::refine::{check_estimate, construct_for_callback, construct_for_surface, SurfaceIndex};
+use crate::refine::{
+    check_estimate, construct_for_callback, construct_top_for_surface, SurfaceIndex,
+};
 use crate::{Connectivity, Octant, MAX_LEVEL};
 
 /// Refinement callback: returns non-zero to refine the octant. It must give
@@ -143,8 +145,7 @@ pub unsafe extern "C" fn octmesh_refine_surface(h: *mut octmesh_t, level: i32) -
         let (comm, limit) = (h.comm.clone(), h.limit());
         let index = h.index_for(&domain)?;
         check_estimate(&comm, index, level, limit)?;
-        let mut tree = construct_for_surface(comm, index, level)?;
-        tree.refine_surface(index, level, limit)?;
+        let tree = construct_top_for_surface(comm, index, level)?.refine(index, limit)?;
         h.tree = Some((tree, domain));
         h.mesh = None;
         Ok(())
