@@ -17,8 +17,10 @@ connectivity; classify (inside/outside) apart; total = refine + balance +
 classify + mesh (reading the surface does not depend on the level and is
 left out). Times are seconds, max over ranks, medians of --repeat runs, or
 more for short cases (--min-seconds); the repeats are rounds over all the
-cases, so that a slow spell of the machine does not fall on a few sizes
-only.
+cases, and each case's runs are spread evenly over the rounds (a case with
+3 runs out of 15 rounds runs in rounds 1, 6 and 11), so that every size
+samples the same stretch of time and a slow spell of the machine does not
+fall on a few sizes only.
 
 Before each level the peak memory is estimated from the level below (leaves
 x 4.2); a level that would not fit in --max-mem-gib (default 90% of RAM)
@@ -287,7 +289,10 @@ def run_all(ap, args):
         for k in range(1, rounds):
             print("round %d of %d" % (k + 1, rounds), flush=True)
             for key, done in runs.items():
-                if len(done) < want[key]:
+                # Spread over all rounds, not packed into the first ones:
+                # otherwise the short cases alone would sample the last
+                # minutes of the machine.
+                if len(done) < math.ceil((k + 1) * want[key] / rounds):
                     src = done[0][0]
                     name, level, np_ = key
                     done.append((src, run_once(src, level, np_, args.fit, env, stats_path)))
