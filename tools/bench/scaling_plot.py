@@ -55,6 +55,7 @@ COLUMNS = [
     ("surface", "surface"), ("level", "level"), ("np", "np"), ("leaves", "balanced leaves"),
     ("refine", "refine [s]"), ("balance", "balance [s]"), ("classify", "classify [s]"),
     ("mesh", "mesh [s]"), ("total", "total [s]"), ("ns", "total ns/leaf"),
+    ("runs", "runs"), ("range", "ns/leaf over runs"),
     ("peak", "peak MiB/rank"), ("bpl", "B/leaf"),
 ]
 
@@ -88,6 +89,10 @@ def summarize(runs):
         raise RunError("leaf counts differ between repeats: %s" % sorted(leaves))
     out = {k: median([r[k] for r in runs]) for k in runs[0] if k != "leaves"}
     out["leaves"] = leaves.pop()
+    # The spread of the runs, to be read against the 1.5x band.
+    out["runs"] = len(runs)
+    out["total_min"] = min(r["total"] for r in runs)
+    out["total_max"] = max(r["total"] for r in runs)
     return out
 
 
@@ -95,8 +100,12 @@ def table_row(r):
     n, np_ = r["leaves"], r["np"]
     return {"surface": r["surface"], "level": str(r["level"]), "np": str(np_),
             "leaves": fmt_int(n), **{p: fmt_s(r[p]) for p in PHASES},
-            "ns": "%.0f" % (r["total"] * np_ / n * 1e9), "peak": fmt_mib(r["peak"]),
-            "bpl": "%.0f" % (r["peak"] * np_ / n)}
+            "ns": "%.0f" % (r["total"] * np_ / n * 1e9),
+            "runs": str(r.get("runs", "-")),
+            "range": ("%.0f to %.0f" % (r["total_min"] * np_ / n * 1e9,
+                                        r["total_max"] * np_ / n * 1e9)
+                      if "total_min" in r else "-"),
+            "peak": fmt_mib(r["peak"]), "bpl": "%.0f" % (r["peak"] * np_ / n)}
 
 
 def verdicts(records, lo=1e5):
