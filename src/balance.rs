@@ -24,6 +24,8 @@
 //!
 //! The probes of one level are radix-sorted and resolved in one sequential
 //! sweep over the leaves, which is far cheaper than a search per probe.
+//! Most probes repeat one made by a neighbouring family; a small
+//! direct-mapped table drops those before they are stored.
 //!
 //! # Passes and rounds
 //!
@@ -137,6 +139,9 @@ fn sibling_masks() -> [u32; 8] {
     })
 }
 
+/// Slots of [`Balancer::recent`]: `2^RECENT_BITS` (128 KiB).
+const RECENT_BITS: u32 = 14;
+
 struct Balancer {
     offsets: &'static [[i32; 3]],
     skip: [u32; 8],
@@ -148,6 +153,13 @@ struct Balancer {
     /// `pending[l]`: parents of families at level `l` still to process.
     pending: Vec<Vec<Octant>>,
     outbox: Vec<Vec<u64>>,
+    /// Direct-mapped filter of the local probes already pushed at the
+    /// current level (`u64::MAX`: empty). Neighbouring families share most
+    /// of their probes (about 14 pushes per distinct probe on a surface
+    /// refinement); dropping the repeats here keeps the probe list, its
+    /// sort buffer and the sort about that much smaller. Repeats it misses
+    /// are removed after the sort.
+    recent: Vec<u64>,
     /// Most leaves the rank may hold (the global limit).
     limit: usize,
     /// Set when applying the splits would exceed `limit`; the pass stops.
@@ -176,6 +188,7 @@ impl Balancer {
             leaves,
             pending,
             outbox: vec![Vec::new(); p],
+            recent: vec![u64::MAX; 1 << RECENT_BITS],
             limit: limit.min(usize::MAX as u64) as usize,
             over: false,
         }
@@ -199,6 +212,8 @@ impl Balancer {
             }
             fams.dedup();
             probes.clear();
+            // Probes of different levels may share a Morton code.
+            self.recent.fill(u64::MAX);
             for &p in &fams {
                 self.probe_family(p, &mut probes);
             }
@@ -265,7 +280,11 @@ impl Balancer {
             let q = Octant::from_parts(qb, qlevel);
             let qe = q.cell_end();
             if qb >= self.begin && qe <= self.end {
-                probes.push(qb);
+                let slot = (qb.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - RECENT_BITS)) as usize;
+                if self.recent[slot] != qb {
+                    self.recent[slot] = qb;
+                    probes.push(qb);
+                }
             } else if qe <= self.begin || qb >= self.end {
                 let r = owner_of_cell(&self.first_cell, qb);
                 if qe <= self.first_cell[r + 1] {
