@@ -149,7 +149,8 @@ struct Balancer {
     end: u64,
     first_cell: Vec<u64>,
     leaves: Vec<Octant>,
-    spare: Vec<Octant>,
+    /// Scratch: the octants replacing split leaves.
+    made: Vec<Octant>,
     /// `pending[l]`: parents of families at level `l` still to process.
     pending: Vec<Vec<Octant>>,
     outbox: Vec<Vec<u64>>,
@@ -171,15 +172,15 @@ impl Balancer {
         let (begin, end) = tree.local_cells();
         let p = tree.comm().size();
         let mut leaves = tree.take_leaves();
-        // Headroom for the balance's growth, so the leaf buffers are not
-        // reallocated (and their pages faulted in again) at every level.
+        // Headroom for the balance's growth, so the leaf buffer is not
+        // reallocated (and its pages faulted in again) at every level.
         leaves.reserve(leaves.len() / 4);
         let mut pending = vec![Vec::new(); MAX_LEVEL as usize + 1];
         for &o in &leaves {
             queue_family(&mut pending, o);
         }
         Balancer {
-            spare: Vec::with_capacity(leaves.len() + leaves.len() / 4),
+            made: Vec::new(),
             offsets: conn.offsets(),
             skip: sibling_masks(),
             begin,
@@ -296,6 +297,11 @@ impl Balancer {
 
     /// Replaces each leaf named in `splits` by the coarsest set of octants
     /// that covers every required octant inside it.
+    ///
+    /// In place: the new octants are made first (a few per split), then the
+    /// leaves are moved to their final places from the back, so the leaf
+    /// buffer is not copied into a second one of the same size (whose pages
+    /// would all be faulted in).
     fn apply_splits(&mut self, splits: &mut [(usize, Octant)]) {
         splits.sort_unstable();
         // Each split leaf becomes at least 8: refuse before allocating.
@@ -304,16 +310,12 @@ impl Balancer {
             self.over = true;
             return;
         }
-        let mut out = std::mem::take(&mut self.spare);
-        out.clear();
-        let need = self.leaves.len() + 8 * splits.len();
-        if out.capacity() < need {
-            out.reserve(need + need / 4);
-        }
-        let mut done = 0usize;
-        let mut i = 0;
+        // (leaf index, its replacement `made[start..end]`), in leaf order.
+        let mut groups: Vec<(usize, usize, usize)> = Vec::with_capacity(split_leaves);
+        let mut made = std::mem::take(&mut self.made);
+        made.clear();
         let mut members = Vec::new();
-        let mut new_leaves = Vec::new();
+        let mut i = 0;
         while i < splits.len() {
             let idx = splits[i].0;
             members.clear();
@@ -323,17 +325,31 @@ impl Balancer {
                 }
                 i += 1;
             }
-            out.extend_from_slice(&self.leaves[done..idx]);
-            new_leaves.clear();
-            refine_to(self.leaves[idx], &members, &mut new_leaves);
-            for &o in &new_leaves {
+            let start = made.len();
+            refine_to(self.leaves[idx], &members, &mut made);
+            for &o in &made[start..] {
                 queue_family(&mut self.pending, o);
             }
-            out.extend_from_slice(&new_leaves);
-            done = idx + 1;
+            groups.push((idx, start, made.len()));
         }
-        out.extend_from_slice(&self.leaves[done..]);
-        self.spare = std::mem::replace(&mut self.leaves, out);
+        let old_len = self.leaves.len();
+        let new_len = old_len - groups.len() + made.len();
+        self.leaves.resize(new_len, Octant::ROOT);
+        // From the back: the leaves after each split leaf move up by the
+        // number of octants added before them, then its replacement goes in.
+        let mut tail = old_len; // leaves[idx + 1..tail] still at their old place
+        let mut write = new_len;
+        for &(idx, start, end) in groups.iter().rev() {
+            let n = tail - (idx + 1);
+            self.leaves.copy_within(idx + 1..tail, write - n);
+            write -= n;
+            let k = end - start;
+            self.leaves[write - k..write].copy_from_slice(&made[start..end]);
+            write -= k;
+            tail = idx;
+        }
+        debug_assert_eq!(write, tail);
+        self.made = made;
     }
 
     /// Applies probes received from other ranks.
