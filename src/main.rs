@@ -389,7 +389,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         construct_top_for_surface(comm.clone(), &index, o.level)
     })?;
     table.row(&timer, Some(top.tree().global_len()));
-    let mut tree = timer.time(&*comm, "refine", || top.refine(&index, o.max_octants))?;
+    let mut tree = timer.time(&*comm, "refine", || top.refine(o.max_octants))?;
     let refined = tree.global_len();
     table.row(&timer, Some(refined));
     timer.time(&*comm, "partition", || tree.partition())?;

@@ -358,7 +358,7 @@ pub fn construct_top_for_surface(
     comm: CommRef,
     surface: &SurfaceIndex,
     level: u8,
-) -> Result<SurfaceTop> {
+) -> Result<SurfaceTop<'_>> {
     agree(&*comm, check_level(level))?;
     let weight = 1u64 << (2 * (level.saturating_sub(COARSE_LEVEL)) as u32).min(60);
     let (coarse, lists) = surface_top(surface, level, weight);
@@ -369,8 +369,8 @@ pub fn construct_top_for_surface(
     Ok(SurfaceTop {
         tree: LinearOctree::from_local_leaves(comm, mine)?,
         lists,
+        surface,
         level,
-        triangles: surface.triangles().len(),
     })
 }
 
@@ -378,15 +378,15 @@ pub fn construct_top_for_surface(
 /// with, for each of its leaves, the triangles that may touch it. Refining
 /// from it ([`SurfaceTop::refine`]) reuses those lists instead of searching
 /// the bounding-box tree once per leaf.
-pub struct SurfaceTop {
+pub struct SurfaceTop<'a> {
     tree: LinearOctree,
     lists: CoarseLists,
+    /// The surface the lists index.
+    surface: &'a SurfaceIndex,
     level: u8,
-    /// Of the surface the lists index.
-    triangles: usize,
 }
 
-impl SurfaceTop {
+impl SurfaceTop<'_> {
     /// The octree of the top.
     pub fn tree(&self) -> &LinearOctree {
         &self.tree
@@ -397,20 +397,11 @@ impl SurfaceTop {
         self.tree
     }
 
-    /// [`LinearOctree::refine_surface`] to the level the top was built for;
-    /// `surface` must be the one it was built from. Collective.
-    pub fn refine(self, surface: &SurfaceIndex, limit: u64) -> Result<LinearOctree> {
-        let SurfaceTop {
-            mut tree,
-            lists,
-            level,
-            triangles,
-        } = self;
-        // Another surface (or leaves changed since) cannot use the lists.
-        let lists = (triangles == surface.triangles().len()
-            && lists.ends.len() == tree.local_len())
-        .then_some(&lists);
-        tree.refine_surface_with(surface, level, limit, lists)?;
+    /// [`LinearOctree::refine_surface`] with the top's surface, to the level
+    /// the top was built for. Collective.
+    pub fn refine(self, limit: u64) -> Result<LinearOctree> {
+        let mut tree = self.tree;
+        tree.refine_surface_with(self.surface, self.level, limit, Some(&self.lists))?;
         Ok(tree)
     }
 }
@@ -444,26 +435,22 @@ fn surface_top(
         /// `buf[lo..hi]`: the triangles whose boxes meet the box of `o`.
         fn visit(&mut self, o: Octant, lo: usize, hi: usize) {
             let (min, max) = o.bounds_f64();
-            let weight = if o.level() >= self.max_level {
-                Some(1)
+            // The lists stay empty where refinement has nothing to do.
+            let (weight, list) = if o.level() >= self.max_level {
+                (Some(1), lo..lo)
             } else if o.level() == self.stop {
-                if lo < hi {
-                    self.lists.tris.extend_from_slice(&self.buf[lo..hi]);
-                    Some(self.deep_weight)
-                } else {
-                    Some(1)
-                }
+                (Some(if lo < hi { self.deep_weight } else { 1 }), lo..hi)
             } else if self.buf[lo..hi]
                 .iter()
                 .any(|&t| triangle_box_overlap(&self.surface.tris[t as usize], min, max))
             {
-                None
+                (None, lo..lo)
             } else {
-                Some(1)
+                (Some(1), lo..lo)
             };
             if let Some(w) = weight {
                 self.out.push((o, w));
-                self.lists.ends.push(self.lists.tris.len());
+                self.lists.push(&self.buf[list]);
                 return;
             }
             let b = split_candidates(
@@ -497,37 +484,44 @@ fn surface_top(
 }
 
 /// Candidate triangles of a run of coarse leaves, as the top's walk found
-/// them: leaf `i` has `tris[ends[i - 1]..ends[i]]` (from 0 for the first),
-/// a superset of the triangles touching it.
-#[derive(Default)]
+/// them: leaf `i` has `tris[offsets[i]..offsets[i + 1]]`, a superset of the
+/// triangles touching it.
 struct CoarseLists {
-    ends: Vec<usize>,
+    offsets: Vec<usize>,
     tris: Vec<u32>,
 }
 
+impl Default for CoarseLists {
+    fn default() -> CoarseLists {
+        CoarseLists {
+            offsets: vec![0],
+            tris: Vec::new(),
+        }
+    }
+}
+
 impl CoarseLists {
+    /// Appends the list of the next leaf.
+    fn push(&mut self, tris: &[u32]) {
+        self.tris.extend_from_slice(tris);
+        self.offsets.push(self.tris.len());
+    }
+
     /// The lists of leaves `range` only.
     fn slice(&self, range: std::ops::Range<usize>) -> CoarseLists {
-        let start = if range.start == 0 {
-            0
-        } else {
-            self.ends[range.start - 1]
-        };
-        let end = if range.end == 0 {
-            0
-        } else {
-            self.ends[range.end - 1]
-        };
+        let first = self.offsets[range.start];
         CoarseLists {
-            ends: self.ends[range].iter().map(|&e| e - start).collect(),
-            tris: self.tris[start..end].to_vec(),
+            offsets: self.offsets[range.start..=range.end]
+                .iter()
+                .map(|&e| e - first)
+                .collect(),
+            tris: self.tris[first..self.offsets[range.end]].to_vec(),
         }
     }
 
     /// Candidates of leaf `i`.
     fn get(&self, i: usize) -> &[u32] {
-        let start = if i == 0 { 0 } else { self.ends[i - 1] };
-        &self.tris[start..self.ends[i]]
+        &self.tris[self.offsets[i]..self.offsets[i + 1]]
     }
 }
 
@@ -634,7 +628,7 @@ pub fn build_from_surface(
     limit: u64,
 ) -> Result<LinearOctree> {
     check_estimate(&comm, surface, level, limit)?;
-    construct_top_for_surface(comm, surface, level)?.refine(surface, limit)
+    construct_top_for_surface(comm, surface, level)?.refine(limit)
 }
 
 impl LinearOctree {
@@ -676,31 +670,9 @@ impl LinearOctree {
                 continue;
             }
             if let Some(lists) = lists {
-                let cand = lists.get(i);
-                let (lo, hi) = o.bounds_f64();
-                if !cand
-                    .iter()
-                    .any(|&t| triangle_box_overlap(&w.tris[t as usize], lo, hi))
-                {
-                    w.out.push(o);
-                } else if o.level() + 1 == level {
-                    w.out.extend_from_slice(&o.children());
-                } else {
-                    w.buf.clear();
-                    w.buf.extend_from_slice(cand);
-                    if let Err(e) = w.walk(o, 0, cand.len()) {
-                        result = Err(e);
-                        break;
-                    }
-                    continue;
-                }
-                if let Err(e) = w.check_limit() {
-                    result = Err(e);
-                    break;
-                }
-                continue;
-            }
-            if o.level() + 1 == level
+                w.buf.clear();
+                w.buf.extend_from_slice(lists.get(i));
+            } else if o.level() + 1 == level
                 && o.child_id() == 0
                 && leaves.get(i + 7) == Some(&o.parent().child(7))
             {
@@ -718,33 +690,11 @@ impl LinearOctree {
                 }
                 skip = 7;
                 continue;
+            } else {
+                w.buf.clear();
+                surface.candidates(o, &mut w.buf);
             }
-            if o.level() + 1 == level {
-                // Only whether it touches matters: the first hit decides.
-                if surface.touches(o) {
-                    w.out.extend_from_slice(&o.children());
-                } else {
-                    w.out.push(o);
-                }
-                if let Err(e) = w.check_limit() {
-                    result = Err(e);
-                    break;
-                }
-                continue;
-            }
-            w.buf.clear();
-            surface.candidates(o, &mut w.buf);
-            let (lo, hi) = o.bounds_f64();
-            if !w
-                .buf
-                .iter()
-                .any(|&t| triangle_box_overlap(&w.tris[t as usize], lo, hi))
-            {
-                w.out.push(o);
-                continue;
-            }
-            let n = w.buf.len();
-            if let Err(e) = w.walk(o, 0, n) {
+            if let Err(e) = w.leaf(o) {
                 result = Err(e);
                 break;
             }
@@ -806,6 +756,25 @@ impl SurfaceWalker<'_> {
             }
         }
         self.buf.truncate(b[0]);
+        self.check_limit()
+    }
+
+    /// Refines leaf `o` (above the target), whose candidates are all of
+    /// `buf`.
+    fn leaf(&mut self, o: Octant) -> Result<()> {
+        let (lo, hi) = o.bounds_f64();
+        if !self
+            .buf
+            .iter()
+            .any(|&t| triangle_box_overlap(&self.tris[t as usize], lo, hi))
+        {
+            self.out.push(o);
+        } else if o.level() + 1 == self.level {
+            // Only whether it touches matters: the first hit decided.
+            self.out.extend_from_slice(&o.children());
+        } else {
+            return self.walk(o, 0, self.buf.len());
+        }
         self.check_limit()
     }
 
@@ -976,8 +945,7 @@ mod tests {
 
     /// Refining from the top's candidate lists gives the leaves that
     /// searching the bounding-box tree per leaf gives, at levels above,
-    /// at and below the top's depth, for a surface partly outside the cube;
-    /// a top refined with another surface falls back to searching.
+    /// at and below the top's depth, for surfaces partly outside the cube.
     #[test]
     fn refining_from_the_top_lists_matches_searching() {
         let comm: CommRef = Rc::new(SerialComm);
@@ -987,11 +955,11 @@ mod tests {
         let torus = SurfaceIndex::new(&torus, &domain);
         let sphere = SurfaceIndex::new(&sphere, &domain);
         for level in [0, 3, COARSE_LEVEL, COARSE_LEVEL + 1, COARSE_LEVEL + 2] {
-            for (a, b) in [(&torus, &torus), (&torus, &sphere)] {
-                let mut searched = construct_for_surface(comm.clone(), a, level).unwrap();
-                searched.refine_surface(b, level, NO_LIMIT).unwrap();
-                let top = construct_top_for_surface(comm.clone(), a, level).unwrap();
-                let listed = top.refine(b, NO_LIMIT).unwrap();
+            for s in [&torus, &sphere] {
+                let mut searched = construct_for_surface(comm.clone(), s, level).unwrap();
+                searched.refine_surface(s, level, NO_LIMIT).unwrap();
+                let top = construct_top_for_surface(comm.clone(), s, level).unwrap();
+                let listed = top.refine(NO_LIMIT).unwrap();
                 listed.check().unwrap();
                 assert_eq!(listed.leaves(), searched.leaves(), "level {level}");
                 assert!(level < 3 || listed.local_len() > 8usize.pow(level as u32 / 2));

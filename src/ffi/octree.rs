@@ -145,7 +145,7 @@ pub unsafe extern "C" fn octmesh_refine_surface(h: *mut octmesh_t, level: i32) -
         let (comm, limit) = (h.comm.clone(), h.limit());
         let index = h.index_for(&domain)?;
         check_estimate(&comm, index, level, limit)?;
-        let tree = construct_top_for_surface(comm, index, level)?.refine(index, limit)?;
+        let tree = construct_top_for_surface(comm, index, level)?.refine(limit)?;
         h.tree = Some((tree, domain));
         h.mesh = None;
         Ok(())
