@@ -52,6 +52,12 @@ pub trait Comm {
     fn traffic(&self) -> Traffic {
         Traffic::default()
     }
+    /// Seconds this rank has spent inside the collectives above so far,
+    /// waiting for the other ranks included. Not collective. The default,
+    /// for communicators that do not count, is zero.
+    fn comm_seconds(&self) -> f64 {
+        0.0
+    }
 }
 
 /// Payload bytes a rank has sent to and received from *other* ranks through
@@ -199,6 +205,7 @@ pub struct MpiComm {
     comm: SimpleCommunicator,
     sent: Cell<u64>,
     received: Cell<u64>,
+    busy: Cell<f64>,
 }
 
 impl MpiComm {
@@ -208,7 +215,16 @@ impl MpiComm {
             comm,
             sent: Cell::new(0),
             received: Cell::new(0),
+            busy: Cell::new(0.0),
         }
+    }
+
+    /// Runs one collective, adding its wall time to [`Comm::comm_seconds`].
+    fn timed<T>(&self, f: impl FnOnce() -> T) -> T {
+        let t0 = std::time::Instant::now();
+        let r = f();
+        self.busy.set(self.busy.get() + t0.elapsed().as_secs_f64());
+        r
     }
 
     fn count(&self, sent: usize, received: usize) {
@@ -245,35 +261,42 @@ impl Comm for MpiComm {
         self.comm.size() as usize
     }
     fn barrier(&self) {
-        self.comm.barrier();
+        self.timed(|| self.comm.barrier());
     }
     fn max_u64(&self, values: &mut [u64]) {
         let send = values.to_vec();
-        self.comm
-            .all_reduce_into(&send[..], values, SystemOperation::max());
+        self.timed(|| {
+            self.comm
+                .all_reduce_into(&send[..], values, SystemOperation::max())
+        });
         self.count_symmetric(8 * values.len());
     }
     fn sum_u64(&self, values: &mut [u64]) {
         let send = values.to_vec();
-        self.comm
-            .all_reduce_into(&send[..], values, SystemOperation::sum());
+        self.timed(|| {
+            self.comm
+                .all_reduce_into(&send[..], values, SystemOperation::sum())
+        });
         self.count_symmetric(8 * values.len());
     }
     fn max_f64(&self, values: &mut [f64]) {
         let send = values.to_vec();
-        self.comm
-            .all_reduce_into(&send[..], values, SystemOperation::max());
+        self.timed(|| {
+            self.comm
+                .all_reduce_into(&send[..], values, SystemOperation::max())
+        });
         self.count_symmetric(8 * values.len());
     }
     fn allgather_u64(&self, value: u64) -> Vec<u64> {
         let mut out = vec![0u64; self.size()];
-        self.comm.all_gather_into(&value, &mut out[..]);
+        self.timed(|| self.comm.all_gather_into(&value, &mut out[..]));
         self.count_symmetric(8 * (self.size() - 1));
         out
     }
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
         let p = self.size();
         let send_counts = to_i32_counts(counts);
+        let t0 = std::time::Instant::now();
         let mut recv_counts = vec![0i32; p];
         self.comm
             .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
@@ -287,6 +310,7 @@ impl Comm for MpiComm {
             let mut rbuf = PartitionMut::new(&mut recv[..], &recv_counts[..], &rdispl[..]);
             self.comm.all_to_all_varcount_into(&sbuf, &mut rbuf);
         }
+        self.busy.set(self.busy.get() + t0.elapsed().as_secs_f64());
         // Blocks a rank addresses to itself never leave it.
         let me = self.rank();
         let others = 4 * (p - 1);
@@ -299,11 +323,13 @@ impl Comm for MpiComm {
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>) {
         let mut len = bytes.len() as u64;
         let proc = self.comm.process_at_rank(root as i32);
-        proc.broadcast_into(&mut len);
-        bytes.resize(len as usize, 0);
-        if len > 0 {
-            proc.broadcast_into(&mut bytes[..]);
-        }
+        self.timed(|| {
+            proc.broadcast_into(&mut len);
+            bytes.resize(len as usize, 0);
+            if len > 0 {
+                proc.broadcast_into(&mut bytes[..]);
+            }
+        });
         let others = self.size() - 1;
         let message = 8 + bytes.len();
         if self.rank() == root {
@@ -317,6 +343,9 @@ impl Comm for MpiComm {
             sent: self.sent.get(),
             received: self.received.get(),
         }
+    }
+    fn comm_seconds(&self) -> f64 {
+        self.busy.get()
     }
 }
 

@@ -538,6 +538,9 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         for (name, bytes) in mesh.traffic() {
             timer.record_traffic(name, *bytes);
         }
+        for (name, secs) in mesh.comm_seconds() {
+            timer.record_wait(name, *secs);
+        }
         for (name, bytes) in mesh.peaks() {
             timer.record_peak(name, *bytes);
         }
@@ -623,6 +626,7 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             steps.num(key, *secs);
         }
         let (bytes, bytes_sent, bytes_sum) = comm_stats(&*comm, &timer, &phase_keys);
+        let (wait_min, wait_max) = wait_stats(&*comm, &timer, &phase_keys);
         // Peak RSS at the end of each phase (its last run), max over ranks:
         // the phase where it grows set the peak.
         let mut after: Vec<u64> = phase_keys
@@ -668,6 +672,8 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         .obj("comm_bytes", &bytes)
         .obj("comm_bytes_sent", &bytes_sent)
         .obj("comm_bytes_sum", &bytes_sum)
+        .obj("comm_seconds_min", &wait_min)
+        .obj("comm_seconds_max", &wait_max)
         .int("peak_rss_bytes", rss[0])
         .obj("peak_rss_after", &peaks)
         .int("rss_start_bytes", rss[1])
@@ -685,6 +691,29 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
         Some(e) => Err(e),
         None => Ok(()),
     }
+}
+
+/// Seconds spent inside collectives per phase, for `--stats`: the smallest
+/// and the largest over ranks (the largest is mostly waiting for the
+/// slowest rank; the smallest is closer to what the exchanges cost).
+/// Collective.
+fn wait_stats(comm: &dyn Comm, timer: &PhaseTimer, keys: &[&str]) -> (JsonObject, JsonObject) {
+    let total: f64 = timer.waits().iter().map(|p| p.1).sum();
+    let own: Vec<f64> = keys
+        .iter()
+        .map(|k| timer.wait_of(k))
+        .chain([total])
+        .collect();
+    // One reduction: the maxima, and the minima as maxima of the negatives.
+    let mut v: Vec<f64> = own.iter().copied().chain(own.iter().map(|x| -x)).collect();
+    comm.max_f64(&mut v);
+    let n = own.len();
+    let (mut lo, mut hi) = (JsonObject::new(), JsonObject::new());
+    for (i, k) in keys.iter().chain(&["total"]).enumerate() {
+        lo.num(k, -v[n + i]);
+        hi.num(k, v[i]);
+    }
+    (lo, hi)
 }
 
 /// Bytes exchanged with other ranks per phase, for `--stats`: the maximum

@@ -50,6 +50,7 @@ pub const TRIM_MIN_FREE: usize = 64 << 20;
 pub struct PhaseTimer {
     phases: Vec<(String, f64)>,
     traffic: Vec<(String, Traffic)>,
+    waits: Vec<(String, f64)>,
     peaks: Vec<(String, u64)>,
 }
 
@@ -64,15 +65,18 @@ impl PhaseTimer {
     pub fn time<T>(&mut self, comm: &dyn Comm, name: &str, f: impl FnOnce() -> T) -> T {
         comm.barrier();
         let bytes0 = comm.traffic();
+        let wait0 = comm.comm_seconds();
         let t0 = Instant::now();
         let r = f();
         let elapsed = t0.elapsed().as_secs_f64();
         // Read before the reduction below, which is bookkeeping, not the phase.
         let bytes = comm.traffic() - bytes0;
+        let wait = comm.comm_seconds() - wait0;
         let mut dt = [elapsed];
         comm.max_f64(&mut dt);
         self.phases.push((name.to_string(), dt[0]));
         self.traffic.push((name.to_string(), bytes));
+        self.waits.push((name.to_string(), wait));
         self.peaks.push((name.to_string(), peak_rss_bytes()));
         r
     }
@@ -112,6 +116,26 @@ impl PhaseTimer {
     /// This rank's bytes per phase, in the order the phases ran.
     pub fn traffic(&self) -> &[(String, Traffic)] {
         &self.traffic
+    }
+
+    /// Adds the seconds this rank spent inside collectives in a phase
+    /// measured elsewhere.
+    pub fn record_wait(&mut self, name: &str, secs: f64) {
+        self.waits.push((name.to_string(), secs));
+    }
+
+    /// Seconds this rank spent inside collectives ([`Comm::comm_seconds`])
+    /// in phase `name`, summed over the phases of that name. Rank-local,
+    /// not reduced: the largest over ranks is mostly waiting for the
+    /// slowest rank, the smallest is closer to the cost of the exchanges.
+    pub fn wait_of(&self, name: &str) -> f64 {
+        self.waits.iter().filter(|p| p.0 == name).map(|p| p.1).sum()
+    }
+
+    /// This rank's seconds inside collectives per phase, in the order the
+    /// phases ran.
+    pub fn waits(&self) -> &[(String, f64)] {
+        &self.waits
     }
 
     /// Seconds of phase `name` (0 if it did not run).
@@ -256,5 +280,20 @@ mod tests {
         assert_eq!(t.traffic_of("ghost").sent, 7);
         assert_eq!(t.traffic_of("balance"), Traffic::default());
         assert_eq!(t.traffic().len(), 3);
+    }
+
+    #[test]
+    fn waits_are_summed_by_phase_name() {
+        let mut t = PhaseTimer::new();
+        let c = crate::comm::SerialComm;
+        t.time(&c, "ghost", || ());
+        t.record_wait("ghost", 0.25);
+        t.record_wait("ghost", 0.5);
+        t.record_wait("nodes", 2.0);
+        // A serial communicator never waits.
+        assert_eq!(t.waits()[0], ("ghost".to_string(), 0.0));
+        assert_eq!(t.wait_of("ghost"), 0.75);
+        assert_eq!(t.wait_of("nodes"), 2.0);
+        assert_eq!(t.wait_of("balance"), 0.0);
     }
 }

@@ -1,4 +1,5 @@
-//! The `comm_bytes` fields of `--stats`: nothing crosses ranks on one rank;
+//! The `comm_bytes` and `comm_seconds` fields of `--stats`: nothing crosses
+//! ranks on one rank;
 //! on two and three ranks every phase that exchanges leaves or nodes reports
 //! bytes, and the bytes sent over all ranks equal those received. Also the
 //! memory marks and the two partition timings the benchmarks read.
@@ -46,6 +47,53 @@ fn one_rank_exchanges_nothing() {
     }
     assert_eq!(j["comm_bytes_sum"]["sent"].as_u64(), Some(0));
     assert_eq!(j["comm_bytes_sum"]["received"].as_u64(), Some(0));
+    // Collectives on one rank only copy: a small part of each phase.
+    let (mut inside, mut phases) = (0.0, 0.0);
+    for k in PHASES {
+        let lo = j["comm_seconds_min"][k].as_f64().unwrap();
+        let hi = j["comm_seconds_max"][k].as_f64().unwrap();
+        let phase = j["timings"][k].as_f64().unwrap();
+        assert_eq!(lo, hi, "{k}: one rank, one reading");
+        assert!(
+            hi <= phase + 1e-6,
+            "{k}: {hi} s inside collectives in a {phase} s phase"
+        );
+        inside += hi;
+        phases += phase;
+    }
+    assert!(
+        inside < 0.5 * phases,
+        "{inside} s inside collectives of {phases} s"
+    );
+}
+
+#[test]
+fn time_inside_collectives_fits_in_the_phases() {
+    let j = stats(2, &scratch("comm_seconds_2"));
+    let mut sum = 0.0;
+    for k in PHASES {
+        let lo = j["comm_seconds_min"][k].as_f64().unwrap();
+        let hi = j["comm_seconds_max"][k].as_f64().unwrap();
+        let phase = j["timings"][k].as_f64().unwrap();
+        // A rank's time inside collectives is part of its phase time, which
+        // is at most the phase's (largest) time; the barrier that starts
+        // each phase is not counted.
+        assert!(0.0 <= lo && lo <= hi, "{k}: min {lo} max {hi}");
+        assert!(
+            hi <= phase + 1e-6,
+            "{k}: {hi} s inside collectives in a {phase} s phase"
+        );
+        sum += hi;
+    }
+    // Ghost exchange and node numbering cannot happen without collectives.
+    for k in ["ghost", "numbering"] {
+        assert!(j["comm_seconds_max"][k].as_f64().unwrap() > 0.0, "{k}");
+    }
+    let total = j["comm_seconds_max"]["total"].as_f64().unwrap();
+    assert!(
+        total > 0.0 && total <= sum + 1e-6,
+        "total {total}, phases {sum}"
+    );
 }
 
 #[test]

@@ -1,5 +1,6 @@
 //! The byte counters of `MpiComm` against counts worked out by hand for each
-//! collective, on 1 to 4 ranks.
+//! collective, on 1 to 4 ranks, and its time inside collectives against a
+//! rank that arrives late.
 //!
 //! Run by `cargo test`, this program launches itself under `mpirun`; each
 //! launched copy checks its own counters and exits non-zero on a mismatch.
@@ -39,6 +40,7 @@ fn child() {
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
     let (r, p) = (comm.rank() as u64, comm.size() as u64);
     check("fresh communicator", comm.traffic(), 0, 0);
+    assert_eq!(comm.comm_seconds(), 0.0, "fresh communicator");
 
     // Rank r sends q + 1 values to rank q (itself included) and so receives
     // r + 1 values from every rank; 4-byte counts go to every other rank first.
@@ -102,6 +104,30 @@ fn child() {
     let t0 = comm.traffic();
     comm.barrier();
     check("barrier", comm.traffic() - t0, 0, 0);
+
+    // Time inside collectives: rank 0 arrives 200 ms late at a reduction,
+    // so every other rank waits about that long inside it; rank 0 does not.
+    let late = Duration::from_millis(200);
+    comm.barrier();
+    let w0 = comm.comm_seconds();
+    if r == 0 {
+        std::thread::sleep(late);
+    }
+    let mut v = [r];
+    comm.sum_u64(&mut v);
+    let waited = comm.comm_seconds() - w0;
+    assert!(waited >= 0.0);
+    if r > 0 {
+        assert!(
+            waited >= 0.5 * late.as_secs_f64(),
+            "rank {r} waited {waited} s for a rank 200 ms late"
+        );
+    } else {
+        assert!(
+            waited < 0.5 * late.as_secs_f64(),
+            "rank 0 came last but waited {waited} s"
+        );
+    }
 
     // Over all ranks, what was sent arrived.
     let total = comm.traffic();

@@ -154,6 +154,7 @@ pub struct Mesh {
     counts: MeshCounts,
     timings: Vec<(String, f64)>,
     traffic: Vec<(String, Traffic)>,
+    waits: Vec<(String, f64)>,
     peaks: Vec<(String, u64)>,
 }
 
@@ -236,6 +237,7 @@ impl Mesh {
         mesh.counts.ghosts = sums[4];
         mesh.timings = timer.phases().to_vec();
         mesh.traffic = timer.traffic().to_vec();
+        mesh.waits = timer.waits().to_vec();
         mesh.peaks = timer.peaks().to_vec();
         Ok(mesh)
     }
@@ -270,6 +272,12 @@ impl Mesh {
     /// [`Mesh::timings`] (rank-local, see [`crate::comm::Traffic`]).
     pub fn traffic(&self) -> &[(String, Traffic)] {
         &self.traffic
+    }
+
+    /// Seconds this rank spent inside collectives in each of the phases of
+    /// [`Mesh::timings`] (rank-local, see [`crate::comm::Comm::comm_seconds`]).
+    pub fn comm_seconds(&self) -> &[(String, f64)] {
+        &self.waits
     }
 
     /// This rank's peak resident set size (bytes) at the end of each phase
@@ -794,6 +802,7 @@ fn assemble(
         },
         timings: Vec::new(),
         traffic: Vec::new(),
+        waits: Vec::new(),
         peaks: Vec::new(),
     })
 }

@@ -21,6 +21,12 @@ many ranks' ranges). The exponent a of the best power law bytes ~ n^a over
 p >= 2 is printed too (2/3 for the model; a surface-refined octree has its
 leaves on a thin shell, where a range's boundary may behave otherwise).
 
+Time. Each row also gives the pipeline's time (the phases from construct to
+connectivity, each the maximum over ranks) and the seconds a rank spent
+inside collectives over those phases (`comm_seconds_min` / `_max`: the
+least and the most over ranks). The most is mostly waiting for the slowest
+rank; the least bounds what overlapping work with communication could hide.
+
     python3 tools/bench/comm_volume.py --np 1-8 --markdown target/bench/comm.md
 
 Standard library only.
@@ -109,6 +115,10 @@ def main():
                      "received_sum": s["comm_bytes_sum"]["received"]}
                 for p in PHASES:
                     r[p] = b[p]
+                timed = [k for k in s["timings"] if k not in ("read", "write")]
+                r["time"] = sum(s["timings"][k] for k in timed)
+                r["wait_min"] = sum(s["comm_seconds_min"][k] for k in timed)
+                r["wait_max"] = sum(s["comm_seconds_max"][k] for k in timed)
                 # The phases that move only boundary data, together.
                 r["boundary"] = b["balance"] + b["ghost"] + b["numbering"]
                 r["other"] = sum(v for k, v in b.items() if k not in PHASES + ("total",))
@@ -119,9 +129,10 @@ def main():
                 if (np_ == 1) != (r["total"] == 0):
                     problems.append("%s %d np %d: total %d bytes" % (name, level, np_,
                                                                      r["total"]))
-                print("%s %d np %d: %s per rank (max), %s in all" % (
-                    name, level, np_, fmt_bytes(r["total"]), fmt_bytes(r["sent_sum"])),
-                    flush=True)
+                print("%s %d np %d: %s per rank (max), %s in all; %.3f s, %.4f to %.4f s "
+                      "inside collectives" % (
+                          name, level, np_, fmt_bytes(r["total"]), fmt_bytes(r["sent_sum"]),
+                          r["time"], r["wait_min"], r["wait_max"]), flush=True)
         except (RunError, OSError, KeyError, ValueError) as e:
             problems.append("%s %d: %s" % (name, level, e))
             print("FAILED " + problems[-1])
@@ -136,6 +147,8 @@ def main():
         columns.append(("per_leaf", "total B per local leaf"))
         for p in MODELLED:
             columns.append(("ratio_" + p, "%s / (c n^(2/3))" % p))
+        columns += [("time", "pipeline [s]"), ("wait", "in collectives [s], min to max"),
+                    ("share", "share, min to max")]
         rows = []
         for r in runs:
             n = r["leaves"] / r["np"]
@@ -144,6 +157,10 @@ def main():
             for p in PHASES + ("other", "total"):
                 row[p] = fmt_bytes(r[p])
             row["per_leaf"] = "%.2f" % (r["total"] / n)
+            row["time"] = "%.3f" % r["time"]
+            row["wait"] = "%.4f to %.4f" % (r["wait_min"], r["wait_max"])
+            row["share"] = "%.1f%% to %.1f%%" % (100 * r["wait_min"] / r["time"],
+                                                  100 * r["wait_max"] / r["time"])
             for p in MODELLED:
                 row["ratio_" + p] = "%.2f" % (r[p] / (cs[p] * x)) if r["np"] > 1 and cs[p] else "-"
             rows.append(row)
