@@ -296,27 +296,28 @@ impl Comm for MpiComm {
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
         let p = self.size();
         let send_counts = to_i32_counts(counts);
-        let t0 = std::time::Instant::now();
-        let mut recv_counts = vec![0i32; p];
-        self.comm
-            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
-        let sdispl: Vec<i32> = offsets(counts)[..p].iter().map(|&d| d as i32).collect();
-        let rc: Vec<usize> = recv_counts.iter().map(|&c| c as usize).collect();
-        let roff = offsets(&rc);
-        let rdispl: Vec<i32> = roff[..p].iter().map(|&d| d as i32).collect();
-        let mut recv = vec![0u64; roff[p]];
-        {
-            let sbuf = Partition::new(send, &send_counts[..], &sdispl[..]);
-            let mut rbuf = PartitionMut::new(&mut recv[..], &recv_counts[..], &rdispl[..]);
-            self.comm.all_to_all_varcount_into(&sbuf, &mut rbuf);
-        }
-        self.busy.set(self.busy.get() + t0.elapsed().as_secs_f64());
+        let (recv, rc) = self.timed(|| {
+            let mut recv_counts = vec![0i32; p];
+            self.comm
+                .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
+            let sdispl: Vec<i32> = offsets(counts)[..p].iter().map(|&d| d as i32).collect();
+            let rc: Vec<usize> = recv_counts.iter().map(|&c| c as usize).collect();
+            let roff = offsets(&rc);
+            let rdispl: Vec<i32> = roff[..p].iter().map(|&d| d as i32).collect();
+            let mut recv = vec![0u64; roff[p]];
+            {
+                let sbuf = Partition::new(send, &send_counts[..], &sdispl[..]);
+                let mut rbuf = PartitionMut::new(&mut recv[..], &recv_counts[..], &rdispl[..]);
+                self.comm.all_to_all_varcount_into(&sbuf, &mut rbuf);
+            }
+            (recv, rc)
+        });
         // Blocks a rank addresses to itself never leave it.
         let me = self.rank();
         let others = 4 * (p - 1);
         self.count(
             others + 8 * (counts.iter().sum::<usize>() - counts[me]),
-            others + 8 * (roff[p] - rc[me]),
+            others + 8 * (recv.len() - rc[me]),
         );
         (recv, rc)
     }
