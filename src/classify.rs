@@ -480,6 +480,15 @@ impl<'a> InsideClassifier<'a> {
     }
 }
 
+/// `x.round() as i64` for `|x| < 2^52`, without the library call that
+/// `round` is on x86-64 before SSE4.1: `x - trunc(x)` is exact there.
+#[inline]
+fn round_half_away(x: f64) -> i64 {
+    let t = x as i64;
+    let frac = x - t as f64;
+    t + (frac >= 0.5) as i64 - (frac <= -0.5) as i64
+}
+
 /// A triangle rounded to fixed point.
 #[derive(Clone, Copy)]
 struct FixedTri {
@@ -600,14 +609,18 @@ impl<'a> Classifier<'a> {
         };
         // The largest coordinate to represent: the lattice and every finite
         // vertex.
-        let mut big = ROOT_LEN as f64;
+        // Nine running maxima, not one: a single chain of dependent
+        // comparisons costs more than the rest of the set-up together.
+        let mut most = [ROOT_LEN as f64; 9];
         for t in tris.iter() {
-            for c in t.v.iter().flatten() {
-                if c.is_finite() {
-                    big = big.max(c.abs());
+            for (m, c) in most.iter_mut().zip(t.v.iter().flatten()) {
+                let a = c.abs();
+                if a > *m && a.is_finite() {
+                    *m = a;
                 }
             }
         }
+        let big = most.into_iter().fold(ROOT_LEN as f64, f64::max);
         // Every fixed-point coordinate, query points included, stays within
         // 2^39 (+1 for the far point), so differences stay below 2^41.
         let mut shift = 20i32;
@@ -615,7 +628,7 @@ impl<'a> Classifier<'a> {
             shift -= 1;
         }
         let scale = 2f64.powi(shift);
-        let round = |p: [f64; 3]| p.map(|c| (c * scale).round() as i64);
+        let round = |p: [f64; 3]| p.map(|c| round_half_away(c * scale));
         let mut fixed: Vec<FixedTri> = tris
             .iter()
             .map(|t| {
@@ -1990,6 +2003,35 @@ mod tests {
             touching > 2000 && sure > 5 * unsure && unsure > 100 && crossing > 300,
             "{touching} {sure} {unsure} {crossing}"
         );
+    }
+
+    #[test]
+    fn round_half_away_matches_round() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -2.5,
+            0.499_999_999_999_999_94,
+            -0.499_999_999_999_999_94,
+            4_503_599_627_370_495.5,
+            -4_503_599_627_370_495.5,
+            (1u64 << 39) as f64 + 0.5,
+        ];
+        for _ in 0..10_000 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let v = (x >> 11) as f64 / (1u64 << 53) as f64;
+            values.push((v - 0.5) * (1u64 << 41) as f64);
+            values.push((v - 0.5) * 8.0);
+        }
+        for v in values {
+            assert_eq!(round_half_away(v), v.round() as i64, "{v}");
+        }
     }
 
     #[test]
