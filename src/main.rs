@@ -272,8 +272,12 @@ struct Table {
 
 impl Table {
     fn row(&self, t: &PhaseTimer, count: Option<u64>) {
+        self.phase_row(&t.phases().last().cloned().unwrap_or_default(), count);
+    }
+
+    /// The row of one phase (name, seconds).
+    fn phase_row(&self, (name, secs): &(String, f64), count: Option<u64>) {
         if self.on {
-            let (name, secs) = t.phases().last().cloned().unwrap_or_default();
             let c = count.map(|c| c.to_string()).unwrap_or_default();
             println!("  {name:<12} {secs:>10.3} {c:>14}");
         }
@@ -524,25 +528,16 @@ fn run(comm: CommRef, o: &Options) -> Result<()> {
             cut_rule: o.cut_rule,
         };
         let mesh = Mesh::build(&tree, &domain, Some(&classes), &opts)?;
-        for (name, secs) in mesh.timings() {
-            timer.record(name, *secs);
+        timer.append(mesh.phase_timer());
+        for phase in mesh.timings() {
             let c = mesh.counts();
-            let count = match name.as_str() {
+            let count = match phase.0.as_str() {
                 "ghost" => Some(c.ghosts),
                 "nodes" => Some(c.independent_nodes + c.face_hanging_nodes + c.edge_hanging_nodes),
                 "connectivity" => Some(c.elements),
                 _ => None,
             };
-            table.row(&timer, count);
-        }
-        for (name, bytes) in mesh.traffic() {
-            timer.record_traffic(name, *bytes);
-        }
-        for (name, secs) in mesh.comm_seconds() {
-            timer.record_wait(name, *secs);
-        }
-        for (name, bytes) in mesh.peaks() {
-            timer.record_peak(name, *bytes);
+            table.phase_row(phase, count);
         }
         if let Some(out) = &o.out {
             timer.time(&*comm, "write", || write_mesh(&*comm, out, &mesh, &[]))?;

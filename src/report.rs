@@ -44,9 +44,10 @@ pub fn trim_heap() {
 /// dynamic trim threshold stops growing at the same 64 MiB).
 pub const TRIM_MIN_FREE: usize = 64 << 20;
 
-/// Wall-clock phases, each reported as the maximum over ranks, and the bytes
-/// this rank exchanged with other ranks in each phase ([`Traffic`]).
-#[derive(Default)]
+/// Wall-clock phases, each reported as the maximum over ranks, and, for this
+/// rank, the bytes exchanged with other ranks ([`Traffic`]), the seconds
+/// inside collectives and the peak memory in each phase.
+#[derive(Clone, Debug, Default)]
 pub struct PhaseTimer {
     phases: Vec<(String, f64)>,
     traffic: Vec<(String, Traffic)>,
@@ -97,6 +98,15 @@ impl PhaseTimer {
     /// Adds a phase timed elsewhere (already the maximum over ranks).
     pub fn record(&mut self, name: &str, secs: f64) {
         self.phases.push((name.to_string(), secs));
+    }
+
+    /// Appends every phase of `other` (time, traffic, time inside
+    /// collectives and peak), in its order.
+    pub fn append(&mut self, other: &PhaseTimer) {
+        self.phases.extend_from_slice(&other.phases);
+        self.traffic.extend_from_slice(&other.traffic);
+        self.waits.extend_from_slice(&other.waits);
+        self.peaks.extend_from_slice(&other.peaks);
     }
 
     /// Adds the bytes this rank exchanged in a phase measured elsewhere.

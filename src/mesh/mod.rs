@@ -152,10 +152,8 @@ pub struct Mesh {
     shared_ranks: Vec<u32>,
     first_global: u64,
     counts: MeshCounts,
-    timings: Vec<(String, f64)>,
-    traffic: Vec<(String, Traffic)>,
-    waits: Vec<(String, f64)>,
-    peaks: Vec<(String, u64)>,
+    /// Time, traffic, time inside collectives and peak memory per phase.
+    timer: PhaseTimer,
 }
 
 impl Mesh {
@@ -235,10 +233,7 @@ impl Mesh {
         mesh.counts.edge_hanging_nodes = sums[2];
         mesh.counts.elements_with_hanging = sums[3];
         mesh.counts.ghosts = sums[4];
-        mesh.timings = timer.phases().to_vec();
-        mesh.traffic = timer.traffic().to_vec();
-        mesh.waits = timer.waits().to_vec();
-        mesh.peaks = timer.peaks().to_vec();
+        mesh.timer = timer;
         Ok(mesh)
     }
 
@@ -265,25 +260,31 @@ impl Mesh {
     /// Seconds per phase (`ghost`, `nodes`, `numbering`, `connectivity`),
     /// each the maximum over ranks.
     pub fn timings(&self) -> &[(String, f64)] {
-        &self.timings
+        self.timer.phases()
     }
 
     /// Bytes this rank exchanged with other ranks in each of the phases of
     /// [`Mesh::timings`] (rank-local, see [`crate::comm::Traffic`]).
     pub fn traffic(&self) -> &[(String, Traffic)] {
-        &self.traffic
+        self.timer.traffic()
     }
 
     /// Seconds this rank spent inside collectives in each of the phases of
     /// [`Mesh::timings`] (rank-local, see [`crate::comm::Comm::comm_seconds`]).
     pub fn comm_seconds(&self) -> &[(String, f64)] {
-        &self.waits
+        self.timer.waits()
     }
 
     /// This rank's peak resident set size (bytes) at the end of each phase
     /// of [`Mesh::build`].
     pub fn peaks(&self) -> &[(String, u64)] {
-        &self.peaks
+        self.timer.peaks()
+    }
+
+    /// Everything [`Mesh::build`] measured, per phase, to merge into a
+    /// caller's timer ([`PhaseTimer::append`]).
+    pub fn phase_timer(&self) -> &PhaseTimer {
+        &self.timer
     }
 
     /// The local elements, in Morton order.
@@ -800,9 +801,6 @@ fn assemble(
             independent_nodes: num.global_count,
             ..MeshCounts::default()
         },
-        timings: Vec::new(),
-        traffic: Vec::new(),
-        waits: Vec::new(),
-        peaks: Vec::new(),
+        timer: PhaseTimer::new(),
     })
 }
