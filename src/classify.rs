@@ -535,6 +535,8 @@ struct Classifier<'a> {
     fixed: Vec<FixedTri>,
     /// Fixed-point units per lattice unit is `2^shift`.
     shift: i32,
+    /// A fixed-point unit in lattice units, `2^-shift`.
+    unit: f64,
     /// How far candidate boxes are grown, in lattice units.
     grow: f64,
     /// Largest absolute coordinate of the triangles and the lattice: scales
@@ -717,6 +719,7 @@ impl<'a> Classifier<'a> {
             bounds,
             fixed,
             shift,
+            unit: 2f64.powi(-shift),
             // Rounding moves a vertex by at most half a unit; four units
             // leave room for the floating-point error of the box test.
             grow: 4.0 / scale,
@@ -836,7 +839,7 @@ impl<'a> Classifier<'a> {
             let h = [half * n[0], half * n[1], half * n[2]];
             // The float plane is within `eta_p` of the fixed-point one.
             let eta_p = if self.shift >= 0 {
-                64.0 * 2f64.powi(-self.shift) * base * base + eta
+                64.0 * self.unit * base * base + eta
             } else {
                 f64::INFINITY
             };
