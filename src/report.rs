@@ -89,17 +89,6 @@ impl PhaseTimer {
         &self.peaks
     }
 
-    /// Adds the peak resident set size at the end of a phase measured
-    /// elsewhere.
-    pub fn record_peak(&mut self, name: &str, bytes: u64) {
-        self.peaks.push((name.to_string(), bytes));
-    }
-
-    /// Adds a phase timed elsewhere (already the maximum over ranks).
-    pub fn record(&mut self, name: &str, secs: f64) {
-        self.phases.push((name.to_string(), secs));
-    }
-
     /// Appends every phase of `other` (time, traffic, time inside
     /// collectives and peak), in its order.
     pub fn append(&mut self, other: &PhaseTimer) {
@@ -107,11 +96,6 @@ impl PhaseTimer {
         self.traffic.extend_from_slice(&other.traffic);
         self.waits.extend_from_slice(&other.waits);
         self.peaks.extend_from_slice(&other.peaks);
-    }
-
-    /// Adds the bytes this rank exchanged in a phase measured elsewhere.
-    pub fn record_traffic(&mut self, name: &str, bytes: Traffic) {
-        self.traffic.push((name.to_string(), bytes));
     }
 
     /// Bytes this rank exchanged in phase `name`, summed over the phases of
@@ -126,12 +110,6 @@ impl PhaseTimer {
     /// This rank's bytes per phase, in the order the phases ran.
     pub fn traffic(&self) -> &[(String, Traffic)] {
         &self.traffic
-    }
-
-    /// Adds the seconds this rank spent inside collectives in a phase
-    /// measured elsewhere.
-    pub fn record_wait(&mut self, name: &str, secs: f64) {
-        self.waits.push((name.to_string(), secs));
     }
 
     /// Seconds this rank spent inside collectives ([`Comm::comm_seconds`])
@@ -265,6 +243,18 @@ mod tests {
         assert!(s.contains("\"a\\\"b\""));
         assert!(s.contains("\"bad\": null"));
         assert!(peak_rss_bytes() > 0);
+    }
+
+    impl PhaseTimer {
+        /// Stands in for a communicator that counts bytes.
+        fn record_traffic(&mut self, name: &str, bytes: Traffic) {
+            self.traffic.push((name.to_string(), bytes));
+        }
+
+        /// Stands in for a communicator that counts its time.
+        fn record_wait(&mut self, name: &str, secs: f64) {
+            self.waits.push((name.to_string(), secs));
+        }
     }
 
     #[test]
