@@ -143,7 +143,6 @@
 use std::borrow::Cow;
 use std::collections::HashMap;
 
-use crate::error::{Error, Result};
 use crate::geometry::diagnostics::{diagnose, weld, SurfaceReport};
 use crate::geometry::intersect::triangle_box_overlap;
 use crate::geometry::winding::{boundary_loops, orient_welded, WindingTree};
@@ -190,115 +189,53 @@ impl LeafClass {
     }
 }
 
-/// Which elements a mesh keeps.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Keep {
-    /// Every leaf.
-    All,
-    /// Leaves inside the surface (cut leaves per the [`CutRule`]).
-    Inside,
-    /// Leaves outside the surface (cut leaves per the [`CutRule`]).
-    Outside,
-}
-
-impl Keep {
-    /// Parses `all`, `inside` or `outside`.
-    pub fn parse(s: &str) -> Result<Keep> {
-        match s {
-            "all" => Ok(Keep::All),
-            "inside" => Ok(Keep::Inside),
-            "outside" => Ok(Keep::Outside),
-            _ => Err(Error::invalid(format!(
-                "unknown keep mode '{s}' (expected all, inside or outside)"
-            ))),
-        }
-    }
-
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Keep::All => "all",
-            Keep::Inside => "inside",
-            Keep::Outside => "outside",
-        }
+crate::named_enum! {
+    /// Which elements a mesh keeps.
+    pub enum Keep: "keep mode" {
+        /// Every leaf.
+        All = "all",
+        /// Leaves inside the surface (cut leaves per the [`CutRule`]).
+        Inside = "inside",
+        /// Leaves outside the surface (cut leaves per the [`CutRule`]).
+        Outside = "outside",
     }
 }
 
-/// What to do with cut leaves (touching the surface) when keeping inside or
-/// outside.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum CutRule {
-    /// Keep a cut leaf on the side of its centre (the default): inside and
-    /// outside then partition the leaves.
-    #[default]
-    Center,
-    /// Keep every cut leaf (the kept part covers its side of the surface).
-    All,
-    /// Drop every cut leaf (the kept part stays off the surface).
-    None,
-}
-
-impl CutRule {
-    /// Parses `center`, `all` or `none`.
-    pub fn parse(s: &str) -> Result<CutRule> {
-        match s {
-            "center" => Ok(CutRule::Center),
-            "all" => Ok(CutRule::All),
-            "none" => Ok(CutRule::None),
-            _ => Err(Error::invalid(format!(
-                "unknown cut rule '{s}' (expected center, all or none)"
-            ))),
-        }
-    }
-
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            CutRule::Center => "center",
-            CutRule::All => "all",
-            CutRule::None => "none",
-        }
+crate::named_enum! {
+    /// What to do with cut leaves (touching the surface) when keeping inside or
+    /// outside.
+    #[derive(Default)]
+    pub enum CutRule: "cut rule" {
+        /// Keep a cut leaf on the side of its centre (the default): inside and
+        /// outside then partition the leaves.
+        #[default]
+        Center = "center",
+        /// Keep every cut leaf (the kept part covers its side of the surface).
+        All = "all",
+        /// Drop every cut leaf (the kept part stays off the surface).
+        None = "none",
     }
 }
 
-/// How the centre of a leaf is found inside or outside the surface.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum InsideRule {
-    /// Parity of surface crossings: exact for one closed surface (of any
-    /// genus or orientation), the exclusive or of several overlapping ones,
-    /// meaningless near holes.
-    Parity,
-    /// Generalized winding number above 1/2, after orienting every
-    /// component: the union of overlapping parts, holes closed smoothly.
-    Winding,
-    /// Parity for one closed, consistently oriented component, winding
-    /// number otherwise (the default).
-    #[default]
-    Auto,
+crate::named_enum! {
+    /// How the centre of a leaf is found inside or outside the surface.
+    #[derive(Default)]
+    pub enum InsideRule: "inside rule" {
+        /// Parity of surface crossings: exact for one closed surface (of any
+        /// genus or orientation), the exclusive or of several overlapping ones,
+        /// meaningless near holes.
+        Parity = "parity",
+        /// Generalized winding number above 1/2, after orienting every
+        /// component: the union of overlapping parts, holes closed smoothly.
+        Winding = "winding",
+        /// Parity for one closed, consistently oriented component, winding
+        /// number otherwise (the default).
+        #[default]
+        Auto = "auto",
+    }
 }
 
 impl InsideRule {
-    /// Parses `parity`, `winding` or `auto`.
-    pub fn parse(s: &str) -> Result<InsideRule> {
-        match s {
-            "parity" => Ok(InsideRule::Parity),
-            "winding" => Ok(InsideRule::Winding),
-            "auto" => Ok(InsideRule::Auto),
-            _ => Err(Error::invalid(format!(
-                "unknown inside rule '{s}' (expected parity, winding or auto)"
-            ))),
-        }
-    }
-
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            InsideRule::Parity => "parity",
-            InsideRule::Winding => "winding",
-            InsideRule::Auto => "auto",
-        }
-    }
-
     /// The rule [`InsideRule::Auto`] picks for a surface with this report,
     /// and why: parity for one closed (no boundary, non-manifold or
     /// inconsistently oriented edge, no degenerate facet), single component,

@@ -22,6 +22,7 @@
 pub mod balance;
 pub mod classify;
 pub mod comm;
+pub mod config;
 pub mod domain;
 pub mod error;
 pub mod ffi;
@@ -30,6 +31,7 @@ pub mod ghost;
 pub mod io;
 pub mod leak;
 pub mod mesh;
+pub mod named;
 pub mod octant;
 pub mod octree;
 pub mod partition;

@@ -74,15 +74,17 @@ pub fn morton_decode(m: u64) -> [u32; 3] {
     [compact3(m), compact3(m >> 1), compact3(m >> 2)]
 }
 
-/// Which contacts between leaves the 2:1 condition applies to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Connectivity {
-    /// Leaves sharing a face (what finite volumes and DG need).
-    Face,
-    /// Leaves sharing a face or an edge (what continuous FEM needs).
-    Edge,
-    /// Leaves sharing a face, an edge or a corner.
-    Corner,
+crate::named_enum! {
+    /// Which contacts between leaves the 2:1 condition applies to.
+    #[derive(PartialOrd, Ord)]
+    pub enum Connectivity: "connectivity" {
+        /// Leaves sharing a face (what finite volumes and DG need).
+        Face = "face",
+        /// Leaves sharing a face or an edge (what continuous FEM needs).
+        Edge = "edge",
+        /// Leaves sharing a face, an edge or a corner.
+        Corner = "corner" | "full",
+    }
 }
 
 impl Connectivity {
@@ -95,27 +97,6 @@ impl Connectivity {
             Connectivity::Corner => 26,
         };
         &NEIGHBOR_OFFSETS[..n]
-    }
-
-    /// Parses `face`, `edge` or `corner` (also `full` for corner).
-    pub fn parse(s: &str) -> Result<Connectivity> {
-        match s {
-            "face" => Ok(Connectivity::Face),
-            "edge" => Ok(Connectivity::Edge),
-            "corner" | "full" => Ok(Connectivity::Corner),
-            _ => Err(Error::invalid(format!(
-                "unknown connectivity '{s}' (expected face, edge or corner)"
-            ))),
-        }
-    }
-
-    /// The lower-case name.
-    pub fn name(self) -> &'static str {
-        match self {
-            Connectivity::Face => "face",
-            Connectivity::Edge => "edge",
-            Connectivity::Corner => "corner",
-        }
     }
 
     /// Whether two boxes that touch in a contact of dimension `dim`

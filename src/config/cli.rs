@@ -1,0 +1,483 @@
+//! The `octmesh` command line: parsed with clap into a [`Config`], on top
+//! of a case file when one is given.
+//!
+//! Options keep the names they always had; each fills one key of the
+//! configuration ([`OPTIONS`]), so an error about a key names the option
+//! when it came from the command line, and the file, line and key when it
+//! came from a case file.
+
+use std::path::PathBuf;
+
+use clap::error::{ContextKind, ContextValue, ErrorKind as ClapKind};
+use clap::{Args, Parser, Subcommand};
+
+use super::case::CaseFile;
+use super::{Balance, Command, Config, ConfigError};
+use crate::classify::{CutRule, InsideRule, Keep};
+use crate::error::{Error, Result};
+
+/// The option that fills each key.
+pub const OPTIONS: &[(&str, &str)] = &[
+    ("surface.file", "the surface argument"),
+    ("surface.drop_degenerate", "--drop-degenerate"),
+    ("surface.drop_duplicates", "--drop-duplicates"),
+    ("domain.fit", "--fit"),
+    ("domain.cube", "--domain"),
+    ("octree.level", "--level"),
+    ("octree.balance", "--balance"),
+    ("octree.max_octants", "--max-octants"),
+    ("classify.inside", "--inside"),
+    ("leak.inside_point", "--inside-point"),
+    ("leak.path", "--leak-path"),
+    ("mesh.keep", "--keep"),
+    ("mesh.cut_rule", "--cut-rule"),
+    ("output.quiet", "--quiet"),
+    ("output.stats", "--stats"),
+    ("output.leaves", "--write-leaves"),
+    ("output.refined_leaves", "--write-refined"),
+    ("output.vtu", "--out"),
+];
+
+/// The option of a key.
+pub fn option_of(key: &str) -> &'static str {
+    OPTIONS
+        .iter()
+        .find(|(k, _)| *k == key)
+        .map_or("an option", |(_, o)| o)
+}
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "octmesh",
+    version,
+    about = "Parallel 2:1-balanced linear octrees and hexahedral meshes from STL surfaces",
+    long_about = "Parallel 2:1-balanced linear octrees and hexahedral meshes from STL \
+                  surfaces. Run it directly or under mpirun; every rank takes part.",
+    after_help = "Lattice units: the root cube is [0, 2^19]^3; a leaf at level l has side \
+                  2^(19-l). User units are the STL file's."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: CliCommand,
+}
+
+#[derive(Subcommand, Debug)]
+enum CliCommand {
+    /// Builds the surface-refined linear octree, partitions it over the MPI
+    /// ranks and 2:1-balances it.
+    Octree(OctreeArgs),
+    /// Builds the octree, then the trilinear hexahedral mesh (ghost layer,
+    /// independent and hanging nodes, global numbering) of the kept leaves.
+    Mesh(MeshArgs),
+    /// Prints the surface diagnostics (welded vertices, boundary and
+    /// non-manifold edges, components, degenerate and duplicate facets,
+    /// genus, volume) and the inside rule auto would pick.
+    Check(CheckArgs),
+}
+
+/// The options of `octree`, also taken by `mesh`.
+#[derive(Args, Debug)]
+struct OctreeArgs {
+    /// An STL file (ASCII or binary), the built-in `sphere` or `torus`, or
+    /// a case file (`.toml`) whose settings the options below override.
+    input: String,
+    /// Level of the leaves touching the surface (0 to 18) [case: octree.level]
+    #[arg(long, value_name = "L", value_parser = parse_level)]
+    level: Option<u8>,
+    /// 2:1 balance: face, edge, corner or none [default: corner]
+    #[arg(long, value_name = "KIND", value_parser = Balance::parse)]
+    balance: Option<Balance>,
+    /// Longest side of the surface's bounding box as a fraction of the cube
+    /// side, 0 < F <= 1 [default: 0.7]
+    #[arg(long, value_name = "F", value_parser = parse_finite)]
+    fit: Option<f64>,
+    /// Explicit cube instead of --fit: lowest corner X,Y,Z and side S, user
+    /// units
+    #[arg(long, value_name = "X,Y,Z,S", value_parser = parse_numbers::<4>)]
+    domain: Option<[f64; 4]>,
+    /// Stop with an error instead of building more than N leaves (refinement
+    /// and balance); refused before refining when the estimate is above 2N
+    #[arg(long, value_name = "N", value_parser = parse_count)]
+    max_octants: Option<u64>,
+    /// Write counts, timings (seconds, max over ranks), peak memory (bytes,
+    /// max over ranks) and bytes exchanged per phase as JSON
+    #[arg(long, value_name = "FILE.json")]
+    stats: Option<PathBuf>,
+    /// Write the balanced leaves, one `x y z level` per line in lattice units
+    /// (.bin: binary)
+    #[arg(long, value_name = "FILE")]
+    write_leaves: Option<PathBuf>,
+    /// Write the leaves before balance, same format
+    #[arg(long, value_name = "FILE")]
+    write_refined: Option<PathBuf>,
+    /// Remove zero-area facets right after loading
+    #[arg(long)]
+    drop_degenerate: bool,
+    /// Remove facets with the same (welded) vertices as an earlier facet
+    #[arg(long)]
+    drop_duplicates: bool,
+    /// How a leaf's centre is found inside: parity (ray parity), winding
+    /// (generalized winding number above 1/2: holes, overlapping parts,
+    /// flipped facets) or auto (parity for one closed, consistently oriented
+    /// component, else winding; the default for mesh). With octree, also
+    /// classifies the leaves and counts them
+    #[arg(long, value_name = "RULE", value_parser = InsideRule::parse)]
+    inside: Option<InsideRule>,
+    /// A point inside the body (user units): after balance, fail with a leak
+    /// report if the region outside the surface reaches it
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_numbers::<3>)]
+    inside_point: Option<[f64; 3]>,
+    /// With --inside-point, write a leak's path (.vtk: legacy VTK lines; any
+    /// other name: CSV step,x,y,z,size,level)
+    #[arg(long, value_name = "FILE")]
+    leak_path: Option<PathBuf>,
+    /// Print nothing but errors
+    #[arg(long)]
+    quiet: bool,
+    /// Print the case file (TOML) equivalent to this command line and stop
+    #[arg(long)]
+    print_case: bool,
+}
+
+/// The options of `mesh`.
+#[derive(Args, Debug)]
+struct MeshArgs {
+    #[command(flatten)]
+    octree: OctreeArgs,
+    /// Which leaves become elements: all, inside (solid) or outside (fluid)
+    /// [default: all]
+    #[arg(long, value_name = "WHICH", value_parser = Keep::parse)]
+    keep: Option<Keep>,
+    /// For inside or outside: leaves touching the surface are kept when their
+    /// centre is on the kept side (center, the default), always (all) or
+    /// never (none)
+    #[arg(long, value_name = "RULE", value_parser = CutRule::parse)]
+    cut_rule: Option<CutRule>,
+    /// Write one binary VTU per rank and a PVTU (cell data level, rank,
+    /// class; point data global_id, hanging)
+    #[arg(long, value_name = "NAME.pvtu")]
+    out: Option<PathBuf>,
+}
+
+/// The options of `check`.
+#[derive(Args, Debug)]
+struct CheckArgs {
+    /// An STL file or the built-in `sphere` or `torus`.
+    surface: String,
+    /// Also write the diagnostics as JSON
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    /// Print nothing but errors
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// What a command line asks for.
+#[derive(Clone, Debug)]
+pub enum Invocation {
+    /// Build an octree or a mesh with this configuration.
+    Run {
+        /// What to build.
+        command: Command,
+        /// Every setting.
+        config: Config,
+        /// Print the case file instead of running.
+        print_case: bool,
+    },
+    /// Diagnose a surface.
+    Check {
+        /// The surface.
+        surface: String,
+        /// JSON output.
+        json: Option<PathBuf>,
+        /// Print nothing but errors.
+        quiet: bool,
+    },
+    /// Print this text (help or version) and succeed.
+    Print(String),
+}
+
+/// Parses the arguments after the program name. Errors are
+/// [`crate::ErrorKind::InvalidArgument`] and name the option (or the case
+/// file's line and key).
+pub fn parse(args: &[String]) -> Result<Invocation> {
+    let argv = std::iter::once("octmesh".to_string()).chain(args.iter().cloned());
+    let cli = match Cli::try_parse_from(argv) {
+        Ok(c) => c,
+        Err(e) => return clap_error(e),
+    };
+    let (command, octree, mesh) = match cli.command {
+        CliCommand::Check(c) => {
+            return Ok(Invocation::Check {
+                surface: c.surface,
+                json: c.json,
+                quiet: c.quiet,
+            })
+        }
+        CliCommand::Octree(o) => (Command::Octree, o, None),
+        CliCommand::Mesh(m) => (Command::Mesh, m.octree, Some((m.keep, m.cut_rule, m.out))),
+    };
+    let case = if octree.input.ends_with(".toml") {
+        Some(CaseFile::read(octree.input.as_ref())?)
+    } else {
+        None
+    };
+    let mut config = case.as_ref().map(|c| c.config.clone()).unwrap_or_default();
+    let mut given = Vec::new();
+    let mut set = |key: &'static str, present: bool| {
+        if present {
+            given.push(key);
+        }
+        present
+    };
+    if case.is_none() {
+        config.surface.file = octree.input.clone();
+        set("surface.file", true);
+    }
+    let o = &octree;
+    if set("octree.level", o.level.is_some()) {
+        config.octree.level = o.level;
+    }
+    if let Some(b) = o.balance {
+        set("octree.balance", true);
+        config.octree.balance = b;
+    }
+    if o.fit.is_some() && o.domain.is_some() {
+        return Err(Error::invalid(
+            "--fit and --domain exclude each other: give one",
+        ));
+    }
+    if set("domain.fit", o.fit.is_some()) {
+        // The command line's cube choice replaces the case file's.
+        config.domain = super::DomainConfig {
+            fit: o.fit,
+            cube: None,
+        };
+    }
+    if set("domain.cube", o.domain.is_some()) {
+        config.domain = super::DomainConfig {
+            fit: None,
+            cube: o.domain,
+        };
+    }
+    if set("octree.max_octants", o.max_octants.is_some()) {
+        config.octree.max_octants = o.max_octants;
+    }
+    for (key, flag, field) in [
+        (
+            "surface.drop_degenerate",
+            o.drop_degenerate,
+            &mut config.surface.drop_degenerate,
+        ),
+        (
+            "surface.drop_duplicates",
+            o.drop_duplicates,
+            &mut config.surface.drop_duplicates,
+        ),
+        ("output.quiet", o.quiet, &mut config.output.quiet),
+    ] {
+        if set(key, flag) {
+            *field = true;
+        }
+    }
+    if set("classify.inside", o.inside.is_some()) {
+        config.classify.inside = o.inside;
+    }
+    if set("leak.inside_point", o.inside_point.is_some()) {
+        config.leak.inside_point = o.inside_point;
+    }
+    for (key, value, field) in [
+        ("leak.path", &o.leak_path, &mut config.leak.path),
+        ("output.stats", &o.stats, &mut config.output.stats),
+        ("output.leaves", &o.write_leaves, &mut config.output.leaves),
+        (
+            "output.refined_leaves",
+            &o.write_refined,
+            &mut config.output.refined_leaves,
+        ),
+    ] {
+        if set(key, value.is_some()) {
+            *field = value.clone();
+        }
+    }
+    if let Some((keep, cut_rule, out)) = mesh {
+        if let Some(k) = keep {
+            set("mesh.keep", true);
+            config.mesh.keep = k;
+        }
+        if let Some(r) = cut_rule {
+            set("mesh.cut_rule", true);
+            config.mesh.cut_rule = r;
+        }
+        if set("output.vtu", out.is_some()) {
+            config.output.vtu = out;
+        }
+    }
+    let label = |key: &str| match &case {
+        Some(c) if !given.contains(&key) => c.label(key),
+        _ => option_of(key).to_string(),
+    };
+    config
+        .validate(command)
+        .map_err(|e: ConfigError| Error::invalid(e.render(label)))?;
+    Ok(Invocation::Run {
+        command,
+        config,
+        print_case: octree.print_case,
+    })
+}
+
+/// A clap error in octmesh's words: help and version are printed, a value
+/// that does not parse names its option, the rest keeps clap's text (with
+/// its "a similar argument exists" tips).
+fn clap_error(e: clap::Error) -> Result<Invocation> {
+    match e.kind() {
+        ClapKind::DisplayHelp | ClapKind::DisplayVersion => {
+            return Ok(Invocation::Print(e.render().to_string()))
+        }
+        ClapKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            return Err(Error::invalid(format!("usage: {}", e.render())))
+        }
+        _ => {}
+    }
+    let arg = match e.get(ContextKind::InvalidArg) {
+        Some(ContextValue::String(a)) => a.split([' ', '=']).next().map(str::to_string),
+        _ => None,
+    };
+    let source = std::error::Error::source(&e).map(|s| s.to_string());
+    let message = match (e.kind(), arg, source) {
+        (ClapKind::ValueValidation, Some(arg), Some(why)) => {
+            let sep = if why.starts_with("unknown") {
+                ": "
+            } else {
+                " "
+            };
+            format!("{arg}{sep}{why}")
+        }
+        _ => {
+            let text = e.render().to_string();
+            let text = text.strip_prefix("error: ").unwrap_or(&text);
+            text.trim_end().to_string()
+        }
+    };
+    Err(Error::invalid(message))
+}
+
+fn parse_level(s: &str) -> std::result::Result<u8, String> {
+    let l: u32 = s
+        .parse()
+        .map_err(|_| format!("expects an integer, got '{s}'"))?;
+    // Out-of-range levels are reported by validation, with the maximum.
+    Ok(l.min(u8::MAX as u32) as u8)
+}
+
+fn parse_count(s: &str) -> std::result::Result<u64, String> {
+    s.parse()
+        .map_err(|_| format!("expects a non-negative integer, got '{s}'"))
+}
+
+fn parse_finite(s: &str) -> std::result::Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() => Ok(x),
+        _ => Err(format!("expects a number, got '{s}'")),
+    }
+}
+
+/// `N` finite comma-separated numbers.
+fn parse_numbers<const N: usize>(s: &str) -> std::result::Result<[f64; N], String> {
+    let bad = || format!("expects {N} comma-separated numbers, got '{s}'");
+    let v: Vec<f64> = s
+        .split(',')
+        .map(parse_finite)
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| bad())?;
+    v.try_into().map_err(|_| bad())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(args: &[&str]) -> Result<Config> {
+        let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+        match parse(&args)? {
+            Invocation::Run { config, .. } => Ok(config),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    fn fails(args: &[&str], needle: &str) {
+        let e = run(args).unwrap_err();
+        assert!(e.message().contains(needle), "{args:?}: {}", e.message());
+    }
+
+    #[test]
+    fn options_fill_the_config() {
+        let c = run(&[
+            "mesh",
+            "bunny.stl",
+            "--level",
+            "7",
+            "--keep",
+            "inside",
+            "--fit",
+            "0.5",
+            "--balance",
+            "edge",
+            "--inside",
+            "winding",
+            "--quiet",
+            "--out",
+            "m.pvtu",
+        ])
+        .unwrap();
+        assert_eq!(c.surface.file, "bunny.stl");
+        assert_eq!(c.octree.level, Some(7));
+        assert_eq!(c.octree.balance, Balance::Edge);
+        assert_eq!(c.domain.fit, Some(0.5));
+        assert_eq!(c.mesh.keep, Keep::Inside);
+        assert_eq!(c.classify.inside, Some(InsideRule::Winding));
+        assert!(c.output.quiet);
+        assert_eq!(c.output.vtu, Some("m.pvtu".into()));
+    }
+
+    #[test]
+    fn errors_name_the_option() {
+        fails(
+            &["octree", "sphere", "--level", "x"],
+            "--level expects an integer",
+        );
+        fails(
+            &["octree", "sphere", "--level", "19"],
+            "above the maximum level 18",
+        );
+        fails(
+            &["octree", "sphere", "--level", "4", "--fit", "2"],
+            "--fit must be in (0, 1]",
+        );
+        fails(
+            &["octree", "sphere", "--level", "4", "--balance", "diagonal"],
+            "--balance: unknown connectivity 'diagonal'",
+        );
+        fails(&["octree", "sphere"], "--level is required");
+        fails(&["octree", "sphere", "--levl", "3"], "--level");
+        fails(
+            &[
+                "octree", "sphere", "--level", "3", "--fit", "0.5", "--domain", "0,0,0,1",
+            ],
+            "--fit and --domain exclude each other",
+        );
+        fails(
+            &["octree", "sphere", "--level", "3", "--leak-path", "x.vtk"],
+            "--leak-path needs --inside-point",
+        );
+        fails(
+            &["octree", "sphere", "--level", "3", "--keep", "inside"],
+            "--keep",
+        );
+        fails(
+            &["mesh", "sphere", "--level", "3", "--out", "m.vtu"],
+            "ending in .pvtu",
+        );
+    }
+}

@@ -1,0 +1,478 @@
+//! The one configuration of a meshing run.
+//!
+//! [`Config`] holds every choice of the pipeline, grouped by stage. Three
+//! front ends fill it and nothing else decides a default:
+//!
+//! - the command line ([`cli`], `octmesh octree|mesh ...`),
+//! - a TOML case file ([`case`], `octmesh mesh case.toml`), whose tables and
+//!   keys are the fields below (`octmesh mesh ... --print-case` prints the
+//!   case file of a command line),
+//! - the C API's `octmesh_options_t` and setters.
+//!
+//! A case file, with every key at its default except the surface and level:
+//!
+//! ```toml
+//! [surface]
+//! file = "bunny.stl"        # an STL file, or the built-in "sphere" or "torus"
+//! drop_degenerate = false
+//! drop_duplicates = false
+//!
+//! [domain]
+//! fit = 0.7                 # or: cube = [x, y, z, side] (user units)
+//!
+//! [octree]
+//! level = 9
+//! balance = "corner"        # none | face | edge | corner
+//! # max_octants = 100000000
+//!
+//! [classify]
+//! # inside = "auto"         # parity | winding | auto (meshes: auto)
+//!
+//! [leak]
+//! # inside_point = [0.0, 0.0, 0.0]
+//! # path = "leak.vtk"
+//!
+//! [mesh]
+//! keep = "all"              # all | inside | outside
+//! cut_rule = "center"       # center | all | none
+//!
+//! [output]
+//! quiet = false
+//! # stats = "stats.json"
+//! # leaves = "leaves.bin"
+//! # refined_leaves = "refined.bin"
+//! # vtu = "mesh.pvtu"
+//! ```
+//!
+//! [`Config::validate`] checks a filled configuration for a command and
+//! reports the first problem as a [`ConfigError`] naming the key, which each
+//! front end turns into its own words (the option, or the file, line and
+//! key).
+
+pub mod case;
+pub mod cli;
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use crate::classify::{CutRule, InsideRule, Keep};
+use crate::domain::{Domain, DEFAULT_FIT};
+use crate::octant::{Connectivity, MAX_LEVEL};
+
+crate::named_enum! {
+    /// What a run builds.
+    pub enum Command: "command" {
+        /// The balanced octree (and optionally its leaf classes).
+        Octree = "octree",
+        /// The octree, then the hexahedral mesh of the kept leaves.
+        Mesh = "mesh",
+    }
+}
+
+crate::named_enum! {
+    /// The 2:1 balance of the octree: none, or the contacts it applies to.
+    #[derive(Default)]
+    pub enum Balance: "connectivity" {
+        /// No balance: the leaves stay as refinement left them.
+        None = "none",
+        /// Leaves sharing a face.
+        Face = "face",
+        /// Leaves sharing a face or an edge (enough for meshing).
+        Edge = "edge",
+        /// Leaves sharing a face, an edge or a corner (the default).
+        #[default]
+        Corner = "corner" | "full",
+    }
+}
+
+impl Balance {
+    /// The connectivity balanced for, or `None` without balance.
+    pub fn connectivity(self) -> Option<Connectivity> {
+        match self {
+            Balance::None => None,
+            Balance::Face => Some(Connectivity::Face),
+            Balance::Edge => Some(Connectivity::Edge),
+            Balance::Corner => Some(Connectivity::Corner),
+        }
+    }
+}
+
+/// Every choice of a run. `Config::default()` holds the defaults, and only
+/// it does.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// The surface and its clean-up.
+    pub surface: SurfaceConfig,
+    /// The root cube.
+    pub domain: DomainConfig,
+    /// Refinement, balance and limits.
+    pub octree: OctreeConfig,
+    /// Inside/outside classification of the leaves.
+    pub classify: ClassifyConfig,
+    /// The leak check of a fluid region.
+    pub leak: LeakConfig,
+    /// Which leaves become elements.
+    pub mesh: MeshConfig,
+    /// Files written and what is printed.
+    pub output: OutputConfig,
+}
+
+/// `[surface]`: what is meshed.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SurfaceConfig {
+    /// An STL file (ASCII or binary), or the built-in `sphere` (radius 1 at
+    /// the origin, 20,480 triangles) or `torus`.
+    pub file: String,
+    /// Remove zero-area facets right after loading.
+    pub drop_degenerate: bool,
+    /// Remove facets with the same (welded) vertices as an earlier facet.
+    pub drop_duplicates: bool,
+}
+
+/// `[domain]`: the root cube, fitted around the surface or given.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DomainConfig {
+    /// Longest side of the surface's bounding box as a fraction of the cube
+    /// side, in (0, 1]; the cube is centred on the box. Unset: 0.7, unless
+    /// `cube` is given.
+    pub fit: Option<f64>,
+    /// An explicit cube `[x, y, z, side]`: lowest corner and side, user
+    /// units. Excludes `fit`.
+    pub cube: Option<[f64; 4]>,
+}
+
+impl DomainConfig {
+    /// The fit used when no cube is given.
+    pub fn fit(&self) -> f64 {
+        self.fit.unwrap_or(DEFAULT_FIT)
+    }
+
+    /// The root cube for a surface with bounding box `min..max`.
+    pub fn resolve(&self, min: [f64; 3], max: [f64; 3]) -> crate::Result<Domain> {
+        match self.cube {
+            Some([x, y, z, s]) => Domain::cube([x, y, z], s),
+            None => Domain::around(min, max, self.fit()),
+        }
+    }
+}
+
+/// `[octree]`: refinement and balance.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OctreeConfig {
+    /// Level of the leaves touching the surface, 0 to 18 (required). A
+    /// leaf at level `l` has side `2^-l` of the cube.
+    pub level: Option<u8>,
+    /// 2:1 balance (default corner).
+    pub balance: Balance,
+    /// Stop with an error instead of building more leaves than this, over
+    /// all ranks (refinement and balance); refused before refining when the
+    /// estimate is above twice the limit. Unset: no limit.
+    pub max_octants: Option<u64>,
+}
+
+impl OctreeConfig {
+    /// The octant limit, [`crate::refine::NO_LIMIT`] when unset.
+    pub fn limit(&self) -> u64 {
+        self.max_octants.unwrap_or(crate::refine::NO_LIMIT)
+    }
+}
+
+/// `[classify]`: how leaf centres are found inside the surface.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ClassifyConfig {
+    /// `parity`, `winding` or `auto`. Meshes always classify (unset: auto);
+    /// octrees classify and count the leaves per class only when it is set.
+    pub inside: Option<InsideRule>,
+}
+
+/// `[leak]`: does the outside region reach a point inside the body?
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LeakConfig {
+    /// A point inside the body, user units: after balance, the run stops
+    /// with a leak report if the region outside the surface reaches it
+    /// through leaves touching no triangle.
+    pub inside_point: Option<[f64; 3]>,
+    /// Where to write a leak's path: `.vtk` for legacy VTK lines, any other
+    /// name for CSV `step,x,y,z,size,level`. Needs `inside_point`.
+    pub path: Option<PathBuf>,
+}
+
+/// `[mesh]`: which leaves become elements.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MeshConfig {
+    /// `all`, `inside` (solid) or `outside` (fluid).
+    pub keep: Keep,
+    /// For inside or outside: leaves touching the surface are kept when
+    /// their centre is on the kept side (`center`), always (`all`) or never
+    /// (`none`).
+    pub cut_rule: CutRule,
+}
+
+impl Default for MeshConfig {
+    fn default() -> MeshConfig {
+        MeshConfig {
+            keep: Keep::All,
+            cut_rule: CutRule::default(),
+        }
+    }
+}
+
+/// `[output]`: files and printing.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputConfig {
+    /// Print nothing but errors.
+    pub quiet: bool,
+    /// JSON statistics: counts, timings (seconds, max over ranks), peak
+    /// memory, bytes exchanged per phase.
+    pub stats: Option<PathBuf>,
+    /// The balanced leaves, one `x y z level` per line in lattice units
+    /// (`.bin`: binary).
+    pub leaves: Option<PathBuf>,
+    /// The leaves before balance, same format.
+    pub refined_leaves: Option<PathBuf>,
+    /// The mesh: one binary VTU per rank and a PVTU (a name ending in
+    /// `.pvtu`).
+    pub vtu: Option<PathBuf>,
+}
+
+/// A problem with one key of a configuration. `message` follows the key's
+/// name ("must be ...", "is required") or, when it starts with "unknown",
+/// stands after a colon; `{table.key}` in it names another key.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ConfigError {
+    /// The key, `table.field` (e.g. `domain.fit`).
+    pub key: &'static str,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl ConfigError {
+    fn new(key: &'static str, message: impl Into<String>) -> ConfigError {
+        ConfigError {
+            key,
+            message: message.into(),
+        }
+    }
+
+    /// The message with keys named by `label` (an option, or a case
+    /// file's key).
+    pub fn render(&self, label: impl Fn(&str) -> String) -> String {
+        let mut text = self.message.clone();
+        for key in KEYS {
+            text = text.replace(&format!("{{{key}}}"), &label(key));
+        }
+        let sep = if text.starts_with("unknown") {
+            ": "
+        } else {
+            " "
+        };
+        format!("{}{sep}{text}", label(self.key))
+    }
+}
+
+/// Every key of a configuration, `table.field`.
+pub const KEYS: &[&str] = &[
+    "surface.file",
+    "surface.drop_degenerate",
+    "surface.drop_duplicates",
+    "domain.fit",
+    "domain.cube",
+    "octree.level",
+    "octree.balance",
+    "octree.max_octants",
+    "classify.inside",
+    "leak.inside_point",
+    "leak.path",
+    "mesh.keep",
+    "mesh.cut_rule",
+    "output.quiet",
+    "output.stats",
+    "output.leaves",
+    "output.refined_leaves",
+    "output.vtu",
+];
+
+impl Config {
+    /// Checks the configuration for `command`: required keys, ranges,
+    /// consistency. Rank-local (every rank checks the same values).
+    pub fn validate(&self, command: Command) -> Result<(), ConfigError> {
+        if self.surface.file.is_empty() {
+            return Err(ConfigError::new(
+                "surface.file",
+                "is required: no surface given",
+            ));
+        }
+        let Some(level) = self.octree.level else {
+            return Err(ConfigError::new("octree.level", "is required"));
+        };
+        if level > MAX_LEVEL {
+            return Err(ConfigError::new(
+                "octree.level",
+                format!("is {level}: above the maximum level {MAX_LEVEL}"),
+            ));
+        }
+        if let Some(fit) = self.domain.fit {
+            if self.domain.cube.is_some() {
+                return Err(ConfigError::new(
+                    "domain.fit",
+                    "and {domain.cube} exclude each other: give one",
+                ));
+            }
+            if !(fit > 0.0 && fit <= 1.0) {
+                return Err(ConfigError::new(
+                    "domain.fit",
+                    format!("must be in (0, 1], got {fit}"),
+                ));
+            }
+        }
+        if let Some([x, y, z, s]) = self.domain.cube {
+            if let Err(e) = Domain::cube([x, y, z], s) {
+                return Err(ConfigError::new("domain.cube", format!("is invalid: {e}")));
+            }
+        }
+        if let Some(p) = self.leak.inside_point {
+            if p.iter().any(|c| !c.is_finite()) {
+                return Err(ConfigError::new(
+                    "leak.inside_point",
+                    format!("must be finite, got {p:?}"),
+                ));
+            }
+        } else if self.leak.path.is_some() {
+            return Err(ConfigError::new("leak.path", "needs {leak.inside_point}"));
+        }
+        if command == Command::Mesh {
+            if !matches!(self.octree.balance, Balance::Edge | Balance::Corner) {
+                return Err(ConfigError::new(
+                    "octree.balance",
+                    format!(
+                        "must be edge or corner for meshing (got {}): with face balance alone a \
+                         hanging node may depend on another hanging node",
+                        self.octree.balance
+                    ),
+                ));
+            }
+            if let Some(v) = &self.output.vtu {
+                if v.extension().is_none_or(|e| e != "pvtu") {
+                    return Err(ConfigError::new(
+                        "output.vtu",
+                        format!("expects a file name ending in .pvtu, got '{}'", v.display()),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The inside rule the run classifies with: the configured one, `auto`
+    /// for meshes when unset, none for octrees when unset.
+    pub fn inside_rule(&self, command: Command) -> Option<InsideRule> {
+        match command {
+            Command::Mesh => Some(self.classify.inside.unwrap_or_default()),
+            Command::Octree => self.classify.inside,
+        }
+    }
+
+    /// The configuration with every default that applies made explicit
+    /// (`domain.fit` when no cube is given), as `--print-case` shows it.
+    pub fn resolved(&self) -> Config {
+        let mut c = self.clone();
+        if c.domain.cube.is_none() {
+            c.domain.fit = Some(c.domain.fit());
+        }
+        c
+    }
+
+    /// The TOML case file of this configuration.
+    pub fn to_toml(&self) -> String {
+        // Serialising plain data to TOML cannot fail: no maps with
+        // non-string keys, no values TOML lacks.
+        toml::to_string(self).unwrap_or_default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sphere(level: u8) -> Config {
+        let mut c = Config::default();
+        c.surface.file = "sphere".into();
+        c.octree.level = Some(level);
+        c
+    }
+
+    #[test]
+    fn validation_names_the_key() {
+        assert!(sphere(5).validate(Command::Mesh).is_ok());
+        let e = sphere(19).validate(Command::Octree).unwrap_err();
+        assert_eq!(e.key, "octree.level");
+        assert!(e
+            .render(|k| k.to_string())
+            .contains("above the maximum level 18"));
+        let mut c = sphere(4);
+        c.domain.fit = Some(0.5);
+        c.domain.cube = Some([0.0, 0.0, 0.0, 1.0]);
+        let e = c.validate(Command::Octree).unwrap_err();
+        let text = e.render(|k| format!("<{k}>"));
+        assert_eq!(
+            text,
+            "<domain.fit> and <domain.cube> exclude each other: give one"
+        );
+        let mut c = sphere(4);
+        c.octree.balance = Balance::Face;
+        assert!(c.validate(Command::Octree).is_ok());
+        let e = c.validate(Command::Mesh).unwrap_err();
+        assert!(e.message.contains("edge or corner"), "{e:?}");
+        let mut c = sphere(4);
+        c.leak.path = Some("x.vtk".into());
+        let e = c.validate(Command::Octree).unwrap_err();
+        assert_eq!(
+            e.render(|k| k.to_string()),
+            "leak.path needs leak.inside_point"
+        );
+    }
+
+    #[test]
+    fn toml_round_trip_keeps_every_field() {
+        let mut c = sphere(7);
+        c.domain.cube = Some([-2.0, -2.0, -2.0, 4.0]);
+        c.octree.balance = Balance::Edge;
+        c.octree.max_octants = Some(123_456);
+        c.classify.inside = Some(InsideRule::Winding);
+        c.leak.inside_point = Some([0.0, 0.1, 0.2]);
+        c.leak.path = Some("leak.csv".into());
+        c.mesh.keep = Keep::Outside;
+        c.mesh.cut_rule = CutRule::None;
+        c.output.stats = Some("s.json".into());
+        c.output.vtu = Some("m.pvtu".into());
+        c.surface.drop_duplicates = true;
+        let text = c.to_toml();
+        let back: Config = toml::from_str(&text).unwrap();
+        assert_eq!(back, c, "{text}");
+        // Every key of KEYS is a field, and the other way round.
+        let full: toml::Table = toml::from_str(&c.resolved().to_toml()).unwrap();
+        let n: usize = full
+            .values()
+            .filter_map(|t| t.as_table())
+            .map(|t| t.len())
+            .sum();
+        assert!(n <= KEYS.len());
+        for (table, fields) in &full {
+            for field in fields.as_table().unwrap().keys() {
+                assert!(
+                    KEYS.contains(&format!("{table}.{field}").as_str()),
+                    "{table}.{field}"
+                );
+            }
+        }
+    }
+}
