@@ -35,6 +35,7 @@ pub mod named;
 pub mod octant;
 pub mod octree;
 pub mod partition;
+pub mod pipeline;
 pub mod refine;
 pub mod report;
 pub mod sort;

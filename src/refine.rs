@@ -127,7 +127,8 @@ impl SurfaceIndex {
     }
 }
 
-fn check_level(level: u8) -> Result<()> {
+/// Fails unless `level` is at most [`MAX_LEVEL`].
+pub fn check_level(level: u8) -> Result<()> {
     if level > MAX_LEVEL {
         return Err(Error::invalid(format!(
             "level {level} is above the maximum level {MAX_LEVEL}"

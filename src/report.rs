@@ -1,5 +1,5 @@
-//! Timings, memory and statistics for people running octmesh: a phase table
-//! like the seed paper's, and a JSON record for scripts.
+//! Timings and memory per phase, for the phase table and the statistics
+//! ([`crate::pipeline::Stats`]).
 
 use std::time::Instant;
 
@@ -128,11 +128,11 @@ impl PhaseTimer {
 
     /// Seconds of phase `name` (0 if it did not run).
     pub fn get(&self, name: &str) -> f64 {
+        // A fold from +0.0: an empty f64 sum is -0.0.
         self.phases
             .iter()
             .filter(|p| p.0 == name)
-            .map(|p| p.1)
-            .sum()
+            .fold(0.0, |acc, p| acc + p.1)
     }
 
     /// Phases in the order they ran.
@@ -141,107 +141,12 @@ impl PhaseTimer {
     }
 }
 
-/// A small ordered JSON object writer (keys in insertion order).
-#[derive(Default)]
-pub struct JsonObject {
-    fields: Vec<(String, String)>,
-}
-
-impl JsonObject {
-    /// An empty object.
-    pub fn new() -> JsonObject {
-        JsonObject::default()
-    }
-
-    /// Adds a number (non-finite values become `null`).
-    pub fn num(&mut self, key: &str, v: f64) -> &mut Self {
-        let s = if v.is_finite() {
-            format!("{v}")
-        } else {
-            "null".into()
-        };
-        self.fields.push((key.into(), s));
-        self
-    }
-
-    /// Adds an integer.
-    pub fn int(&mut self, key: &str, v: u64) -> &mut Self {
-        self.fields.push((key.into(), v.to_string()));
-        self
-    }
-
-    /// Adds a boolean.
-    pub fn bool(&mut self, key: &str, v: bool) -> &mut Self {
-        self.fields.push((key.into(), v.to_string()));
-        self
-    }
-
-    /// Adds a string.
-    pub fn str(&mut self, key: &str, v: &str) -> &mut Self {
-        self.fields.push((key.into(), quote(v)));
-        self
-    }
-
-    /// Adds a nested object.
-    pub fn obj(&mut self, key: &str, v: &JsonObject) -> &mut Self {
-        self.fields.push((key.into(), v.render(1)));
-        self
-    }
-
-    /// Appends all fields of `other`.
-    pub fn merge(&mut self, other: &JsonObject) -> &mut Self {
-        self.fields.extend(other.fields.iter().cloned());
-        self
-    }
-
-    fn render(&self, depth: usize) -> String {
-        let pad = "  ".repeat(depth + 1);
-        let body: Vec<String> = self
-            .fields
-            .iter()
-            .map(|(k, v)| format!("{pad}{}: {v}", quote(k)))
-            .collect();
-        format!("{{\n{}\n{}}}", body.join(",\n"), "  ".repeat(depth))
-    }
-
-    /// The JSON text.
-    pub fn to_json(&self) -> String {
-        self.render(0) + "\n"
-    }
-}
-
-fn quote(s: &str) -> String {
-    let mut o = String::with_capacity(s.len() + 2);
-    o.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => o.push_str("\\\""),
-            '\\' => o.push_str("\\\\"),
-            c if (c as u32) < 0x20 => o.push_str(&format!("\\u{:04x}", c as u32)),
-            c => o.push(c),
-        }
-    }
-    o.push('"');
-    o
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn json_is_well_formed() {
-        let mut inner = JsonObject::new();
-        inner.num("read", 0.5);
-        let mut o = JsonObject::new();
-        o.int("ranks", 2)
-            .str("name", "a\"b")
-            .obj("timings", &inner)
-            .num("bad", f64::NAN);
-        let s = o.to_json();
-        assert!(s.contains("\"ranks\": 2"));
-        assert!(s.contains("\"a\\\"b\""));
-        assert!(s.contains("\"bad\": null"));
+    fn peak_memory_is_read() {
         assert!(peak_rss_bytes() > 0);
     }
 

@@ -89,11 +89,11 @@ struct OctreeArgs {
     balance: Option<Balance>,
     /// Longest side of the surface's bounding box as a fraction of the cube
     /// side, 0 < F <= 1 [default: 0.7]
-    #[arg(long, value_name = "F", value_parser = parse_finite)]
+    #[arg(long, allow_hyphen_values = true, value_name = "F", value_parser = parse_finite)]
     fit: Option<f64>,
     /// Explicit cube instead of --fit: lowest corner X,Y,Z and side S, user
     /// units
-    #[arg(long, value_name = "X,Y,Z,S", value_parser = parse_numbers::<4>)]
+    #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z,S", value_parser = parse_numbers::<4>)]
     domain: Option<[f64; 4]>,
     /// Stop with an error instead of building more than N leaves (refinement
     /// and balance); refused before refining when the estimate is above 2N
@@ -125,7 +125,7 @@ struct OctreeArgs {
     inside: Option<InsideRule>,
     /// A point inside the body (user units): after balance, fail with a leak
     /// report if the region outside the surface reaches it
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_numbers::<3>)]
+    #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z", value_parser = parse_numbers::<3>)]
     inside_point: Option<[f64; 3]>,
     /// With --inside-point, write a leak's path (.vtk: legacy VTK lines; any
     /// other name: CSV step,x,y,z,size,level)
@@ -460,6 +460,19 @@ mod tests {
             "--balance: unknown connectivity 'diagonal'",
         );
         fails(&["octree", "sphere"], "--level is required");
+        let c = run(&[
+            "octree",
+            "sphere",
+            "--level",
+            "3",
+            "--inside-point",
+            "-0.5,0,-1e-3",
+        ]);
+        assert_eq!(c.unwrap().leak.inside_point, Some([-0.5, 0.0, -1e-3]));
+        fails(
+            &["octree", "sphere", "--level", "3", "--fit", "-1"],
+            "--fit must be in (0, 1]",
+        );
         fails(&["octree", "sphere", "--levl", "3"], "--level");
         fails(
             &[

@@ -41,7 +41,7 @@ use crate::error::Result;
 
 /// Topology and defect counts of a surface (see the module documentation
 /// for the definitions).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SurfaceReport {
     /// Number of facets.
     pub triangles: usize,
@@ -73,53 +73,24 @@ pub struct SurfaceReport {
     /// Total facet area.
     pub area: f64,
     /// Bounding box of the vertices.
+    #[serde(skip)]
     pub bbox: Aabb,
 }
 
 impl SurfaceReport {
-    /// The report as a JSON object (absent genus or volume are `null`).
+    /// The report as a JSON object: the fields above, the box as
+    /// `bbox_min` and `bbox_max`; an absent genus or volume and non-finite
+    /// numbers are `null`.
+    pub fn to_json_value(&self) -> serde_json::Value {
+        let mut v = serde_json::to_value(self).unwrap_or_default();
+        v["bbox_min"] = serde_json::json!(self.bbox.min);
+        v["bbox_max"] = serde_json::json!(self.bbox.max);
+        v
+    }
+
+    /// [`SurfaceReport::to_json_value`] as indented text.
     pub fn to_json(&self) -> String {
-        let opt_i = |v: Option<i64>| v.map_or("null".to_string(), |g| g.to_string());
-        let num = |v: f64| {
-            if v.is_finite() {
-                format!("{v:?}")
-            } else {
-                "null".to_string()
-            }
-        };
-        let arr = |p: [f64; 3]| format!("[{}, {}, {}]", num(p[0]), num(p[1]), num(p[2]));
-        let fields = [
-            ("triangles", self.triangles.to_string()),
-            ("degenerate", self.degenerate.to_string()),
-            ("duplicate", self.duplicate.to_string()),
-            ("vertices", self.vertices.to_string()),
-            ("edges", self.edges.to_string()),
-            ("boundary_edges", self.boundary_edges.to_string()),
-            ("non_manifold_edges", self.non_manifold_edges.to_string()),
-            ("components", self.components.to_string()),
-            (
-                "inconsistently_oriented_edges",
-                self.inconsistently_oriented_edges.to_string(),
-            ),
-            ("closed", self.closed.to_string()),
-            (
-                "euler_characteristic",
-                self.euler_characteristic.to_string(),
-            ),
-            ("genus", opt_i(self.genus)),
-            (
-                "signed_volume",
-                self.signed_volume.map_or("null".to_string(), num),
-            ),
-            ("area", num(self.area)),
-            ("bbox_min", arr(self.bbox.min)),
-            ("bbox_max", arr(self.bbox.max)),
-        ];
-        let body: Vec<String> = fields
-            .iter()
-            .map(|(k, v)| format!("  \"{k}\": {v}"))
-            .collect();
-        format!("{{\n{}\n}}\n", body.join(",\n"))
+        serde_json::to_string_pretty(&self.to_json_value()).unwrap_or_default() + "\n"
     }
 }
 

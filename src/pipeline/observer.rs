@@ -1,0 +1,92 @@
+//! What a [`super::Session`] tells its caller while it runs: phases with
+//! their times and counts, and facts as they become known. The command
+//! prints them as a table; a library caller may log them or ignore them.
+
+use std::path::Path;
+
+use crate::classify::{InsideRule, WindingSummary};
+use crate::domain::Domain;
+use crate::mesh::MeshCounts;
+use crate::refine::LeafEstimate;
+
+/// One thing that happened in a session. Every rank sees the same events
+/// with the same (global) values, in the same order.
+#[derive(Clone, Debug)]
+pub enum Event<'a> {
+    /// A surface is ready to refine against.
+    SurfaceLoaded {
+        /// Where it came from (a file, `sphere`, `torus`, or `triangles`).
+        name: &'a str,
+        /// Its triangles after clean-up.
+        triangles: usize,
+        /// Facets dropped by the clean-up, when one was asked for.
+        dropped: Option<usize>,
+        /// The cube the next octree is built in.
+        domain: Domain,
+        /// The size of the octree at the configured level, when one is set.
+        estimate: Option<LeafEstimate>,
+        /// The inside rule the run will classify with, and for `auto` why.
+        inside: Option<(InsideRule, &'a str)>,
+    },
+    /// A phase ended: its name, seconds (maximum over ranks) and, where it
+    /// has one, the global count of what it made.
+    Phase {
+        /// `read`, `construct`, `refine`, `partition`, `balance`,
+        /// `classify`, `leak_check`, `ghost`, `nodes`, `numbering`,
+        /// `connectivity` or `write`.
+        name: &'a str,
+        /// Seconds, maximum over ranks.
+        seconds: f64,
+        /// Leaves, nodes or elements after the phase, over all ranks.
+        count: Option<u64>,
+    },
+    /// The winding-number rule oriented and capped the surface.
+    Winding(&'a WindingSummary),
+    /// Leaves per class over all ranks: inside, outside, cut.
+    LeafClasses([u64; 3]),
+    /// The leak check ended.
+    LeakChecked {
+        /// The point given as inside.
+        point: [f64; 3],
+        /// The length of the leak's path, `None` when sealed off.
+        path_octants: Option<usize>,
+        /// Seconds of the check.
+        seconds: f64,
+        /// Where the path was written.
+        written: Option<&'a Path>,
+    },
+    /// The mesh is built.
+    Meshed {
+        /// Global counts.
+        counts: MeshCounts,
+        /// Volume of the kept elements, user units.
+        kept_volume: f64,
+        /// Volume enclosed by the surface, user units (0 without one).
+        surface_volume: f64,
+    },
+    /// A file was written.
+    Wrote(&'a Path),
+    /// The run ended.
+    Finished {
+        /// Sum of the phases' seconds.
+        seconds: f64,
+        /// Peak resident memory, bytes, maximum over ranks.
+        peak_rss: u64,
+        /// Peak memory of all ranks per balanced leaf.
+        bytes_per_leaf: f64,
+    },
+}
+
+/// Receives a session's events.
+pub trait Observer {
+    /// Called on every rank for every event.
+    fn event(&mut self, e: &Event<'_>);
+}
+
+/// An observer that ignores everything.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Silent;
+
+impl Observer for Silent {
+    fn event(&mut self, _: &Event<'_>) {}
+}
