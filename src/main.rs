@@ -194,12 +194,12 @@ fn run(comm: &CommRef, args: &[String]) -> Result<()> {
         Invocation::Run {
             command, config, ..
         } => {
-            let mut session = Session::new(comm.clone(), config.clone());
+            let mut session = Session::new(comm.clone(), (*config).clone());
             if comm.rank() == 0 && !config.output.quiet {
                 let ranks = comm.size();
                 session.set_observer(Box::new(Table {
                     command,
-                    config,
+                    config: *config,
                     ranks,
                 }));
             }

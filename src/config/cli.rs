@@ -180,7 +180,7 @@ pub enum Invocation {
         /// What to build.
         command: Command,
         /// Every setting.
-        config: Config,
+        config: Box<Config>,
         /// Print the case file instead of running.
         print_case: bool,
     },
@@ -322,7 +322,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         .map_err(|e: ConfigError| Error::invalid(e.render(label)))?;
     Ok(Invocation::Run {
         command,
-        config,
+        config: Box::new(config),
         print_case: octree.print_case,
     })
 }
@@ -401,7 +401,7 @@ mod tests {
     fn run(args: &[&str]) -> Result<Config> {
         let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
         match parse(&args)? {
-            Invocation::Run { config, .. } => Ok(config),
+            Invocation::Run { config, .. } => Ok(*config),
             other => panic!("{other:?}"),
         }
     }
