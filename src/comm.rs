@@ -58,6 +58,12 @@ pub trait Comm {
     fn comm_seconds(&self) -> f64 {
         0.0
     }
+    /// Number of this communicator's ranks on this rank's node (sharing its
+    /// memory). Collective. The default, for communicators of one node, is
+    /// all of them.
+    fn ranks_on_node(&self) -> usize {
+        self.size()
+    }
 }
 
 /// Payload bytes a rank has sent to and received from *other* ranks through
@@ -256,6 +262,10 @@ fn to_i32_counts(counts: &[usize]) -> Vec<i32> {
 impl Comm for MpiComm {
     fn rank(&self) -> usize {
         self.comm.rank() as usize
+    }
+    fn ranks_on_node(&self) -> usize {
+        // MPI_Comm_split_type(MPI_COMM_TYPE_SHARED): the ranks sharing memory.
+        self.comm.split_shared(0).size() as usize
     }
     fn size(&self) -> usize {
         self.comm.size() as usize

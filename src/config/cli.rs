@@ -13,6 +13,7 @@ use clap::{Args, Parser, Subcommand};
 
 use super::case::CaseFile;
 use super::{Balance, Command, Config, ConfigError};
+use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::error::{Error, Result};
 
@@ -26,6 +27,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("octree.level", "--level"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
+    ("octree.memory_budget", "--memory-budget"),
     ("classify.inside", "--inside"),
     ("leak.inside_point", "--inside-point"),
     ("leak.path", "--leak-path"),
@@ -99,6 +101,11 @@ struct OctreeArgs {
     /// and balance); refused before refining when the estimate is above 2N
     #[arg(long, value_name = "N", value_parser = parse_count)]
     max_octants: Option<u64>,
+    /// Memory each rank may use (512MiB, 4GiB, ...): a run expected to need
+    /// more stops before refining with the largest level that fits
+    /// [default: the node's available memory shared among its ranks]
+    #[arg(long, value_name = "SIZE", value_parser = ByteSize::parse)]
+    memory_budget: Option<ByteSize>,
     /// Write counts, timings (seconds, max over ranks), peak memory (bytes,
     /// max over ranks) and bytes exchanged per phase as JSON
     #[arg(long, value_name = "FILE.json")]
@@ -262,6 +269,9 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
     }
     if set("octree.max_octants", o.max_octants.is_some()) {
         config.octree.max_octants = o.max_octants;
+    }
+    if set("octree.memory_budget", o.memory_budget.is_some()) {
+        config.octree.memory_budget = o.memory_budget;
     }
     for (key, flag, field) in [
         (

@@ -24,6 +24,7 @@
 //! level = 9
 //! balance = "corner"        # none | face | edge | corner
 //! # max_octants = 100000000
+//! # memory_budget = "8GiB"  # per rank; unset: the node's available memory
 //!
 //! [classify]
 //! # inside = "auto"         # parity | winding | auto (meshes: auto)
@@ -56,6 +57,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::domain::{Domain, DEFAULT_FIT};
 use crate::octant::{Connectivity, MAX_LEVEL};
@@ -173,6 +175,11 @@ pub struct OctreeConfig {
     /// all ranks (refinement and balance); refused before refining when the
     /// estimate is above twice the limit. Unset: no limit.
     pub max_octants: Option<u64>,
+    /// Memory each rank may use, in bytes or with a unit (`"4GiB"`): a run
+    /// expected to need more stops before refining, and one that grows past
+    /// it stops before allocating (see [`crate::budget`]). Unset: the
+    /// node's available memory shared among its ranks.
+    pub memory_budget: Option<ByteSize>,
 }
 
 impl OctreeConfig {
@@ -289,6 +296,7 @@ pub const KEYS: &[&str] = &[
     "octree.level",
     "octree.balance",
     "octree.max_octants",
+    "octree.memory_budget",
     "classify.inside",
     "leak.inside_point",
     "leak.path",
@@ -447,6 +455,7 @@ mod tests {
         c.domain.cube = Some([-2.0, -2.0, -2.0, 4.0]);
         c.octree.balance = Balance::Edge;
         c.octree.max_octants = Some(123_456);
+        c.octree.memory_budget = Some(crate::budget::ByteSize(3 << 30));
         c.classify.inside = Some(InsideRule::Winding);
         c.leak.inside_point = Some([0.0, 0.1, 0.2]);
         c.leak.path = Some("leak.csv".into());

@@ -23,6 +23,10 @@ pub mod stats;
 use std::cell::OnceCell;
 use std::path::Path;
 
+use crate::budget::{
+    available_on_node, BudgetSource, MemoryBudget, BASE_BYTES, BYTES_PER_OCTANT_MESH,
+    BYTES_PER_OCTANT_OCTREE, BYTES_PER_TRIANGLE,
+};
 use crate::classify::{
     classify_leaves, CutRule, InsideClassifier, InsideRule, Keep, LeafClass, WindingSummary,
 };
@@ -94,6 +98,8 @@ struct Facts {
     estimate: Option<LeafEstimate>,
     /// The surface's diagnostics, when the run computed them.
     report: Option<SurfaceReport>,
+    /// The memory budget of the last refinement or balance.
+    budget: Option<MemoryBudget>,
     /// Peak memory before anything and after reading, bytes (this rank).
     rss_start: u64,
     rss_read: u64,
@@ -105,6 +111,8 @@ pub struct Session {
     config: Config,
     /// The inside rule meshes and classifications use when none is given.
     inside: Option<InsideRule>,
+    /// What the memory budget plans for.
+    plan: Command,
     timer: PhaseTimer,
     observer: Box<dyn Observer>,
     surface: Option<SurfaceState>,
@@ -124,6 +132,7 @@ impl Session {
         Session {
             comm,
             inside: config.classify.inside,
+            plan: Command::Mesh,
             config,
             timer: PhaseTimer::new(),
             observer: Box::new(Silent),
@@ -226,6 +235,62 @@ impl Session {
     /// Tells the observer about the last phase recorded.
     fn report_phase(&mut self, count: Option<u64>) {
         report(&self.timer, &mut *self.observer, count);
+    }
+
+    /// Plans the memory of the following stages for `command`: an octree
+    /// alone, or an octree and its mesh (the default).
+    pub fn plan(&mut self, command: Command) {
+        self.plan = command;
+    }
+
+    /// The memory budget per rank, the same on every rank: the configured
+    /// one, else the smallest over the nodes of their available memory
+    /// shared among their ranks; `None` when it cannot be known.
+    /// Collective.
+    pub fn memory_budget(&mut self) -> Option<MemoryBudget> {
+        let comm = &*self.comm;
+        let (per_rank, source) = match self.config.octree.memory_budget {
+            Some(b) => (b.0, BudgetSource::Given),
+            None => {
+                let on_node = comm.ranks_on_node().max(1);
+                // Minima as maxima of the complements; an unknown figure is
+                // u64::MAX, whose complement never wins.
+                let (per, node) = match available_on_node() {
+                    Some(n) => (n / on_node as u64, n),
+                    None => (u64::MAX, u64::MAX),
+                };
+                let mut v = [!per, !node, on_node as u64];
+                comm.max_u64(&mut v);
+                if !v[0] == u64::MAX {
+                    return None;
+                }
+                let source = BudgetSource::Available {
+                    node: !v[1],
+                    ranks_on_node: v[2] as usize,
+                };
+                (!v[0], source)
+            }
+        };
+        let triangles = self.surface.as_ref().map_or(0, |s| s.surface.len()) as u64;
+        let b = MemoryBudget {
+            per_rank,
+            source,
+            ranks: comm.size(),
+            base: BASE_BYTES + triangles * BYTES_PER_TRIANGLE,
+            bytes_per_octant: match self.plan {
+                Command::Octree => BYTES_PER_OCTANT_OCTREE,
+                Command::Mesh => BYTES_PER_OCTANT_MESH,
+            },
+        };
+        self.facts.budget = Some(b);
+        Some(b)
+    }
+
+    /// The octant limit of refinement and balance: the configured one, or
+    /// the budget's when smaller.
+    fn octant_limit(&self, budget: Option<MemoryBudget>) -> u64 {
+        let own = self.config.octree.limit();
+        budget.map_or(own, |b| own.min(b.octant_limit()))
     }
 
     // ----- surface -------------------------------------------------------
@@ -350,9 +415,15 @@ impl Session {
             self.next_domain()
         });
         let domain = agree(&*self.comm, checked)?;
-        let limit = self.config.octree.limit();
         let comm = self.comm.clone();
-        check_estimate(&comm, self.index_for(domain)?, level, limit)?;
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let own_limit = self.config.octree.limit();
+        check_estimate(&comm, self.index_for(domain)?, level, own_limit)?;
+        if let Some(b) = budget {
+            let index = self.index_for(domain)?;
+            agree(&*comm, check_budget(&b, index, level))?;
+        }
         let index = match &self.surface {
             Some(s) => &s.index,
             None => return Err(Error::new(ErrorKind::Internal, "the surface vanished")),
@@ -365,7 +436,8 @@ impl Session {
             &mut *self.observer,
             Some(top.tree().global_len()),
         );
-        let tree = self.timer.time(&*comm, "refine", || top.refine(limit))?;
+        let tree = self.timer.time(&*comm, "refine", || top.refine(limit));
+        let tree = over_budget(tree, budget, limit, "refinement")?;
         report(&self.timer, &mut *self.observer, Some(tree.global_len()));
         self.facts.octants_refined = tree.global_len();
         self.facts.octants_balanced = tree.global_len();
@@ -383,10 +455,11 @@ impl Session {
             .and_then(|_| self.domain())
             .map(|d| (d, self.tree.is_some()));
         let (domain, existing) = agree(&*self.comm, checked)?;
-        let limit = self.config.octree.limit();
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
         let comm = self.comm.clone();
         let tree = &mut self.tree;
-        self.timer.time(&*comm, "refine", || -> Result<()> {
+        let refined = self.timer.time(&*comm, "refine", || -> Result<()> {
             match tree {
                 Some((tree, _)) if existing => tree.refine(max_level, &split, limit),
                 _ => {
@@ -396,7 +469,8 @@ impl Session {
                     Ok(())
                 }
             }
-        })?;
+        });
+        over_budget(refined, budget, limit, "refinement")?;
         let count = self.tree().map(|t| t.global_len());
         self.report_phase(count);
         let n = self.tree().map_or(0, |t| t.global_len());
@@ -445,13 +519,15 @@ impl Session {
     /// ranks. Phase `balance`.
     pub fn balance(&mut self, conn: Connectivity) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        let limit = self.config.octree.limit();
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
         let comm = self.comm.clone();
         let tree = self.tree.as_mut().map(|t| &mut t.0);
-        self.timer.time(&*comm, "balance", || -> Result<()> {
+        let balanced = self.timer.time(&*comm, "balance", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
             tree.balance_with_limit(conn, limit).map(|_| ())
-        })?;
+        });
+        over_budget(balanced, budget, limit, "balance")?;
         let count = self.tree().map(|t| t.global_len());
         self.report_phase(count);
         self.facts.octants_balanced = self.tree().map_or(0, |t| t.global_len());
@@ -694,6 +770,7 @@ impl Session {
                 .ok_or_else(|| Error::invalid("octree.level is required")),
         )?;
         self.inside = self.config.inside_rule(command);
+        self.plan = command;
         self.load_surface()?;
         self.refine_surface(level)?;
         self.partition()?;
@@ -755,5 +832,44 @@ fn report(timer: &PhaseTimer, observer: &mut dyn Observer, count: Option<u64>) {
             seconds: *seconds,
             count,
         });
+    }
+}
+
+/// Fails with the budget's error when the octree estimated at `level` does
+/// not fit, naming the largest level that does.
+fn check_budget(b: &MemoryBudget, index: &SurfaceIndex, level: u8) -> Result<()> {
+    let e = estimate_leaves(index, level);
+    if b.need(e.balanced) <= b.per_rank {
+        return Ok(());
+    }
+    let fits = (0..level)
+        .rev()
+        .map(|l| estimate_leaves(index, l))
+        .find(|f| b.need(f.balanced) <= b.per_rank);
+    let hint = match fits {
+        Some(f) => format!("level {} would fit (about {} octants)", f.level, f.balanced),
+        None => "no level fits".to_string(),
+    };
+    let what = format!(
+        "about {} octants are estimated at level {level}, so nothing was refined",
+        e.balanced
+    );
+    Err(b.error(e.balanced, &what, &hint))
+}
+
+/// A stage's result, with an octant-limit failure that the memory budget
+/// (not the configured limit) set turned into the budget's error.
+fn over_budget<T>(
+    r: Result<T>,
+    budget: Option<MemoryBudget>,
+    limit: u64,
+    during: &str,
+) -> Result<T> {
+    match (r, budget) {
+        (Err(e), Some(b)) if e.kind() == ErrorKind::Limit && limit == b.octant_limit() => {
+            let what = format!("the octree grew past the {limit} octants that fit during {during}");
+            Err(b.error(limit, &what, "a lower level or more ranks would fit"))
+        }
+        (r, _) => r,
     }
 }

@@ -190,6 +190,12 @@ pub struct Stats {
     pub rss_after_read_bytes: u64,
     /// Side of the root cube, user units.
     pub domain_side: f64,
+    /// The memory budget per rank, bytes, when one was known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_budget_bytes: Option<u64>,
+    /// The octants that fit in it, over all ranks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_budget_octants: Option<u64>,
 }
 
 impl Session {
@@ -348,6 +354,8 @@ impl Session {
             rss_start_bytes: rss[1],
             rss_after_read_bytes: rss[2],
             domain_side: self.domain().map_or(0.0, |d| d.side),
+            memory_budget_bytes: f.budget.map(|b| b.per_rank),
+            memory_budget_octants: f.budget.map(|b| b.octant_limit()),
         }
     }
 }
