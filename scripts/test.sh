@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The whole test suite: style, lints, the header check, unit tests, MPI tests on 1-4 ranks, p4est equality,
+# The whole test suite: style, lints, documentation, the header check, unit tests, MPI tests on 1-4 ranks, p4est equality,
 # then the installed CMake package with the C, C++ and Fortran examples (CTest).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -7,8 +7,9 @@ source scripts/env.sh
 bash scripts/setup.sh
 cargo fmt --check
 cargo clippy --release --all-targets --quiet -- -D warnings
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --quiet
 status=0
-cargo test --release 2>&1 | tee target/test.log || status=1
+cargo test --release --no-fail-fast 2>&1 | tee target/test.log || status=1
 bash scripts/test_cmake.sh target/cmake-test 2>&1 | tee -a target/test.log || status=1
 # One closing line for the whole run (cargo's last line is the doc-test summary).
 awk '/test result:/ { for (i = 1; i <= NF; i++) { if ($i ~ /^passed/) p += $(i-1); if ($i ~ /^failed/) f += $(i-1) } }

@@ -334,6 +334,7 @@ impl Balancer {
         }
         let old_len = self.leaves.len();
         let new_len = old_len - groups.len() + made.len();
+        crate::progress::set_done(new_len as u64);
         self.leaves.resize(new_len, Octant::ROOT);
         // From the back: the leaves after each split leaf move up by the
         // number of octants added before them, then its replacement goes in.

@@ -37,6 +37,7 @@ pub mod octant;
 pub mod octree;
 pub mod partition;
 pub mod pipeline;
+pub mod progress;
 pub mod refine;
 pub mod report;
 pub mod sort;

@@ -13,6 +13,7 @@ use octmesh::config::{Command, Config};
 use octmesh::geometry::diagnostics::diagnose;
 use octmesh::geometry::load_surface;
 use octmesh::pipeline::{Event, Observer, Session};
+use octmesh::progress::Style;
 use octmesh::Result;
 
 /// Prints to stdout, ignoring a closed pipe (`octmesh ... | head -1`).
@@ -195,6 +196,9 @@ fn run(comm: &CommRef, args: &[String]) -> Result<()> {
             command, config, ..
         } => {
             let mut session = Session::new(comm.clone(), (*config).clone());
+            if !config.output.quiet {
+                session.set_progress(Some(Style::detect()));
+            }
             if comm.rank() == 0 && !config.output.quiet {
                 let ranks = comm.size();
                 session.set_observer(Box::new(Table {

@@ -662,6 +662,9 @@ impl LinearOctree {
         let leaves = self.leaves();
         let mut skip = 0;
         for (i, &o) in leaves.iter().enumerate() {
+            if i % 4096 == 0 {
+                crate::progress::set_done(w.out.len() as u64);
+            }
             if skip > 0 {
                 skip -= 1;
                 continue;

@@ -42,6 +42,7 @@ use crate::leak::find_leak;
 use crate::mesh::{Mesh, MeshOptions};
 use crate::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
+use crate::progress::{self, Progress, Style};
 use crate::refine::{
     check_estimate, check_level, construct_for_callback, construct_top_for_surface,
     estimate_leaves, LeafEstimate, SurfaceIndex,
@@ -113,6 +114,8 @@ pub struct Session {
     inside: Option<InsideRule>,
     /// What the memory budget plans for.
     plan: Command,
+    /// How rank 0 shows the progress of long phases, if at all.
+    progress: Option<Style>,
     timer: PhaseTimer,
     observer: Box<dyn Observer>,
     surface: Option<SurfaceState>,
@@ -133,6 +136,7 @@ impl Session {
             comm,
             inside: config.classify.inside,
             plan: Command::Mesh,
+            progress: None,
             config,
             timer: PhaseTimer::new(),
             observer: Box::new(Silent),
@@ -235,6 +239,26 @@ impl Session {
     /// Tells the observer about the last phase recorded.
     fn report_phase(&mut self, count: Option<u64>) {
         report(&self.timer, &mut *self.observer, count);
+    }
+
+    /// Shows the progress of long phases on rank 0 in `style` (none by
+    /// default).
+    pub fn set_progress(&mut self, style: Option<Style>) {
+        self.progress = style;
+    }
+
+    /// The progress display of phase `name` with `expected` octants, on
+    /// rank 0 when asked for; it ends when dropped.
+    fn progress(&self, name: &str, expected: Option<u64>) -> Option<Progress> {
+        let style = self.progress.filter(|_| self.comm.rank() == 0)?;
+        let ranks = self.comm.size() as u64;
+        Some(Progress::start(
+            name,
+            expected,
+            ranks,
+            style,
+            progress::delay(),
+        ))
     }
 
     /// Plans the memory of the following stages for `command`: an octree
@@ -418,6 +442,7 @@ impl Session {
         let comm = self.comm.clone();
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
+        self.facts.estimate = Some(estimate_leaves(self.index_for(domain)?, level));
         let own_limit = self.config.octree.limit();
         check_estimate(&comm, self.index_for(domain)?, level, own_limit)?;
         if let Some(b) = budget {
@@ -428,15 +453,20 @@ impl Session {
             Some(s) => &s.index,
             None => return Err(Error::new(ErrorKind::Internal, "the surface vanished")),
         };
+        let expected = self.facts.estimate.map(|e| e.refined);
+        let shown = self.progress("construct", None);
         let top = self.timer.time(&*comm, "construct", || {
             construct_top_for_surface(comm.clone(), index, level)
         })?;
+        drop(shown);
         report(
             &self.timer,
             &mut *self.observer,
             Some(top.tree().global_len()),
         );
+        let shown = self.progress("refine", expected);
         let tree = self.timer.time(&*comm, "refine", || top.refine(limit));
+        drop(shown);
         let tree = over_budget(tree, budget, limit, "refinement")?;
         report(&self.timer, &mut *self.observer, Some(tree.global_len()));
         self.facts.octants_refined = tree.global_len();
@@ -519,14 +549,23 @@ impl Session {
     /// ranks. Phase `balance`.
     pub fn balance(&mut self, conn: Connectivity) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        let budget = self.memory_budget();
+        // Balance keeps a copy of the leaves to restore when it stops at a
+        // limit; the budget applies only when the octree is within a
+        // factor of 8 of it, as surface octrees grow by about 1.3.
+        let n = self.tree().map_or(0, |t| t.global_len());
+        let budget = self
+            .memory_budget()
+            .filter(|b| n.saturating_mul(8) > b.octant_limit());
         let limit = self.octant_limit(budget);
         let comm = self.comm.clone();
+        let expected = self.facts.estimate.map(|e| e.balanced);
+        let shown = self.progress("balance", expected);
         let tree = self.tree.as_mut().map(|t| &mut t.0);
         let balanced = self.timer.time(&*comm, "balance", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
             tree.balance_with_limit(conn, limit).map(|_| ())
         });
+        drop(shown);
         over_budget(balanced, budget, limit, "balance")?;
         let count = self.tree().map(|t| t.global_len());
         self.report_phase(count);
@@ -697,7 +736,10 @@ impl Session {
             Some(c) if c.rule.is_some() => Some(c.bits.as_slice()),
             _ => None,
         };
-        let mesh = Mesh::build(tree, domain, classes, &MeshOptions { keep, cut_rule })?;
+        let shown = self.progress("mesh", None);
+        let mesh = Mesh::build(tree, domain, classes, &MeshOptions { keep, cut_rule });
+        drop(shown);
+        let mesh = mesh?;
         self.timer.append(mesh.phase_timer());
         let c = *mesh.counts();
         for (name, seconds) in mesh.timings() {
