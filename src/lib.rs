@@ -39,6 +39,7 @@ pub mod partition;
 pub mod pipeline;
 pub mod progress;
 pub mod refine;
+pub mod regions;
 pub mod report;
 pub mod sort;
 

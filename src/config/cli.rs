@@ -16,6 +16,7 @@ use super::{Balance, Command, Config, ConfigError};
 use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::error::{Error, Result};
+use crate::regions::Region;
 
 /// The option that fills each key.
 pub const OPTIONS: &[(&str, &str)] = &[
@@ -25,6 +26,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("domain.fit", "--fit"),
     ("domain.cube", "--domain"),
     ("octree.level", "--level"),
+    ("octree.min_level", "--min-level"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
     ("octree.memory_budget", "--memory-budget"),
@@ -38,6 +40,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("output.leaves", "--write-leaves"),
     ("output.refined_leaves", "--write-refined"),
     ("output.vtu", "--out"),
+    ("regions", "--region"),
 ];
 
 /// The option of a key.
@@ -86,6 +89,14 @@ struct OctreeArgs {
     /// Level of the leaves touching the surface (0 to 18) [case: octree.level]
     #[arg(long, value_name = "L", value_parser = parse_level)]
     level: Option<u8>,
+    /// Every leaf at least this level [default: 0]
+    #[arg(long, value_name = "L", value_parser = parse_level)]
+    min_level: Option<u8>,
+    /// A refinement region, repeatable: box:X0,Y0,Z0,X1,Y1,Z1:LEVEL,
+    /// sphere:CX,CY,CZ,R:LEVEL or cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (user
+    /// units), then :outside to refine where the shape is not
+    #[arg(long, value_name = "SHAPE:NUMBERS:LEVEL", allow_hyphen_values = true, value_parser = Region::parse)]
+    region: Vec<Region>,
     /// 2:1 balance: face, edge, corner or none [default: corner]
     #[arg(long, value_name = "KIND", value_parser = Balance::parse)]
     balance: Option<Balance>,
@@ -244,6 +255,13 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
     let o = &octree;
     if set("octree.level", o.level.is_some()) {
         config.octree.level = o.level;
+    }
+    if set("octree.min_level", o.min_level.is_some()) {
+        config.octree.min_level = o.min_level.unwrap_or(0);
+    }
+    if set("regions", !o.region.is_empty()) {
+        // The command line's regions replace the case file's.
+        config.regions = o.region.clone();
     }
     if let Some(b) = o.balance {
         set("octree.balance", true);

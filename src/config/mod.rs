@@ -22,6 +22,7 @@
 //!
 //! [octree]
 //! level = 9
+//! min_level = 0
 //! balance = "corner"        # none | face | edge | corner
 //! # max_octants = 100000000
 //! # memory_budget = "8GiB"  # per rank; unset: the node's available memory
@@ -32,6 +33,13 @@
 //! [leak]
 //! # inside_point = [0.0, 0.0, 0.0]
 //! # path = "leak.vtk"
+//!
+//! [[regions]]              # as many as wanted
+//! shape = "box"             # box (min, max) | sphere (center, radius) | cylinder (start, end, radius)
+//! min = [0.0, 0.0, 0.0]
+//! max = [1.0, 0.5, 0.5]
+//! level = 8
+//! outside = false
 //!
 //! [mesh]
 //! keep = "all"              # all | inside | outside
@@ -61,6 +69,7 @@ use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::domain::{Domain, DEFAULT_FIT};
 use crate::octant::{Connectivity, MAX_LEVEL};
+use crate::regions::Region;
 
 crate::named_enum! {
     /// What a run builds.
@@ -117,6 +126,10 @@ pub struct Config {
     pub leak: LeakConfig,
     /// Which leaves become elements.
     pub mesh: MeshConfig,
+    /// Refinement regions (`[[regions]]` tables: `shape = "box"` with `min`,
+    /// `max`; `"sphere"` with `center`, `radius`; `"cylinder"` with `start`,
+    /// `end`, `radius`; each with `level` and optionally `outside = true`).
+    pub regions: Vec<Region>,
     /// Files written and what is printed.
     pub output: OutputConfig,
 }
@@ -169,6 +182,8 @@ pub struct OctreeConfig {
     /// Level of the leaves touching the surface, 0 to 18 (required). A
     /// leaf at level `l` has side `2^-l` of the cube.
     pub level: Option<u8>,
+    /// Every leaf at least this level (default 0).
+    pub min_level: u8,
     /// 2:1 balance (default corner).
     pub balance: Balance,
     /// Stop with an error instead of building more leaves than this, over
@@ -294,6 +309,7 @@ pub const KEYS: &[&str] = &[
     "domain.fit",
     "domain.cube",
     "octree.level",
+    "octree.min_level",
     "octree.balance",
     "octree.max_octants",
     "octree.memory_budget",
@@ -307,6 +323,7 @@ pub const KEYS: &[&str] = &[
     "output.leaves",
     "output.refined_leaves",
     "output.vtu",
+    "regions",
 ];
 
 impl Config {
@@ -327,6 +344,23 @@ impl Config {
                 "octree.level",
                 format!("is {level}: above the maximum level {MAX_LEVEL}"),
             ));
+        }
+        if self.octree.min_level > MAX_LEVEL {
+            return Err(ConfigError::new(
+                "octree.min_level",
+                format!(
+                    "is {}: above the maximum level {MAX_LEVEL}",
+                    self.octree.min_level
+                ),
+            ));
+        }
+        for (i, r) in self.regions.iter().enumerate() {
+            if let Err(m) = r.validate() {
+                return Err(ConfigError::new(
+                    "regions",
+                    format!("number {} ({}) {m}", i + 1, r.shape()),
+                ));
+            }
         }
         if let Some(fit) = self.domain.fit {
             if self.domain.cube.is_some() {
@@ -464,6 +498,11 @@ mod tests {
         c.output.stats = Some("s.json".into());
         c.output.vtu = Some("m.pvtu".into());
         c.surface.drop_duplicates = true;
+        c.octree.min_level = 2;
+        c.regions = vec![
+            Region::parse("box:0,0,0,1,1,1:5").unwrap(),
+            Region::parse("cylinder:0,0,0,1,0,0,0.5:4:outside").unwrap(),
+        ];
         let text = c.to_toml();
         let back: Config = toml::from_str(&text).unwrap();
         assert_eq!(back, c, "{text}");
@@ -476,11 +515,15 @@ mod tests {
             .sum();
         assert!(n <= KEYS.len());
         for (table, fields) in &full {
-            for field in fields.as_table().unwrap().keys() {
-                assert!(
-                    KEYS.contains(&format!("{table}.{field}").as_str()),
-                    "{table}.{field}"
-                );
+            match fields.as_table() {
+                Some(t) => {
+                    for field in t.keys() {
+                        let key = format!("{table}.{field}");
+                        assert!(KEYS.contains(&key.as_str()), "{key}");
+                    }
+                }
+                // Arrays of tables (regions) are keys themselves.
+                None => assert!(KEYS.contains(&table.as_str()), "{table}"),
             }
         }
     }

@@ -47,6 +47,7 @@ use crate::refine::{
     check_estimate, check_level, construct_for_callback, construct_top_for_surface,
     estimate_leaves, LeafEstimate, SurfaceIndex,
 };
+use crate::regions::RegionRules;
 use crate::report::{peak_rss_bytes, PhaseTimer};
 
 pub use observer::{Event, Observer, Silent};
@@ -511,6 +512,36 @@ impl Session {
         Ok(())
     }
 
+    /// Refines the octree by the configured minimum level and regions
+    /// (`octree.min_level`, `regions`): a leaf is split while a rule asks
+    /// for more (see [`crate::regions`]). Within the octant limit and the
+    /// memory budget. Phase `regions`; nothing happens without rules.
+    pub fn refine_regions(&mut self) -> Result<()> {
+        let domain = agree(&*self.comm, self.tree_or_state().map(|t| t.1))?;
+        let rules = RegionRules::new(&domain, self.config.octree.min_level, &self.config.regions);
+        if rules.is_empty() {
+            return Ok(());
+        }
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let comm = self.comm.clone();
+        let shown = self.progress("regions", None);
+        let tree = self.tree.as_mut().map(|t| &mut t.0);
+        let refined = self.timer.time(&*comm, "regions", || -> Result<()> {
+            let Some(tree) = tree else { return Ok(()) };
+            tree.refine(rules.max_level(), |o| rules.splits(o), limit)
+        });
+        drop(shown);
+        over_budget(refined, budget, limit, "region refinement")?;
+        let n = self.tree().map_or(0, |t| t.global_len());
+        self.report_phase(Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
+        self.classes = None;
+        self.mesh = None;
+        Ok(())
+    }
+
     fn set_tree(&mut self, tree: LinearOctree, domain: Domain) {
         self.tree = Some((tree, domain));
         self.classes = None;
@@ -815,6 +846,7 @@ impl Session {
         self.plan = command;
         self.load_surface()?;
         self.refine_surface(level)?;
+        self.refine_regions()?;
         self.partition()?;
         if let Some(p) = self.config.output.refined_leaves.clone() {
             self.write_leaves(&p, "refined leaves")?;

@@ -206,6 +206,9 @@ impl Session {
         let f = &self.facts;
         let meshed = self.mesh.as_ref();
         let mut keys = vec!["read", "construct", "refine", "partition", "balance"];
+        if self.timer.phases().iter().any(|p| p.0 == "regions") {
+            keys.insert(3, "regions");
+        }
         if self.classes.as_ref().is_some_and(|c| c.rule.is_some()) || f.winding.is_some() {
             keys.push("classify");
         }

@@ -1,0 +1,459 @@
+//! Refinement regions: boxes, spheres and cylinders in user units, each with
+//! a level, refining where they are (or, with `outside`, where they are
+//! not), and the minimum level everywhere.
+//!
+//! The rule, the same for every region and like the surface's: a leaf is
+//! split while its level is below the region's level and its closed box
+//! overlaps the closed region (for `outside`: is not inside the region's
+//! interior). Applied after the surface refinement by splitting leaves
+//! recursively, it gives the coarsest octree that satisfies the surface,
+//! every region and the minimum level; balance comes after.
+//!
+//! ```text
+//!   box            sphere           cylinder (start ── end, radius r)
+//!   +------+         .-"-.           ___________________
+//!   |      |        /     \         (___________________)
+//!   +------+        \     /          start           end
+//!   min..max         '-.-'
+//! ```
+//!
+//! Tests against a leaf are exact for boxes and spheres; for a cylinder
+//! the distance from the axis segment to the box is minimised over the
+//! segment (a convex function of its parameter) to a relative 1e-12, which
+//! may count a box just beyond a flat cap as overlapping (one more split,
+//! never one less).
+
+use serde::{Deserialize, Serialize};
+
+use crate::domain::Domain;
+use crate::error::{Error, Result};
+use crate::octant::{Octant, MAX_LEVEL};
+
+/// A refinement region with its level, user units.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "shape", rename_all = "lowercase", deny_unknown_fields)]
+pub enum Region {
+    /// The box `min..max`.
+    Box {
+        /// Lowest corner.
+        min: [f64; 3],
+        /// Highest corner.
+        max: [f64; 3],
+        /// Leaves overlapping it are refined to this level.
+        level: u8,
+        /// Refine where the box is not, instead.
+        #[serde(default)]
+        outside: bool,
+    },
+    /// The ball of `radius` around `center`.
+    Sphere {
+        /// Centre.
+        center: [f64; 3],
+        /// Radius (> 0).
+        radius: f64,
+        /// Leaves overlapping it are refined to this level.
+        level: u8,
+        /// Refine where the ball is not, instead.
+        #[serde(default)]
+        outside: bool,
+    },
+    /// The points within `radius` of the segment `start..end` whose
+    /// projection falls on the segment (flat caps).
+    Cylinder {
+        /// One end of the axis.
+        start: [f64; 3],
+        /// The other end.
+        end: [f64; 3],
+        /// Radius (> 0).
+        radius: f64,
+        /// Leaves overlapping it are refined to this level.
+        level: u8,
+        /// Refine where the cylinder is not, instead.
+        #[serde(default)]
+        outside: bool,
+    },
+}
+
+impl Region {
+    /// The region's level.
+    pub fn level(&self) -> u8 {
+        match self {
+            Region::Box { level, .. }
+            | Region::Sphere { level, .. }
+            | Region::Cylinder { level, .. } => *level,
+        }
+    }
+
+    /// Whether it refines outside its shape.
+    pub fn outside(&self) -> bool {
+        match self {
+            Region::Box { outside, .. }
+            | Region::Sphere { outside, .. }
+            | Region::Cylinder { outside, .. } => *outside,
+        }
+    }
+
+    /// `box`, `sphere` or `cylinder`.
+    pub fn shape(&self) -> &'static str {
+        match self {
+            Region::Box { .. } => "box",
+            Region::Sphere { .. } => "sphere",
+            Region::Cylinder { .. } => "cylinder",
+        }
+    }
+
+    /// Checks the numbers: finite, positive radii, a box with min below
+    /// max, a cylinder of positive length, a level at most 18. The message
+    /// follows the region's name.
+    pub fn validate(&self) -> std::result::Result<(), String> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if self.level() > MAX_LEVEL {
+            return Err(format!(
+                "has level {}, above the maximum level {MAX_LEVEL}",
+                self.level()
+            ));
+        }
+        match self {
+            Region::Box { min, max, .. } => {
+                if !finite(min) || !finite(max) || (0..3).any(|k| min[k] >= max[k]) {
+                    return Err(format!(
+                        "needs finite corners with min below max, got {min:?} and {max:?}"
+                    ));
+                }
+            }
+            Region::Sphere { center, radius, .. } => {
+                if !finite(center) || !(radius.is_finite() && *radius > 0.0) {
+                    return Err(format!(
+                        "needs a finite centre and a positive radius, got {center:?} and {radius}"
+                    ));
+                }
+            }
+            Region::Cylinder {
+                start, end, radius, ..
+            } => {
+                if !finite(start)
+                    || !finite(end)
+                    || start == end
+                    || !(radius.is_finite() && *radius > 0.0)
+                {
+                    return Err(format!(
+                        "needs two distinct finite ends and a positive radius, got {start:?}, {end:?} and {radius}"
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Parses the command line's form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
+    /// `sphere:CX,CY,CZ,R:LEVEL` or `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`,
+    /// each optionally followed by `:outside`.
+    pub fn parse(s: &str) -> Result<Region> {
+        let bad = |why: &str| {
+            Error::invalid(format!(
+                "expects box:X0,Y0,Z0,X1,Y1,Z1:LEVEL, sphere:CX,CY,CZ,R:LEVEL or \
+                 cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (then :outside if wanted), got '{s}': {why}"
+            ))
+        };
+        let parts: Vec<&str> = s.split(':').collect();
+        let (shape, numbers, level, outside) = match parts.as_slice() {
+            [shape, n, l] => (*shape, *n, *l, false),
+            [shape, n, l, "outside"] => (*shape, *n, *l, true),
+            _ => return Err(bad("wrong number of ':' parts")),
+        };
+        let v: Vec<f64> = numbers
+            .split(',')
+            .map(|x| x.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| bad("not a list of numbers"))?;
+        let level: u8 = level
+            .parse()
+            .map_err(|_| bad("the level is not an integer"))?;
+        let p = |i: usize| [v[i], v[i + 1], v[i + 2]];
+        let r = match (shape, v.len()) {
+            ("box", 6) => Region::Box {
+                min: p(0),
+                max: p(3),
+                level,
+                outside,
+            },
+            ("sphere", 4) => Region::Sphere {
+                center: p(0),
+                radius: v[3],
+                level,
+                outside,
+            },
+            ("cylinder", 7) => Region::Cylinder {
+                start: p(0),
+                end: p(3),
+                radius: v[6],
+                level,
+                outside,
+            },
+            ("box" | "sphere" | "cylinder", n) => return Err(bad(&format!("{n} numbers"))),
+            _ => return Err(bad("unknown shape")),
+        };
+        r.validate().map_err(|m| bad(&m))?;
+        Ok(r)
+    }
+}
+
+/// The regions mapped to the lattice of a domain, ready for octant tests.
+#[derive(Clone, Debug)]
+pub struct RegionRules {
+    min_level: u8,
+    rules: Vec<(Lattice, u8, bool)>,
+}
+
+/// A region's shape in lattice units.
+#[derive(Clone, Copy, Debug)]
+enum Lattice {
+    Box([f64; 3], [f64; 3]),
+    Sphere([f64; 3], f64),
+    Cylinder([f64; 3], [f64; 3], f64),
+}
+
+impl RegionRules {
+    /// The rules of `regions` and `min_level` in the lattice of `domain`.
+    pub fn new(domain: &Domain, min_level: u8, regions: &[Region]) -> RegionRules {
+        let s = domain.scale();
+        let rules = regions
+            .iter()
+            .map(|r| {
+                let shape = match r {
+                    Region::Box { min, max, .. } => {
+                        Lattice::Box(domain.to_lattice(*min), domain.to_lattice(*max))
+                    }
+                    Region::Sphere { center, radius, .. } => {
+                        Lattice::Sphere(domain.to_lattice(*center), radius * s)
+                    }
+                    Region::Cylinder {
+                        start, end, radius, ..
+                    } => Lattice::Cylinder(
+                        domain.to_lattice(*start),
+                        domain.to_lattice(*end),
+                        radius * s,
+                    ),
+                };
+                (shape, r.level(), r.outside())
+            })
+            .collect();
+        RegionRules { min_level, rules }
+    }
+
+    /// Whether any rule asks for more than the root.
+    pub fn is_empty(&self) -> bool {
+        self.min_level == 0 && self.rules.iter().all(|r| r.1 == 0)
+    }
+
+    /// The finest level any rule asks for.
+    pub fn max_level(&self) -> u8 {
+        self.rules.iter().map(|r| r.1).fold(self.min_level, u8::max)
+    }
+
+    /// Whether leaf `o` must be split.
+    pub fn splits(&self, o: Octant) -> bool {
+        if o.level() < self.min_level {
+            return true;
+        }
+        let (lo, hi) = o.bounds_f64();
+        self.rules.iter().any(|&(shape, level, outside)| {
+            o.level() < level
+                && if outside {
+                    !inside_interior(shape, lo, hi)
+                } else {
+                    overlaps(shape, lo, hi)
+                }
+        })
+    }
+}
+
+/// Squared distance from point `p` to the box `lo..hi`.
+fn dist2_to_box(p: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let d = (lo[k] - p[k]).max(0.0).max(p[k] - hi[k]);
+            d * d
+        })
+        .sum()
+}
+
+/// The point at parameter `t` of the segment `a..b`.
+fn along(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
+    std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
+}
+
+/// Whether the closed shape meets the closed box `lo..hi`.
+fn overlaps(shape: Lattice, lo: [f64; 3], hi: [f64; 3]) -> bool {
+    match shape {
+        Lattice::Box(a, b) => (0..3).all(|k| a[k] <= hi[k] && lo[k] <= b[k]),
+        Lattice::Sphere(c, r) => dist2_to_box(c, lo, hi) <= r * r,
+        Lattice::Cylinder(a, b, r) => cylinder_meets_box(a, b, r, lo, hi),
+    }
+}
+
+/// Whether the closed box `lo..hi` lies in the shape's open interior.
+fn inside_interior(shape: Lattice, lo: [f64; 3], hi: [f64; 3]) -> bool {
+    let corners =
+        (0..8).map(|c| std::array::from_fn(|k| if c >> k & 1 == 1 { hi[k] } else { lo[k] }));
+    match shape {
+        Lattice::Box(a, b) => (0..3).all(|k| a[k] < lo[k] && hi[k] < b[k]),
+        // Both shapes are convex: the box is inside when its corners are.
+        Lattice::Sphere(c, r) => corners
+            .into_iter()
+            .all(|q: [f64; 3]| (0..3).map(|k| (q[k] - c[k]).powi(2)).sum::<f64>() < r * r),
+        Lattice::Cylinder(a, b, r) => corners.into_iter().all(|q: [f64; 3]| {
+            let d: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
+            let len2: f64 = d.iter().map(|x| x * x).sum();
+            let t = (0..3).map(|k| (q[k] - a[k]) * d[k]).sum::<f64>() / len2;
+            let foot = along(a, b, t);
+            t > 0.0 && t < 1.0 && (0..3).map(|k| (q[k] - foot[k]).powi(2)).sum::<f64>() < r * r
+        }),
+    }
+}
+
+/// Whether the closed cylinder meets the closed box: some point of the box
+/// is within `r` of the axis segment with its projection on the segment.
+/// The box is cut to the slab between the caps first (the slab and the box
+/// are convex); then the distance from the segment to that part is a convex
+/// function of the segment's parameter, minimised by golden sections.
+fn cylinder_meets_box(a: [f64; 3], b: [f64; 3], r: f64, lo: [f64; 3], hi: [f64; 3]) -> bool {
+    let d: [f64; 3] = std::array::from_fn(|k| b[k] - a[k]);
+    // Parameter range of the box's projection on the axis.
+    let len2: f64 = d.iter().map(|x| x * x).sum();
+    let proj = |q: [f64; 3]| (0..3).map(|k| (q[k] - a[k]) * d[k]).sum::<f64>() / len2;
+    let (mut t0, mut t1) = (f64::INFINITY, f64::NEG_INFINITY);
+    for c in 0..8 {
+        let q = std::array::from_fn(|k| if c >> k & 1 == 1 { hi[k] } else { lo[k] });
+        let t = proj(q);
+        t0 = t0.min(t);
+        t1 = t1.max(t);
+    }
+    let (t0, t1) = (t0.max(0.0), t1.min(1.0));
+    if t0 > t1 {
+        return false;
+    }
+    // Over t in [t0, t1] the distance from the axis point to the box is
+    // convex; at its minimum a box point within r projects inside [0, 1]
+    // when the box reaches that far along the axis, which t0..t1 ensures
+    // up to the slab's corners (a conservative answer there refines one
+    // more leaf, never one less).
+    let f = |t: f64| dist2_to_box(along(a, b, t), lo, hi);
+    let (mut x0, mut x1) = (t0, t1);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let mut c = x1 - g * (x1 - x0);
+    let mut e = x0 + g * (x1 - x0);
+    let (mut fc, mut fe) = (f(c), f(e));
+    for _ in 0..80 {
+        if fc <= fe {
+            x1 = e;
+            e = c;
+            fe = fc;
+            c = x1 - g * (x1 - x0);
+            fc = f(c);
+        } else {
+            x0 = c;
+            c = e;
+            fc = fe;
+            e = x0 + g * (x1 - x0);
+            fe = f(e);
+        }
+    }
+    [f(t0), f(t1), fc, fe]
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        <= r * r * (1.0 + 1e-12)
+}
+
+/// The level whose cell is not larger than `size` (user units) in a cube of
+/// side `side`: the smallest `l` with `side / 2^l <= size`.
+pub fn level_for_size(side: f64, size: f64) -> Result<u8> {
+    if !(size.is_finite() && size > 0.0) {
+        return Err(Error::invalid(format!(
+            "a cell size must be positive, got {size}"
+        )));
+    }
+    let l = (side / size).log2().ceil().max(0.0);
+    if l > MAX_LEVEL as f64 {
+        return Err(Error::invalid(format!(
+            "a cell of size {size} needs level {l}, above the maximum level {MAX_LEVEL} in a domain of side {side}"
+        )));
+    }
+    Ok(l as u8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_the_command_line_forms() {
+        let r = Region::parse("box:0,0,0,1,2,3:7").unwrap();
+        assert_eq!(
+            r,
+            Region::Box {
+                min: [0.0; 3],
+                max: [1.0, 2.0, 3.0],
+                level: 7,
+                outside: false
+            }
+        );
+        let r = Region::parse("sphere:0,0,0,0.5:6:outside").unwrap();
+        assert!(r.outside() && r.level() == 6 && r.shape() == "sphere");
+        let r = Region::parse("cylinder:0,0,0,1,0,0,0.25:5").unwrap();
+        assert_eq!(r.shape(), "cylinder");
+        for bad in [
+            "box:0,0,0,1,1:3",
+            "cone:0,0,0,1:3",
+            "box:1,0,0,0,1,1:3",
+            "sphere:0,0,0,-1:3",
+            "box:0,0,0,1,1,1:19",
+            "box:0,0,0,1,1,1:3:inside",
+        ] {
+            assert!(Region::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn shapes_against_boxes() {
+        let lo = [0.0; 3];
+        let hi = [1.0; 3];
+        assert!(
+            overlaps(Lattice::Box([1.0; 3], [2.0; 3]), lo, hi),
+            "touching counts"
+        );
+        assert!(!overlaps(Lattice::Box([1.5; 3], [2.0; 3]), lo, hi));
+        assert!(overlaps(Lattice::Sphere([2.0, 0.5, 0.5], 1.0), lo, hi));
+        assert!(!overlaps(Lattice::Sphere([2.0, 2.0, 2.0], 1.7), lo, hi));
+        assert!(inside_interior(Lattice::Sphere([0.5; 3], 0.9), lo, hi));
+        assert!(!inside_interior(Lattice::Sphere([0.5; 3], 0.8), lo, hi));
+        // An axis along x at distance 1.5 from the box, radius 1.4 and 1.6.
+        let (a, b) = ([-3.0, 2.5, 0.5], [3.0, 2.5, 0.5]);
+        assert!(!cylinder_meets_box(a, b, 1.4, lo, hi));
+        assert!(cylinder_meets_box(a, b, 1.6, lo, hi));
+        // Its caps end before the box.
+        assert!(!cylinder_meets_box(
+            [-3.0, 0.5, 0.5],
+            [-0.5, 0.5, 0.5],
+            10.0,
+            lo,
+            hi
+        ));
+        assert!(cylinder_meets_box(
+            [-3.0, 0.5, 0.5],
+            [0.0, 0.5, 0.5],
+            0.1,
+            lo,
+            hi
+        ));
+    }
+
+    #[test]
+    fn sizes_round_to_the_level_not_larger() {
+        assert_eq!(level_for_size(1.0, 0.25).unwrap(), 2);
+        assert_eq!(level_for_size(1.0, 0.2).unwrap(), 3);
+        assert_eq!(level_for_size(1.0, 2.0).unwrap(), 0);
+        assert!(level_for_size(1.0, 1e-9).is_err());
+    }
+}

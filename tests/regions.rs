@@ -1,0 +1,187 @@
+//! Refinement regions and the minimum level, checked against a brute-force
+//! construction written here: the leaves octmesh writes before balance are
+//! exactly the coarsest octree in which every leaf satisfies every rule.
+
+mod common;
+
+use common::*;
+
+const N: f64 = (1u64 << 19) as f64;
+
+/// A rule in the unit cube: (shape, level, outside).
+enum Shape {
+    Box([f64; 3], [f64; 3]),
+    Ball([f64; 3], f64),
+}
+
+/// Whether the rule asks to split the closed box `lo..hi` at `level`.
+fn wants(
+    shape: &Shape,
+    rule_level: u32,
+    outside: bool,
+    level: u32,
+    lo: [f64; 3],
+    hi: [f64; 3],
+) -> bool {
+    if level >= rule_level {
+        return false;
+    }
+    let meets = match shape {
+        Shape::Box(a, b) => (0..3).all(|k| a[k] <= hi[k] && lo[k] <= b[k]),
+        Shape::Ball(c, r) => {
+            let d2: f64 = (0..3)
+                .map(|k| (lo[k] - c[k]).max(0.0).max(c[k] - hi[k]).powi(2))
+                .sum();
+            d2 <= r * r
+        }
+    };
+    let inside = match shape {
+        Shape::Box(a, b) => (0..3).all(|k| a[k] < lo[k] && hi[k] < b[k]),
+        Shape::Ball(c, r) => (0..8).all(|m| {
+            let d2: f64 = (0..3)
+                .map(|k| (if m >> k & 1 == 1 { hi[k] } else { lo[k] } - c[k]).powi(2))
+                .sum();
+            d2 < r * r
+        }),
+    };
+    if outside {
+        !inside
+    } else {
+        meets
+    }
+}
+
+/// The leaves (x, y, z, level in lattice units) of the coarsest octree of
+/// the unit cube in which no rule wants a split.
+fn brute_force(rules: &[(Shape, u32, bool)], min_level: u32) -> Vec<(u32, u32, u32, u32)> {
+    let mut out = Vec::new();
+    let mut stack = vec![(0u32, 0u32, 0u32, 0u32)];
+    while let Some((x, y, z, l)) = stack.pop() {
+        let len = 1u32 << (19 - l);
+        let lo = [x as f64 / N, y as f64 / N, z as f64 / N];
+        let hi = [
+            (x + len) as f64 / N,
+            (y + len) as f64 / N,
+            (z + len) as f64 / N,
+        ];
+        let split = l < min_level || rules.iter().any(|(s, rl, o)| wants(s, *rl, *o, l, lo, hi));
+        if split && l < 18 {
+            let h = len / 2;
+            for c in 0..8u32 {
+                stack.push((
+                    x + (c & 1) * h,
+                    y + (c >> 1 & 1) * h,
+                    z + (c >> 2 & 1) * h,
+                    l + 1,
+                ));
+            }
+        } else {
+            out.push((x, y, z, l));
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+#[test]
+fn region_leaves_equal_a_brute_force_construction() {
+    let dir = scratch("regions_brute_force");
+    let rules = vec![
+        (Shape::Box([0.1, 0.2, 0.3], [0.4, 0.5, 0.6]), 6, false),
+        (Shape::Ball([0.7, 0.7, 0.7], 0.2), 5, false),
+        (Shape::Ball([0.5, 0.5, 0.5], 0.45), 4, true),
+    ];
+    let expected = brute_force(&rules, 2);
+    let args = [
+        "octree",
+        "sphere",
+        "--level",
+        "0",
+        "--domain",
+        "0,0,0,1",
+        "--balance",
+        "none",
+        "--min-level",
+        "2",
+        "--region",
+        "box:0.1,0.2,0.3,0.4,0.5,0.6:6",
+        "--region",
+        "sphere:0.7,0.7,0.7,0.2:5",
+        "--region",
+        "sphere:0.5,0.5,0.5,0.45:4:outside",
+        "--quiet",
+    ];
+    for np in [1, 2, 3] {
+        let file = dir.join(format!("leaves{np}.txt"));
+        octmesh_ok(
+            np,
+            &[&args[..], &["--write-leaves", file.to_str().unwrap()]].concat(),
+        );
+        let mut got: Vec<(u32, u32, u32, u32)> = leaves(&file)
+            .iter()
+            .map(|o| {
+                let c = o.coords();
+                (c[0], c[1], c[2], o.level() as u32)
+            })
+            .collect();
+        got.sort_unstable();
+        assert_eq!(got.len(), expected.len(), "np {np}");
+        assert!(
+            got == expected,
+            "np {np}: the leaves differ from the brute-force octree"
+        );
+    }
+    // The same rules from a case file.
+    let case = dir.join("case.toml");
+    let printed = octmesh_ok(1, &[&args[..], &["--print-case"]].concat());
+    std::fs::write(&case, &printed.stdout).unwrap();
+    let file = dir.join("from_case.txt");
+    octmesh_ok(
+        2,
+        &[
+            "octree",
+            case.to_str().unwrap(),
+            "--write-leaves",
+            file.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(leaves(&file).len(), expected.len());
+}
+
+#[test]
+fn bad_regions_name_the_option_or_key() {
+    let out = octmesh_fails(&[
+        "octree",
+        "sphere",
+        "--level",
+        "3",
+        "--region",
+        "box:1,0,0,0,1,1:4",
+    ]);
+    assert!(out.contains("--region expects box:"), "{out}");
+    assert!(out.contains("min below max"), "{out}");
+    let dir = scratch("regions_bad");
+    let case = dir.join("bad.toml");
+    std::fs::write(
+        &case,
+        "[surface]\nfile = \"sphere\"\n[octree]\nlevel = 3\n[[regions]]\nshape = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1.0\nlevel = 30\n",
+    )
+    .unwrap();
+    let out = octmesh_fails(&["octree", case.to_str().unwrap()]);
+    assert!(
+        out.contains("bad.toml: regions number 1 (sphere) has level 30"),
+        "{out}"
+    );
+    let out = octmesh_fails(&["octree", "sphere", "--level", "3", "--min-level", "19"]);
+    assert!(
+        out.contains("--min-level is 19: above the maximum level 18"),
+        "{out}"
+    );
+}
+
+/// Runs octmesh on one rank expecting exit status 2; returns stderr.
+fn octmesh_fails(args: &[&str]) -> String {
+    let out = mpirun(1, &octmesh_bin(), args, std::time::Duration::from_secs(60));
+    assert_eq!(out.status.code(), Some(2), "{args:?}");
+    String::from_utf8_lossy(&out.stderr).into()
+}
