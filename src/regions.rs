@@ -122,7 +122,7 @@ impl Region {
                 }
             }
             Region::Sphere { center, radius, .. } => {
-                if !finite(center) || !(radius.is_finite() && *radius > 0.0) {
+                if !(finite(center) && radius.is_finite() && *radius > 0.0) {
                     return Err(format!(
                         "needs a finite centre and a positive radius, got {center:?} and {radius}"
                     ));
@@ -131,10 +131,11 @@ impl Region {
             Region::Cylinder {
                 start, end, radius, ..
             } => {
-                if !finite(start)
-                    || !finite(end)
-                    || start == end
-                    || !(radius.is_finite() && *radius > 0.0)
+                if !(finite(start)
+                    && finite(end)
+                    && start != end
+                    && radius.is_finite()
+                    && *radius > 0.0)
                 {
                     return Err(format!(
                         "needs two distinct finite ends and a positive radius, got {start:?}, {end:?} and {radius}"
