@@ -24,6 +24,7 @@ pub mod budget;
 pub mod classify;
 pub mod comm;
 pub mod config;
+pub mod curvature;
 pub mod domain;
 pub mod error;
 pub mod ffi;

@@ -27,6 +27,8 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("domain.cube", "--domain"),
     ("octree.level", "--level"),
     ("octree.min_level", "--min-level"),
+    ("octree.max_level", "--level"),
+    ("octree.feature_angle", "--feature-angle"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
     ("octree.memory_budget", "--memory-budget"),
@@ -86,9 +88,14 @@ struct OctreeArgs {
     /// An STL file (ASCII or binary), the built-in `sphere` or `torus`, or
     /// a case file (`.toml`) whose settings the options below override.
     input: String,
-    /// Level of the leaves touching the surface (0 to 18) [case: octree.level]
-    #[arg(long, value_name = "L", value_parser = parse_level)]
-    level: Option<u8>,
+    /// Level of the leaves touching the surface (0 to 18); MIN:MAX refines
+    /// them further, up to MAX, where the surface curves by more than the
+    /// feature angle
+    #[arg(long, value_name = "L[:MAX]", value_parser = parse_level_range)]
+    level: Option<(u8, Option<u8>)>,
+    /// Feature angle of curvature refinement, degrees [default: 30]
+    #[arg(long, value_name = "DEG", value_parser = parse_finite)]
+    feature_angle: Option<f64>,
     /// Every leaf at least this level [default: 0]
     #[arg(long, value_name = "L", value_parser = parse_level)]
     min_level: Option<u8>,
@@ -253,8 +260,15 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         set("surface.file", true);
     }
     let o = &octree;
-    if set("octree.level", o.level.is_some()) {
-        config.octree.level = o.level;
+    if let Some((min, max)) = o.level {
+        set("octree.level", true);
+        config.octree.level = Some(min);
+        if set("octree.max_level", max.is_some()) {
+            config.octree.max_level = max;
+        }
+    }
+    if set("octree.feature_angle", o.feature_angle.is_some()) {
+        config.octree.feature_angle = o.feature_angle;
     }
     if set("octree.min_level", o.min_level.is_some()) {
         config.octree.min_level = o.min_level.unwrap_or(0);
@@ -397,6 +411,14 @@ fn parse_level(s: &str) -> std::result::Result<u8, String> {
         .map_err(|_| format!("expects an integer, got '{s}'"))?;
     // Out-of-range levels are reported by validation, with the maximum.
     Ok(l.min(u8::MAX as u32) as u8)
+}
+
+/// `L` or `MIN:MAX`.
+fn parse_level_range(s: &str) -> std::result::Result<(u8, Option<u8>), String> {
+    match s.split_once(':') {
+        None => Ok((parse_level(s)?, None)),
+        Some((a, b)) => Ok((parse_level(a)?, Some(parse_level(b)?))),
+    }
 }
 
 fn parse_count(s: &str) -> std::result::Result<u64, String> {

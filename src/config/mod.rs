@@ -22,6 +22,8 @@
 //!
 //! [octree]
 //! level = 9
+//! # max_level = 11          # curvature refinement up to here (--level 9:11)
+//! # feature_angle = 30.0
 //! min_level = 0
 //! balance = "corner"        # none | face | edge | corner
 //! # max_octants = 100000000
@@ -182,6 +184,13 @@ pub struct OctreeConfig {
     /// Level of the leaves touching the surface, 0 to 18 (required). A
     /// leaf at level `l` has side `2^-l` of the cube.
     pub level: Option<u8>,
+    /// With curvature refinement: leaves touching the surface are refined
+    /// further, up to this level, where the normals of the triangles
+    /// touching them differ by more than `feature_angle` (`--level
+    /// MIN:MAX`). Unset: every surface leaf at `level`.
+    pub max_level: Option<u8>,
+    /// The feature angle of curvature refinement, degrees (default 30).
+    pub feature_angle: Option<f64>,
     /// Every leaf at least this level (default 0).
     pub min_level: u8,
     /// 2:1 balance (default corner).
@@ -310,6 +319,8 @@ pub const KEYS: &[&str] = &[
     "domain.cube",
     "octree.level",
     "octree.min_level",
+    "octree.max_level",
+    "octree.feature_angle",
     "octree.balance",
     "octree.max_octants",
     "octree.memory_budget",
@@ -344,6 +355,24 @@ impl Config {
                 "octree.level",
                 format!("is {level}: above the maximum level {MAX_LEVEL}"),
             ));
+        }
+        if let Some(max) = self.octree.max_level {
+            if max > MAX_LEVEL || max < level {
+                return Err(ConfigError::new(
+                    "octree.max_level",
+                    format!(
+                        "is {max}: it must be between {{octree.level}} ({level}) and {MAX_LEVEL}"
+                    ),
+                ));
+            }
+        }
+        if let Some(a) = self.octree.feature_angle {
+            if !(a > 0.0 && a < 180.0) {
+                return Err(ConfigError::new(
+                    "octree.feature_angle",
+                    format!("must be between 0 and 180 degrees, got {a}"),
+                ));
+            }
         }
         if self.octree.min_level > MAX_LEVEL {
             return Err(ConfigError::new(

@@ -32,6 +32,7 @@ use crate::classify::{
 };
 use crate::comm::{agree, CommRef};
 use crate::config::{Command, Config};
+use crate::curvature::CurvatureRule;
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{clean, diagnose, SurfaceReport};
@@ -51,6 +52,10 @@ use crate::regions::RegionRules;
 use crate::report::{peak_rss_bytes, PhaseTimer};
 
 pub use observer::{Event, Observer, Silent};
+
+/// The feature angle of curvature refinement when none is configured,
+/// degrees (snappyHexMesh's `resolveFeatureAngle` default).
+pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
 pub use stats::Stats;
 
 /// The surface and what is derived from it.
@@ -512,6 +517,47 @@ impl Session {
         Ok(())
     }
 
+    /// Refines the leaves touching the surface further where it curves:
+    /// up to `octree.max_level`, while the normals of the triangles
+    /// touching a leaf differ by more than `octree.feature_angle` (see
+    /// [`crate::curvature`]). Phase `curvature`; nothing happens without a
+    /// maximum level above the surface level.
+    pub fn refine_curvature(&mut self) -> Result<()> {
+        let (level, max) = (self.config.octree.level, self.config.octree.max_level);
+        let Some(max) = max.filter(|&m| level.is_some_and(|l| m > l)) else {
+            return Ok(());
+        };
+        let angle = self
+            .config
+            .octree
+            .feature_angle
+            .unwrap_or(DEFAULT_FEATURE_ANGLE);
+        let domain = agree(&*self.comm, self.tree_or_state().map(|t| t.1))?;
+        self.index_for(domain)?;
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let comm = self.comm.clone();
+        let shown = self.progress("curvature", None);
+        let (tree, surface) = (self.tree.as_mut().map(|t| &mut t.0), &self.surface);
+        let refined = self.timer.time(&*comm, "curvature", || -> Result<()> {
+            let (Some(tree), Some(s)) = (tree, surface) else {
+                return Ok(());
+            };
+            let rule = CurvatureRule::new(&s.index, max, angle);
+            let mut buf = Vec::new();
+            tree.refine(rule.max_level(), |o| rule.splits(o, &mut buf), limit)
+        });
+        drop(shown);
+        over_budget(refined, budget, limit, "curvature refinement")?;
+        let n = self.tree().map_or(0, |t| t.global_len());
+        self.report_phase(Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
+        self.classes = None;
+        self.mesh = None;
+        Ok(())
+    }
+
     /// Refines the octree by the configured minimum level and regions
     /// (`octree.min_level`, `regions`): a leaf is split while a rule asks
     /// for more (see [`crate::regions`]). Within the octant limit and the
@@ -846,6 +892,7 @@ impl Session {
         self.plan = command;
         self.load_surface()?;
         self.refine_surface(level)?;
+        self.refine_curvature()?;
         self.refine_regions()?;
         self.partition()?;
         if let Some(p) = self.config.output.refined_leaves.clone() {

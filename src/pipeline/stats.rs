@@ -205,10 +205,10 @@ impl Session {
         let comm = &*self.comm;
         let f = &self.facts;
         let meshed = self.mesh.as_ref();
-        let mut keys = vec!["read", "construct", "refine", "partition", "balance"];
-        if self.timer.phases().iter().any(|p| p.0 == "regions") {
-            keys.insert(3, "regions");
-        }
+        let ran = |name: &str| self.timer.phases().iter().any(|p| p.0 == name);
+        let mut keys = vec!["read", "construct", "refine"];
+        keys.extend(["curvature", "regions"].into_iter().filter(|k| ran(k)));
+        keys.extend(["partition", "balance"]);
         if self.classes.as_ref().is_some_and(|c| c.rule.is_some()) || f.winding.is_some() {
             keys.push("classify");
         }
