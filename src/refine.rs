@@ -120,6 +120,16 @@ impl SurfaceIndex {
         self.bvh.query_candidates(lo, hi, out);
     }
 
+    /// Whether the closed box `lo..hi` (lattice units) comes within `d` of
+    /// the surface (exact distance; `buf` is scratch space).
+    pub fn box_within(&self, lo: [f64; 3], hi: [f64; 3], d: f64, buf: &mut Vec<u32>) -> bool {
+        let (a, b) = (lo.map(|x| x - d), hi.map(|x| x + d));
+        buf.clear();
+        self.bvh.query_candidates(a, b, buf);
+        buf.iter()
+            .any(|&t| crate::geometry::distance::box_within(&self.tris[t as usize], lo, hi, d))
+    }
+
     /// Indices of the triangles touching the closed box of `o`.
     pub fn touching(&self, o: Octant, out: &mut Vec<u32>) {
         let (lo, hi) = o.bounds_f64();

@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::octant::{Octant, MAX_LEVEL};
+use crate::refine::SurfaceIndex;
 
 /// A refinement region with its level, user units.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -200,10 +201,13 @@ impl Region {
 }
 
 /// The regions mapped to the lattice of a domain, ready for octant tests.
-#[derive(Clone, Debug)]
-pub struct RegionRules {
+pub struct RegionRules<'a> {
     min_level: u8,
     rules: Vec<(Lattice, u8, bool)>,
+    /// Distance bands (lattice units, level), increasing distances, and the
+    /// surface they measure from.
+    bands: Vec<(f64, u8)>,
+    surface: Option<&'a SurfaceIndex>,
 }
 
 /// A region's shape in lattice units.
@@ -214,9 +218,9 @@ enum Lattice {
     Cylinder([f64; 3], [f64; 3], f64),
 }
 
-impl RegionRules {
+impl<'a> RegionRules<'a> {
     /// The rules of `regions` and `min_level` in the lattice of `domain`.
-    pub fn new(domain: &Domain, min_level: u8, regions: &[Region]) -> RegionRules {
+    pub fn new(domain: &Domain, min_level: u8, regions: &[Region]) -> RegionRules<'a> {
         let s = domain.scale();
         let rules = regions
             .iter()
@@ -239,25 +243,68 @@ impl RegionRules {
                 (shape, r.level(), r.outside())
             })
             .collect();
-        RegionRules { min_level, rules }
+        RegionRules {
+            min_level,
+            rules,
+            bands: Vec::new(),
+            surface: None,
+        }
+    }
+
+    /// Adds distance bands `(distance in user units, level)` around
+    /// `surface` (indexed in the lattice of `domain`): a leaf is split while
+    /// its level is below a band's and its closed box comes within the
+    /// band's distance of the surface.
+    pub fn with_bands(
+        mut self,
+        domain: &Domain,
+        bands: &[(f64, u8)],
+        surface: &'a SurfaceIndex,
+    ) -> RegionRules<'a> {
+        self.bands = bands
+            .iter()
+            .map(|&(d, l)| (d * domain.scale(), l))
+            .collect();
+        self.surface = Some(surface);
+        self
     }
 
     /// Whether any rule asks for more than the root.
     pub fn is_empty(&self) -> bool {
-        self.min_level == 0 && self.rules.iter().all(|r| r.1 == 0)
+        self.min_level == 0
+            && self.rules.iter().all(|r| r.1 == 0)
+            && self.bands.iter().all(|b| b.1 == 0)
     }
 
     /// The finest level any rule asks for.
     pub fn max_level(&self) -> u8 {
-        self.rules.iter().map(|r| r.1).fold(self.min_level, u8::max)
+        let bands = self.bands.iter().map(|b| b.1);
+        self.rules
+            .iter()
+            .map(|r| r.1)
+            .chain(bands)
+            .fold(self.min_level, u8::max)
     }
 
-    /// Whether leaf `o` must be split.
-    pub fn splits(&self, o: Octant) -> bool {
+    /// Whether leaf `o` must be split; `buf` is scratch space.
+    pub fn splits(&self, o: Octant, buf: &mut Vec<u32>) -> bool {
         if o.level() < self.min_level {
             return true;
         }
         let (lo, hi) = o.bounds_f64();
+        if let Some(s) = self.surface {
+            // The widest band that still refines this leaf decides: the
+            // narrower ones lie inside it.
+            let widest = self
+                .bands
+                .iter()
+                .filter(|b| o.level() < b.1)
+                .map(|b| b.0)
+                .fold(-1.0, f64::max);
+            if widest >= 0.0 && s.box_within(lo, hi, widest, buf) {
+                return true;
+            }
+        }
         self.rules.iter().any(|&(shape, level, outside)| {
             o.level() < level
                 && if outside {

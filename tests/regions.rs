@@ -185,3 +185,82 @@ fn octmesh_fails(args: &[&str]) -> String {
     assert_eq!(out.status.code(), Some(2), "{args:?}");
     String::from_utf8_lossy(&out.stderr).into()
 }
+
+/// Distance from the box `lo..hi` to the unit sphere at the origin.
+fn sphere_distance(lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    let near: f64 = (0..3)
+        .map(|k| (lo[k].max(0.0).max(-hi[k])).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let far: f64 = (0..3)
+        .map(|k| lo[k].abs().max(hi[k].abs()).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    if near > 1.0 {
+        near - 1.0
+    } else if far < 1.0 {
+        1.0 - far
+    } else {
+        0.0
+    }
+}
+
+#[test]
+fn distance_bands_follow_the_exact_distance() {
+    let dir = scratch("regions_distance");
+    // The built-in sphere is a polyhedron within 1e-3 of the unit sphere.
+    let tol = 2e-3;
+    let bands = [(0.1, 6u8), (0.3, 5u8)];
+    for np in [1, 2] {
+        let file = dir.join(format!("leaves{np}.txt"));
+        octmesh_ok(
+            np,
+            &[
+                "octree",
+                "sphere",
+                "--level",
+                "2",
+                "--distance",
+                "0.1:6,0.3:5",
+                "--domain",
+                "-2,-2,-2,4",
+                "--balance",
+                "none",
+                "--quiet",
+                "--write-leaves",
+                file.to_str().unwrap(),
+            ],
+        );
+        let user = |c: [u32; 3], level: u8| {
+            let len = 4.0 / (1u32 << level) as f64;
+            let lo: [f64; 3] = std::array::from_fn(|k| -2.0 + 4.0 * c[k] as f64 / N);
+            let hi: [f64; 3] = std::array::from_fn(|k| lo[k] + len);
+            sphere_distance(lo, hi)
+        };
+        let mut in_band = 0;
+        for o in leaves(&file) {
+            let d = user(o.coords(), o.level());
+            // Close enough: at least the band's level.
+            for (bd, bl) in bands {
+                if d < bd - tol {
+                    in_band += 1;
+                    assert!(
+                        o.level() >= bl,
+                        "{o:?} at distance {d} is coarser than level {bl}"
+                    );
+                }
+            }
+            // No finer than a rule asks: the parent was within a band that
+            // wanted more, or below the surface level.
+            if o.level() > 2 {
+                let p = o.parent();
+                let dp = user(p.coords(), p.level());
+                let wanted = bands
+                    .iter()
+                    .any(|&(bd, bl)| p.level() < bl && dp <= bd + tol);
+                assert!(wanted, "{o:?}: its parent at distance {dp} needed no split");
+            }
+        }
+        assert!(in_band > 0);
+    }
+}

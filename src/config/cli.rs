@@ -29,6 +29,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("octree.min_level", "--min-level"),
     ("octree.max_level", "--level"),
     ("octree.feature_angle", "--feature-angle"),
+    ("octree.distance", "--distance"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
     ("octree.memory_budget", "--memory-budget"),
@@ -99,6 +100,10 @@ struct OctreeArgs {
     /// Every leaf at least this level [default: 0]
     #[arg(long, value_name = "L", value_parser = parse_level)]
     min_level: Option<u8>,
+    /// Distance bands around the surface, D1:L1,D2:L2,... with increasing
+    /// distances D (user units): leaves within D of the surface get level L
+    #[arg(long, value_name = "D:L,...", value_parser = parse_bands)]
+    distance: Option<Bands>,
     /// A refinement region, repeatable: box:X0,Y0,Z0,X1,Y1,Z1:LEVEL,
     /// sphere:CX,CY,CZ,R:LEVEL or cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (user
     /// units), then :outside to refine where the shape is not
@@ -273,6 +278,10 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
     if set("octree.min_level", o.min_level.is_some()) {
         config.octree.min_level = o.min_level.unwrap_or(0);
     }
+    if let Some(b) = &o.distance {
+        set("octree.distance", true);
+        config.octree.distance = b.0.clone();
+    }
     if set("regions", !o.region.is_empty()) {
         // The command line's regions replace the case file's.
         config.regions = o.region.clone();
@@ -411,6 +420,26 @@ fn parse_level(s: &str) -> std::result::Result<u8, String> {
         .map_err(|_| format!("expects an integer, got '{s}'"))?;
     // Out-of-range levels are reported by validation, with the maximum.
     Ok(l.min(u8::MAX as u32) as u8)
+}
+
+/// Distance bands as one option value (clap reads a bare `Vec` as several
+/// values).
+#[derive(Clone, Debug)]
+struct Bands(Vec<(f64, u8)>);
+
+/// `D1:L1,D2:L2,...`.
+fn parse_bands(s: &str) -> std::result::Result<Bands, String> {
+    let bad = || format!("expects D1:L1,D2:L2,... (distance:level pairs), got '{s}'");
+    s.split(',')
+        .map(|band| {
+            let (d, l) = band.split_once(':').ok_or_else(bad)?;
+            Ok((
+                parse_finite(d).map_err(|_| bad())?,
+                parse_level(l).map_err(|_| bad())?,
+            ))
+        })
+        .collect::<std::result::Result<_, String>>()
+        .map(Bands)
 }
 
 /// `L` or `MIN:MAX`.

@@ -25,6 +25,7 @@
 //! # max_level = 11          # curvature refinement up to here (--level 9:11)
 //! # feature_angle = 30.0
 //! min_level = 0
+//! # distance = [[0.01, 10], [0.05, 8]]   # (distance, level) bands around the surface
 //! balance = "corner"        # none | face | edge | corner
 //! # max_octants = 100000000
 //! # memory_budget = "8GiB"  # per rank; unset: the node's available memory
@@ -193,6 +194,11 @@ pub struct OctreeConfig {
     pub feature_angle: Option<f64>,
     /// Every leaf at least this level (default 0).
     pub min_level: u8,
+    /// Distance bands around the surface, `[[distance, level], ...]` with
+    /// increasing distances (user units): a leaf is refined while its level
+    /// is below a band's and its box comes within the band's distance of
+    /// the surface (exact distances).
+    pub distance: Vec<(f64, u8)>,
     /// 2:1 balance (default corner).
     pub balance: Balance,
     /// Stop with an error instead of building more leaves than this, over
@@ -321,6 +327,7 @@ pub const KEYS: &[&str] = &[
     "octree.min_level",
     "octree.max_level",
     "octree.feature_angle",
+    "octree.distance",
     "octree.balance",
     "octree.max_octants",
     "octree.memory_budget",
@@ -373,6 +380,19 @@ impl Config {
                     format!("must be between 0 and 180 degrees, got {a}"),
                 ));
             }
+        }
+        let bands = &self.octree.distance;
+        if let Some((i, &(d, l))) = bands.iter().enumerate().find(|(i, &(d, l))| {
+            !(d.is_finite() && d >= 0.0) || l > MAX_LEVEL || (*i > 0 && d <= bands[i - 1].0)
+        }) {
+            return Err(ConfigError::new(
+                "octree.distance",
+                format!(
+                    "band {} ({d}, level {l}) is invalid: distances must be finite, non-negative \
+                     and increasing, levels at most {MAX_LEVEL}",
+                    i + 1
+                ),
+            ));
         }
         if self.octree.min_level > MAX_LEVEL {
             return Err(ConfigError::new(

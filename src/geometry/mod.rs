@@ -8,6 +8,7 @@
 
 pub mod bvh;
 pub mod diagnostics;
+pub mod distance;
 pub mod intersect;
 pub mod shapes;
 pub mod stl;

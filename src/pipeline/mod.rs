@@ -563,19 +563,34 @@ impl Session {
     /// for more (see [`crate::regions`]). Within the octant limit and the
     /// memory budget. Phase `regions`; nothing happens without rules.
     pub fn refine_regions(&mut self) -> Result<()> {
-        let domain = agree(&*self.comm, self.tree_or_state().map(|t| t.1))?;
-        let rules = RegionRules::new(&domain, self.config.octree.min_level, &self.config.regions);
-        if rules.is_empty() {
-            return Ok(());
+        let bands = self.config.octree.distance.clone();
+        let checked = self.tree_or_state().map(|t| t.1).and_then(|d| {
+            if !bands.is_empty() {
+                self.surface_or_state()?;
+            }
+            Ok(d)
+        });
+        let domain = agree(&*self.comm, checked)?;
+        if !bands.is_empty() {
+            self.index_for(domain)?;
         }
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
+        let mut rules =
+            RegionRules::new(&domain, self.config.octree.min_level, &self.config.regions);
+        if let (Some(s), false) = (&self.surface, bands.is_empty()) {
+            rules = rules.with_bands(&domain, &bands, &s.index);
+        }
+        if rules.is_empty() {
+            return Ok(());
+        }
         let comm = self.comm.clone();
         let shown = self.progress("regions", None);
         let tree = self.tree.as_mut().map(|t| &mut t.0);
         let refined = self.timer.time(&*comm, "regions", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
-            tree.refine(rules.max_level(), |o| rules.splits(o), limit)
+            let mut buf = Vec::new();
+            tree.refine(rules.max_level(), |o| rules.splits(o, &mut buf), limit)
         });
         drop(shown);
         over_budget(refined, budget, limit, "region refinement")?;

@@ -1,0 +1,237 @@
+//! Exact Euclidean distances between points, segments, triangles and
+//! axis-aligned boxes, for distance bands around a surface.
+//!
+//! The distance between two disjoint convex polytopes is attained by a
+//! pair of features at least one of which is a vertex, or by two edges.
+//! So the box-to-triangle distance is the least of: each box corner to the
+//! triangle, each triangle vertex to the box, and each of the 12 box edges
+//! to each of the 3 triangle edges; and zero when they overlap.
+
+use super::intersect::triangle_box_overlap;
+use super::Triangle;
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn add_scaled(a: [f64; 3], d: [f64; 3], t: f64) -> [f64; 3] {
+    [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]
+}
+
+fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let d = sub(a, b);
+    dot(d, d)
+}
+
+/// Squared distance from `p` to the box `lo..hi`.
+pub fn point_box2(p: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let d = (lo[k] - p[k]).max(0.0).max(p[k] - hi[k]);
+            d * d
+        })
+        .sum()
+}
+
+/// Squared distance from `p` to the triangle `a b c` (Ericson's region
+/// tests, "Real-Time Collision Detection" 5.1.5).
+pub fn point_triangle2(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return dist2(p, a);
+    }
+    let bp = sub(p, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return dist2(p, b);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return dist2(p, add_scaled(a, ab, d1 / (d1 - d3)));
+    }
+    let cp = sub(p, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return dist2(p, c);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return dist2(p, add_scaled(a, ac, d2 / (d2 - d6)));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return dist2(p, add_scaled(b, sub(c, b), w));
+    }
+    let denom = va + vb + vc;
+    if !(denom > 0.0) {
+        // A degenerate triangle: its edges hold it.
+        return segment_point2(a, b, p)
+            .min(segment_point2(b, c, p))
+            .min(segment_point2(a, c, p));
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    dist2(p, add_scaled(add_scaled(a, ab, v), ac, w))
+}
+
+fn segment_point2(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> f64 {
+    let d = sub(b, a);
+    let l = dot(d, d);
+    let t = if l > 0.0 {
+        (dot(sub(p, a), d) / l).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    dist2(p, add_scaled(a, d, t))
+}
+
+/// Squared distance between the segments `p1 q1` and `p2 q2` (Ericson
+/// 5.1.9, with the parallel and degenerate cases).
+pub fn segment_segment2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3], q2: [f64; 3]) -> f64 {
+    let (d1, d2, r) = (sub(q1, p1), sub(q2, p2), sub(p1, p2));
+    let (a, e, f) = (dot(d1, d1), dot(d2, d2), dot(d2, r));
+    if a <= 0.0 && e <= 0.0 {
+        return dist2(p1, p2);
+    }
+    let (s, t) = if a <= 0.0 {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = dot(d1, r);
+        if e <= 0.0 {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = dot(d1, d2);
+            let denom = a * e - b * b;
+            let mut s = if denom > 0.0 {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    dist2(add_scaled(p1, d1, s), add_scaled(p2, d2, t))
+}
+
+/// Whether the closed box `lo..hi` comes within `d` of the triangle
+/// (distance at most `d`).
+pub fn box_within(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> bool {
+    let d2 = d * d;
+    let [a, b, c] = t.v;
+    // Quick accept and reject on the triangle's vertices and box.
+    if [a, b, c].iter().any(|&v| point_box2(v, lo, hi) <= d2) {
+        return true;
+    }
+    let tlo: [f64; 3] = std::array::from_fn(|k| a[k].min(b[k]).min(c[k]));
+    let thi: [f64; 3] = std::array::from_fn(|k| a[k].max(b[k]).max(c[k]));
+    let gap2: f64 = (0..3)
+        .map(|k| {
+            let g = (lo[k] - thi[k]).max(0.0).max(tlo[k] - hi[k]);
+            g * g
+        })
+        .sum();
+    if gap2 > d2 {
+        return false;
+    }
+    if triangle_box_overlap(t, lo, hi) {
+        return true;
+    }
+    let corner = |i: usize| -> [f64; 3] {
+        std::array::from_fn(|k| if i >> k & 1 == 1 { hi[k] } else { lo[k] })
+    };
+    if (0..8).any(|i| {
+        let p = corner(i);
+        point_triangle2(p, a, b, c) <= d2
+    }) {
+        return true;
+    }
+    // The 12 edges: corner pairs differing in one bit.
+    let edges = (0..8usize).flat_map(|i| {
+        (0..3)
+            .filter(move |k| i >> k & 1 == 0)
+            .map(move |k| (i, i | 1 << k))
+    });
+    let tri_edges = [(a, b), (b, c), (c, a)];
+    edges.into_iter().any(|(i, j)| {
+        let (p, q) = (corner(i), corner(j));
+        tri_edges
+            .iter()
+            .any(|&(u, v)| segment_segment2(p, q, u, v) <= d2)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Brute-force squared distance from the box to the triangle by dense
+    /// sampling of both (an upper bound that converges).
+    fn sampled(t: &Triangle, lo: [f64; 3], hi: [f64; 3]) -> f64 {
+        let n = 24;
+        let mut best = f64::INFINITY;
+        for i in 0..=n {
+            for j in 0..=(n - i) {
+                let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+                let p: [f64; 3] = std::array::from_fn(|k| {
+                    t.v[0][k] + u * (t.v[1][k] - t.v[0][k]) + v * (t.v[2][k] - t.v[0][k])
+                });
+                best = best.min(point_box2(p, lo, hi));
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn box_distance_agrees_with_sampling() {
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
+        };
+        let (lo, hi) = ([0.0, 0.0, 0.0], [1.0, 0.5, 0.25]);
+        for _ in 0..300 {
+            let t = Triangle::new(
+                [rnd(), rnd(), rnd()],
+                [rnd(), rnd(), rnd()],
+                [rnd(), rnd(), rnd()],
+            );
+            let s = sampled(&t, lo, hi).sqrt();
+            // Sampling only overestimates; the exact test must accept at the
+            // sampled distance and, well below the true one, reject.
+            assert!(box_within(&t, lo, hi, s + 1e-12), "{t:?}: sampled {s}");
+            if s > 0.2 {
+                assert!(!box_within(&t, lo, hi, 0.5 * s - 0.1), "{t:?}: sampled {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn segments_and_points() {
+        assert_eq!(
+            segment_segment2([0.0; 3], [1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.5, 2.0, 0.0]),
+            1.0
+        );
+        assert_eq!(
+            segment_segment2([0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0]),
+            1.0
+        );
+        let (a, b, c) = ([0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]);
+        assert_eq!(point_triangle2([0.25, 0.25, 2.0], a, b, c), 4.0);
+        assert_eq!(point_triangle2([-1.0, 0.0, 0.0], a, b, c), 1.0);
+    }
+}
