@@ -69,7 +69,7 @@ pub fn point_triangle2(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f6
         return dist2(p, add_scaled(b, sub(c, b), w));
     }
     let denom = va + vb + vc;
-    if !(denom > 0.0) {
+    if denom.is_nan() || denom <= 0.0 {
         // A degenerate triangle: its edges hold it.
         return segment_point2(a, b, p)
             .min(segment_point2(b, c, p))
