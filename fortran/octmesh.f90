@@ -9,7 +9,7 @@
 !>   st = octmesh_create_f(MPI_COMM_WORLD, h)          ! use mpi
 !>   st = octmesh_create_f(MPI_COMM_WORLD%MPI_VAL, h)  ! use mpi_f08
 !>   st = octmesh_surface_builtin_f(h, "torus")
-!>   st = octmesh_refine_callback(h, 6, c_funloc(my_refine), c_null_ptr)
+!>   st = octmesh_octree_refine_callback(h, 6, c_funloc(my_refine), c_null_ptr)
 !>   ...
 !>   call octmesh_destroy(h)
 !>
@@ -52,6 +52,7 @@ module octmesh
      real(c_double) :: fit
      integer(c_int64_t) :: max_octants
      integer(c_int32_t) :: verbosity
+     integer(c_int64_t) :: memory_budget
   end type octmesh_options_t
 
   !> octmesh_octant_t: lowest corner (lattice units) and level.
@@ -61,19 +62,19 @@ module octmesh
 
   !> octmesh_mesh_counts_t
   type, bind(c), public :: octmesh_mesh_counts_t
-     integer(c_int64_t) :: local_elements, local_nodes, num_owned, num_independent, &
-          first_global, global_elements, global_independent, global_face_hanging, &
+     integer(c_int32_t) :: local_elements, local_nodes, num_owned, num_independent
+     integer(c_int64_t) :: first_global, global_elements, global_independent, global_face_hanging, &
           global_edge_hanging
   end type octmesh_mesh_counts_t
 
   public :: octmesh_create_f, octmesh_destroy, octmesh_error, octmesh_status_name_f
   public :: octmesh_options_default
   public :: octmesh_surface_builtin_f, octmesh_surface_from_stl_f, octmesh_surface_from_triangles
-  public :: octmesh_set_domain, octmesh_get_domain
-  public :: octmesh_refine_surface, octmesh_refine_callback, octmesh_balance, octmesh_partition
-  public :: octmesh_get_num_leaves, octmesh_get_leaves, octmesh_check_leak
-  public :: octmesh_mesh, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
-  public :: octmesh_set_inside_rule, octmesh_mesh_get_inside_rule
+  public :: octmesh_domain_set, octmesh_domain_get
+  public :: octmesh_octree_refine_surface, octmesh_octree_refine_callback, octmesh_octree_balance, octmesh_octree_partition
+  public :: octmesh_octree_get_num_leaves, octmesh_octree_get_leaves, octmesh_octree_check_leak
+  public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
+  public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
@@ -111,30 +112,30 @@ module octmesh
        type(c_ptr) :: octmesh_last_error
      end function octmesh_last_error
 
-     function octmesh_set_domain(h, origin, side) bind(c, name="octmesh_set_domain")
+     function octmesh_domain_set(h, origin, side) bind(c, name="octmesh_domain_set")
        import :: c_ptr, c_double, c_int
        type(c_ptr), value :: h
        real(c_double), intent(in) :: origin(3)
        real(c_double), value :: side
-       integer(c_int) :: octmesh_set_domain
-     end function octmesh_set_domain
+       integer(c_int) :: octmesh_domain_set
+     end function octmesh_domain_set
 
      !> OCTMESH_STATUS_LEAK when the region outside the surface reaches
      !> point(3), known to be inside the body; octmesh_error(h) then
      !> describes the path.
-     function octmesh_check_leak(h, point) bind(c, name="octmesh_check_leak")
+     function octmesh_octree_check_leak(h, point) bind(c, name="octmesh_octree_check_leak")
        import :: c_ptr, c_double, c_int
        type(c_ptr), value :: h
        real(c_double), intent(in) :: point(3)
-       integer(c_int) :: octmesh_check_leak
-     end function octmesh_check_leak
+       integer(c_int) :: octmesh_octree_check_leak
+     end function octmesh_octree_check_leak
 
-     function octmesh_set_inside_rule(h, rule) bind(c, name="octmesh_set_inside_rule")
+     function octmesh_mesh_set_inside_rule(h, rule) bind(c, name="octmesh_mesh_set_inside_rule")
        import :: c_ptr, c_int32_t, c_int
        type(c_ptr), value :: h
        integer(c_int32_t), value :: rule
-       integer(c_int) :: octmesh_set_inside_rule
-     end function octmesh_set_inside_rule
+       integer(c_int) :: octmesh_mesh_set_inside_rule
+     end function octmesh_mesh_set_inside_rule
 
      function octmesh_mesh_get_inside_rule(h, rule) bind(c, name="octmesh_mesh_get_inside_rule")
        import :: c_ptr, c_int32_t, c_int
@@ -143,13 +144,13 @@ module octmesh
        integer(c_int) :: octmesh_mesh_get_inside_rule
      end function octmesh_mesh_get_inside_rule
 
-     function octmesh_get_domain(h, origin, side) bind(c, name="octmesh_get_domain")
+     function octmesh_domain_get(h, origin, side) bind(c, name="octmesh_domain_get")
        import :: c_ptr, c_double, c_int
        type(c_ptr), value :: h
        real(c_double), intent(out) :: origin(3)
        real(c_double), intent(out) :: side
-       integer(c_int) :: octmesh_get_domain
-     end function octmesh_get_domain
+       integer(c_int) :: octmesh_domain_get
+     end function octmesh_domain_get
 
      function c_octmesh_surface_builtin(h, name) bind(c, name="octmesh_surface_builtin")
        import :: c_ptr, c_char, c_int
@@ -175,62 +176,64 @@ module octmesh
        integer(c_int) :: octmesh_surface_from_triangles
      end function octmesh_surface_from_triangles
 
-     function octmesh_refine_surface(h, level) bind(c, name="octmesh_refine_surface")
+     function octmesh_octree_refine_surface(h, level) bind(c, name="octmesh_octree_refine_surface")
        import :: c_ptr, c_int32_t, c_int
        type(c_ptr), value :: h
        integer(c_int32_t), value :: level
-       integer(c_int) :: octmesh_refine_surface
-     end function octmesh_refine_surface
+       integer(c_int) :: octmesh_octree_refine_surface
+     end function octmesh_octree_refine_surface
 
      !> refine: c_funloc of a bind(c) function (ctx, octant) -> int32;
      !> ctx: c_loc of anything, or c_null_ptr.
-     function octmesh_refine_callback(h, max_level, refine, ctx) &
-          bind(c, name="octmesh_refine_callback")
+     function octmesh_octree_refine_callback(h, max_level, refine, ctx) &
+          bind(c, name="octmesh_octree_refine_callback")
        import :: c_ptr, c_funptr, c_int32_t, c_int
        type(c_ptr), value :: h
        integer(c_int32_t), value :: max_level
        type(c_funptr), value :: refine
        type(c_ptr), value :: ctx
-       integer(c_int) :: octmesh_refine_callback
-     end function octmesh_refine_callback
+       integer(c_int) :: octmesh_octree_refine_callback
+     end function octmesh_octree_refine_callback
 
-     function octmesh_balance(h, connect) bind(c, name="octmesh_balance")
+     function octmesh_octree_balance(h, connect) bind(c, name="octmesh_octree_balance")
        import :: c_ptr, c_int32_t, c_int
        type(c_ptr), value :: h
        integer(c_int32_t), value :: connect
-       integer(c_int) :: octmesh_balance
-     end function octmesh_balance
+       integer(c_int) :: octmesh_octree_balance
+     end function octmesh_octree_balance
 
      !> weight: c_null_funptr for equal counts, or c_funloc of a bind(c)
      !> function (ctx, octant) -> int64.
-     function octmesh_partition(h, weight, ctx) bind(c, name="octmesh_partition")
+     function octmesh_octree_partition(h, weight, ctx) bind(c, name="octmesh_octree_partition")
        import :: c_ptr, c_funptr, c_int
        type(c_ptr), value :: h
        type(c_funptr), value :: weight
        type(c_ptr), value :: ctx
-       integer(c_int) :: octmesh_partition
-     end function octmesh_partition
+       integer(c_int) :: octmesh_octree_partition
+     end function octmesh_octree_partition
 
-     function octmesh_get_num_leaves(h, nlocal, nglobal) bind(c, name="octmesh_get_num_leaves")
-       import :: c_ptr, c_int64_t, c_int
+     function octmesh_octree_get_num_leaves(h, nlocal, nglobal) bind(c, name="octmesh_octree_get_num_leaves")
+       import :: c_ptr, c_int32_t, c_int64_t, c_int
        type(c_ptr), value :: h
-       integer(c_int64_t), intent(out) :: nlocal, nglobal
-       integer(c_int) :: octmesh_get_num_leaves
-     end function octmesh_get_num_leaves
+       integer(c_int32_t), intent(out) :: nlocal
+       integer(c_int64_t), intent(out) :: nglobal
+       integer(c_int) :: octmesh_octree_get_num_leaves
+     end function octmesh_octree_get_num_leaves
 
-     function octmesh_get_leaves(h, out) bind(c, name="octmesh_get_leaves")
-       import :: c_ptr, c_int, octmesh_octant_t
+     function octmesh_octree_get_leaves(h, out, capacity) bind(c, name="octmesh_octree_get_leaves")
+       import :: c_ptr, c_int, c_int32_t, octmesh_octant_t
        type(c_ptr), value :: h
        type(octmesh_octant_t), intent(out) :: out(*)
-       integer(c_int) :: octmesh_get_leaves
-     end function octmesh_get_leaves
+       integer(c_int32_t), value :: capacity
+       integer(c_int) :: octmesh_octree_get_leaves
+     end function octmesh_octree_get_leaves
 
-     function octmesh_mesh(h, keep, rule) bind(c, name="octmesh_mesh")
+     function octmesh_mesh_build(h, keep, rule) bind(c, name="octmesh_mesh_build")
        import :: c_ptr, c_int32_t, c_int
        type(c_ptr), value :: h
        integer(c_int32_t), value :: keep, rule
-       integer(c_int) :: octmesh_mesh
-     end function octmesh_mesh
+       integer(c_int) :: octmesh_mesh_build
+     end function octmesh_mesh_build
 
      function octmesh_mesh_get_counts(h, out) bind(c, name="octmesh_mesh_get_counts")
        import :: c_ptr, c_int, octmesh_mesh_counts_t

@@ -14,8 +14,10 @@
 
 
 /**
- * Status returned by every octmesh function. The values other than
- * `OCTMESH_STATUS_OK` are the stable error codes of octmesh's error kinds.
+ * Status returned by every octmesh function: `OCTMESH_STATUS_OK`, or the
+ * code of what failed (the same numbers as the library's error kinds; the
+ * list is `for_each_error_kind!` in `src/error.rs`, and the compiler checks
+ * this enumeration against it).
  */
 typedef enum {
   /**
@@ -40,7 +42,8 @@ typedef enum {
    */
   OCTMESH_STATUS_GEOMETRY = 4,
   /**
-   * A resource limit was reached (the octant limit of the options).
+   * A resource limit was reached (the octant limit or the memory budget
+   * of the options).
    */
   OCTMESH_STATUS_LIMIT = 5,
   /**
@@ -62,7 +65,7 @@ typedef enum {
   OCTMESH_STATUS_INTERNAL = 9,
   /**
    * The region outside the surface reaches the point given as inside
-   * (`octmesh_check_leak`); the message describes the path.
+   * (`octmesh_octree_check_leak`); the message describes the path.
    */
   OCTMESH_STATUS_LEAK = 10,
 } octmesh_status_t;
@@ -124,7 +127,7 @@ typedef enum {
 
 /**
  * How a leaf's centre is found inside the surface when meshing (values of
- * `octmesh_inside_rule_t`, set by `octmesh_set_inside_rule`).
+ * `octmesh_inside_rule_t`, set by `octmesh_mesh_set_inside_rule`).
  */
 typedef enum {
   /**
@@ -166,27 +169,28 @@ typedef enum {
 } octmesh_class;
 
 /**
- * Opaque handle: a communicator, options, and the pipeline's current
- * surface, octree and mesh. Created by `octmesh_create`, freed by
+ * Opaque handle: a communicator, the pipeline's session (surface, octree,
+ * mesh) and the last error. Created by `octmesh_create`, freed by
  * `octmesh_destroy`. A handle must not be used by two threads at once.
  */
 typedef struct octmesh_t octmesh_t;
 
 /**
  * Options of a handle, read once by `octmesh_create`. Initialise with
- * `octmesh_options_default`, then change fields.
+ * `octmesh_options_default`, then change fields. They fill the same
+ * configuration as the `octmesh` command's options of the same names.
  */
 typedef struct {
   /**
    * Longest side of the surface's bounding box as a fraction of the cube
    * side when the cube is fitted around the surface, in (0, 1]
-   * (default 0.7). Not used after `octmesh_set_domain`.
+   * (default 0.7; `--fit`). Not used after `octmesh_domain_set`.
    */
   double fit;
   /**
    * Largest number of leaves (over all ranks) a refinement or a balance
-   * may create; 0 means unlimited (default). Exceeding it fails with
-   * `OCTMESH_STATUS_LIMIT`.
+   * may create; 0 means unlimited (default; `--max-octants`). Exceeding
+   * it fails with `OCTMESH_STATUS_LIMIT`.
    */
   uint64_t max_octants;
   /**
@@ -194,6 +198,13 @@ typedef struct {
    * failed call on stderr, one line per rank.
    */
   int32_t verbosity;
+  /**
+   * Bytes of memory each rank may use (`--memory-budget`); 0 (default)
+   * means the node's available memory shared among its ranks. A
+   * refinement expected to need more fails with `OCTMESH_STATUS_LIMIT`
+   * before it starts, naming the largest level that fits.
+   */
+  uint64_t memory_budget;
 } octmesh_options_t;
 
 /**
@@ -212,6 +223,16 @@ typedef int32_t octmesh_cut_rule_t;
 typedef int32_t octmesh_inside_rule_t;
 
 /**
+ * A local count or index (elements, nodes, leaves of one rank): 32 bits.
+ */
+typedef int32_t octmesh_locidx_t;
+
+/**
+ * A global count or number (over all ranks): 64 bits.
+ */
+typedef int64_t octmesh_gloidx_t;
+
+/**
  * Sizes of the mesh: this rank's part and global totals (the same on
  * every rank).
  */
@@ -219,46 +240,46 @@ typedef struct {
   /**
    * Elements on this rank.
    */
-  int64_t local_elements;
+  octmesh_locidx_t local_elements;
   /**
    * Nodes on this rank (independent and hanging).
    */
-  int64_t local_nodes;
+  octmesh_locidx_t local_nodes;
   /**
    * Local nodes `0..num_owned` are owned by this rank.
    */
-  int64_t num_owned;
+  octmesh_locidx_t num_owned;
   /**
    * Local nodes `0..num_independent` are independent, the rest hang.
    */
-  int64_t num_independent;
+  octmesh_locidx_t num_independent;
   /**
    * Global number of this rank's first owned node.
    */
-  int64_t first_global;
+  octmesh_gloidx_t first_global;
   /**
    * Elements over all ranks.
    */
-  int64_t global_elements;
+  octmesh_gloidx_t global_elements;
   /**
    * Independent nodes over all ranks (each counted once).
    */
-  int64_t global_independent;
+  octmesh_gloidx_t global_independent;
   /**
    * Face-hanging nodes over all ranks.
    */
-  int64_t global_face_hanging;
+  octmesh_gloidx_t global_face_hanging;
   /**
    * Edge-hanging nodes over all ranks.
    */
-  int64_t global_edge_hanging;
+  octmesh_gloidx_t global_edge_hanging;
 } octmesh_mesh_counts_t;
 
 /**
  * An octant as seen by callbacks: its lowest corner in lattice units (the
  * root cube is `[0, 2^19]^3`; lattice point `q` is the user point
- * `origin + q * side / 2^19`, see `octmesh_get_domain`) and its
- * level (side `2^(19 - level)` lattice units).
+ * `origin + q * side / 2^19`, see `octmesh_domain_get`) and its level
+ * (side `2^(19 - level)` lattice units).
  */
 typedef struct {
   /**
@@ -293,8 +314,9 @@ typedef int32_t octmesh_connect_t;
 
 /**
  * Weight callback for partitioning: the weight of a leaf. When the sum
- * over all leaves does not fit in 64 bits, `octmesh_partition` fails with
- * `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or longjmp.
+ * over all leaves does not fit in 64 bits, `octmesh_octree_partition`
+ * fails with `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or
+ * longjmp.
  */
 typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 
@@ -302,28 +324,27 @@ typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 extern "C" {
 #endif // __cplusplus
 
-/**
- * The name of a status value, e.g. `"OCTMESH_STATUS_STATE"`, or
- * `"OCTMESH_STATUS_UNKNOWN"` for a value that is not a status. The string
- * is static. Not collective.
- */
-const char *octmesh_status_name(int32_t status);
+/* ---- The handle: options, creation, errors, the domain cube ---- */
 
 /**
- * Writes the default options (fit 0.7, no octant limit, verbosity 0) to
- * `*out`. Not collective.
+ * Writes the default options (fit 0.7, no octant limit, verbosity 0, the
+ * memory budget from the node's available memory) to `*out`. Not
+ * collective.
+ *
+ * \param[out] out  the options
  */
 octmesh_status_t octmesh_options_default(octmesh_options_t *out);
 
 /**
- * Creates a handle over a duplicate of `comm` and writes it to `*out`.
- * `opts` may be NULL for the defaults. MPI must be initialised by the
- * caller; octmesh never initialises or finalises it. Collective over
- * `comm`. Destroy the handle with `octmesh_destroy` before
- * `MPI_Finalize`.
+ * Creates a handle over a duplicate of `comm`. MPI must be initialised by
+ * the caller; octmesh never initialises or finalises it. Collective over
+ * `comm`. Destroy the handle with `octmesh_destroy` before `MPI_Finalize`.
+ * On failure `*out` is not written and `octmesh_last_error(NULL)` gives
+ * the message.
  *
- * On failure `*out` is not written and `octmesh_last_error(NULL)`
- * gives the message.
+ * \param[in]  comm  the communicator the handle works over (duplicated)
+ * \param[in]  opts  options, or NULL for the defaults
+ * \param[out] out   the new handle
  */
 octmesh_status_t octmesh_create(MPI_Comm comm, const octmesh_options_t *opts, octmesh_t **out);
 
@@ -332,66 +353,235 @@ octmesh_status_t octmesh_create(MPI_Comm comm, const octmesh_options_t *opts, oc
  * included). NULL is accepted and ignored. Collective over the handle's
  * communicator (it frees a communicator); call it before `MPI_Finalize`
  * (after `MPI_Finalize` the memory is leaked instead).
+ *
+ * \param[in] h  the handle, or NULL
  */
 void octmesh_destroy(octmesh_t *h);
 
 /**
  * The message of the last failed call on `h`, or for NULL, of the last
- * failure on this thread that had no handle (a failed
- * `octmesh_create`, a NULL handle). Never NULL; the string stays valid
- * until the next failed call on the same handle (or thread) or
- * `octmesh_destroy`. Not collective.
+ * failure on this thread that had no handle (a failed `octmesh_create`, a
+ * NULL handle). Never NULL; the string stays valid until the next failed
+ * call on the same handle (or thread) or `octmesh_destroy`. Not
+ * collective.
+ *
+ * \param[in] h  the handle, or NULL
  */
 const char *octmesh_last_error(const octmesh_t *h);
 
 /**
+ * The name of a status value, e.g. `"OCTMESH_STATUS_STATE"`, or
+ * `"OCTMESH_STATUS_UNKNOWN"` for a value that is not a status. The string
+ * is static. Not collective.
+ *
+ * \param[in] status  a status value
+ */
+const char *octmesh_status_name(int32_t status);
+
+/**
  * Sets the cube of the next construction from the root (by
- * `octmesh_refine_surface`, or
- * `octmesh_refine_callback` without an octree): lowest
- * corner `origin[3]` and side `side > 0`, in user units. Without it the
- * cube is fitted around the surface (option `fit`), or is the unit cube
- * when there is no surface. An existing octree keeps its cube.
- * Collective.
+ * `octmesh_octree_refine_surface`, or `octmesh_octree_refine_callback`
+ * without an octree). Without it the cube is fitted around the surface
+ * (option `fit`), or is the unit cube when there is no surface. An
+ * existing octree keeps its cube. Collective.
+ *
+ * \param[in] h       the handle
+ * \param[in] origin  lowest corner, 3 values, user units
+ * \param[in] side    side, user units, > 0
  */
-octmesh_status_t octmesh_set_domain(octmesh_t *h, const double *origin, double side);
+octmesh_status_t octmesh_domain_set(octmesh_t *h, const double *origin, double side);
 
 /**
- * Writes the cube of the current octree (or, without one, the cube the
- * next construction would use) to `origin[3]` and `*side`, user units.
+ * The cube of the current octree (or, without one, the cube the next
+ * construction would use). Not collective.
+ *
+ * \param[in]  h       the handle
+ * \param[out] origin  lowest corner, 3 values, user units
+ * \param[out] side    side, user units
+ */
+octmesh_status_t octmesh_domain_get(const octmesh_t *h, double *origin, double *side);
+
+/* ---- Surfaces ---- */
+
+/**
+ * Reads the surface from an STL file (ASCII or binary); every rank reads
+ * the file. Collective: a failure on any rank (a file missing on one node)
+ * fails on every rank.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file's path, NUL-terminated
+ */
+octmesh_status_t octmesh_surface_from_stl(octmesh_t *h, const char *path);
+
+/**
+ * Sets the surface from the caller's triangles. The data is copied.
+ * Collective; each rank passes the whole surface.
+ *
+ * \param[in] h     the handle
+ * \param[in] ntri  number of triangles, > 0
+ * \param[in] xyz   9 * ntri doubles: x, y, z of the three vertices of
+ *                  each triangle, user units
+ */
+octmesh_status_t octmesh_surface_from_triangles(octmesh_t *h,
+                                                octmesh_gloidx_t ntri,
+                                                const double *xyz);
+
+/**
+ * Sets a built-in surface: `"sphere"` (radius 1 at the origin, 20,480
+ * triangles) or `"torus"` (radii 1 and 0.35, 9,216 triangles).
+ * Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] name  `"sphere"` or `"torus"`, NUL-terminated
+ */
+octmesh_status_t octmesh_surface_builtin(octmesh_t *h, const char *name);
+
+/* ---- The octree: refinement, balance, partition, leaves ---- */
+
+/**
+ * Builds a new octree from the root whose leaves touching the surface are
+ * at `level` and whose other leaves are as coarse as possible, in the cube
+ * of `octmesh_domain_set` or fitted around the surface. Replaces any
+ * previous octree and mesh. Needs a surface. Fails with
+ * `OCTMESH_STATUS_LIMIT` before refining when the size estimated from the
+ * surface area is more than twice the octant limit or more than the memory
+ * budget allows (the message gives the estimate and the finest level that
+ * would fit), and otherwise as soon as the count exceeds either.
+ * Collective.
+ *
+ * \param[in] h      the handle
+ * \param[in] level  level of the leaves touching the surface, 0 to 18
+ */
+octmesh_status_t octmesh_octree_refine_surface(octmesh_t *h, int32_t level);
+
+/**
+ * Refines by a callback: a leaf is split while `refine(ctx, &octant)`
+ * returns non-zero and its level is below `max_level`. Without an octree,
+ * builds one from the root (in the cube of `octmesh_domain_set`, else
+ * fitted around the surface, else the unit cube); otherwise refines the
+ * existing leaves (which drops their balance). Drops the mesh.
+ * Collective; see `octmesh_refine_fn` for what the callback must satisfy.
+ *
+ * \param[in] h          the handle
+ * \param[in] max_level  no leaf is split beyond this level, 0 to 18
+ * \param[in] refine     the callback
+ * \param[in] ctx        passed to the callback unchanged
+ */
+octmesh_status_t octmesh_octree_refine_callback(octmesh_t *h,
+                                                int32_t max_level,
+                                                octmesh_refine_fn refine,
+                                                void *ctx);
+
+/**
+ * 2:1-balances the octree. Leaves stay on their ranks; call
+ * `octmesh_octree_partition` afterwards to even out the counts. Drops the
+ * mesh. Needs an octree. Fails with `OCTMESH_STATUS_LIMIT`, leaving the
+ * octree as it was, when the balanced octree would exceed the octant limit
+ * or the memory budget. Collective.
+ *
+ * \param[in] h        the handle
+ * \param[in] connect  the contacts balanced: one of `octmesh_connect`
+ */
+octmesh_status_t octmesh_octree_balance(octmesh_t *h, octmesh_connect_t connect);
+
+/**
+ * Repartitions the leaves in Morton order: equal counts when `weight` is
+ * NULL, else about equal sums of `weight(ctx, &leaf)` (called once per
+ * local leaf). Drops the mesh. Needs an octree. Collective.
+ *
+ * \param[in] h       the handle
+ * \param[in] weight  the weight callback, or NULL for equal counts
+ * \param[in] ctx     passed to the callback unchanged
+ */
+octmesh_status_t octmesh_octree_partition(octmesh_t *h, octmesh_weight_fn weight, void *ctx);
+
+/**
+ * The number of leaves on this rank and over all ranks. Needs an octree.
  * Not collective.
+ *
+ * \param[in]  h       the handle
+ * \param[out] local   leaves on this rank
+ * \param[out] global  leaves over all ranks
  */
-octmesh_status_t octmesh_get_domain(const octmesh_t *h, double *origin, double *side);
+octmesh_status_t octmesh_octree_get_num_leaves(const octmesh_t *h,
+                                               octmesh_locidx_t *local,
+                                               octmesh_gloidx_t *global);
 
 /**
- * Builds the mesh of the octree, replacing any previous one. `keep` (one
- * of `octmesh_keep`) selects the elements among the leaves, classified
- * against the surface (by the rule of `octmesh_set_inside_rule`); without
- * a surface only `OCTMESH_KEEP_ALL` is allowed. `rule` (one of
- * `octmesh_cut_rule`) decides for leaves touching the surface. The octree
- * must be balanced for edge or corner contacts (`octmesh_balance`).
+ * Copies this rank's leaves, in Morton order, to the caller's buffer.
+ * Needs an octree. Not collective.
+ *
+ * \param[in]  h         the handle
+ * \param[out] out       room for `capacity` leaves; the first `local`
+ *                       (`octmesh_octree_get_num_leaves`) are written
+ * \param[in]  capacity  the room in `out`, at least the local count
+ */
+octmesh_status_t octmesh_octree_get_leaves(const octmesh_t *h,
+                                           octmesh_octant_t *out,
+                                           octmesh_locidx_t capacity);
+
+/**
+ * Checks that the region outside the surface does not reach `point`, a
+ * point the caller knows to be inside the body: no path of face-adjacent
+ * leaves touching no triangle leads from the boundary of the cube to the
+ * leaf holding it. Returns `OCTMESH_STATUS_OK` when the point is sealed
+ * off, `OCTMESH_STATUS_LEAK` when it is reached (then `octmesh_last_error`
+ * describes the path: its length, the first and last leaves' centres and
+ * sizes, where it enters the surface's bounding box), and
+ * `OCTMESH_STATUS_INVALID_ARGUMENT` when the point is outside the cube or
+ * in a leaf touching the surface. Run it after refinement and balance,
+ * before `octmesh_mesh_build` with `OCTMESH_KEEP_OUTSIDE`. Needs a surface
+ * and an octree. Collective; every rank gets the same status and message.
+ *
+ * \param[in] h      the handle
+ * \param[in] point  3 values, user units
+ */
+octmesh_status_t octmesh_octree_check_leak(octmesh_t *h, const double *point);
+
+/* ---- The mesh: building it, its arrays, output ---- */
+
+/**
+ * Builds the mesh of the octree, replacing any previous one. The elements
+ * are the leaves `keep` selects, classified against the surface by the
+ * rule of `octmesh_mesh_set_inside_rule`; without a surface only
+ * `OCTMESH_KEEP_ALL` is allowed. The octree must be balanced for edge or
+ * corner contacts (`octmesh_octree_balance`). Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] keep  one of `octmesh_keep`
+ * \param[in] rule  for leaves touching the surface: one of
+ *                  `octmesh_cut_rule`
+ */
+octmesh_status_t octmesh_mesh_build(octmesh_t *h, octmesh_keep_t keep, octmesh_cut_rule_t rule);
+
+/**
+ * Sets how the following `octmesh_mesh_build` calls decide whether a
+ * leaf's centre is inside the surface (`OCTMESH_INSIDE_RULE_AUTO` until
+ * set). Every rank must pass the same rule. The current mesh is kept.
  * Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] rule  one of `octmesh_inside_rule`
  */
-octmesh_status_t octmesh_mesh(octmesh_t *h, octmesh_keep_t keep, octmesh_cut_rule_t rule);
+octmesh_status_t octmesh_mesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_t rule);
 
 /**
- * Sets how the following `octmesh_mesh` calls decide whether a leaf's
- * centre is inside the surface: one of `octmesh_inside_rule`
- * (`OCTMESH_INSIDE_RULE_AUTO` until set). Every rank must pass the same
- * rule. The current mesh is kept. Collective.
- */
-octmesh_status_t octmesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_t rule);
-
-/**
- * Writes to `*out` the rule the current mesh was classified with:
+ * The rule the current mesh was classified with:
  * `OCTMESH_INSIDE_RULE_PARITY` or `OCTMESH_INSIDE_RULE_WINDING` (what
  * `OCTMESH_INSIDE_RULE_AUTO` chose), or `OCTMESH_INSIDE_RULE_AUTO` when it
  * was built without a surface (nothing classified). Needs a mesh. Not
  * collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  one of `octmesh_inside_rule`
  */
 octmesh_status_t octmesh_mesh_get_inside_rule(const octmesh_t *h, octmesh_inside_rule_t *out);
 
 /**
  * Writes the mesh sizes to `*out`. Needs a mesh. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  the counts
  */
 octmesh_status_t octmesh_mesh_get_counts(const octmesh_t *h, octmesh_mesh_counts_t *out);
 
@@ -399,24 +589,54 @@ octmesh_status_t octmesh_mesh_get_counts(const octmesh_t *h, octmesh_mesh_counts
  * Sets `*out` to the connectivity: 8 local node numbers (0-based) per
  * local element, VTK hexahedron order, elements in Morton order. Needs a
  * mesh. Not collective.
+ *
+ * ```text
+ *   VTK hexahedron corner order (x right, y back, z up):
+ *
+ *        7 -------- 6
+ *       /|         /|
+ *      4 -------- 5 |
+ *      | |        | |
+ *      | 3 -------|-2
+ *      |/         |/
+ *      0 -------- 1
+ *
+ *   0 (x0,y0,z0)  1 (x1,y0,z0)  2 (x1,y1,z0)  3 (x0,y1,z0)
+ *   4 (x0,y0,z1)  5 (x1,y0,z1)  6 (x1,y1,z1)  7 (x0,y1,z1)
+ * ```
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  8 * local_elements local node numbers, owned by the
+ *                  handle
  */
 octmesh_status_t octmesh_mesh_get_connectivity(const octmesh_t *h, const int32_t **out);
 
 /**
  * Sets `*out` to the node coordinates: x, y, z per local node, user
  * units. Needs a mesh. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  3 * local_nodes doubles (x, y, z per node, user
+ *                  units), owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_coordinates(const octmesh_t *h, const double **out);
 
 /**
  * Sets `*out` to the global numbers (0-based) of the `num_independent`
  * independent local nodes. Needs a mesh. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  num_independent global numbers (0-based), owned by the
+ *                  handle
  */
 octmesh_status_t octmesh_mesh_get_global_ids(const octmesh_t *h, const int64_t **out);
 
 /**
  * Sets `*out` to the owner rank of each of the `num_independent`
  * independent local nodes. Needs a mesh. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  num_independent owner ranks, owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_owners(const octmesh_t *h, const int32_t **out);
 
@@ -425,6 +645,12 @@ octmesh_status_t octmesh_mesh_get_owners(const octmesh_t *h, const int32_t **out
  * ranks using each independent local node, in CSR form: node `i` is used
  * by `ranks[offsets[i] .. offsets[i + 1]]`, sorted, this rank included; a
  * node is shared when it has more than one. Needs a mesh. Not collective.
+ *
+ * \param[in]  h        the handle
+ * \param[out] offsets  num_independent + 1 offsets into `ranks`, owned by
+ *                      the handle
+ * \param[out] ranks    the ranks using each node, sorted, owned by the
+ *                      handle
  */
 octmesh_status_t octmesh_mesh_get_sharers(const octmesh_t *h,
                                           const int32_t **offsets,
@@ -436,6 +662,15 @@ octmesh_status_t octmesh_mesh_get_sharers(const octmesh_t *h,
  * nodes `(*nodes)[(*offsets)[k] .. (*offsets)[k + 1]]`, ordered by global
  * number, so both ranks of a pair list the same nodes in the same order.
  * Needs a mesh. Not collective.
+ *
+ * \param[in]  h           the handle
+ * \param[out] nneighbors  the number of neighbour ranks
+ * \param[out] ranks       the neighbour ranks, increasing, owned by the
+ *                         handle
+ * \param[out] offsets     nneighbors + 1 offsets into `nodes`, owned by
+ *                         the handle
+ * \param[out] nodes       local node numbers shared with each neighbour,
+ *                         by increasing global number, owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_exchange(const octmesh_t *h,
                                            int32_t *nneighbors,
@@ -449,6 +684,23 @@ octmesh_status_t octmesh_mesh_get_exchange(const octmesh_t *h,
  * hanging) or 4 (face-hanging), and its value is the mean of the
  * independent local nodes `(*deps)[4k .. 4k + count]` (weights
  * `1/count`; unused entries are -1). Needs a mesh. Not collective.
+ *
+ * ```text
+ *   a face-hanging node (h) at the centre of a coarse face depends on the
+ *   face's 4 corners; an edge-hanging node (e) at the middle of a coarse
+ *   edge on the edge's 2 ends:
+ *
+ *     d2 -------- d3          d0 ---- e ---- d1
+ *      |          |
+ *      |    h     |           e = (d0 + d1) / 2
+ *      |          |
+ *     d0 -------- d1          h = (d0 + d1 + d2 + d3) / 4
+ * ```
+ *
+ * \param[in]  h      the handle
+ * \param[out] count  per hanging node, 2 or 4, owned by the handle
+ * \param[out] deps   4 per hanging node: its independent local nodes, -1
+ *                    for unused entries, owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_hanging(const octmesh_t *h,
                                           const int32_t **count,
@@ -457,12 +709,19 @@ octmesh_status_t octmesh_mesh_get_hanging(const octmesh_t *h,
 /**
  * Sets `*out` to the class of each local element (one of
  * `octmesh_class`). Needs a mesh. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  local_elements classes (`octmesh_class`), owned by the
+ *                  handle
  */
 octmesh_status_t octmesh_mesh_get_element_class(const octmesh_t *h, const int8_t **out);
 
 /**
  * Sets `*out` to the octree level of each local element. Needs a mesh.
  * Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  local_elements levels, owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_element_level(const octmesh_t *h, const int8_t **out);
 
@@ -472,6 +731,9 @@ octmesh_status_t octmesh_mesh_get_element_level(const octmesh_t *h, const int8_t
  * 0. Cell data: level, class, rank; point data: global id (-1 when
  * hanging), hanging kind. Needs a mesh. Collective. The same as
  * `octmesh_mesh_write_vtu_fields` with no fields.
+ *
+ * \param[in] h     the handle
+ * \param[in] pvtu  the PVTU path, ending in `.pvtu`, NUL-terminated
  */
 octmesh_status_t octmesh_mesh_write_vtu(octmesh_t *h, const char *pvtu);
 
@@ -488,104 +750,18 @@ octmesh_status_t octmesh_mesh_write_vtu(octmesh_t *h, const char *pvtu);
  * NULL on a rank with no nodes. Every rank must pass the same names in the
  * same order. The arrays are only read during the call. Needs a mesh.
  * Collective.
+ *
+ * \param[in] h        the handle
+ * \param[in] pvtu     the PVTU path, ending in `.pvtu`, NUL-terminated
+ * \param[in] nfields  the number of fields, >= 0
+ * \param[in] names    nfields names, NUL-terminated
+ * \param[in] values   nfields arrays of local_nodes doubles
  */
 octmesh_status_t octmesh_mesh_write_vtu_fields(octmesh_t *h,
                                                const char *pvtu,
                                                int32_t nfields,
                                                const char *const *names,
                                                const double *const *values);
-
-/**
- * Reads the surface from an STL file (ASCII or binary) at `path`; every
- * rank reads the file. Replaces any previous surface. Collective: a
- * failure on any rank (missing file on one rank) fails on every rank.
- */
-octmesh_status_t octmesh_surface_from_stl(octmesh_t *h, const char *path);
-
-/**
- * Sets the surface from `ntri` triangles: `xyz` holds 9 doubles per
- * triangle (x, y, z of its three vertices), user units. The data is
- * copied. Collective; each rank passes the whole surface.
- */
-octmesh_status_t octmesh_surface_from_triangles(octmesh_t *h, int64_t ntri, const double *xyz);
-
-/**
- * Sets a built-in surface: `"sphere"` (radius 1 at the origin) or
- * `"torus"`. Collective.
- */
-octmesh_status_t octmesh_surface_builtin(octmesh_t *h, const char *name);
-
-/**
- * Builds a new octree from the root whose leaves touching the surface are
- * at `level` (0 to 18) and whose other leaves are as coarse as possible,
- * in the cube of `octmesh_set_domain` or fitted around the
- * surface. Replaces any previous octree and mesh. Needs a surface.
- * With an octant limit (option `max_octants`), fails with
- * `OCTMESH_STATUS_LIMIT` before refining when the size estimated from the
- * surface area is more than twice the limit (the message gives the
- * estimate and the finest level that would fit), and otherwise as soon as
- * the count exceeds the limit. Collective.
- */
-octmesh_status_t octmesh_refine_surface(octmesh_t *h, int32_t level);
-
-/**
- * Refines by a callback: a leaf is split while `refine(ctx, &octant)`
- * returns non-zero and its level is below `max_level` (0 to 18). Without
- * an octree, builds one from the root (in the cube of
- * `octmesh_set_domain`, else fitted around the surface,
- * else the unit cube); otherwise refines the existing leaves (which drops
- * their balance). Drops the mesh. Collective; see `octmesh_refine_fn`
- * for what the callback must satisfy.
- */
-octmesh_status_t octmesh_refine_callback(octmesh_t *h,
-                                         int32_t max_level,
-                                         octmesh_refine_fn refine,
-                                         void *ctx);
-
-/**
- * 2:1-balances the octree for `connect` contacts (one of
- * `octmesh_connect`). Leaves stay on their ranks; call
- * `octmesh_partition` afterwards to even out the counts. Drops the mesh.
- * Needs an octree. Fails with `OCTMESH_STATUS_LIMIT`, leaving the octree
- * as it was, when the balanced octree would exceed the octant limit.
- * Collective.
- */
-octmesh_status_t octmesh_balance(octmesh_t *h, octmesh_connect_t connect);
-
-/**
- * Repartitions the leaves in Morton order: equal counts when `weight` is
- * NULL, else about equal sums of `weight(ctx, &leaf)` (called once per
- * local leaf). Drops the mesh. Needs an octree. Collective.
- */
-octmesh_status_t octmesh_partition(octmesh_t *h, octmesh_weight_fn weight, void *ctx);
-
-/**
- * Writes the number of leaves on this rank to `*local` and over all ranks
- * to `*global`. Needs an octree. Not collective.
- */
-octmesh_status_t octmesh_get_num_leaves(const octmesh_t *h, int64_t *local, int64_t *global);
-
-/**
- * Writes this rank's leaves to `out`, which has room for the local number
- * of leaves (`octmesh_get_num_leaves`), in Morton order. Needs an
- * octree. Not collective.
- */
-octmesh_status_t octmesh_get_leaves(const octmesh_t *h, octmesh_octant_t *out);
-
-/**
- * Checks that the region outside the surface does not reach `point[3]`
- * (user units), a point the caller knows to be inside the body: no path of
- * face-adjacent leaves touching no triangle leads from the boundary of the
- * cube to the leaf holding it. Returns `OCTMESH_STATUS_OK` when the point
- * is sealed off, `OCTMESH_STATUS_LEAK` when it is reached (then
- * `octmesh_last_error` describes the path: its length, the first and last
- * leaves' centres and sizes, where it enters the surface's bounding box),
- * and `OCTMESH_STATUS_INVALID_ARGUMENT` when the point is outside the cube
- * or in a leaf touching the surface. Run it after refinement and balance,
- * before `octmesh_mesh` with `OCTMESH_KEEP_OUTSIDE`. Needs a surface and an
- * octree. Collective; every rank gets the same status and message.
- */
-octmesh_status_t octmesh_check_leak(octmesh_t *h, const double *point);
 
 #ifdef __cplusplus
 }  // extern "C"

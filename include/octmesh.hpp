@@ -75,10 +75,10 @@ class Mesher {
   octmesh_t *get() const noexcept { return h_; }
 
   void set_domain(const double origin[3], double side) {
-    detail::check(octmesh_set_domain(h_, origin, side), h_, "octmesh_set_domain");
+    detail::check(octmesh_domain_set(h_, origin, side), h_, "octmesh_domain_set");
   }
   void get_domain(double origin[3], double &side) const {
-    detail::check(octmesh_get_domain(h_, origin, &side), h_, "octmesh_get_domain");
+    detail::check(octmesh_domain_get(h_, origin, &side), h_, "octmesh_domain_get");
   }
   void surface_builtin(const std::string &name) {
     detail::check(octmesh_surface_builtin(h_, name.c_str()), h_, "octmesh_surface_builtin");
@@ -94,7 +94,7 @@ class Mesher {
                   "octmesh_surface_from_triangles");
   }
   void refine_surface(int level) {
-    detail::check(octmesh_refine_surface(h_, level), h_, "octmesh_refine_surface");
+    detail::check(octmesh_octree_refine_surface(h_, level), h_, "octmesh_octree_refine_surface");
   }
   /// Refines while `f(octant)` is true (below max_level). `f` must give the
   /// same answer on every rank and must not throw.
@@ -103,14 +103,14 @@ class Mesher {
     auto tramp = [](void *ctx, const octmesh_octant_t *o) -> int32_t {
       return (*static_cast<typename std::remove_reference<F>::type *>(ctx))(*o) ? 1 : 0;
     };
-    detail::check(octmesh_refine_callback(h_, max_level, tramp, (void *)&f), h_,
-                  "octmesh_refine_callback");
+    detail::check(octmesh_octree_refine_callback(h_, max_level, tramp, (void *)&f), h_,
+                  "octmesh_octree_refine_callback");
   }
   void balance(octmesh_connect_t connect = OCTMESH_CONNECT_CORNER) {
-    detail::check(octmesh_balance(h_, connect), h_, "octmesh_balance");
+    detail::check(octmesh_octree_balance(h_, connect), h_, "octmesh_octree_balance");
   }
   void partition() {
-    detail::check(octmesh_partition(h_, nullptr, nullptr), h_, "octmesh_partition");
+    detail::check(octmesh_octree_partition(h_, nullptr, nullptr), h_, "octmesh_octree_partition");
   }
   /// Partitions by `w(octant)` (a uint64_t; must not throw).
   template <class W>
@@ -118,30 +118,32 @@ class Mesher {
     auto tramp = [](void *ctx, const octmesh_octant_t *o) -> uint64_t {
       return (*static_cast<typename std::remove_reference<W>::type *>(ctx))(*o);
     };
-    detail::check(octmesh_partition(h_, tramp, (void *)&w), h_, "octmesh_partition");
+    detail::check(octmesh_octree_partition(h_, tramp, (void *)&w), h_, "octmesh_octree_partition");
   }
-  std::pair<int64_t, int64_t> num_leaves() const {
-    int64_t l = 0, g = 0;
-    detail::check(octmesh_get_num_leaves(h_, &l, &g), h_, "octmesh_get_num_leaves");
+  std::pair<octmesh_locidx_t, octmesh_gloidx_t> num_leaves() const {
+    octmesh_locidx_t l = 0;
+    octmesh_gloidx_t g = 0;
+    detail::check(octmesh_octree_get_num_leaves(h_, &l, &g), h_, "octmesh_octree_get_num_leaves");
     return {l, g};
   }
   std::vector<octmesh_octant_t> leaves() const {
-    std::vector<octmesh_octant_t> v((size_t)num_leaves().first);
-    detail::check(octmesh_get_leaves(h_, v.data()), h_, "octmesh_get_leaves");
+    octmesh_locidx_t n = num_leaves().first;
+    std::vector<octmesh_octant_t> v((size_t)n);
+    detail::check(octmesh_octree_get_leaves(h_, v.data(), n), h_, "octmesh_octree_get_leaves");
     return v;
   }
   // Throws Error with status OCTMESH_STATUS_LEAK when the region outside
   // the surface reaches point[3], a point inside the body.
   void check_leak(const double point[3]) {
-    detail::check(octmesh_check_leak(h_, point), h_, "octmesh_check_leak");
+    detail::check(octmesh_octree_check_leak(h_, point), h_, "octmesh_octree_check_leak");
   }
   void mesh(octmesh_keep_t keep = OCTMESH_KEEP_ALL,
             octmesh_cut_rule_t rule = OCTMESH_CUT_RULE_CENTER) {
-    detail::check(octmesh_mesh(h_, keep, rule), h_, "octmesh_mesh");
+    detail::check(octmesh_mesh_build(h_, keep, rule), h_, "octmesh_mesh_build");
   }
   /// How the next meshes find leaf centres inside (octmesh_inside_rule).
   void set_inside_rule(octmesh_inside_rule_t rule) {
-    detail::check(octmesh_set_inside_rule(h_, rule), h_, "octmesh_set_inside_rule");
+    detail::check(octmesh_mesh_set_inside_rule(h_, rule), h_, "octmesh_mesh_set_inside_rule");
   }
   /// The rule the current mesh was classified with.
   octmesh_inside_rule_t inside_rule() const {

@@ -7,55 +7,72 @@
 
 use std::fmt;
 
-/// Classification of an [`Error`], stable across releases (the C status enum
-/// uses the same numbers).
-#[repr(i32)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum ErrorKind {
-    /// An argument was out of range or inconsistent (a level above
-    /// [`crate::octant::MAX_LEVEL`], a negative fit, ...).
-    InvalidArgument = 1,
-    /// A file could not be opened or read.
-    Io = 2,
-    /// An input file exists but its content is not valid (truncated or
-    /// malformed STL, leaf file syntax).
-    Format = 3,
-    /// The surface cannot be used: no triangles, non-finite coordinates,
-    /// zero extent.
-    Geometry = 4,
-    /// A resource limit was reached (octant limit).
-    Limit = 5,
-    /// The operations were called in an order that is not allowed.
-    State = 6,
-    /// An MPI call failed or ranks disagree.
-    Mpi = 7,
-    /// Another rank failed; this rank's own work was fine.
-    RemoteFailure = 8,
-    /// A bug inside octmesh (a caught panic, a broken invariant).
-    Internal = 9,
-    /// The region outside the surface reaches a point given as inside the
-    /// body (see [`crate::leak`]): the surface has a gap wider than the
-    /// leaves around it.
-    Leak = 10,
+/// Calls macro `$m` with the one list of error kinds: each as
+/// `(Variant, code, C status name, doc)`. The Rust [`ErrorKind`] and the C
+/// status enum (`octmesh_status_t`, its names and conversions) are both made
+/// from this list, so they cannot drift apart.
+#[macro_export]
+macro_rules! for_each_error_kind {
+    ($m:ident) => {
+        $m! {
+            (InvalidArgument, 1, OCTMESH_STATUS_INVALID_ARGUMENT,
+             "An argument was out of range, inconsistent or NULL (a level above the maximum, a negative fit, ...)."),
+            (Io, 2, OCTMESH_STATUS_IO,
+             "A file could not be opened, read or written."),
+            (Format, 3, OCTMESH_STATUS_FORMAT,
+             "An input file exists but its content is not valid (truncated or malformed STL, leaf file syntax)."),
+            (Geometry, 4, OCTMESH_STATUS_GEOMETRY,
+             "The surface cannot be used: no triangles, non-finite coordinates, zero extent."),
+            (Limit, 5, OCTMESH_STATUS_LIMIT,
+             "A resource limit was reached (the octant limit or the memory budget)."),
+            (State, 6, OCTMESH_STATUS_STATE,
+             "The operations were called in an order that is not allowed (the message says what to call first)."),
+            (Mpi, 7, OCTMESH_STATUS_MPI,
+             "An MPI call failed, MPI is not initialised, or the ranks disagree."),
+            (RemoteFailure, 8, OCTMESH_STATUS_REMOTE_FAILURE,
+             "Another rank failed; this rank's own work was fine (the message is that rank's)."),
+            (Internal, 9, OCTMESH_STATUS_INTERNAL,
+             "A bug inside octmesh (a caught panic, a broken invariant)."),
+            (Leak, 10, OCTMESH_STATUS_LEAK,
+             "The region outside the surface reaches a point given as inside the body: the surface has a gap wider than the leaves around it."),
+        }
+    };
 }
 
-impl ErrorKind {
-    /// Converts the numeric code back, for errors received from other ranks.
-    pub fn from_code(code: i32) -> ErrorKind {
-        match code {
-            1 => ErrorKind::InvalidArgument,
-            2 => ErrorKind::Io,
-            3 => ErrorKind::Format,
-            4 => ErrorKind::Geometry,
-            5 => ErrorKind::Limit,
-            6 => ErrorKind::State,
-            7 => ErrorKind::Mpi,
-            8 => ErrorKind::RemoteFailure,
-            10 => ErrorKind::Leak,
-            _ => ErrorKind::Internal,
+macro_rules! define_error_kind {
+    ($(($variant:ident, $code:literal, $c:ident, $doc:literal)),+ $(,)?) => {
+        /// Classification of an [`Error`], stable across releases (the C
+        /// status enum uses the same numbers; see [`for_each_error_kind`]).
+        #[repr(i32)]
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum ErrorKind {
+            $(#[doc = $doc] $variant = $code,)+
         }
-    }
+
+        impl ErrorKind {
+            /// Every kind, in code order.
+            pub const ALL: &'static [ErrorKind] = &[$(ErrorKind::$variant),+];
+
+            /// Converts the numeric code back, for errors received from
+            /// other ranks; an unknown code is [`ErrorKind::Internal`].
+            pub fn from_code(code: i32) -> ErrorKind {
+                match code {
+                    $($code => ErrorKind::$variant,)+
+                    _ => ErrorKind::Internal,
+                }
+            }
+
+            /// The name of the C status of this kind (`OCTMESH_STATUS_IO`).
+            pub fn status_name(self) -> &'static str {
+                match self {
+                    $(ErrorKind::$variant => stringify!($c),)+
+                }
+            }
+        }
+    };
 }
+
+for_each_error_kind!(define_error_kind);
 
 /// An octmesh error: a kind plus a message meant for a human.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -9,16 +9,22 @@
 
 /// Declares a `Copy` enumeration whose variants have lower-case names.
 ///
-/// ```ignore
-/// named_enum! {
-///     /// Which elements a mesh keeps.
-///     pub enum Keep: "keep mode" {
-///         /// Every leaf.
-///         All = "all",
-///         /// Leaves inside.
-///         Inside = "inside" | "solid",
+/// ```
+/// octmesh::named_enum! {
+///     /// A side of the surface.
+///     pub enum Side: "side" {
+///         /// Inside.
+///         In = "in" | "inside",
+///         /// Outside.
+///         Out = "out",
 ///     }
 /// }
+/// assert_eq!("inside".parse::<Side>().unwrap(), Side::In);
+/// assert_eq!(Side::Out.name(), "out");
+/// assert_eq!(
+///     Side::parse("up").unwrap_err().message(),
+///     "unknown side 'up' (expected in or out)"
+/// );
 /// ```
 ///
 /// The first word of a variant is its name; words after `|` are also

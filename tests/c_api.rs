@@ -193,3 +193,84 @@ fn leak_check_from_c_on_1_and_2_ranks() {
         assert_eq!(out.matches("LEAK OK").count(), np, "{out}");
     }
 }
+
+/// The C API and the command (through a case file from `--print-case`) on
+/// the same settings give the same global counts.
+#[test]
+fn the_c_api_and_the_command_agree_on_the_same_settings() {
+    let dir = scratch("c_api_settings");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("settings", &lib, &dir);
+    // (surface, level, keep, cut rule, inside rule, balance, fit) as the
+    // command's words and as the C constants' values.
+    let cases: &[([&str; 7], [&str; 7])] = &[
+        (
+            ["sphere", "5", "inside", "center", "auto", "corner", "0.7"],
+            ["sphere", "5", "1", "0", "0", "3", "0.7"],
+        ),
+        (
+            ["torus", "5", "outside", "all", "winding", "edge", "0.5"],
+            ["torus", "5", "2", "1", "2", "2", "0.5"],
+        ),
+        (
+            ["sphere", "4", "all", "none", "parity", "corner", "0.9"],
+            ["sphere", "4", "0", "2", "1", "3", "0.9"],
+        ),
+    ];
+    for (i, (words, values)) in cases.iter().enumerate() {
+        let [surface, level, keep, cut, inside, balance, fit] = *words;
+        let args = [
+            "mesh",
+            surface,
+            "--level",
+            level,
+            "--keep",
+            keep,
+            "--cut-rule",
+            cut,
+            "--inside",
+            inside,
+            "--balance",
+            balance,
+            "--fit",
+            fit,
+        ];
+        let case = dir.join(format!("case{i}.toml"));
+        let printed = common::octmesh_ok(1, &[&args[..], &["--print-case"]].concat());
+        std::fs::write(&case, &printed.stdout).unwrap();
+        let stats = dir.join(format!("stats{i}.json"));
+        common::octmesh_ok(
+            2,
+            &[
+                "mesh",
+                case.to_str().unwrap(),
+                "--quiet",
+                "--stats",
+                stats.to_str().unwrap(),
+            ],
+        );
+        let j = common::json_file(&stats);
+        let cli: Vec<u64> = [
+            "elements",
+            "independent_nodes",
+            "face_hanging_nodes",
+            "edge_hanging_nodes",
+        ]
+        .iter()
+        .map(|k| common::int(&j, k))
+        .collect();
+        for np in [1, 2] {
+            let out = run_ok(np, &exe, values);
+            let c: Vec<u64> = line_starting(&out, "COUNTS")
+                .split_whitespace()
+                .skip(1)
+                .map(|w| w.parse().unwrap())
+                .collect();
+            assert_eq!(
+                c, cli,
+                "{args:?}: the C API on {np} rank(s) against the command"
+            );
+        }
+    }
+}

@@ -216,13 +216,13 @@ int main(int argc, char **argv) {
       printf("surface %s not found: using the built-in sphere\n", stl ? stl : "(none given)");
     TRY(octmesh_surface_builtin(h, "sphere"));
   }
-  TRY(octmesh_refine_surface(h, level));
+  TRY(octmesh_octree_refine_surface(h, level));
   uniform_ctx uctx = {level - 2};
-  TRY(octmesh_refine_callback(h, level - 2, refine_uniform, &uctx));
-  TRY(octmesh_balance(h, OCTMESH_CONNECT_CORNER));
-  TRY(octmesh_partition(h, NULL, NULL));
-  TRY(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER));
-  TRY(octmesh_get_domain(h, g_origin, &g_side));
+  TRY(octmesh_octree_refine_callback(h, level - 2, refine_uniform, &uctx));
+  TRY(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER));
+  TRY(octmesh_octree_partition(h, NULL, NULL));
+  TRY(octmesh_mesh_build(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER));
+  TRY(octmesh_domain_get(h, g_origin, &g_side));
 
   octmesh_mesh_counts_t c;
   TRY(octmesh_mesh_get_counts(h, &c));

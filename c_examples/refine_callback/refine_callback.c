@@ -46,10 +46,10 @@ int main(int argc, char **argv) {
   TRY(octmesh_create(MPI_COMM_WORLD, NULL, &h));
   const double root = (double)(1 << 19);
   ball_ctx ball = {{0.3 * root, 0.4 * root, 0.5 * root}, 0.1 * root, 0};
-  TRY(octmesh_refine_callback(h, max_level, refine_ball, &ball));
-  TRY(octmesh_balance(h, OCTMESH_CONNECT_CORNER));
-  TRY(octmesh_partition(h, NULL, NULL));
-  TRY(octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER));
+  TRY(octmesh_octree_refine_callback(h, max_level, refine_ball, &ball));
+  TRY(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER));
+  TRY(octmesh_octree_partition(h, NULL, NULL));
+  TRY(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER));
   octmesh_mesh_counts_t c;
   TRY(octmesh_mesh_get_counts(h, &c));
   long calls = 0;

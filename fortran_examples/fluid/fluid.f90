@@ -46,17 +46,17 @@ program fluid
 
   call check(octmesh_create_f(MPI_COMM_WORLD%MPI_VAL, h), c_null_ptr)
   call check(octmesh_surface_builtin_f(h, "torus"), h)
-  call check(octmesh_refine_surface(h, 4_c_int32_t), h)
+  call check(octmesh_octree_refine_surface(h, 4_c_int32_t), h)
   ctx%level = 5
   ctx%calls = 0
-  call check(octmesh_refine_callback(h, 5_c_int32_t, c_funloc(refine_lower_half), c_loc(ctx)), h)
-  call check(octmesh_balance(h, OCTMESH_CONNECT_CORNER), h)
-  call check(octmesh_partition(h, c_null_funptr, c_null_ptr), h)
-  call check(octmesh_mesh(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_CENTER), h)
+  call check(octmesh_octree_refine_callback(h, 5_c_int32_t, c_funloc(refine_lower_half), c_loc(ctx)), h)
+  call check(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h)
+  call check(octmesh_octree_partition(h, c_null_funptr, c_null_ptr), h)
+  call check(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_CENTER), h)
   call check(octmesh_mesh_get_counts(h, counts), h)
   if (len_trim(out) > 0) then
      call check(octmesh_mesh_get_coordinates(h, pxyz), h)
-     call c_f_pointer(pxyz, xyz, [3_c_int64_t, counts%local_nodes])
+     call c_f_pointer(pxyz, xyz, [3_c_int64_t, int(counts%local_nodes, c_int64_t)])
      allocate(height(counts%local_nodes, 1))
      height(:, 1) = xyz(3, :)
      call check(octmesh_mesh_write_vtu_fields_f(h, trim(out), ['z'], height), h)

@@ -16,10 +16,10 @@ program legacy
   call MPI_Comm_rank(comm, rank, ierr)
   call check(octmesh_create_f(comm, h), c_null_ptr)
   call check(octmesh_surface_builtin_f(h, "sphere"), h)
-  call check(octmesh_refine_surface(h, 5_c_int32_t), h)
-  call check(octmesh_balance(h, OCTMESH_CONNECT_EDGE), h)
-  call check(octmesh_partition(h, c_null_funptr, c_null_ptr), h)
-  call check(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h)
+  call check(octmesh_octree_refine_surface(h, 5_c_int32_t), h)
+  call check(octmesh_octree_balance(h, OCTMESH_CONNECT_EDGE), h)
+  call check(octmesh_octree_partition(h, c_null_funptr, c_null_ptr), h)
+  call check(octmesh_mesh_build(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h)
   call check(octmesh_mesh_get_counts(h, counts), h)
   if (rank == 0) then
      write (*, '(a,i0,a,i0,a,i0)') 'LEGACY elements=', counts%global_elements, &

@@ -23,6 +23,7 @@ use std::ptr::{null, null_mut};
 use octmesh::ffi::handle::*;
 use octmesh::ffi::mesh::*;
 use octmesh::ffi::octree::*;
+use octmesh::ffi::surface::*;
 use octmesh::ffi::*;
 
 /// Calls per input.
@@ -264,7 +265,7 @@ fn call(st: &mut State, b: &mut Bytes) {
             2 => {
                 let origin = [b.f64(), b.f64(), b.f64()];
                 let p = if b.one_in(8) { null() } else { origin.as_ptr() };
-                let s = octmesh_set_domain(h, p, b.f64());
+                let s = octmesh_domain_set(h, p, b.f64());
                 check_status(s, h, "set_domain");
             }
             3 => {
@@ -275,7 +276,7 @@ fn call(st: &mut State, b: &mut Bytes) {
                     1 => (origin.as_mut_ptr(), null_mut()),
                     _ => (origin.as_mut_ptr(), &mut side as *mut f64),
                 };
-                let s = octmesh_get_domain(h, po, ps);
+                let s = octmesh_domain_get(h, po, ps);
                 check_status(s, h, "get_domain");
                 if ok(s) {
                     assert!(side.is_finite() && side > 0.0, "side {side}");
@@ -331,7 +332,7 @@ fn call(st: &mut State, b: &mut Bytes) {
             7 => {
                 let level = b.level(st.small_limit(hb));
                 let before = leaves_of(h);
-                let s = octmesh_refine_surface(h, level);
+                let s = octmesh_octree_refine_surface(h, level);
                 check_status(s, h, "refine_surface");
                 if !ok(s) {
                     assert_eq!(
@@ -347,7 +348,7 @@ fn call(st: &mut State, b: &mut Bytes) {
                 let f: octmesh_refine_fn = if b.one_in(16) { None } else { Some(refine_cb) };
                 let before = leaves_of(h);
                 let ctx = &seed as *const u64 as *mut c_void;
-                let s = octmesh_refine_callback(h, level, f, ctx);
+                let s = octmesh_octree_refine_callback(h, level, f, ctx);
                 check_status(s, h, "refine_callback");
                 if !ok(s) {
                     assert_eq!(
@@ -359,7 +360,7 @@ fn call(st: &mut State, b: &mut Bytes) {
             }
             9 => {
                 let before = leaves_of(h);
-                let s = octmesh_balance(h, b.choice(4));
+                let s = octmesh_octree_balance(h, b.choice(4));
                 check_status(s, h, "balance");
                 if !ok(s) {
                     assert_eq!(leaves_of(h), before, "a failed balance changed the octree");
@@ -370,7 +371,7 @@ fn call(st: &mut State, b: &mut Bytes) {
                 let f: octmesh_weight_fn = if b.one_in(2) { None } else { Some(weight_cb) };
                 let ctx = &seed as *const u64 as *mut c_void;
                 let n = leaves_of(h).map_or(0, |v| v.len());
-                let s = octmesh_partition(h, f, ctx);
+                let s = octmesh_octree_partition(h, f, ctx);
                 check_status(s, h, "partition");
                 if f.is_some() && seed % 6 == 3 && n >= 2 {
                     // Weights of u64::MAX: the sum cannot fit.
@@ -378,23 +379,23 @@ fn call(st: &mut State, b: &mut Bytes) {
                 }
             }
             11 => {
-                let s = octmesh_mesh(h, b.choice(3), b.choice(3));
+                let s = octmesh_mesh_build(h, b.choice(3), b.choice(3));
                 check_status(s, h, "mesh");
                 if ok(s) {
                     check_mesh(h);
                 }
             }
             12 => {
-                let (mut l, mut g) = (-1i64, -1i64);
+                let (mut l, mut g) = (-1i32, -1i64);
                 let (pl, pg) = match b.u8() % 4 {
                     0 => (null_mut(), &mut g as *mut i64),
-                    1 => (&mut l as *mut i64, null_mut()),
-                    _ => (&mut l as *mut i64, &mut g as *mut i64),
+                    1 => (&mut l as *mut i32, null_mut()),
+                    _ => (&mut l as *mut i32, &mut g as *mut i64),
                 };
-                let s = octmesh_get_num_leaves(h, pl, pg);
+                let s = octmesh_octree_get_num_leaves(h, pl, pg);
                 check_status(s, h, "get_num_leaves");
                 if ok(s) {
-                    assert!(l >= 1 && l == g, "{l} leaves of {g} on one rank");
+                    assert!(l >= 1 && l as i64 == g, "{l} leaves of {g} on one rank");
                     check_leaves(h, l as usize, b.one_in(8));
                 }
             }
@@ -480,9 +481,9 @@ unsafe fn create(st: &mut State, b: &mut Bytes, hb: u8) {
 
 /// The local leaves of `h`, or None without an octree.
 fn leaves_of(h: *mut octmesh_t) -> Option<Vec<octmesh_octant_t>> {
-    let (mut l, mut g) = (0i64, 0i64);
+    let (mut l, mut g) = (0i32, 0i64);
     // SAFETY: valid out-pointers.
-    if !ok(unsafe { octmesh_get_num_leaves(h, &mut l, &mut g) }) {
+    if !ok(unsafe { octmesh_octree_get_num_leaves(h, &mut l, &mut g) }) {
         return None;
     }
     let mut v = vec![
@@ -495,7 +496,7 @@ fn leaves_of(h: *mut octmesh_t) -> Option<Vec<octmesh_octant_t>> {
         l as usize
     ];
     // SAFETY: room for the local leaves.
-    let s = unsafe { octmesh_get_leaves(h, v.as_mut_ptr()) };
+    let s = unsafe { octmesh_octree_get_leaves(h, v.as_mut_ptr(), l) };
     assert!(ok(s));
     Some(v)
 }
@@ -504,7 +505,7 @@ fn leaves_of(h: *mut octmesh_t) -> Option<Vec<octmesh_octant_t>> {
 fn check_leaves(h: *mut octmesh_t, n: usize, null_out: bool) {
     if null_out {
         // SAFETY: NULL is refused before anything is written.
-        let s = unsafe { octmesh_get_leaves(h, null_mut()) };
+        let s = unsafe { octmesh_octree_get_leaves(h, null_mut(), n as i32) };
         assert_eq!(s, octmesh_status_t::OCTMESH_STATUS_INVALID_ARGUMENT);
         return;
     }
@@ -529,15 +530,15 @@ fn check_mesh(h: *mut octmesh_t) {
     // the documented lengths.
     unsafe {
         assert!(ok(octmesh_mesh_get_counts(h, &mut c)));
-        assert!(c.local_elements >= 0 && c.local_elements == c.global_elements);
+        assert!(c.local_elements >= 0 && c.local_elements as i64 == c.global_elements);
         assert!(0 <= c.num_owned && c.num_owned <= c.num_independent);
         assert!(c.num_independent <= c.local_nodes);
         assert_eq!(
-            c.num_owned, c.global_independent,
+            c.num_owned as i64, c.global_independent,
             "one rank owns everything"
         );
         assert_eq!(
-            c.local_nodes - c.num_independent,
+            (c.local_nodes - c.num_independent) as i64,
             c.global_face_hanging + c.global_edge_hanging
         );
         let (ne, nn, ni) = (

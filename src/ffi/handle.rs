@@ -1,7 +1,7 @@
-//! The handle: creation over the caller's communicator, options, errors,
+//! The handle: options, creation over the caller's communicator, errors,
 //! the domain cube, destruction.
 
-use std::cell::{Cell, OnceCell, RefCell};
+use std::cell::{Cell, RefCell};
 use std::ffi::{c_char, CString};
 use std::rc::Rc;
 
@@ -9,76 +9,82 @@ use mpi::raw::FromRaw;
 use mpi::topology::SimpleCommunicator;
 
 use super::{
-    c_string, catch, fail_without_handle, no_handle_error, non_null, octmesh_status_t, with_mut,
-    with_ref, write_out,
+    c_string, catch, fail_without_handle, no_handle_error, non_null, octmesh_status_t, slice_arg,
+    with_mut, with_ref, write_out,
 };
-use crate::classify::InsideRule;
+use crate::budget::ByteSize;
 use crate::comm::{agree, CommRef, MpiComm};
-use crate::domain::{Domain, DEFAULT_FIT};
+use crate::config::Config;
 use crate::error::{Error, ErrorKind, Result};
-use crate::geometry::Surface;
-use crate::mesh::Mesh;
-use crate::octree::LinearOctree;
-use crate::refine::{SurfaceIndex, NO_LIMIT};
+use crate::pipeline::Session;
 
 /// Options of a handle, read once by `octmesh_create`. Initialise with
-/// `octmesh_options_default`, then change fields.
+/// `octmesh_options_default`, then change fields. They fill the same
+/// configuration as the `octmesh` command's options of the same names.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct octmesh_options_t {
     /// Longest side of the surface's bounding box as a fraction of the cube
     /// side when the cube is fitted around the surface, in (0, 1]
-    /// (default 0.7). Not used after `octmesh_set_domain`.
+    /// (default 0.7; `--fit`). Not used after `octmesh_domain_set`.
     pub fit: f64,
     /// Largest number of leaves (over all ranks) a refinement or a balance
-    /// may create; 0 means unlimited (default). Exceeding it fails with
-    /// `OCTMESH_STATUS_LIMIT`.
+    /// may create; 0 means unlimited (default; `--max-octants`). Exceeding
+    /// it fails with `OCTMESH_STATUS_LIMIT`.
     pub max_octants: u64,
     /// 0 (default) prints nothing; 1 also prints the message of every
     /// failed call on stderr, one line per rank.
     pub verbosity: i32,
+    /// Bytes of memory each rank may use (`--memory-budget`); 0 (default)
+    /// means the node's available memory shared among its ranks. A
+    /// refinement expected to need more fails with `OCTMESH_STATUS_LIMIT`
+    /// before it starts, naming the largest level that fits.
+    pub memory_budget: u64,
 }
 
 impl Default for octmesh_options_t {
     fn default() -> Self {
+        let c = Config::default();
         octmesh_options_t {
-            fit: DEFAULT_FIT,
-            max_octants: 0,
+            fit: c.domain.fit(),
+            max_octants: c.octree.max_octants.unwrap_or(0),
             verbosity: 0,
+            memory_budget: c.octree.memory_budget.map_or(0, |b| b.0),
         }
     }
 }
 
-/// The surface, with its index for the domain it was last mapped to.
-pub(crate) struct SurfaceState {
-    pub(crate) surface: Surface,
-    pub(crate) index: SurfaceIndex,
-    pub(crate) index_domain: Domain,
-    /// The rule `InsideRule::Auto` picks for it, once diagnosed.
-    pub(crate) auto_rule: OnceCell<InsideRule>,
+impl octmesh_options_t {
+    /// The configuration these options give.
+    fn config(&self) -> Result<Config> {
+        let mut c = Config::default();
+        if !(self.fit > 0.0 && self.fit <= 1.0) {
+            return Err(Error::invalid(format!(
+                "options: fit must be in (0, 1], got {}",
+                self.fit
+            )));
+        }
+        c.domain.fit = Some(self.fit);
+        c.octree.max_octants = (self.max_octants > 0).then_some(self.max_octants);
+        c.octree.memory_budget = (self.memory_budget > 0).then_some(ByteSize(self.memory_budget));
+        c.output.quiet = true;
+        Ok(c)
+    }
 }
 
-/// The mesh and the C arrays made from it on demand.
-pub(crate) struct MeshState {
-    pub(crate) mesh: Mesh,
-    /// The rule its leaves were classified with (none without a surface).
-    pub(crate) inside_rule: Option<InsideRule>,
-    pub(crate) cache: super::mesh::MeshArrays,
-}
+/// C arrays derived from the mesh, made on first request.
+pub(crate) type MeshArrays = super::mesh::MeshArrays;
 
-/// Opaque handle: a communicator, options, and the pipeline's current
-/// surface, octree and mesh. Created by `octmesh_create`, freed by
+/// Opaque handle: a communicator, the pipeline's session (surface, octree,
+/// mesh) and the last error. Created by `octmesh_create`, freed by
 /// `octmesh_destroy`. A handle must not be used by two threads at once.
 pub struct octmesh_t {
     pub(crate) comm: CommRef,
-    pub(crate) options: octmesh_options_t,
-    pub(crate) explicit_domain: Option<Domain>,
-    pub(crate) surface: Option<SurfaceState>,
-    /// The octree and the domain it was built in.
-    pub(crate) tree: Option<(LinearOctree, Domain)>,
-    pub(crate) mesh: Option<MeshState>,
-    /// The inside rule of the next meshes.
-    pub(crate) inside_rule: InsideRule,
+    pub(crate) session: Session,
+    verbosity: i32,
+    /// The arrays handed out for the mesh of generation `arrays_of`.
+    pub(crate) arrays: MeshArrays,
+    arrays_of: u64,
     last_error: RefCell<CString>,
     poisoned: Cell<bool>,
 }
@@ -86,7 +92,7 @@ pub struct octmesh_t {
 impl octmesh_t {
     /// Records `e` as the last error and returns its status.
     pub(crate) fn fail(&self, e: Error) -> octmesh_status_t {
-        if self.options.verbosity > 0 {
+        if self.verbosity > 0 {
             use std::io::Write;
             let line = format!(
                 "octmesh: error [rank {} of {}]: {}\n",
@@ -121,67 +127,22 @@ impl octmesh_t {
         agree(&*self.comm, local)
     }
 
-    /// The refinement limit from the options.
-    pub(crate) fn limit(&self) -> u64 {
-        match self.options.max_octants {
-            0 => NO_LIMIT,
-            n => n,
+    /// Drops the arrays made for a mesh the session no longer holds (the
+    /// pointers handed out stay valid until the mesh changes).
+    pub(crate) fn forget_stale_arrays(&mut self) {
+        let now = self.session.mesh_generation();
+        if now != self.arrays_of {
+            self.arrays = MeshArrays::default();
+            self.arrays_of = now;
         }
-    }
-
-    /// The cube a construction from the root uses: the explicit domain, else
-    /// the cube fitted around the surface, else the unit cube.
-    pub(crate) fn new_tree_domain(&self) -> Result<Domain> {
-        if let Some(d) = self.explicit_domain {
-            return Ok(d);
-        }
-        match &self.surface {
-            Some(s) => {
-                let b = s.surface.bbox();
-                Domain::around(b.min, b.max, self.options.fit)
-            }
-            None => Domain::cube([0.0; 3], 1.0),
-        }
-    }
-
-    /// The surface index mapped to `domain` (rebuilt if it was mapped to
-    /// another cube), or a state error saying how to give a surface.
-    pub(crate) fn index_for(&mut self, domain: &Domain) -> Result<&SurfaceIndex> {
-        let s = self.surface.as_mut().ok_or_else(|| {
-            Error::new(
-                ErrorKind::State,
-                "there is no surface: call octmesh_surface_from_stl, \
-                 octmesh_surface_from_triangles or octmesh_surface_builtin first",
-            )
-        })?;
-        if s.index_domain != *domain {
-            s.index = SurfaceIndex::new(&s.surface, domain);
-            s.index_domain = *domain;
-        }
-        Ok(&s.index)
-    }
-
-    /// The octree, or a state error saying how to make one.
-    pub(crate) fn tree_or_state(&self) -> Result<&(LinearOctree, Domain)> {
-        self.tree.as_ref().ok_or_else(no_tree)
-    }
-
-    /// [`Handle::tree_or_state`], mutable.
-    pub(crate) fn tree_mut_or_state(&mut self) -> Result<&mut (LinearOctree, Domain)> {
-        self.tree.as_mut().ok_or_else(no_tree)
     }
 }
 
-fn no_tree() -> Error {
-    Error::new(
-        ErrorKind::State,
-        "there is no octree yet: call octmesh_refine_surface or \
-         octmesh_refine_callback first",
-    )
-}
-
-/// Writes the default options (fit 0.7, no octant limit, verbosity 0) to
-/// `*out`. Not collective.
+/// Writes the default options (fit 0.7, no octant limit, verbosity 0, the
+/// memory budget from the node's available memory) to `*out`. Not
+/// collective.
+///
+/// \param[out] out  the options
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_options_default(out: *mut octmesh_options_t) -> octmesh_status_t {
     if out.is_null() {
@@ -223,36 +184,28 @@ fn create(comm: mpi_sys::MPI_Comm, opts: *const octmesh_options_t) -> Result<Box
     let owned = unsafe { SimpleCommunicator::from_raw(dup) };
     let comm: CommRef = Rc::new(MpiComm::new(owned));
     // SAFETY: NULL or a valid options struct (requirement of the C API).
-    let local = match unsafe { opts.as_ref() } {
-        None => Ok(octmesh_options_t::default()),
-        Some(o) if !(o.fit > 0.0 && o.fit <= 1.0) => Err(Error::invalid(format!(
-            "options: fit must be in (0, 1], got {}",
-            o.fit
-        ))),
-        Some(o) => Ok(*o),
-    };
-    let options = agree(&*comm, local)?;
+    let options = unsafe { opts.as_ref() }.copied().unwrap_or_default();
+    let config = agree(&*comm, options.config())?;
     Ok(Box::new(octmesh_t {
+        session: Session::new(comm.clone(), config),
         comm,
-        options,
-        explicit_domain: None,
-        surface: None,
-        tree: None,
-        mesh: None,
-        inside_rule: InsideRule::Auto,
+        verbosity: options.verbosity,
+        arrays: MeshArrays::default(),
+        arrays_of: 0,
         last_error: RefCell::new(CString::default()),
         poisoned: Cell::new(false),
     }))
 }
 
-/// Creates a handle over a duplicate of `comm` and writes it to `*out`.
-/// `opts` may be NULL for the defaults. MPI must be initialised by the
-/// caller; octmesh never initialises or finalises it. Collective over
-/// `comm`. Destroy the handle with `octmesh_destroy` before
-/// `MPI_Finalize`.
+/// Creates a handle over a duplicate of `comm`. MPI must be initialised by
+/// the caller; octmesh never initialises or finalises it. Collective over
+/// `comm`. Destroy the handle with `octmesh_destroy` before `MPI_Finalize`.
+/// On failure `*out` is not written and `octmesh_last_error(NULL)` gives
+/// the message.
 ///
-/// On failure `*out` is not written and `octmesh_last_error(NULL)`
-/// gives the message.
+/// \param[in]  comm  the communicator the handle works over (duplicated)
+/// \param[in]  opts  options, or NULL for the defaults
+/// \param[out] out   the new handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_create(
     comm: mpi_sys::MPI_Comm,
@@ -276,6 +229,8 @@ pub unsafe extern "C" fn octmesh_create(
 /// included). NULL is accepted and ignored. Collective over the handle's
 /// communicator (it frees a communicator); call it before `MPI_Finalize`
 /// (after `MPI_Finalize` the memory is leaked instead).
+///
+/// \param[in] h  the handle, or NULL
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_destroy(h: *mut octmesh_t) {
     if h.is_null() {
@@ -296,10 +251,12 @@ pub unsafe extern "C" fn octmesh_destroy(h: *mut octmesh_t) {
 }
 
 /// The message of the last failed call on `h`, or for NULL, of the last
-/// failure on this thread that had no handle (a failed
-/// `octmesh_create`, a NULL handle). Never NULL; the string stays valid
-/// until the next failed call on the same handle (or thread) or
-/// `octmesh_destroy`. Not collective.
+/// failure on this thread that had no handle (a failed `octmesh_create`, a
+/// NULL handle). Never NULL; the string stays valid until the next failed
+/// call on the same handle (or thread) or `octmesh_destroy`. Not
+/// collective.
+///
+/// \param[in] h  the handle, or NULL
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_last_error(h: *const octmesh_t) -> *const c_char {
     // SAFETY: NULL or a live handle (requirement of the C API).
@@ -309,51 +266,61 @@ pub unsafe extern "C" fn octmesh_last_error(h: *const octmesh_t) -> *const c_cha
     }
 }
 
-/// Sets the cube of the next construction from the root (by
-/// `octmesh_refine_surface`, or
-/// `octmesh_refine_callback` without an octree): lowest
-/// corner `origin[3]` and side `side > 0`, in user units. Without it the
-/// cube is fitted around the surface (option `fit`), or is the unit cube
-/// when there is no surface. An existing octree keeps its cube.
-/// Collective.
+/// The name of a status value, e.g. `"OCTMESH_STATUS_STATE"`, or
+/// `"OCTMESH_STATUS_UNKNOWN"` for a value that is not a status. The string
+/// is static. Not collective.
+///
+/// \param[in] status  a status value
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_set_domain(
+pub extern "C" fn octmesh_status_name(status: i32) -> *const c_char {
+    octmesh_status_t::name_of(status).as_ptr()
+}
+
+/// Sets the cube of the next construction from the root (by
+/// `octmesh_octree_refine_surface`, or `octmesh_octree_refine_callback`
+/// without an octree). Without it the cube is fitted around the surface
+/// (option `fit`), or is the unit cube when there is no surface. An
+/// existing octree keeps its cube. Collective.
+///
+/// \param[in] h       the handle
+/// \param[in] origin  lowest corner, 3 values, user units
+/// \param[in] side    side, user units, > 0
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_domain_set(
     h: *mut octmesh_t,
     origin: *const f64,
     side: f64,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
-        let d = non_null(origin, "origin").and_then(|_| {
-            // SAFETY: non-NULL, 3 values (requirement of the C API).
-            let o = unsafe { std::slice::from_raw_parts(origin, 3) };
-            Domain::cube([o[0], o[1], o[2]], side)
-        });
+        // SAFETY: NULL or 3 values (requirement of the C API).
+        let d = unsafe { slice_arg(origin, 3, "origin") }
+            .and_then(|o| crate::domain::Domain::cube([o[0], o[1], o[2]], side));
         let d = h.agree(d)?;
-        h.explicit_domain = Some(d);
+        let c = h.session.config_mut();
+        c.domain.cube = Some([d.origin[0], d.origin[1], d.origin[2], d.side]);
+        c.domain.fit = None;
         Ok(())
     })
 }
 
-/// Writes the cube of the current octree (or, without one, the cube the
-/// next construction would use) to `origin[3]` and `*side`, user units.
-/// Not collective.
+/// The cube of the current octree (or, without one, the cube the next
+/// construction would use). Not collective.
+///
+/// \param[in]  h       the handle
+/// \param[out] origin  lowest corner, 3 values, user units
+/// \param[out] side    side, user units
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_get_domain(
+pub unsafe extern "C" fn octmesh_domain_get(
     h: *const octmesh_t,
     origin: *mut f64,
     side: *mut f64,
 ) -> octmesh_status_t {
     with_ref(h, |h| {
-        non_null(origin, "origin")?;
+        // SAFETY: NULL or room for 3 values (requirement of the C API).
+        let o = unsafe { super::out_slice(origin, 3, 3, "origin") }?;
         non_null(side, "side")?;
-        let d = match &h.tree {
-            Some((_, d)) => *d,
-            None => h.new_tree_domain()?,
-        };
-        for k in 0..3 {
-            // SAFETY: non-NULL, room for 3 values (requirement of the C API).
-            write_out(unsafe { origin.add(k) }, d.origin[k]);
-        }
+        let d = h.session.domain()?;
+        o.copy_from_slice(&d.origin);
         write_out(side, d.side);
         Ok(())
     })

@@ -11,17 +11,14 @@
 use std::cell::OnceCell;
 use std::ffi::{c_char, CStr};
 
-use super::handle::{octmesh_t, MeshState};
+use super::handle::octmesh_t;
 use super::{
-    inside_rule_of, inside_rule_value, non_null, octmesh_cut_rule, octmesh_cut_rule_t,
-    octmesh_inside_rule_t, octmesh_keep, octmesh_keep_t, octmesh_status_t, path_arg, with_mut,
-    with_ref, write_out,
+    non_null, octmesh_cut_rule_t, octmesh_gloidx_t, octmesh_inside_rule_t, octmesh_keep_t,
+    octmesh_locidx_t, octmesh_status_t, path_arg, slice_arg, with_mut, with_ref, write_out, FromC,
 };
-use crate::classify::{classify_leaves_with, CutRule, InsideRule, Keep};
+use crate::classify::{CutRule, InsideRule, Keep};
 use crate::error::{Error, ErrorKind, Result};
-use crate::geometry::diagnostics::diagnose;
-use crate::io::vtu::write_mesh;
-use crate::mesh::{Mesh, MeshOptions};
+use crate::mesh::Mesh;
 
 /// Sizes of the mesh: this rank's part and global totals (the same on
 /// every rank).
@@ -29,23 +26,23 @@ use crate::mesh::{Mesh, MeshOptions};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct octmesh_mesh_counts_t {
     /// Elements on this rank.
-    pub local_elements: i64,
+    pub local_elements: octmesh_locidx_t,
     /// Nodes on this rank (independent and hanging).
-    pub local_nodes: i64,
+    pub local_nodes: octmesh_locidx_t,
     /// Local nodes `0..num_owned` are owned by this rank.
-    pub num_owned: i64,
+    pub num_owned: octmesh_locidx_t,
     /// Local nodes `0..num_independent` are independent, the rest hang.
-    pub num_independent: i64,
+    pub num_independent: octmesh_locidx_t,
     /// Global number of this rank's first owned node.
-    pub first_global: i64,
+    pub first_global: octmesh_gloidx_t,
     /// Elements over all ranks.
-    pub global_elements: i64,
+    pub global_elements: octmesh_gloidx_t,
     /// Independent nodes over all ranks (each counted once).
-    pub global_independent: i64,
+    pub global_independent: octmesh_gloidx_t,
     /// Face-hanging nodes over all ranks.
-    pub global_face_hanging: i64,
+    pub global_face_hanging: octmesh_gloidx_t,
     /// Edge-hanging nodes over all ranks.
-    pub global_edge_hanging: i64,
+    pub global_edge_hanging: octmesh_gloidx_t,
 }
 
 /// C arrays derived from the mesh, made on first request.
@@ -60,96 +57,62 @@ pub(crate) struct MeshArrays {
     levels: OnceCell<Vec<i8>>,
 }
 
-/// Builds the mesh of the octree, replacing any previous one. `keep` (one
-/// of `octmesh_keep`) selects the elements among the leaves, classified
-/// against the surface (by the rule of `octmesh_set_inside_rule`); without
-/// a surface only `OCTMESH_KEEP_ALL` is allowed. `rule` (one of
-/// `octmesh_cut_rule`) decides for leaves touching the surface. The octree
-/// must be balanced for edge or corner contacts (`octmesh_balance`).
-/// Collective.
+/// Builds the mesh of the octree, replacing any previous one. The elements
+/// are the leaves `keep` selects, classified against the surface by the
+/// rule of `octmesh_mesh_set_inside_rule`; without a surface only
+/// `OCTMESH_KEEP_ALL` is allowed. The octree must be balanced for edge or
+/// corner contacts (`octmesh_octree_balance`). Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] keep  one of `octmesh_keep`
+/// \param[in] rule  for leaves touching the surface: one of
+///                  `octmesh_cut_rule`
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh(
+pub unsafe extern "C" fn octmesh_mesh_build(
     h: *mut octmesh_t,
     keep: octmesh_keep_t,
     rule: octmesh_cut_rule_t,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
-        let keep = match keep {
-            x if x == octmesh_keep::OCTMESH_KEEP_ALL as i32 => Ok(Keep::All),
-            x if x == octmesh_keep::OCTMESH_KEEP_INSIDE as i32 => Ok(Keep::Inside),
-            x if x == octmesh_keep::OCTMESH_KEEP_OUTSIDE as i32 => Ok(Keep::Outside),
-            x => Err(Error::invalid(format!(
-                "keep {x} is not one of OCTMESH_KEEP_ALL, _INSIDE, _OUTSIDE"
-            ))),
-        };
-        let rule = match rule {
-            x if x == octmesh_cut_rule::OCTMESH_CUT_RULE_CENTER as i32 => Ok(CutRule::Center),
-            x if x == octmesh_cut_rule::OCTMESH_CUT_RULE_ALL as i32 => Ok(CutRule::All),
-            x if x == octmesh_cut_rule::OCTMESH_CUT_RULE_NONE as i32 => Ok(CutRule::None),
-            x => Err(Error::invalid(format!(
-                "rule {x} is not one of OCTMESH_CUT_RULE_CENTER, _ALL, _NONE"
-            ))),
-        };
-        let checked = keep.and_then(|k| Ok((k, rule?, h.tree_or_state()?.1)));
-        let (keep, cut_rule, domain) = h.agree(checked)?;
-        // Classify against the surface mapped to the octree's cube, if there
-        // is a surface (keeping all elements needs none).
-        if h.surface.is_some() {
-            h.index_for(&domain)?;
-        }
-        let (tree, _) = h.tree_or_state()?;
-        let chosen = h.inside_rule;
-        let classified = h.surface.as_ref().map(|s| {
-            let rule = match chosen {
-                InsideRule::Auto => *s
-                    .auto_rule
-                    .get_or_init(|| InsideRule::auto_choice(&diagnose(&s.surface)).0),
-                r => r,
-            };
-            (classify_leaves_with(tree.leaves(), &s.index, rule), rule)
-        });
-        let (classes, inside_rule) = match classified {
-            Some((c, r)) => (Some(c), Some(r)),
-            None => (None, None),
-        };
-        let opts = MeshOptions { keep, cut_rule };
-        let mesh = Mesh::build(tree, &domain, classes.as_deref(), &opts)?;
-        h.mesh = Some(MeshState {
-            mesh,
-            inside_rule,
-            cache: MeshArrays::default(),
-        });
-        Ok(())
+        let checked = Keep::from_c(keep).and_then(|k| Ok((k, CutRule::from_c(rule)?)));
+        let (keep, cut_rule) = h.agree(checked)?;
+        h.session.build_mesh(keep, cut_rule)
     })
 }
 
-/// Sets how the following `octmesh_mesh` calls decide whether a leaf's
-/// centre is inside the surface: one of `octmesh_inside_rule`
-/// (`OCTMESH_INSIDE_RULE_AUTO` until set). Every rank must pass the same
-/// rule. The current mesh is kept. Collective.
+/// Sets how the following `octmesh_mesh_build` calls decide whether a
+/// leaf's centre is inside the surface (`OCTMESH_INSIDE_RULE_AUTO` until
+/// set). Every rank must pass the same rule. The current mesh is kept.
+/// Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] rule  one of `octmesh_inside_rule`
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_set_inside_rule(
+pub unsafe extern "C" fn octmesh_mesh_set_inside_rule(
     h: *mut octmesh_t,
     rule: octmesh_inside_rule_t,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
-        let rule = h.agree(inside_rule_of(rule))?;
-        let all = h.comm.allgather_u64(inside_rule_value(rule) as u64);
+        let rule = h.agree(InsideRule::from_c(rule))?;
+        let all = h.comm.allgather_u64(rule.to_c() as u64);
         if all.iter().any(|&r| r != all[0]) {
             return Err(Error::invalid(
-                "the ranks passed different inside rules to octmesh_set_inside_rule",
+                "the ranks passed different inside rules to octmesh_mesh_set_inside_rule",
             ));
         }
-        h.inside_rule = rule;
+        h.session.set_inside_rule(rule);
         Ok(())
     })
 }
 
-/// Writes to `*out` the rule the current mesh was classified with:
+/// The rule the current mesh was classified with:
 /// `OCTMESH_INSIDE_RULE_PARITY` or `OCTMESH_INSIDE_RULE_WINDING` (what
 /// `OCTMESH_INSIDE_RULE_AUTO` chose), or `OCTMESH_INSIDE_RULE_AUTO` when it
 /// was built without a surface (nothing classified). Needs a mesh. Not
 /// collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  one of `octmesh_inside_rule`
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_inside_rule(
     h: *const octmesh_t,
@@ -157,17 +120,18 @@ pub unsafe extern "C" fn octmesh_mesh_get_inside_rule(
 ) -> octmesh_status_t {
     with_ref(h, |h| {
         non_null(out, "out")?;
-        let rule = mesh_of(h)?.inside_rule.unwrap_or(InsideRule::Auto);
-        write_out(out, inside_rule_value(rule));
+        mesh_of(h)?;
+        let rule = h.session.classified_with().unwrap_or(InsideRule::Auto);
+        write_out(out, rule.to_c());
         Ok(())
     })
 }
 
-fn mesh_of(h: &octmesh_t) -> Result<&MeshState> {
-    h.mesh.as_ref().ok_or_else(|| {
+fn mesh_of(h: &octmesh_t) -> Result<&Mesh> {
+    h.session.mesh().ok_or_else(|| {
         Error::new(
             ErrorKind::State,
-            "there is no mesh: call octmesh_mesh first (after refining and balancing)",
+            "there is no mesh: call octmesh_mesh_build first (after refining and balancing)",
         )
     })
 }
@@ -176,12 +140,12 @@ fn mesh_of(h: &octmesh_t) -> Result<&MeshState> {
 fn get_ptr<T>(
     h: *const octmesh_t,
     out: *mut *const T,
-    f: impl FnOnce(&MeshState) -> *const T,
+    f: impl FnOnce(&Mesh, &MeshArrays) -> *const T,
 ) -> octmesh_status_t {
     with_ref(h, |h| {
         non_null(out, "out")?;
         let m = mesh_of(h)?;
-        write_out(out, f(m));
+        write_out(out, f(m, &h.arrays));
         Ok(())
     })
 }
@@ -191,6 +155,9 @@ fn i32_of(v: impl IntoIterator<Item = u32>) -> Vec<i32> {
 }
 
 /// Writes the mesh sizes to `*out`. Needs a mesh. Not collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  the counts
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_counts(
     h: *const octmesh_t,
@@ -198,20 +165,20 @@ pub unsafe extern "C" fn octmesh_mesh_get_counts(
 ) -> octmesh_status_t {
     with_ref(h, |h| {
         non_null(out, "out")?;
-        let m = &mesh_of(h)?.mesh;
+        let m = mesh_of(h)?;
         let c = m.counts();
         write_out(
             out,
             octmesh_mesh_counts_t {
-                local_elements: m.elements().len() as i64,
-                local_nodes: m.num_nodes() as i64,
-                num_owned: m.num_owned() as i64,
-                num_independent: m.num_independent() as i64,
-                first_global: m.first_global() as i64,
-                global_elements: c.elements as i64,
-                global_independent: c.independent_nodes as i64,
-                global_face_hanging: c.face_hanging_nodes as i64,
-                global_edge_hanging: c.edge_hanging_nodes as i64,
+                local_elements: m.elements().len() as octmesh_locidx_t,
+                local_nodes: m.num_nodes() as octmesh_locidx_t,
+                num_owned: m.num_owned() as octmesh_locidx_t,
+                num_independent: m.num_independent() as octmesh_locidx_t,
+                first_global: m.first_global() as octmesh_gloidx_t,
+                global_elements: c.elements as octmesh_gloidx_t,
+                global_independent: c.independent_nodes as octmesh_gloidx_t,
+                global_face_hanging: c.face_hanging_nodes as octmesh_gloidx_t,
+                global_edge_hanging: c.edge_hanging_nodes as octmesh_gloidx_t,
             },
         );
         Ok(())
@@ -221,6 +188,25 @@ pub unsafe extern "C" fn octmesh_mesh_get_counts(
 /// Sets `*out` to the connectivity: 8 local node numbers (0-based) per
 /// local element, VTK hexahedron order, elements in Morton order. Needs a
 /// mesh. Not collective.
+///
+/// ```text
+///   VTK hexahedron corner order (x right, y back, z up):
+///
+///        7 -------- 6
+///       /|         /|
+///      4 -------- 5 |
+///      | |        | |
+///      | 3 -------|-2
+///      |/         |/
+///      0 -------- 1
+///
+///   0 (x0,y0,z0)  1 (x1,y0,z0)  2 (x1,y1,z0)  3 (x0,y1,z0)
+///   4 (x0,y0,z1)  5 (x1,y0,z1)  6 (x1,y1,z1)  7 (x0,y1,z1)
+/// ```
+///
+/// \param[in]  h    the handle
+/// \param[out] out  8 * local_elements local node numbers, owned by the
+///                  handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_connectivity(
     h: *const octmesh_t,
@@ -228,50 +214,58 @@ pub unsafe extern "C" fn octmesh_mesh_get_connectivity(
 ) -> octmesh_status_t {
     // Local node numbers are below 2^31 (checked when meshing), so the
     // stored u32 array reads as int32 without a copy.
-    get_ptr(h, out, |m| m.mesh.connectivity().as_ptr().cast::<i32>())
+    get_ptr(h, out, |m, _| m.connectivity().as_ptr().cast::<i32>())
 }
 
 /// Sets `*out` to the node coordinates: x, y, z per local node, user
 /// units. Needs a mesh. Not collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  3 * local_nodes doubles (x, y, z per node, user
+///                  units), owned by the handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_coordinates(
     h: *const octmesh_t,
     out: *mut *const f64,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m| {
-        m.cache
-            .coords
-            .get_or_init(|| m.mesh.coordinates().into_flattened())
+    get_ptr(h, out, |m, a| {
+        a.coords
+            .get_or_init(|| m.coordinates().into_flattened())
             .as_ptr()
     })
 }
 
 /// Sets `*out` to the global numbers (0-based) of the `num_independent`
 /// independent local nodes. Needs a mesh. Not collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  num_independent global numbers (0-based), owned by the
+///                  handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_global_ids(
     h: *const octmesh_t,
     out: *mut *const i64,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m| {
-        m.cache
-            .global_ids
-            .get_or_init(|| m.mesh.global_ids().iter().map(|&g| g as i64).collect())
+    get_ptr(h, out, |m, a| {
+        a.global_ids
+            .get_or_init(|| m.global_ids().iter().map(|&g| g as i64).collect())
             .as_ptr()
     })
 }
 
 /// Sets `*out` to the owner rank of each of the `num_independent`
 /// independent local nodes. Needs a mesh. Not collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  num_independent owner ranks, owned by the handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_owners(
     h: *const octmesh_t,
     out: *mut *const i32,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m| {
-        m.cache
-            .owners
-            .get_or_init(|| i32_of(m.mesh.owners().iter().copied()))
+    get_ptr(h, out, |m, a| {
+        a.owners
+            .get_or_init(|| i32_of(m.owners().iter().copied()))
             .as_ptr()
     })
 }
@@ -280,6 +274,12 @@ pub unsafe extern "C" fn octmesh_mesh_get_owners(
 /// ranks using each independent local node, in CSR form: node `i` is used
 /// by `ranks[offsets[i] .. offsets[i + 1]]`, sorted, this rank included; a
 /// node is shared when it has more than one. Needs a mesh. Not collective.
+///
+/// \param[in]  h        the handle
+/// \param[out] offsets  num_independent + 1 offsets into `ranks`, owned by
+///                      the handle
+/// \param[out] ranks    the ranks using each node, sorted, owned by the
+///                      handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_sharers(
     h: *const octmesh_t,
@@ -290,11 +290,11 @@ pub unsafe extern "C" fn octmesh_mesh_get_sharers(
         non_null(offsets, "offsets")?;
         non_null(ranks, "ranks")?;
         let m = mesh_of(h)?;
-        let (o, r) = m.cache.sharers.get_or_init(|| {
+        let (o, r) = h.arrays.sharers.get_or_init(|| {
             let mut o = vec![0i32];
             let mut r = Vec::new();
-            for i in 0..m.mesh.num_independent() {
-                r.extend(m.mesh.sharers(i).into_iter().map(|x| x as i32));
+            for i in 0..m.num_independent() {
+                r.extend(m.sharers(i).into_iter().map(|x| x as i32));
                 o.push(r.len() as i32);
             }
             (o, r)
@@ -310,6 +310,15 @@ pub unsafe extern "C" fn octmesh_mesh_get_sharers(
 /// nodes `(*nodes)[(*offsets)[k] .. (*offsets)[k + 1]]`, ordered by global
 /// number, so both ranks of a pair list the same nodes in the same order.
 /// Needs a mesh. Not collective.
+///
+/// \param[in]  h           the handle
+/// \param[out] nneighbors  the number of neighbour ranks
+/// \param[out] ranks       the neighbour ranks, increasing, owned by the
+///                         handle
+/// \param[out] offsets     nneighbors + 1 offsets into `nodes`, owned by
+///                         the handle
+/// \param[out] nodes       local node numbers shared with each neighbour,
+///                         by increasing global number, owned by the handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_exchange(
     h: *const octmesh_t,
@@ -324,8 +333,8 @@ pub unsafe extern "C" fn octmesh_mesh_get_exchange(
         non_null(offsets, "offsets")?;
         non_null(nodes, "nodes")?;
         let m = mesh_of(h)?;
-        let (r, o, n) = m.cache.exchange.get_or_init(|| {
-            let lists = m.mesh.exchange_lists();
+        let (r, o, n) = h.arrays.exchange.get_or_init(|| {
+            let lists = m.exchange_lists();
             let mut r = Vec::with_capacity(lists.len());
             let mut o = vec![0i32];
             let mut n = Vec::new();
@@ -349,6 +358,23 @@ pub unsafe extern "C" fn octmesh_mesh_get_exchange(
 /// hanging) or 4 (face-hanging), and its value is the mean of the
 /// independent local nodes `(*deps)[4k .. 4k + count]` (weights
 /// `1/count`; unused entries are -1). Needs a mesh. Not collective.
+///
+/// ```text
+///   a face-hanging node (h) at the centre of a coarse face depends on the
+///   face's 4 corners; an edge-hanging node (e) at the middle of a coarse
+///   edge on the edge's 2 ends:
+///
+///     d2 -------- d3          d0 ---- e ---- d1
+///      |          |
+///      |    h     |           e = (d0 + d1) / 2
+///      |          |
+///     d0 -------- d1          h = (d0 + d1 + d2 + d3) / 4
+/// ```
+///
+/// \param[in]  h      the handle
+/// \param[out] count  per hanging node, 2 or 4, owned by the handle
+/// \param[out] deps   4 per hanging node: its independent local nodes, -1
+///                    for unused entries, owned by the handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_hanging(
     h: *const octmesh_t,
@@ -359,8 +385,8 @@ pub unsafe extern "C" fn octmesh_mesh_get_hanging(
         non_null(count, "count")?;
         non_null(deps, "deps")?;
         let m = mesh_of(h)?;
-        let (c, d) = m.cache.hanging.get_or_init(|| {
-            let mesh = &m.mesh;
+        let (c, d) = h.arrays.hanging.get_or_init(|| {
+            let mesh = m;
             let hang = (0..mesh.num_hanging()).map(|k| mesh.hanging_deps(k));
             let c = hang.clone().map(|x| x.len() as i32).collect();
             let d = hang
@@ -376,25 +402,31 @@ pub unsafe extern "C" fn octmesh_mesh_get_hanging(
 
 /// Sets `*out` to the class of each local element (one of
 /// `octmesh_class`). Needs a mesh. Not collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  local_elements classes (`octmesh_class`), owned by the
+///                  handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_element_class(
     h: *const octmesh_t,
     out: *mut *const i8,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m| m.mesh.element_class().as_ptr().cast::<i8>())
+    get_ptr(h, out, |m, _| m.element_class().as_ptr().cast::<i8>())
 }
 
 /// Sets `*out` to the octree level of each local element. Needs a mesh.
 /// Not collective.
+///
+/// \param[in]  h    the handle
+/// \param[out] out  local_elements levels, owned by the handle
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_get_element_level(
     h: *const octmesh_t,
     out: *mut *const i8,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m| {
-        m.cache
-            .levels
-            .get_or_init(|| m.mesh.elements().iter().map(|e| e.level() as i8).collect())
+    get_ptr(h, out, |m, a| {
+        a.levels
+            .get_or_init(|| m.elements().iter().map(|e| e.level() as i8).collect())
             .as_ptr()
     })
 }
@@ -404,6 +436,9 @@ pub unsafe extern "C" fn octmesh_mesh_get_element_level(
 /// 0. Cell data: level, class, rank; point data: global id (-1 when
 /// hanging), hanging kind. Needs a mesh. Collective. The same as
 /// `octmesh_mesh_write_vtu_fields` with no fields.
+///
+/// \param[in] h     the handle
+/// \param[in] pvtu  the PVTU path, ending in `.pvtu`, NUL-terminated
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_write_vtu(
     h: *mut octmesh_t,
@@ -429,13 +464,11 @@ unsafe fn field_args<'a>(
     if n == 0 {
         return Ok(Vec::new());
     }
-    non_null(names, "names")?;
-    non_null(values, "values")?;
-    // SAFETY: non-NULL and `nfields` entries long (requirement of the API).
+    // SAFETY: `nfields` entries each (requirement of the API).
     let (names, values) = unsafe {
         (
-            std::slice::from_raw_parts(names, n),
-            std::slice::from_raw_parts(values, n),
+            slice_arg(names, n, "names")?,
+            slice_arg(values, n, "values")?,
         )
     };
     let mut out = Vec::with_capacity(n);
@@ -448,9 +481,8 @@ unsafe fn field_args<'a>(
         let v: &[f64] = if nodes == 0 {
             &[]
         } else {
-            non_null(values[k], &format!("values[{k}]"))?;
-            // SAFETY: non-NULL and `nodes` values long (requirement of the API).
-            unsafe { std::slice::from_raw_parts(values[k], nodes) }
+            // SAFETY: `nodes` values (requirement of the API).
+            unsafe { slice_arg(values[k], nodes, &format!("values[{k}]")) }?
         };
         out.push((name, v));
     }
@@ -469,6 +501,12 @@ unsafe fn field_args<'a>(
 /// NULL on a rank with no nodes. Every rank must pass the same names in the
 /// same order. The arrays are only read during the call. Needs a mesh.
 /// Collective.
+///
+/// \param[in] h        the handle
+/// \param[in] pvtu     the PVTU path, ending in `.pvtu`, NUL-terminated
+/// \param[in] nfields  the number of fields, >= 0
+/// \param[in] names    nfields names, NUL-terminated
+/// \param[in] values   nfields arrays of local_nodes doubles
 #[no_mangle]
 pub unsafe extern "C" fn octmesh_mesh_write_vtu_fields(
     h: *mut octmesh_t,
@@ -479,12 +517,12 @@ pub unsafe extern "C" fn octmesh_mesh_write_vtu_fields(
 ) -> octmesh_status_t {
     with_mut(h, |h| {
         let checked = path_arg(pvtu, "pvtu").and_then(|p| {
-            let nodes = mesh_of(h)?.mesh.num_nodes();
+            let nodes = mesh_of(h)?.num_nodes();
             // SAFETY: the pointers are the caller's, as documented above.
             let fields = unsafe { field_args(nfields, names, values, nodes) }?;
             Ok((p, fields))
         });
         let (path, fields) = h.agree(checked)?;
-        write_mesh(&*h.comm, &path, &mesh_of(h)?.mesh, &fields).map(|_| ())
+        h.session.write_vtu(&path, &fields)
     })
 }

@@ -1,23 +1,35 @@
-//! The C ABI: an opaque handle ([`octmesh_t`]) driving the pipeline through
-//! `extern "C"` functions, for C, C++ and Fortran callers.
+//! The C ABI: an opaque handle ([`octmesh_t`]) over a
+//! [`crate::pipeline::Session`], driven through `extern "C"` functions by C,
+//! C++ and Fortran callers.
 //!
-//! The layer is thin: every function checks its arguments, calls the Rust
-//! API and translates the result. Conventions, the same for every function:
+//! The layer is thin: every function checks its arguments, calls the
+//! session's stage and translates the result. The command line and this API
+//! run the same stages with the same checks. Conventions, the same for every
+//! function:
 //!
+//! - Names go by subsystem, in pipeline order: the handle
+//!   (`octmesh_create`, `octmesh_options_default`, `octmesh_domain_set`,
+//!   ...), `octmesh_surface_*`, `octmesh_octree_*`, `octmesh_mesh_*`; the
+//!   header's sections follow that order.
 //! - Each function returns an [`octmesh_status_t`]; `OCTMESH_STATUS_OK` (0)
-//!   means success, the other values are the numbers of
-//!   [`crate::ErrorKind`]. [`handle::octmesh_last_error`] gives the message of the
-//!   last failed call on a handle.
-//! - Out-parameters are written only on success.
+//!   means success, the other values are the codes of [`crate::ErrorKind`].
+//!   [`handle::octmesh_last_error`] gives the message of the last failed
+//!   call on a handle.
+//! - Out-parameters are written only on success. An output buffer the caller
+//!   allocates is followed by its capacity; a buffer too small fails with
+//!   `OCTMESH_STATUS_INVALID_ARGUMENT` naming the size needed.
+//! - Local counts and indices are [`octmesh_locidx_t`] (32-bit), global
+//!   ones [`octmesh_gloidx_t`] (64-bit), as p4est's `p4est_locidx_t` and
+//!   `p4est_gloidx_t`.
 //! - No panic crosses the boundary: a panic becomes
 //!   `OCTMESH_STATUS_INTERNAL` with a message starting with `panic: `, and
 //!   the handle then refuses further work (destroy it).
-//! - Collective functions (marked so in their documentation) must be called
-//!   by every rank of the handle's communicator in the same order. Their
-//!   argument and state checks are agreed over the ranks, so a failure on
-//!   one rank (a NULL pointer, an unreadable file) is reported on every rank
-//!   instead of leaving the others waiting. A NULL handle cannot be agreed
-//!   on: it fails on the calling rank only.
+//! - Collective functions (marked so) must be called by every rank of the
+//!   handle's communicator in the same order. Their argument and state
+//!   checks are agreed over the ranks, so a failure on one rank (a NULL
+//!   pointer, an unreadable file) is reported on every rank instead of
+//!   leaving the others waiting. A NULL handle cannot be agreed on: it fails
+//!   on the calling rank only.
 //! - A failed call leaves the handle as it was before the call.
 //! - Enumerations passed *to* octmesh are `int32_t` typedefs (`..._t`) with
 //!   named constants in an enum of the same name without `_t`, so that an
@@ -25,11 +37,8 @@
 //!   behaviour.
 //!
 //! The header `include/octmesh.h` is generated from this module by cbindgen
-//! (`tests/c_header.rs` checks that it is up to date).
-//!
-//! Submodules: [`handle`] (create, destroy, options, errors, domain),
-//! [`octree`] (surface, refinement, balance, partition), [`mesh`] (mesh,
-//! getters, VTU output).
+//! (`tests/c_header.rs` checks that it is up to date and that every
+//! parameter is documented `[in]`, `[out]` or `[in,out]`).
 
 #![allow(non_camel_case_types)]
 #![allow(clippy::missing_safety_doc)]
@@ -37,6 +46,7 @@
 pub mod handle;
 pub mod mesh;
 pub mod octree;
+pub mod surface;
 
 use std::any::Any;
 use std::cell::RefCell;
@@ -48,8 +58,16 @@ use crate::error::{Error, ErrorKind, Result};
 
 pub use handle::octmesh_t;
 
-/// Status returned by every octmesh function. The values other than
-/// `OCTMESH_STATUS_OK` are the stable error codes of octmesh's error kinds.
+/// A local count or index (elements, nodes, leaves of one rank): 32 bits.
+pub type octmesh_locidx_t = i32;
+
+/// A global count or number (over all ranks): 64 bits.
+pub type octmesh_gloidx_t = i64;
+
+/// Status returned by every octmesh function: `OCTMESH_STATUS_OK`, or the
+/// code of what failed (the same numbers as the library's error kinds; the
+/// list is `for_each_error_kind!` in `src/error.rs`, and the compiler checks
+/// this enumeration against it).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_status_t {
@@ -64,7 +82,8 @@ pub enum octmesh_status_t {
     /// The surface cannot be used (no triangles, non-finite coordinates,
     /// zero extent).
     OCTMESH_STATUS_GEOMETRY = 4,
-    /// A resource limit was reached (the octant limit of the options).
+    /// A resource limit was reached (the octant limit or the memory budget
+    /// of the options).
     OCTMESH_STATUS_LIMIT = 5,
     /// Functions were called in an order that is not allowed (the message
     /// says what to call first).
@@ -76,27 +95,75 @@ pub enum octmesh_status_t {
     /// A bug inside octmesh (a caught panic, a broken invariant).
     OCTMESH_STATUS_INTERNAL = 9,
     /// The region outside the surface reaches the point given as inside
-    /// (`octmesh_check_leak`); the message describes the path.
+    /// (`octmesh_octree_check_leak`); the message describes the path.
     OCTMESH_STATUS_LEAK = 10,
 }
 
-impl octmesh_status_t {
-    /// The status of an error kind.
-    pub fn from_kind(kind: ErrorKind) -> octmesh_status_t {
-        use octmesh_status_t::*;
-        match kind {
-            ErrorKind::InvalidArgument => OCTMESH_STATUS_INVALID_ARGUMENT,
-            ErrorKind::Io => OCTMESH_STATUS_IO,
-            ErrorKind::Format => OCTMESH_STATUS_FORMAT,
-            ErrorKind::Geometry => OCTMESH_STATUS_GEOMETRY,
-            ErrorKind::Limit => OCTMESH_STATUS_LIMIT,
-            ErrorKind::State => OCTMESH_STATUS_STATE,
-            ErrorKind::Mpi => OCTMESH_STATUS_MPI,
-            ErrorKind::RemoteFailure => OCTMESH_STATUS_REMOTE_FAILURE,
-            ErrorKind::Internal => OCTMESH_STATUS_INTERNAL,
-            ErrorKind::Leak => OCTMESH_STATUS_LEAK,
+macro_rules! status_conversions {
+    ($(($variant:ident, $code:literal, $c:ident, $doc:literal)),+ $(,)?) => {
+        // The C enumeration above must hold the list's values.
+        $(const _: () = assert!(octmesh_status_t::$c as i32 == $code);)+
+
+        impl octmesh_status_t {
+            /// The status of an error kind.
+            pub fn from_kind(kind: ErrorKind) -> octmesh_status_t {
+                match kind {
+                    $(ErrorKind::$variant => octmesh_status_t::$c,)+
+                }
+            }
+
+            /// The name of a status value, for `octmesh_status_name`.
+            fn name_of(status: i32) -> &'static CStr {
+                match status {
+                    0 => c"OCTMESH_STATUS_OK",
+                    $($code => {
+                        // Built from the same identifier as the enumeration.
+                        const NAME: &CStr = match CStr::from_bytes_with_nul(
+                            concat!(stringify!($c), "\0").as_bytes(),
+                        ) {
+                            Ok(n) => n,
+                            Err(_) => c"OCTMESH_STATUS_UNKNOWN",
+                        };
+                        NAME
+                    })+
+                    _ => c"OCTMESH_STATUS_UNKNOWN",
+                }
+            }
         }
-    }
+    };
+}
+
+crate::for_each_error_kind!(status_conversions);
+
+/// Declares the conversions between an `int32_t` C enumeration
+/// (`octmesh_keep_t` with constants in `octmesh_keep`) and a library type:
+/// from the C integer (an unknown value is an error naming the allowed
+/// constants) and back. The constants are named once, here.
+macro_rules! c_enum_conversions {
+    ($c_enum:ident, $what:literal, $rust:ty { $($c:ident <=> $value:expr),+ $(,)? }) => {
+        impl FromC for $rust {
+            fn from_c(x: i32) -> Result<$rust> {
+                $(if x == $c_enum::$c as i32 { return Ok($value); })+
+                Err(Error::invalid(format!(
+                    "{} {x} is not one of {}",
+                    $what,
+                    [$(stringify!($c)),+].join(", ")
+                )))
+            }
+            fn to_c(self) -> i32 {
+                $(if self == $value { return $c_enum::$c as i32; })+
+                unreachable!("every value has a C constant")
+            }
+        }
+    };
+}
+
+/// A library type with an `int32_t` C enumeration.
+pub(crate) trait FromC: Sized {
+    /// The value of a C constant, or an error naming the allowed ones.
+    fn from_c(x: i32) -> Result<Self>;
+    /// The C constant of the value.
+    fn to_c(self) -> i32;
 }
 
 /// Contacts the 2:1 balance applies to (values of `octmesh_connect_t`).
@@ -114,6 +181,12 @@ pub enum octmesh_connect {
 /// One of the `octmesh_connect` constants.
 pub type octmesh_connect_t = i32;
 
+c_enum_conversions!(octmesh_connect, "connect", crate::Connectivity {
+    OCTMESH_CONNECT_FACE <=> crate::Connectivity::Face,
+    OCTMESH_CONNECT_EDGE <=> crate::Connectivity::Edge,
+    OCTMESH_CONNECT_CORNER <=> crate::Connectivity::Corner,
+});
+
 /// Which leaves become elements (values of `octmesh_keep_t`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -128,6 +201,12 @@ pub enum octmesh_keep {
 
 /// One of the `octmesh_keep` constants.
 pub type octmesh_keep_t = i32;
+
+c_enum_conversions!(octmesh_keep, "keep", crate::classify::Keep {
+    OCTMESH_KEEP_ALL <=> crate::classify::Keep::All,
+    OCTMESH_KEEP_INSIDE <=> crate::classify::Keep::Inside,
+    OCTMESH_KEEP_OUTSIDE <=> crate::classify::Keep::Outside,
+});
 
 /// What happens to leaves touching the surface when keeping inside or
 /// outside (values of `octmesh_cut_rule_t`).
@@ -145,8 +224,14 @@ pub enum octmesh_cut_rule {
 /// One of the `octmesh_cut_rule` constants.
 pub type octmesh_cut_rule_t = i32;
 
+c_enum_conversions!(octmesh_cut_rule, "rule", crate::classify::CutRule {
+    OCTMESH_CUT_RULE_CENTER <=> crate::classify::CutRule::Center,
+    OCTMESH_CUT_RULE_ALL <=> crate::classify::CutRule::All,
+    OCTMESH_CUT_RULE_NONE <=> crate::classify::CutRule::None,
+});
+
 /// How a leaf's centre is found inside the surface when meshing (values of
-/// `octmesh_inside_rule_t`, set by `octmesh_set_inside_rule`).
+/// `octmesh_inside_rule_t`, set by `octmesh_mesh_set_inside_rule`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_inside_rule {
@@ -165,29 +250,11 @@ pub enum octmesh_inside_rule {
 /// One of the `octmesh_inside_rule` constants.
 pub type octmesh_inside_rule_t = i32;
 
-/// The Rust rule of an `octmesh_inside_rule_t`.
-pub(crate) fn inside_rule_of(x: octmesh_inside_rule_t) -> Result<crate::classify::InsideRule> {
-    use crate::classify::InsideRule;
-    use octmesh_inside_rule::*;
-    match x {
-        x if x == OCTMESH_INSIDE_RULE_AUTO as i32 => Ok(InsideRule::Auto),
-        x if x == OCTMESH_INSIDE_RULE_PARITY as i32 => Ok(InsideRule::Parity),
-        x if x == OCTMESH_INSIDE_RULE_WINDING as i32 => Ok(InsideRule::Winding),
-        x => Err(Error::invalid(format!(
-            "inside rule {x} is not one of OCTMESH_INSIDE_RULE_AUTO, _PARITY, _WINDING"
-        ))),
-    }
-}
-
-/// The `octmesh_inside_rule_t` of a Rust rule.
-pub(crate) fn inside_rule_value(r: crate::classify::InsideRule) -> octmesh_inside_rule_t {
-    use crate::classify::InsideRule;
-    match r {
-        InsideRule::Auto => octmesh_inside_rule::OCTMESH_INSIDE_RULE_AUTO as i32,
-        InsideRule::Parity => octmesh_inside_rule::OCTMESH_INSIDE_RULE_PARITY as i32,
-        InsideRule::Winding => octmesh_inside_rule::OCTMESH_INSIDE_RULE_WINDING as i32,
-    }
-}
+c_enum_conversions!(octmesh_inside_rule, "inside rule", crate::classify::InsideRule {
+    OCTMESH_INSIDE_RULE_AUTO <=> crate::classify::InsideRule::Auto,
+    OCTMESH_INSIDE_RULE_PARITY <=> crate::classify::InsideRule::Parity,
+    OCTMESH_INSIDE_RULE_WINDING <=> crate::classify::InsideRule::Winding,
+});
 
 /// Class of an element, as stored in the array of
 /// `octmesh_mesh_get_element_class`.
@@ -203,10 +270,18 @@ pub enum octmesh_class {
     OCTMESH_CLASS_CUT = 2,
 }
 
+// The class bytes of the mesh are handed out as they are stored.
+const _: () = {
+    use crate::classify::LeafClass;
+    assert!(octmesh_class::OCTMESH_CLASS_OUTSIDE as u8 == LeafClass::Outside as u8);
+    assert!(octmesh_class::OCTMESH_CLASS_INSIDE as u8 == LeafClass::Inside as u8);
+    assert!(octmesh_class::OCTMESH_CLASS_CUT as u8 == LeafClass::Cut as u8);
+};
+
 /// An octant as seen by callbacks: its lowest corner in lattice units (the
 /// root cube is `[0, 2^19]^3`; lattice point `q` is the user point
-/// `origin + q * side / 2^19`, see `octmesh_get_domain`) and its
-/// level (side `2^(19 - level)` lattice units).
+/// `origin + q * side / 2^19`, see `octmesh_domain_get`) and its level
+/// (side `2^(19 - level)` lattice units).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct octmesh_octant_t {
@@ -299,7 +374,9 @@ pub(crate) fn with_mut(
     if let Err(e) = h.usable() {
         return h.fail(e);
     }
-    match catch_panic(|| f(&mut *h)) {
+    let result = catch_panic(|| f(&mut *h));
+    h.forget_stale_arrays();
+    match result {
         Ok(Ok(())) => octmesh_status_t::OCTMESH_STATUS_OK,
         Ok(Err(e)) => h.fail(e),
         Err(panic) => {
@@ -337,6 +414,43 @@ pub(crate) fn non_null<T>(p: *const T, name: &str) -> Result<()> {
     }
 }
 
+/// The caller's array `p` of `len` values, read-only.
+///
+/// # Safety
+/// `p` is NULL (an error) or points to `len` initialised values that stay
+/// valid and unchanged for `'a` (requirement of the C API).
+pub(crate) unsafe fn slice_arg<'a, T>(p: *const T, len: usize, name: &str) -> Result<&'a [T]> {
+    non_null(p, name)?;
+    if len == 0 {
+        return Ok(&[]);
+    }
+    // SAFETY: non-NULL and `len` values long, by the caller's contract.
+    Ok(unsafe { std::slice::from_raw_parts(p, len) })
+}
+
+/// The caller's output buffer `p` with room for `capacity` values, of
+/// which `needed` are written: fails, naming the size needed, when it is
+/// too small.
+///
+/// # Safety
+/// `p` is NULL (an error) or valid for writes of `capacity` values
+/// (requirement of the C API).
+pub(crate) unsafe fn out_slice<'a, T>(
+    p: *mut T,
+    capacity: octmesh_locidx_t,
+    needed: usize,
+    name: &str,
+) -> Result<&'a mut [T]> {
+    non_null(p, name)?;
+    if capacity < 0 || (capacity as usize) < needed {
+        return Err(Error::invalid(format!(
+            "argument '{name}' has room for {capacity} values, {needed} are needed"
+        )));
+    }
+    // SAFETY: non-NULL and valid for `capacity >= needed` values.
+    Ok(unsafe { std::slice::from_raw_parts_mut(p, needed) })
+}
+
 /// A path from a NUL-terminated C string.
 pub(crate) fn path_arg(p: *const c_char, name: &str) -> Result<PathBuf> {
     non_null(p, name)?;
@@ -360,28 +474,6 @@ pub(crate) fn write_out<T>(p: *mut T, value: T) {
     // SAFETY: checked non-NULL by the caller; the C API requires it to be
     // valid for writes.
     unsafe { p.write(value) }
-}
-
-/// The name of a status value, e.g. `"OCTMESH_STATUS_STATE"`, or
-/// `"OCTMESH_STATUS_UNKNOWN"` for a value that is not a status. The string
-/// is static. Not collective.
-#[no_mangle]
-pub extern "C" fn octmesh_status_name(status: i32) -> *const c_char {
-    let s: &'static CStr = match status {
-        0 => c"OCTMESH_STATUS_OK",
-        1 => c"OCTMESH_STATUS_INVALID_ARGUMENT",
-        2 => c"OCTMESH_STATUS_IO",
-        3 => c"OCTMESH_STATUS_FORMAT",
-        4 => c"OCTMESH_STATUS_GEOMETRY",
-        5 => c"OCTMESH_STATUS_LIMIT",
-        6 => c"OCTMESH_STATUS_STATE",
-        7 => c"OCTMESH_STATUS_MPI",
-        8 => c"OCTMESH_STATUS_REMOTE_FAILURE",
-        9 => c"OCTMESH_STATUS_INTERNAL",
-        10 => c"OCTMESH_STATUS_LEAK",
-        _ => c"OCTMESH_STATUS_UNKNOWN",
-    };
-    s.as_ptr()
 }
 
 /// Panics inside the boundary; for testing that no panic crosses it. Only

@@ -82,12 +82,16 @@ impl SurfaceState {
     }
 }
 
-/// The leaf classes of the current octree.
+/// The leaf classes of the current octree. A plain struct, not an
+/// `Option`: every byte of it is written whenever it changes.
+#[derive(Default)]
 struct Classes {
-    /// One class byte per local leaf.
+    /// One class byte per local leaf (empty when `cut` is false).
     bits: Vec<u8>,
-    /// The rule they were classified with; `None` when only the cut bit
-    /// was computed (for a leak check).
+    /// Whether `bits` holds at least the cut bit of every leaf.
+    cut: bool,
+    /// The rule the inside bits were classified with; `None` when only the
+    /// cut bit was computed (for a leak check).
     rule: Option<InsideRule>,
 }
 
@@ -122,6 +126,8 @@ pub struct Session {
     plan: Command,
     /// How rank 0 shows the progress of long phases, if at all.
     progress: Option<Style>,
+    /// Counts the meshes built, so that views of a mesh know it changed.
+    mesh_generation: u64,
     timer: PhaseTimer,
     observer: Box<dyn Observer>,
     surface: Option<SurfaceState>,
@@ -129,7 +135,7 @@ pub struct Session {
     released: Option<(Aabb, f64, String)>,
     /// The octree and the cube it was built in.
     tree: Option<(LinearOctree, Domain)>,
-    classes: Option<Classes>,
+    classes: Classes,
     mesh: Option<Mesh>,
     facts: Facts,
 }
@@ -143,13 +149,14 @@ impl Session {
             inside: config.classify.inside,
             plan: Command::Mesh,
             progress: None,
+            mesh_generation: 0,
             config,
             timer: PhaseTimer::new(),
             observer: Box::new(Silent),
             surface: None,
             released: None,
             tree: None,
-            classes: None,
+            classes: Classes::default(),
             mesh: None,
             facts: Facts {
                 rss_start: peak_rss_bytes(),
@@ -189,6 +196,11 @@ impl Session {
         self.mesh.as_ref()
     }
 
+    /// A number that changes whenever a new mesh is built.
+    pub fn mesh_generation(&self) -> u64 {
+        self.mesh_generation
+    }
+
     /// The phases run so far.
     pub fn timer(&self) -> &PhaseTimer {
         &self.timer
@@ -197,7 +209,7 @@ impl Session {
     /// The inside rule the leaves of the current mesh (or octree) were
     /// classified with, if they were.
     pub fn classified_with(&self) -> Option<InsideRule> {
-        self.classes.as_ref().and_then(|c| c.rule)
+        self.classes.rule
     }
 
     /// The cube of the current octree or, without one, of the next one:
@@ -404,7 +416,7 @@ impl Session {
         self.report_phase(None);
         self.surface = Some(state);
         self.released = None;
-        self.classes = None;
+        self.classes = Classes::default();
         Ok(())
     }
 
@@ -512,7 +524,7 @@ impl Session {
         let n = self.tree().map_or(0, |t| t.global_len());
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
-        self.classes = None;
+        self.classes = Classes::default();
         self.mesh = None;
         Ok(())
     }
@@ -553,7 +565,7 @@ impl Session {
         self.report_phase(Some(n));
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
-        self.classes = None;
+        self.classes = Classes::default();
         self.mesh = None;
         Ok(())
     }
@@ -598,14 +610,14 @@ impl Session {
         self.report_phase(Some(n));
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
-        self.classes = None;
+        self.classes = Classes::default();
         self.mesh = None;
         Ok(())
     }
 
     fn set_tree(&mut self, tree: LinearOctree, domain: Domain) {
         self.tree = Some((tree, domain));
-        self.classes = None;
+        self.classes = Classes::default();
         self.mesh = None;
     }
 
@@ -631,7 +643,7 @@ impl Session {
         })?;
         let count = self.tree().map(|t| t.global_len());
         self.report_phase(count);
-        self.classes = None;
+        self.classes = Classes::default();
         self.mesh = None;
         Ok(())
     }
@@ -662,7 +674,7 @@ impl Session {
         let count = self.tree().map(|t| t.global_len());
         self.report_phase(count);
         self.facts.octants_balanced = self.tree().map_or(0, |t| t.global_len());
-        self.classes = None;
+        self.classes = Classes::default();
         self.mesh = None;
         Ok(())
     }
@@ -712,20 +724,24 @@ impl Session {
             self.observer.event(&Event::Winding(w));
         }
         self.facts.winding = summary;
-        self.classes = Some(Classes {
+        self.classes = Classes {
             bits,
+            cut: true,
             rule: Some(rule),
-        });
+        };
         Ok(())
     }
 
     /// Counts the leaves per class over all ranks (after
     /// [`Session::classify`]): inside, outside, cut. Collective.
     pub fn count_classes(&mut self) -> Result<[u64; 3]> {
-        let local = self
-            .classes
-            .as_ref()
-            .ok_or_else(|| Error::new(ErrorKind::State, "the leaves are not classified"));
+        let local = match self.classes.cut {
+            true => Ok(&self.classes),
+            false => Err(Error::new(
+                ErrorKind::State,
+                "the leaves are not classified",
+            )),
+        };
         let classes = agree(&*self.comm, local)?;
         let mut n = [0u64; 3];
         for &b in &classes.bits {
@@ -755,25 +771,24 @@ impl Session {
             .and_then(|d| self.surface_or_state().map(|_| d));
         let domain = agree(&*self.comm, checked)?;
         self.index_for(domain)?;
-        if self.classes.is_none() {
+        if !self.classes.cut {
             // The leak search needs only the cut bits, which every rule
             // computes alike.
             let (Some((tree, _)), Some(s)) = (&self.tree, &self.surface) else {
                 return Err(Error::new(ErrorKind::Internal, "the octree vanished"));
             };
-            self.classes = Some(Classes {
+            self.classes = Classes {
                 bits: classify_leaves(tree.leaves(), &s.index),
+                cut: true,
                 rule: None,
-            });
+            };
         }
         let comm = self.comm.clone();
         let (tree, classes) = (&self.tree, &self.classes);
-        let found = self
-            .timer
-            .time(&*comm, "leak_check", || match (tree, classes) {
-                (Some((tree, d)), Some(c)) => find_leak(tree, &c.bits, d, point),
-                _ => Err(Error::new(ErrorKind::Internal, "the octree vanished")),
-            })?;
+        let found = self.timer.time(&*comm, "leak_check", || match tree {
+            Some((tree, d)) => find_leak(tree, &classes.bits, d, point),
+            _ => Err(Error::new(ErrorKind::Internal, "the octree vanished")),
+        })?;
         self.report_phase(None);
         self.facts.leak_checked = true;
         self.facts.leak_path = found.as_ref().map(|p| p.len());
@@ -819,15 +834,12 @@ impl Session {
         let rule = self.inside.unwrap_or_default();
         if self.surface.is_some() {
             let wanted = agree(&*self.comm, self.resolve(rule))?;
-            if self.classes.as_ref().is_none_or(|c| c.rule != Some(wanted)) {
+            if self.classes.rule != Some(wanted) {
                 self.classify(rule)?;
             }
         }
         let (tree, domain) = self.tree_or_state()?;
-        let classes = match &self.classes {
-            Some(c) if c.rule.is_some() => Some(c.bits.as_slice()),
-            _ => None,
-        };
+        let classes = self.classes.rule.map(|_| self.classes.bits.as_slice());
         let shown = self.progress("mesh", None);
         let mesh = Mesh::build(tree, domain, classes, &MeshOptions { keep, cut_rule });
         drop(shown);
@@ -855,6 +867,7 @@ impl Session {
             surface_volume: self.surface_volume(),
         });
         self.mesh = Some(mesh);
+        self.mesh_generation += 1;
         Ok(())
     }
 

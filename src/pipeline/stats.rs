@@ -209,7 +209,7 @@ impl Session {
         let mut keys = vec!["read", "construct", "refine"];
         keys.extend(["curvature", "regions"].into_iter().filter(|k| ran(k)));
         keys.extend(["partition", "balance"]);
-        if self.classes.as_ref().is_some_and(|c| c.rule.is_some()) || f.winding.is_some() {
+        if self.classes.rule.is_some() || f.winding.is_some() {
             keys.push("classify");
         }
         if f.leak_checked {
@@ -296,9 +296,7 @@ impl Session {
                 _ => e.balanced,
             }),
             estimated_octants_refined: estimate.map_or(0, |e| e.refined),
-            inside_rule: self
-                .inside
-                .and_then(|_| self.classes.as_ref().and_then(|c| c.rule)),
+            inside_rule: self.inside.and(self.classes.rule),
             reversed_facets: f.winding.as_ref().map(|w| w.reversed_facets as u64),
             boundary_loops: f.winding.as_ref().map(|w| w.boundary_loops as u64),
             inside_leaves: f.leaf_classes.map(|c| c[0]),

@@ -60,21 +60,23 @@ static void says(octmesh_t *h, const char *word) {
 }
 
 static int64_t global_leaves(octmesh_t *h) {
-  int64_t l = -1, g = -1;
-  OK(octmesh_get_num_leaves(h, &l, &g), h);
+  octmesh_locidx_t l = -1;
+  octmesh_gloidx_t g = -1;
+  OK(octmesh_octree_get_num_leaves(h, &l, &g), h);
   return g;
 }
 
 static int64_t local_leaves(octmesh_t *h) {
-  int64_t l = -1, g = -1;
-  OK(octmesh_get_num_leaves(h, &l, &g), h);
+  octmesh_locidx_t l = -1;
+  octmesh_gloidx_t g = -1;
+  OK(octmesh_octree_get_num_leaves(h, &l, &g), h);
   return l;
 }
 
 /* The handle still works: the built-in sphere refined at level 3. */
 static void still_works(octmesh_t *h) {
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 3), h);
+  OK(octmesh_octree_refine_surface(h, 3), h);
   CHECK(global_leaves(h) > 8, h);
 }
 
@@ -93,21 +95,22 @@ static void file_case(const char *path, octmesh_status_t want, int nwords, char 
   const char *stage = "surface_from_stl";
   if (s == OCTMESH_STATUS_OK) {
     stage = "refine_surface";
-    s = octmesh_refine_surface(h, 3);
+    s = octmesh_octree_refine_surface(h, 3);
   }
   if (s == OCTMESH_STATUS_OK) {
     stage = "balance";
-    s = octmesh_balance(h, OCTMESH_CONNECT_CORNER);
+    s = octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER);
   }
   if (s == OCTMESH_STATUS_OK) {
     stage = "mesh";
-    s = octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER);
+    s = octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER);
   }
   expect_all(s, want, h, stage);
   for (int i = 0; i < nwords; i++) says(h, words[i]);
   /* Nothing was built from the bad file. */
-  int64_t l, g;
-  CHECK_STATUS(octmesh_get_num_leaves(h, &l, &g), OCTMESH_STATUS_STATE, h);
+  octmesh_locidx_t l;
+  octmesh_gloidx_t g;
+  CHECK_STATUS(octmesh_octree_get_num_leaves(h, &l, &g), OCTMESH_STATUS_STATE, h);
   still_works(h);
   octmesh_destroy(h);
 }
@@ -135,10 +138,10 @@ static void cases(const char *good, const char *missing, const char *dir) {
   expect_all(octmesh_surface_from_triangles(h, 1, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h,
              "NULL triangles");
   expect_all(octmesh_surface_builtin(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h, "NULL name");
-  expect_all(octmesh_set_domain(h, NULL, 1.0), OCTMESH_STATUS_INVALID_ARGUMENT, h, "NULL origin");
+  expect_all(octmesh_domain_set(h, NULL, 1.0), OCTMESH_STATUS_INVALID_ARGUMENT, h, "NULL origin");
   still_works(h);
   int64_t g = -5;
-  CHECK_STATUS(octmesh_get_num_leaves(h, NULL, &g), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_get_num_leaves(h, NULL, &g), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK(g == -5, h);
   octmesh_mesh_counts_t mc;
   CHECK_STATUS(octmesh_mesh_get_counts(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
@@ -150,7 +153,7 @@ static void cases(const char *good, const char *missing, const char *dir) {
   expect_all(octmesh_surface_from_stl(h, dir), OCTMESH_STATUS_IO, h, "directory");
   says(h, "directory");
   OK(octmesh_surface_from_stl(h, good), h);
-  OK(octmesh_refine_surface(h, 3), h);
+  OK(octmesh_octree_refine_surface(h, 3), h);
   int64_t before = global_leaves(h);
   expect(octmesh_surface_from_stl(h, rank == last ? missing : good), last, OCTMESH_STATUS_IO,
          OCTMESH_STATUS_REMOTE_FAILURE, h, "file missing on the last rank");
@@ -162,18 +165,18 @@ static void cases(const char *good, const char *missing, const char *dir) {
   }
   /* The failed load kept the octree and the surface. */
   CHECK(global_leaves(h) == before, h);
-  OK(octmesh_balance(h, OCTMESH_CONNECT_CORNER), h);
-  OK(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
   OK(octmesh_mesh_get_counts(h, &mc), h);
   CHECK(mc.global_elements > 0, h);
 
   /* Levels above the maximum. */
   before = global_leaves(h);
-  expect_all(octmesh_refine_surface(h, 19), OCTMESH_STATUS_INVALID_ARGUMENT, h, "level 19");
+  expect_all(octmesh_octree_refine_surface(h, 19), OCTMESH_STATUS_INVALID_ARGUMENT, h, "level 19");
   says(h, "19");
-  expect_all(octmesh_refine_surface(h, 1000000), OCTMESH_STATUS_INVALID_ARGUMENT, h, "level 1e6");
+  expect_all(octmesh_octree_refine_surface(h, 1000000), OCTMESH_STATUS_INVALID_ARGUMENT, h, "level 1e6");
   int flag = 1;
-  expect_all(octmesh_refine_callback(h, 25, refine_if_flag, &flag), OCTMESH_STATUS_INVALID_ARGUMENT, h,
+  expect_all(octmesh_octree_refine_callback(h, 25, refine_if_flag, &flag), OCTMESH_STATUS_INVALID_ARGUMENT, h,
              "callback level 25");
   CHECK(global_leaves(h) == before, h);
   /* The mesh survived the failed calls. */
@@ -184,9 +187,9 @@ static void cases(const char *good, const char *missing, const char *dir) {
   /* Reference counts of the sphere at level 5, without a limit. */
   h = create(0);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 5), h);
+  OK(octmesh_octree_refine_surface(h, 5), h);
   int64_t refined5 = global_leaves(h);
-  OK(octmesh_balance(h, OCTMESH_CONNECT_CORNER), h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
   int64_t balanced5 = global_leaves(h);
   CHECK(balanced5 > refined5, h);
   octmesh_destroy(h);
@@ -195,10 +198,10 @@ static void cases(const char *good, const char *missing, const char *dir) {
    * estimate and a level that fits; the previous octree is kept. */
   h = create(400);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 2), h);
+  OK(octmesh_octree_refine_surface(h, 2), h);
   before = global_leaves(h);
   CHECK(before <= 400, h);
-  expect_all(octmesh_refine_surface(h, 6), OCTMESH_STATUS_LIMIT, h, "limit 400 at level 6");
+  expect_all(octmesh_octree_refine_surface(h, 6), OCTMESH_STATUS_LIMIT, h, "limit 400 at level 6");
   says(h, "limit of 400 octants");
   says(h, "estimated");
   says(h, "would fit");
@@ -209,9 +212,9 @@ static void cases(const char *good, const char *missing, const char *dir) {
   /* A limit just below the count: fails while refining. */
   h = create((uint64_t)refined5 - 1);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 3), h);
+  OK(octmesh_octree_refine_surface(h, 3), h);
   before = global_leaves(h);
-  expect_all(octmesh_refine_surface(h, 5), OCTMESH_STATUS_LIMIT, h, "limit just below at level 5");
+  expect_all(octmesh_octree_refine_surface(h, 5), OCTMESH_STATUS_LIMIT, h, "limit just below at level 5");
   says(h, "while refining");
   CHECK(global_leaves(h) == before, h);
   octmesh_destroy(h);
@@ -220,14 +223,14 @@ static void cases(const char *good, const char *missing, const char *dir) {
    * fits, the balance fails on every rank and keeps the octree. */
   h = create((uint64_t)refined5);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 5), h);
-  OK(octmesh_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_refine_surface(h, 5), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
   int64_t local_before = local_leaves(h);
-  expect_all(octmesh_balance(h, OCTMESH_CONNECT_CORNER), OCTMESH_STATUS_LIMIT, h, "balance limit");
+  expect_all(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), OCTMESH_STATUS_LIMIT, h, "balance limit");
   says(h, "balancing");
   CHECK(global_leaves(h) == refined5 && local_leaves(h) == local_before, h);
   /* Still unbalanced, so no mesh. */
-  expect_all(octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_STATE, h,
+  expect_all(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_STATE, h,
              "mesh after failed balance");
   still_works(h);
   octmesh_destroy(h);
@@ -238,18 +241,18 @@ static void cases(const char *good, const char *missing, const char *dir) {
    * collectives and fail. */
   h = create(3000);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 3), h);
-  OK(octmesh_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_refine_surface(h, 3), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
   local_before = local_leaves(h);
   before = global_leaves(h);
   flag = rank == last;
-  expect_all(octmesh_refine_callback(h, 6, refine_if_flag, &flag), OCTMESH_STATUS_LIMIT, h,
+  expect_all(octmesh_octree_refine_callback(h, 6, refine_if_flag, &flag), OCTMESH_STATUS_LIMIT, h,
              "limit on the last rank");
   says(h, "limit of 3000 octants");
   CHECK(local_leaves(h) == local_before && global_leaves(h) == before, h);
   /* The same refinement on no rank succeeds and changes nothing. */
   flag = 0;
-  OK(octmesh_refine_callback(h, 6, refine_if_flag, &flag), h);
+  OK(octmesh_octree_refine_callback(h, 6, refine_if_flag, &flag), h);
   CHECK(global_leaves(h) == before, h);
   still_works(h);
   octmesh_destroy(h);

@@ -19,10 +19,10 @@ static void cube(double *xyz) {
 }
 
 static void build(octmesh_t *h, int level) {
-  OK(octmesh_refine_surface(h, level), h);
-  OK(octmesh_partition(h, NULL, NULL), h);
-  OK(octmesh_balance(h, OCTMESH_CONNECT_CORNER), h);
-  OK(octmesh_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_refine_surface(h, level), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
 }
 
 int main(int argc, char **argv) {
@@ -34,14 +34,14 @@ int main(int argc, char **argv) {
   octmesh_t *h = NULL;
   OK(octmesh_create(MPI_COMM_WORLD, NULL, &h), NULL);
   /* No surface and no octree yet. */
-  CHECK_STATUS(octmesh_check_leak(h, centre), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_octree_check_leak(h, centre), OCTMESH_STATUS_STATE, h);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  CHECK_STATUS(octmesh_check_leak(h, centre), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_octree_check_leak(h, centre), OCTMESH_STATUS_STATE, h);
   build(h, 5);
-  OK(octmesh_check_leak(h, centre), h);
-  CHECK_STATUS(octmesh_check_leak(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  OK(octmesh_octree_check_leak(h, centre), h);
+  CHECK_STATUS(octmesh_octree_check_leak(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   const double far[3] = {5.0, 0.0, 0.0};
-  CHECK_STATUS(octmesh_check_leak(h, far), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_check_leak(h, far), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK(strstr(octmesh_last_error(h), "not in the cube") != NULL, h);
 
   /* The open box leaks. */
@@ -49,7 +49,7 @@ int main(int argc, char **argv) {
   cube(xyz);
   OK(octmesh_surface_from_triangles(h, 10, xyz), h);
   build(h, 5);
-  CHECK_STATUS(octmesh_check_leak(h, centre), OCTMESH_STATUS_LEAK, h);
+  CHECK_STATUS(octmesh_octree_check_leak(h, centre), OCTMESH_STATUS_LEAK, h);
   const char *msg = octmesh_last_error(h);
   CHECK(strncmp(msg, "leak: ", 6) == 0 && strstr(msg, "a path of ") != NULL, h);
   CHECK(strcmp(octmesh_status_name(OCTMESH_STATUS_LEAK), "OCTMESH_STATUS_LEAK") == 0, h);
@@ -63,12 +63,12 @@ int main(int argc, char **argv) {
   CHECK(strcmp(copy, msg) == 0, h);
   free(copy);
   /* The handle still works: the fluid mesh can be built anyway. */
-  OK(octmesh_mesh(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_CENTER), h);
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_CENTER), h);
 
   /* The closed cube seals its centre. */
   OK(octmesh_surface_from_triangles(h, 12, xyz), h);
   build(h, 5);
-  OK(octmesh_check_leak(h, centre), h);
+  OK(octmesh_octree_check_leak(h, centre), h);
 
   octmesh_destroy(h);
   printf("LEAK OK rank %d\n", rank);

@@ -24,7 +24,7 @@ int main(int argc, char **argv) {
   octmesh_destroy(NULL);
   CHECK_STATUS(octmesh_create(MPI_COMM_WORLD, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, NULL);
   CHECK(contains(octmesh_last_error(NULL), "out"), NULL);
-  CHECK_STATUS(octmesh_balance(NULL, OCTMESH_CONNECT_FACE), OCTMESH_STATUS_INVALID_ARGUMENT, NULL);
+  CHECK_STATUS(octmesh_octree_balance(NULL, OCTMESH_CONNECT_FACE), OCTMESH_STATUS_INVALID_ARGUMENT, NULL);
   CHECK(contains(octmesh_last_error(NULL), "NULL"), NULL);
   CHECK_STATUS(octmesh_options_default(NULL), OCTMESH_STATUS_INVALID_ARGUMENT, NULL);
   CHECK(strcmp(octmesh_status_name(OCTMESH_STATUS_STATE), "OCTMESH_STATUS_STATE") == 0, NULL);
@@ -44,28 +44,29 @@ int main(int argc, char **argv) {
   CHECK(strlen(octmesh_last_error(h)) == 0, h);
 
   /* Out of order. */
-  int64_t nl = -7, ng = -7;
-  CHECK_STATUS(octmesh_balance(h, OCTMESH_CONNECT_CORNER), OCTMESH_STATUS_STATE, h);
-  CHECK(contains(octmesh_last_error(h), "octmesh_refine_surface"), h);
-  CHECK_STATUS(octmesh_partition(h, NULL, NULL), OCTMESH_STATUS_STATE, h);
-  CHECK_STATUS(octmesh_get_num_leaves(h, &nl, &ng), OCTMESH_STATUS_STATE, h);
+  octmesh_locidx_t nl = -7;
+  octmesh_gloidx_t ng = -7;
+  CHECK_STATUS(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), OCTMESH_STATUS_STATE, h);
+  CHECK(contains(octmesh_last_error(h), "octmesh_octree_refine_surface"), h);
+  CHECK_STATUS(octmesh_octree_partition(h, NULL, NULL), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_octree_get_num_leaves(h, &nl, &ng), OCTMESH_STATUS_STATE, h);
   CHECK(nl == -7 && ng == -7, h); /* out-params untouched on failure */
-  CHECK_STATUS(octmesh_refine_surface(h, 3), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_octree_refine_surface(h, 3), OCTMESH_STATUS_STATE, h);
   CHECK(contains(octmesh_last_error(h), "octmesh_surface_from_stl"), h);
-  CHECK_STATUS(octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_STATE, h);
   octmesh_mesh_counts_t c;
   CHECK_STATUS(octmesh_mesh_get_counts(h, &c), OCTMESH_STATUS_STATE, h);
-  CHECK(contains(octmesh_last_error(h), "octmesh_mesh"), h);
+  CHECK(contains(octmesh_last_error(h), "octmesh_mesh_build"), h);
   octmesh_inside_rule_t ir = -1;
   CHECK_STATUS(octmesh_mesh_get_inside_rule(h, &ir), OCTMESH_STATUS_STATE, h);
   CHECK(ir == -1, h);
-  CHECK_STATUS(octmesh_set_inside_rule(h, 3), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_mesh_set_inside_rule(h, 3), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK(contains(octmesh_last_error(h), "inside rule"), h);
   if (size > 1) /* different rules on different ranks: every rank fails */
-    CHECK_STATUS(octmesh_set_inside_rule(h, rank == 0 ? OCTMESH_INSIDE_RULE_PARITY
+    CHECK_STATUS(octmesh_mesh_set_inside_rule(h, rank == 0 ? OCTMESH_INSIDE_RULE_PARITY
                                                       : OCTMESH_INSIDE_RULE_WINDING),
                  OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  OK(octmesh_set_inside_rule(h, OCTMESH_INSIDE_RULE_WINDING), h);
+  OK(octmesh_mesh_set_inside_rule(h, OCTMESH_INSIDE_RULE_WINDING), h);
 
   /* Missing file: IO with the path in the message. */
   CHECK_STATUS(octmesh_surface_from_stl(h, missing), OCTMESH_STATUS_IO, h);
@@ -92,26 +93,26 @@ int main(int argc, char **argv) {
 
   /* The handle still works after the failures. */
   OK(octmesh_surface_from_stl(h, good), h);
-  CHECK_STATUS(octmesh_refine_surface(h, 19), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_refine_surface(h, 19), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK(contains(octmesh_last_error(h), "19"), h);
-  CHECK_STATUS(octmesh_refine_surface(h, -1), OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  CHECK_STATUS(octmesh_refine_callback(h, 3, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_refine_surface(h, -1), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_refine_callback(h, 3, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   /* The octant limit of the options. */
-  CHECK_STATUS(octmesh_refine_surface(h, 6), OCTMESH_STATUS_LIMIT, h);
-  CHECK_STATUS(octmesh_get_num_leaves(h, &nl, &ng), OCTMESH_STATUS_STATE, h);
-  OK(octmesh_refine_surface(h, 3), h);
-  OK(octmesh_get_num_leaves(h, &nl, &ng), h);
+  CHECK_STATUS(octmesh_octree_refine_surface(h, 6), OCTMESH_STATUS_LIMIT, h);
+  CHECK_STATUS(octmesh_octree_get_num_leaves(h, &nl, &ng), OCTMESH_STATUS_STATE, h);
+  OK(octmesh_octree_refine_surface(h, 3), h);
+  OK(octmesh_octree_get_num_leaves(h, &nl, &ng), h);
   CHECK(ng > 8 && ng <= 2000, h);
-  CHECK_STATUS(octmesh_get_num_leaves(h, NULL, &ng), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_get_num_leaves(h, NULL, &ng), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK(contains(octmesh_last_error(h), "local"), h);
-  CHECK_STATUS(octmesh_balance(h, 99), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_balance(h, 99), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   /* Face balance is not enough to mesh. */
-  OK(octmesh_balance(h, OCTMESH_CONNECT_FACE), h);
-  CHECK_STATUS(octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_STATE, h);
-  OK(octmesh_balance(h, OCTMESH_CONNECT_CORNER), h);
-  CHECK_STATUS(octmesh_mesh(h, 7, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  CHECK_STATUS(octmesh_mesh(h, OCTMESH_KEEP_OUTSIDE, -1), OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  OK(octmesh_mesh(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_NONE), h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_FACE), h);
+  CHECK_STATUS(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_STATE, h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
+  CHECK_STATUS(octmesh_mesh_build(h, 7, OCTMESH_CUT_RULE_CENTER), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, -1), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_NONE), h);
   CHECK_STATUS(octmesh_mesh_get_inside_rule(h, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   OK(octmesh_mesh_get_inside_rule(h, &ir), h);
   CHECK(ir == OCTMESH_INSIDE_RULE_WINDING, h);
@@ -124,12 +125,12 @@ int main(int argc, char **argv) {
   CHECK_STATUS(octmesh_mesh_write_vtu(h, "/nonexistent-dir/x.pvtu"), OCTMESH_STATUS_IO, h);
   /* Setting the domain: bad values fail, good ones apply to the next build. */
   double o[3] = {-2, -2, -2};
-  CHECK_STATUS(octmesh_set_domain(h, o, -1.0), OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  CHECK_STATUS(octmesh_set_domain(h, NULL, 4.0), OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  OK(octmesh_set_domain(h, o, 4.0), h);
-  OK(octmesh_refine_surface(h, 3), h);
+  CHECK_STATUS(octmesh_domain_set(h, o, -1.0), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_domain_set(h, NULL, 4.0), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  OK(octmesh_domain_set(h, o, 4.0), h);
+  OK(octmesh_octree_refine_surface(h, 3), h);
   double o2[3], side = 0;
-  OK(octmesh_get_domain(h, o2, &side), h);
+  OK(octmesh_domain_get(h, o2, &side), h);
   CHECK(side == 4.0 && o2[0] == -2.0, h);
   octmesh_destroy(h);
   printf("MISUSE OK rank %d\n", rank);

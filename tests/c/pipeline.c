@@ -38,19 +38,22 @@ int main(int argc, char **argv) {
   OK(octmesh_create(MPI_COMM_WORLD, NULL, &h), NULL);
   CHECK(h != NULL, NULL);
   OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_refine_surface(h, 5), h);
-  int64_t nl = -1, ng = -1;
-  OK(octmesh_get_num_leaves(h, &nl, &ng), h);
+  OK(octmesh_octree_refine_surface(h, 5), h);
+  octmesh_locidx_t nl = -1;
+  octmesh_gloidx_t ng = -1;
+  OK(octmesh_octree_get_num_leaves(h, &nl, &ng), h);
   CHECK(nl >= 0 && ng > 0, h);
-  OK(octmesh_partition(h, NULL, NULL), h);
-  OK(octmesh_balance(h, OCTMESH_CONNECT_CORNER), h);
-  OK(octmesh_partition(h, NULL, NULL), h);
-  OK(octmesh_get_num_leaves(h, &nl, &ng), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_get_num_leaves(h, &nl, &ng), h);
   octmesh_octant_t *leaves = malloc(sizeof(octmesh_octant_t) * (size_t)(nl + 1));
-  OK(octmesh_get_leaves(h, leaves), h);
+  OK(octmesh_octree_get_leaves(h, leaves, nl + 1), h);
+  /* A buffer too small is refused, naming the size needed. */
+  if (nl > 0) CHECK_STATUS(octmesh_octree_get_leaves(h, leaves, nl - 1), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   for (int64_t i = 0; i < nl; i++) CHECK(leaves[i].level >= 0 && leaves[i].level <= 5, h);
   free(leaves);
-  OK(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
 
   octmesh_mesh_counts_t c;
   OK(octmesh_mesh_get_counts(h, &c), h);
@@ -153,40 +156,40 @@ int main(int argc, char **argv) {
   OK(octmesh_mesh_get_inside_rule(h, &used), h);
   CHECK(used == OCTMESH_INSIDE_RULE_PARITY, h);
   int64_t parity_elements = c.global_elements;
-  OK(octmesh_set_inside_rule(h, OCTMESH_INSIDE_RULE_WINDING), h);
+  OK(octmesh_mesh_set_inside_rule(h, OCTMESH_INSIDE_RULE_WINDING), h);
   OK(octmesh_mesh_get_inside_rule(h, &used), h);
-  CHECK(used == OCTMESH_INSIDE_RULE_PARITY, h); /* until the next octmesh_mesh */
-  OK(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
+  CHECK(used == OCTMESH_INSIDE_RULE_PARITY, h); /* until the next octmesh_mesh_build */
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER), h);
   OK(octmesh_mesh_get_inside_rule(h, &used), h);
   CHECK(used == OCTMESH_INSIDE_RULE_WINDING, h);
   OK(octmesh_mesh_get_counts(h, &c), h);
   CHECK(c.global_elements == parity_elements, h);
   double origin[3], side;
-  OK(octmesh_get_domain(h, origin, &side), h);
+  OK(octmesh_domain_get(h, origin, &side), h);
   CHECK(side > 2.0 && origin[0] < -1.0, h);
   octmesh_destroy(h);
 
   /* Callback refinement on the unit cube, counted through ctx. */
   counter_t ctr = {0, -1};
   OK(octmesh_create(MPI_COMM_WORLD, NULL, &h), NULL);
-  OK(octmesh_refine_callback(h, 4, refine_corner, &ctr), h);
+  OK(octmesh_octree_refine_callback(h, 4, refine_corner, &ctr), h);
   CHECK(ctr.calls > 0 && ctr.max_level_seen <= 3, h);
-  OK(octmesh_get_num_leaves(h, &nl, &ng), h);
+  OK(octmesh_octree_get_num_leaves(h, &nl, &ng), h);
   CHECK(ng == 1 + 7 * 4, h);
-  OK(octmesh_refine_callback(h, 6, refine_corner, &ctr), h); /* refines the tree */
-  OK(octmesh_get_num_leaves(h, &nl, &ng), h);
+  OK(octmesh_octree_refine_callback(h, 6, refine_corner, &ctr), h); /* refines the tree */
+  OK(octmesh_octree_get_num_leaves(h, &nl, &ng), h);
   CHECK(ng == 1 + 7 * 6, h);
   counter_t wctr = {0, 0};
-  OK(octmesh_partition(h, weight_level, &wctr), h);
+  OK(octmesh_octree_partition(h, weight_level, &wctr), h);
   CHECK(wctr.calls == nl, h); /* once per local leaf before the move */
-  OK(octmesh_balance(h, OCTMESH_CONNECT_EDGE), h);
-  CHECK_STATUS(octmesh_mesh(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER),
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_EDGE), h);
+  CHECK_STATUS(octmesh_mesh_build(h, OCTMESH_KEEP_INSIDE, OCTMESH_CUT_RULE_CENTER),
                OCTMESH_STATUS_INVALID_ARGUMENT, h); /* no surface */
-  OK(octmesh_mesh(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), h);
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER), h);
   OK(octmesh_mesh_get_inside_rule(h, &used), h);
   CHECK(used == OCTMESH_INSIDE_RULE_AUTO, h); /* nothing classified */
   OK(octmesh_mesh_get_counts(h, &c), h);
-  OK(octmesh_get_num_leaves(h, &nl, &ng), h);
+  OK(octmesh_octree_get_num_leaves(h, &nl, &ng), h);
   CHECK(c.global_elements == ng, h);
   OK(octmesh_mesh_get_coordinates(h, &xyz), h);
   for (int64_t i = 0; i < 3 * c.local_nodes; i++) CHECK(xyz[i] >= 0.0 && xyz[i] <= 1.0, h);

@@ -1,0 +1,102 @@
+//! Surfaces: from an STL file, from the caller's triangles, or built in.
+//!
+//! A new surface replaces the old one; the octree and mesh are kept (a
+//! later mesh classifies against the new surface).
+
+use std::ffi::{c_char, CStr};
+
+use super::handle::octmesh_t;
+use super::{non_null, octmesh_gloidx_t, octmesh_status_t, path_arg, slice_arg, with_mut};
+use crate::error::{Error, Result};
+use crate::geometry::{shapes, stl, Surface, Triangle};
+
+/// Installs a surface read (or not) on every rank.
+fn install(h: &mut octmesh_t, name: &str, loaded: Result<Surface>) -> Result<()> {
+    h.session.set_surface(name, loaded)
+}
+
+/// Reads the surface from an STL file (ASCII or binary); every rank reads
+/// the file. Collective: a failure on any rank (a file missing on one node)
+/// fails on every rank.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file's path, NUL-terminated
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_surface_from_stl(
+    h: *mut octmesh_t,
+    path: *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = path_arg(path, "path");
+        let name = path
+            .as_ref()
+            .map_or(String::new(), |p| p.display().to_string());
+        let loaded = path.and_then(|p| stl::read_stl_file(&p));
+        install(h, &name, loaded)
+    })
+}
+
+/// Sets the surface from the caller's triangles. The data is copied.
+/// Collective; each rank passes the whole surface.
+///
+/// \param[in] h     the handle
+/// \param[in] ntri  number of triangles, > 0
+/// \param[in] xyz   9 * ntri doubles: x, y, z of the three vertices of
+///                  each triangle, user units
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_surface_from_triangles(
+    h: *mut octmesh_t,
+    ntri: octmesh_gloidx_t,
+    xyz: *const f64,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let loaded = non_null(xyz, "xyz").and_then(|_| {
+            if ntri <= 0 || ntri as u64 > (isize::MAX as u64) / 72 {
+                return Err(Error::invalid(format!("ntri must be positive, got {ntri}")));
+            }
+            // SAFETY: 9 * ntri values (requirement of the C API).
+            let v = unsafe { slice_arg(xyz, 9 * ntri as usize, "xyz") }?;
+            let tris = v
+                .chunks_exact(9)
+                .map(|t| Triangle::new([t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]))
+                .collect();
+            Surface::new(tris)
+        });
+        install(h, "triangles", loaded)
+    })
+}
+
+/// Sets a built-in surface: `"sphere"` (radius 1 at the origin, 20,480
+/// triangles) or `"torus"` (radii 1 and 0.35, 9,216 triangles).
+/// Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] name  `"sphere"` or `"torus"`, NUL-terminated
+#[no_mangle]
+pub unsafe extern "C" fn octmesh_surface_builtin(
+    h: *mut octmesh_t,
+    name: *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let loaded = non_null(name, "name").and_then(|_| {
+            // SAFETY: non-NULL, NUL-terminated (requirement of the C API).
+            match unsafe { CStr::from_ptr(name) }.to_bytes() {
+                b"sphere" => Ok(shapes::default_sphere()),
+                b"torus" => Ok(shapes::default_torus()),
+                other => Err(Error::invalid(format!(
+                    "unknown built-in surface '{}' (expected sphere or torus)",
+                    String::from_utf8_lossy(other)
+                ))),
+            }
+        });
+        let n = if name.is_null() {
+            String::new()
+        } else {
+            // SAFETY: as above.
+            unsafe { CStr::from_ptr(name) }
+                .to_string_lossy()
+                .into_owned()
+        };
+        install(h, &n, loaded)
+    })
+}
