@@ -1,0 +1,362 @@
+//! Stages: the octree (surface, curvature and region refinement, partition,
+//! balance) and the memory budget they keep to.
+
+use std::path::Path;
+
+use crate::budget::{
+    available_on_node, BudgetSource, MemoryBudget, BASE_BYTES, BYTES_PER_OCTANT_MESH,
+    BYTES_PER_OCTANT_OCTREE, BYTES_PER_TRIANGLE,
+};
+use crate::comm::agree;
+use crate::config::Command;
+use crate::curvature::CurvatureRule;
+use crate::domain::Domain;
+use crate::error::{Error, ErrorKind, Result};
+use crate::io::leaves::write_leaves;
+use crate::octant::{Connectivity, Octant};
+use crate::octree::LinearOctree;
+use crate::refine::{
+    check_estimate, check_level, construct_for_callback, construct_top_for_surface,
+    estimate_leaves, SurfaceIndex,
+};
+use crate::regions::RegionRules;
+
+use super::*;
+
+impl Session {
+    /// Plans the memory of the following stages for `command`: an octree
+    /// alone, or an octree and its mesh (the default).
+    pub fn plan(&mut self, command: Command) {
+        self.plan = command;
+    }
+
+    /// The memory budget per rank, the same on every rank: the configured
+    /// one, else the smallest over the nodes of their available memory
+    /// shared among their ranks; `None` when it cannot be known.
+    /// Collective.
+    pub fn memory_budget(&mut self) -> Option<MemoryBudget> {
+        let comm = &*self.comm;
+        let (per_rank, source) = match self.config.octree.memory_budget {
+            Some(b) => (b.0, BudgetSource::Given),
+            None => {
+                let on_node = comm.ranks_on_node().max(1);
+                // Minima as maxima of the complements; an unknown figure is
+                // u64::MAX, whose complement never wins.
+                let (per, node) = match available_on_node() {
+                    Some(n) => (n / on_node as u64, n),
+                    None => (u64::MAX, u64::MAX),
+                };
+                let mut v = [!per, !node, on_node as u64];
+                comm.max_u64(&mut v);
+                if !v[0] == u64::MAX {
+                    return None;
+                }
+                let source = BudgetSource::Available {
+                    node: !v[1],
+                    ranks_on_node: v[2] as usize,
+                };
+                (!v[0], source)
+            }
+        };
+        let triangles = self.surface.as_ref().map_or(0, |s| s.surface.len()) as u64;
+        let b = MemoryBudget {
+            per_rank,
+            source,
+            ranks: comm.size(),
+            base: BASE_BYTES + triangles * BYTES_PER_TRIANGLE,
+            bytes_per_octant: match self.plan {
+                Command::Octree => BYTES_PER_OCTANT_OCTREE,
+                Command::Mesh => BYTES_PER_OCTANT_MESH,
+            },
+        };
+        self.facts.budget = Some(b);
+        Some(b)
+    }
+
+    /// The octant limit of refinement and balance: the configured one, or
+    /// the budget's when smaller.
+    pub(super) fn octant_limit(&self, budget: Option<MemoryBudget>) -> u64 {
+        let own = self.config.octree.limit();
+        budget.map_or(own, |b| own.min(b.octant_limit()))
+    }
+
+    /// Builds a new octree whose leaves touching the surface are at the
+    /// configured level (`octree.level`) and whose other leaves are as
+    /// coarse as possible, in the cube of [`Session::domain`]. Fails with
+    /// [`ErrorKind::Limit`] before refining when the estimate is above
+    /// twice `octree.max_octants`, and as soon as the count exceeds it.
+    /// Phases `construct` and `refine`. Replaces the octree, classes and
+    /// mesh.
+    pub fn refine_surface(&mut self, level: u8) -> Result<()> {
+        let checked = self.surface_or_state().and_then(|_| {
+            check_level(level)?;
+            self.next_domain()
+        });
+        let domain = agree(&*self.comm, checked)?;
+        let comm = self.comm.clone();
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        self.facts.estimate = Some(estimate_leaves(self.index_for(domain)?, level));
+        let own_limit = self.config.octree.limit();
+        check_estimate(&comm, self.index_for(domain)?, level, own_limit)?;
+        if let Some(b) = budget {
+            let index = self.index_for(domain)?;
+            agree(&*comm, check_budget(&b, index, level))?;
+        }
+        let index = match &self.surface {
+            Some(s) => &s.index,
+            None => return Err(Error::new(ErrorKind::Internal, "the surface vanished")),
+        };
+        let expected = self.facts.estimate.map(|e| e.refined);
+        let shown = self.progress("construct", None);
+        let top = self.timer.time(&*comm, "construct", || {
+            construct_top_for_surface(comm.clone(), index, level)
+        })?;
+        drop(shown);
+        report(
+            &self.timer,
+            &mut *self.observer,
+            Some(top.tree().global_len()),
+        );
+        let shown = self.progress("refine", expected);
+        let tree = self.timer.time(&*comm, "refine", || top.refine(limit));
+        drop(shown);
+        let tree = over_budget(tree, budget, limit, "refinement")?;
+        report(&self.timer, &mut *self.observer, Some(tree.global_len()));
+        self.facts.octants_refined = tree.global_len();
+        self.facts.octants_balanced = tree.global_len();
+        self.set_tree(tree, domain);
+        Ok(())
+    }
+
+    /// Refines by a predicate: a leaf is split while `split(leaf)` is true
+    /// and its level is below `max_level`. Without an octree, builds one
+    /// from the root in the cube of [`Session::domain`]; otherwise refines
+    /// the existing leaves (which may undo their balance). `split` must
+    /// answer the same on every rank for the same octant. Phase `refine`.
+    pub fn refine_callback(&mut self, max_level: u8, split: impl Fn(Octant) -> bool) -> Result<()> {
+        let checked = check_level(max_level)
+            .and_then(|_| self.domain())
+            .map(|d| (d, self.tree.is_some()));
+        let (domain, existing) = agree(&*self.comm, checked)?;
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let comm = self.comm.clone();
+        let tree = &mut self.tree;
+        let refined = self.timer.time(&*comm, "refine", || -> Result<()> {
+            match tree {
+                Some((tree, _)) if existing => tree.refine(max_level, &split, limit),
+                _ => {
+                    let mut t = construct_for_callback(comm.clone(), max_level, &split)?;
+                    t.refine(max_level, &split, limit)?;
+                    *tree = Some((t, domain));
+                    Ok(())
+                }
+            }
+        });
+        over_budget(refined, budget, limit, "refinement")?;
+        let count = self.tree().map(|t| t.global_len());
+        self.report_phase(count);
+        let n = self.tree().map_or(0, |t| t.global_len());
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
+        self.classes = Classes::default();
+        self.mesh = None;
+        Ok(())
+    }
+
+    /// Refines the leaves touching the surface further where it curves:
+    /// up to `octree.max_level`, while the normals of the triangles
+    /// touching a leaf differ by more than `octree.feature_angle` (see
+    /// [`crate::curvature`]). Phase `curvature`; nothing happens without a
+    /// maximum level above the surface level.
+    pub fn refine_curvature(&mut self) -> Result<()> {
+        let (level, max) = (self.config.octree.level, self.config.octree.max_level);
+        let Some(max) = max.filter(|&m| level.is_some_and(|l| m > l)) else {
+            return Ok(());
+        };
+        let angle = self
+            .config
+            .octree
+            .feature_angle
+            .unwrap_or(DEFAULT_FEATURE_ANGLE);
+        let domain = agree(&*self.comm, self.tree_or_state().map(|t| t.1))?;
+        self.index_for(domain)?;
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let comm = self.comm.clone();
+        let shown = self.progress("curvature", None);
+        let (tree, surface) = (self.tree.as_mut().map(|t| &mut t.0), &self.surface);
+        let refined = self.timer.time(&*comm, "curvature", || -> Result<()> {
+            let (Some(tree), Some(s)) = (tree, surface) else {
+                return Ok(());
+            };
+            let rule = CurvatureRule::new(&s.index, max, angle);
+            let mut buf = Vec::new();
+            tree.refine(rule.max_level(), |o| rule.splits(o, &mut buf), limit)
+        });
+        drop(shown);
+        over_budget(refined, budget, limit, "curvature refinement")?;
+        let n = self.tree().map_or(0, |t| t.global_len());
+        self.report_phase(Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
+        self.classes = Classes::default();
+        self.mesh = None;
+        Ok(())
+    }
+
+    /// Refines the octree by the configured minimum level and regions
+    /// (`octree.min_level`, `regions`): a leaf is split while a rule asks
+    /// for more (see [`crate::regions`]). Within the octant limit and the
+    /// memory budget. Phase `regions`; nothing happens without rules.
+    pub fn refine_regions(&mut self) -> Result<()> {
+        let bands = self.config.octree.distance.clone();
+        let checked = self.tree_or_state().map(|t| t.1).and_then(|d| {
+            if !bands.is_empty() {
+                self.surface_or_state()?;
+            }
+            Ok(d)
+        });
+        let domain = agree(&*self.comm, checked)?;
+        if !bands.is_empty() {
+            self.index_for(domain)?;
+        }
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let mut rules =
+            RegionRules::new(&domain, self.config.octree.min_level, &self.config.regions);
+        if let (Some(s), false) = (&self.surface, bands.is_empty()) {
+            rules = rules.with_bands(&domain, &bands, &s.index);
+        }
+        if rules.is_empty() {
+            return Ok(());
+        }
+        let comm = self.comm.clone();
+        let shown = self.progress("regions", None);
+        let tree = self.tree.as_mut().map(|t| &mut t.0);
+        let refined = self.timer.time(&*comm, "regions", || -> Result<()> {
+            let Some(tree) = tree else { return Ok(()) };
+            let mut buf = Vec::new();
+            tree.refine(rules.max_level(), |o| rules.splits(o, &mut buf), limit)
+        });
+        drop(shown);
+        over_budget(refined, budget, limit, "region refinement")?;
+        let n = self.tree().map_or(0, |t| t.global_len());
+        self.report_phase(Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
+        self.classes = Classes::default();
+        self.mesh = None;
+        Ok(())
+    }
+
+    pub(super) fn set_tree(&mut self, tree: LinearOctree, domain: Domain) {
+        self.tree = Some((tree, domain));
+        self.classes = Classes::default();
+        self.mesh = None;
+    }
+
+    /// Repartitions the leaves in Morton order, equal counts per rank.
+    /// Phase `partition`.
+    pub fn partition(&mut self) -> Result<()> {
+        self.partition_weighted(None::<fn(Octant) -> u64>)
+    }
+
+    /// Repartitions the leaves in Morton order: equal counts without
+    /// `weight`, else about equal sums of `weight(leaf)`. Leaf classes
+    /// are dropped (they follow the old partition). Phase `partition`.
+    pub fn partition_weighted(&mut self, weight: Option<impl Fn(Octant) -> u64>) -> Result<()> {
+        agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
+        let comm = self.comm.clone();
+        let tree = self.tree.as_mut().map(|t| &mut t.0);
+        self.timer.time(&*comm, "partition", || -> Result<()> {
+            let Some(tree) = tree else { return Ok(()) };
+            match &weight {
+                None => tree.partition().map(|_| ()),
+                Some(w) => tree.partition_weighted(w).map(|_| ()),
+            }
+        })?;
+        let count = self.tree().map(|t| t.global_len());
+        self.report_phase(count);
+        self.classes = Classes::default();
+        self.mesh = None;
+        Ok(())
+    }
+
+    /// 2:1-balances the octree for `conn` contacts, within the octant
+    /// limit (on failure the octree is as it was). Leaves stay on their
+    /// ranks. Phase `balance`.
+    pub fn balance(&mut self, conn: Connectivity) -> Result<()> {
+        agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
+        // Balance keeps a copy of the leaves to restore when it stops at a
+        // limit; the budget applies only when the octree is within a
+        // factor of 8 of it, as surface octrees grow by about 1.3.
+        let n = self.tree().map_or(0, |t| t.global_len());
+        let budget = self
+            .memory_budget()
+            .filter(|b| n.saturating_mul(8) > b.octant_limit());
+        let limit = self.octant_limit(budget);
+        let comm = self.comm.clone();
+        let expected = self.facts.estimate.map(|e| e.balanced);
+        let shown = self.progress("balance", expected);
+        let tree = self.tree.as_mut().map(|t| &mut t.0);
+        let balanced = self.timer.time(&*comm, "balance", || -> Result<()> {
+            let Some(tree) = tree else { return Ok(()) };
+            tree.balance_with_limit(conn, limit).map(|_| ())
+        });
+        drop(shown);
+        over_budget(balanced, budget, limit, "balance")?;
+        let count = self.tree().map(|t| t.global_len());
+        self.report_phase(count);
+        self.facts.octants_balanced = self.tree().map_or(0, |t| t.global_len());
+        self.classes = Classes::default();
+        self.mesh = None;
+        Ok(())
+    }
+
+    /// Writes the leaves (`title` goes in the file's header line). Collective.
+    pub fn write_leaves(&self, path: &Path, title: &str) -> Result<()> {
+        let (tree, _) = agree(&*self.comm, self.tree_or_state())?;
+        write_leaves(tree, path, title)
+    }
+}
+
+/// Fails with the budget's error when the octree estimated at `level` does
+/// not fit, naming the largest level that does.
+pub(super) fn check_budget(b: &MemoryBudget, index: &SurfaceIndex, level: u8) -> Result<()> {
+    let e = estimate_leaves(index, level);
+    if b.need(e.balanced) <= b.per_rank {
+        return Ok(());
+    }
+    let fits = (0..level)
+        .rev()
+        .map(|l| estimate_leaves(index, l))
+        .find(|f| b.need(f.balanced) <= b.per_rank);
+    let hint = match fits {
+        Some(f) => format!("level {} would fit (about {} octants)", f.level, f.balanced),
+        None => "no level fits".to_string(),
+    };
+    let what = format!(
+        "about {} octants are estimated at level {level}, so nothing was refined",
+        e.balanced
+    );
+    Err(b.error(e.balanced, &what, &hint))
+}
+
+/// A stage's result, with an octant-limit failure that the memory budget
+/// (not the configured limit) set turned into the budget's error.
+pub(super) fn over_budget<T>(
+    r: Result<T>,
+    budget: Option<MemoryBudget>,
+    limit: u64,
+    during: &str,
+) -> Result<T> {
+    match (r, budget) {
+        (Err(e), Some(b)) if e.kind() == ErrorKind::Limit && limit == b.octant_limit() => {
+            let what = format!("the octree grew past the {limit} octants that fit during {during}");
+            Err(b.error(limit, &what, "a lower level or more ranks would fit"))
+        }
+        (r, _) => r,
+    }
+}

@@ -1,0 +1,125 @@
+//! Stage: the surface (reading, cleaning, indexing for the domain).
+
+use std::cell::OnceCell;
+
+use crate::classify::InsideRule;
+use crate::comm::agree;
+use crate::domain::Domain;
+use crate::error::{Error, ErrorKind, Result};
+use crate::geometry::diagnostics::{clean, diagnose};
+use crate::geometry::{load_surface, Surface};
+use crate::refine::{estimate_leaves, SurfaceIndex};
+use crate::report::peak_rss_bytes;
+
+use super::*;
+
+impl Session {
+    /// Reads the configured surface (`surface.file`: an STL file, `sphere`
+    /// or `torus`), cleans it as configured, and indexes it for the cube
+    /// the next octree will use. Phase `read`. Collective: a failure on any
+    /// rank (a file missing on one node) fails on every rank.
+    pub fn load_surface(&mut self) -> Result<()> {
+        let file = self.config.surface.file.clone();
+        self.install_surface(&file, || load_surface(&file))
+    }
+
+    /// Installs `surface` (read by the caller on every rank) under `name`,
+    /// as [`Session::load_surface`] does with a file.
+    pub fn set_surface(&mut self, name: &str, surface: Result<Surface>) -> Result<()> {
+        self.install_surface(name, || surface)
+    }
+
+    pub(super) fn install_surface(
+        &mut self,
+        name: &str,
+        get: impl FnOnce() -> Result<Surface>,
+    ) -> Result<()> {
+        let (drop_degenerate, drop_duplicates) = (
+            self.config.surface.drop_degenerate,
+            self.config.surface.drop_duplicates,
+        );
+        let want_report =
+            self.config.output.stats.is_some() || self.inside == Some(InsideRule::Auto);
+        let comm = self.comm.clone();
+        let (tree_domain, domain_config) = (self.tree.as_ref().map(|t| t.1), &self.config.domain);
+        let loaded = self.timer.time(&*comm, "read", || -> Result<SurfaceState> {
+            let mut surface = get()?;
+            let mut dropped = None;
+            if drop_degenerate || drop_duplicates {
+                let (cleaned, n) = clean(&surface, drop_degenerate, drop_duplicates)?;
+                surface = cleaned;
+                dropped = Some(n);
+            }
+            let bbox = surface.bbox();
+            let domain = match tree_domain {
+                Some(d) => d,
+                None => domain_config.resolve(bbox.min, bbox.max)?,
+            };
+            let report = OnceCell::new();
+            if want_report {
+                let _ = report.set(diagnose(&surface));
+            }
+            Ok(SurfaceState {
+                name: name.to_string(),
+                index: SurfaceIndex::new(&surface, &domain),
+                index_domain: domain,
+                volume: surface.signed_volume().abs(),
+                bbox,
+                surface,
+                dropped,
+                report,
+            })
+        });
+        let state = agree(&*self.comm, loaded)?;
+        self.facts.rss_read = peak_rss_bytes();
+        let level = self.config.octree.level;
+        let estimate = level.map(|l| estimate_leaves(&state.index, l));
+        let inside = self.inside.map(|r| match r {
+            InsideRule::Auto => {
+                let (rule, why) = InsideRule::auto_choice(state.report());
+                (rule, format!(" (auto: {why})"))
+            }
+            r => (r, String::new()),
+        });
+        self.observer.event(&Event::SurfaceLoaded {
+            name: &state.name,
+            triangles: state.surface.len(),
+            dropped: state.dropped,
+            domain: state.index_domain,
+            estimate,
+            inside: inside.as_ref().map(|(r, why)| (*r, why.as_str())),
+        });
+        self.facts.triangles = state.surface.len();
+        self.facts.dropped = state.dropped;
+        self.facts.estimate = estimate;
+        self.facts.report = state.report.get().cloned();
+        // The phase's row comes after the facts it found.
+        self.report_phase(None);
+        self.surface = Some(state);
+        self.released = None;
+        self.classes = Classes::default();
+        Ok(())
+    }
+
+    /// Frees the surface (its triangles and index) once no stage needs it:
+    /// meshing does not, and its memory then goes before the mesh's.
+    pub fn release_surface(&mut self) {
+        if let Some(s) = self.surface.take() {
+            self.released = Some((s.bbox, s.volume, s.name));
+        }
+    }
+
+    /// The surface index mapped to the cube `domain` (re-mapped if the
+    /// surface was indexed for another cube).
+    pub(super) fn index_for(&mut self, domain: Domain) -> Result<&SurfaceIndex> {
+        let s = self
+            .surface
+            .as_mut()
+            .ok_or_else(|| Error::new(ErrorKind::State, "there is no surface: load one first"))?;
+        if s.index_domain != domain {
+            s.index = SurfaceIndex::new(&s.surface, &domain);
+            s.index_domain = domain;
+        }
+        Ok(&s.index)
+    }
+}
