@@ -42,6 +42,9 @@
 
 #![allow(non_camel_case_types)]
 #![allow(clippy::missing_safety_doc)]
+// The docs carry the C header's doxygen markup (`\param[in] h`), which
+// rustdoc would read as links.
+#![allow(rustdoc::broken_intra_doc_links)]
 
 pub mod handle;
 pub mod mesh;
