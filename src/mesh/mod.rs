@@ -109,7 +109,7 @@ impl std::ops::Deref for Elements {
 }
 
 /// Global sizes of a mesh, the same on every rank.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct MeshCounts {
     /// Elements over all ranks.
     pub elements: u64,

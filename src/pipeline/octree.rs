@@ -154,15 +154,7 @@ impl Session {
                 }
             }
         });
-        over_budget(refined, budget, limit, "refinement")?;
-        let count = self.tree().map(|t| t.global_len());
-        self.report_phase(count);
-        let n = self.tree().map_or(0, |t| t.global_len());
-        self.facts.octants_refined = n;
-        self.facts.octants_balanced = n;
-        self.classes = Classes::default();
-        self.mesh = None;
-        Ok(())
+        self.refined(refined, budget, limit, "refinement")
     }
 
     /// Refines the leaves touching the surface further where it curves:
@@ -196,14 +188,7 @@ impl Session {
             tree.refine(rule.max_level(), |o| rule.splits(o, &mut buf), limit)
         });
         drop(shown);
-        over_budget(refined, budget, limit, "curvature refinement")?;
-        let n = self.tree().map_or(0, |t| t.global_len());
-        self.report_phase(Some(n));
-        self.facts.octants_refined = n;
-        self.facts.octants_balanced = n;
-        self.classes = Classes::default();
-        self.mesh = None;
-        Ok(())
+        self.refined(refined, budget, limit, "curvature refinement")
     }
 
     /// Refines the octree by the configured minimum level and regions
@@ -241,7 +226,20 @@ impl Session {
             tree.refine(rules.max_level(), |o| rules.splits(o, &mut buf), limit)
         });
         drop(shown);
-        over_budget(refined, budget, limit, "region refinement")?;
+        self.refined(refined, budget, limit, "region refinement")
+    }
+
+    /// Ends a refinement stage: its error (in the budget's words when the
+    /// budget stopped it), its row, the new counts, the stale classes and
+    /// mesh dropped.
+    fn refined(
+        &mut self,
+        r: Result<()>,
+        budget: Option<MemoryBudget>,
+        limit: u64,
+        during: &str,
+    ) -> Result<()> {
+        over_budget(r, budget, limit, during)?;
         let n = self.tree().map_or(0, |t| t.global_len());
         self.report_phase(Some(n));
         self.facts.octants_refined = n;

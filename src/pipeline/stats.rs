@@ -13,6 +13,7 @@ use crate::classify::{CutRule, InsideRule, Keep};
 use crate::comm::Traffic;
 use crate::config::{Balance, Command};
 use crate::geometry::diagnostics::SurfaceReport;
+use crate::mesh::MeshCounts;
 use crate::report::peak_rss_bytes;
 
 /// Values per phase, serialised as a JSON object in the order the phases
@@ -73,18 +74,9 @@ pub struct LeakStats {
 /// The mesh's counts (global), flattened into the statistics.
 #[derive(Clone, Debug, Serialize)]
 pub struct MeshStats {
-    /// Elements.
-    pub elements: u64,
-    /// Independent nodes, each counted once.
-    pub independent_nodes: u64,
-    /// Face-hanging nodes.
-    pub face_hanging_nodes: u64,
-    /// Edge-hanging nodes.
-    pub edge_hanging_nodes: u64,
-    /// Elements with a hanging corner.
-    pub elements_with_hanging: u64,
-    /// Ghost leaves.
-    pub ghosts: u64,
+    /// Elements, nodes of each kind, ghosts (see [`MeshCounts`]).
+    #[serde(flatten)]
+    pub counts: MeshCounts,
     /// Nodes over all ranks' pieces, shared nodes once per rank (what a VTU
     /// holds).
     pub points_written: u64,
@@ -265,12 +257,7 @@ impl Session {
             let mut v = [m.local_volume_cells(), m.num_nodes() as u64];
             comm.sum_u64(&mut v);
             MeshStats {
-                elements: c.elements,
-                independent_nodes: c.independent_nodes,
-                face_hanging_nodes: c.face_hanging_nodes,
-                edge_hanging_nodes: c.edge_hanging_nodes,
-                elements_with_hanging: c.elements_with_hanging,
-                ghosts: c.ghosts,
+                counts: *c,
                 points_written: v[1],
                 kept_volume: m.cells_to_volume(v[0]),
                 kept_cells: v[0],
