@@ -10,6 +10,7 @@ pub mod bvh;
 pub mod diagnostics;
 pub mod distance;
 pub mod intersect;
+pub mod predicates;
 pub mod shapes;
 pub mod stl;
 pub mod winding;

@@ -1,0 +1,303 @@
+//! Child masks: what one triangle does to the eight children of an octant
+//! (may touch, certainly touches, may separate the centres), computed for
+//! all eight at once.
+
+use super::walk::*;
+use crate::geometry::predicates::*;
+use crate::geometry::Aabb;
+
+/// Child masks: children whose bit `k` is set (`POS[k]`) or clear (`NEG[k]`).
+pub(crate) const POS: [u8; 3] = [0b1010_1010, 0b1100_1100, 0b1111_0000];
+pub(crate) const NEG: [u8; 3] = [0b0101_0101, 0b0011_0011, 0b0000_1111];
+/// Direction of child `i`'s centre from its parent's centre.
+pub(crate) const SX: [f64; 8] = [-1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0];
+pub(crate) const SY: [f64; 8] = [-1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0];
+pub(crate) const SZ: [f64; 8] = [-1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0];
+
+/// What one triangle does to the eight children of an octant (bit `i` for
+/// child `i`).
+#[derive(Clone, Copy, Default)]
+pub(crate) struct ChildMasks {
+    /// The triangle may touch the child's grown box (a superset of those it
+    /// does): it stays a candidate below.
+    pub(crate) near: u8,
+    /// [`triangle_box_overlap`] certainly says the closed box touches.
+    pub(crate) touch: u8,
+    /// Too close to call in floating point: ask [`triangle_box_overlap`].
+    pub(crate) unsure: u8,
+    /// The child's centre may lie on the other side of the triangle's
+    /// plane than the parent's centre.
+    pub(crate) plane: u8,
+    /// The triangle's grown box meets the segment from the parent's centre
+    /// to the child's centre: only then can the segment cross it (most
+    /// candidates of a large octant are far from its centre).
+    pub(crate) seg: u8,
+}
+
+impl Classifier<'_> {
+    /// Classifies triangle `t` against the children in `want` of the octant
+    /// with centre `c` whose children have side `side`; the closed-box
+    /// verdicts (`touch`, `unsure`) are computed for the children in `leafy`
+    /// only.
+    ///
+    /// The children's boxes are tested on the 13 axes of
+    /// [`triangle_box_overlap`] at once. The three box normals compare raw
+    /// coordinates, as `triangle_box_overlap` does, so they are exact. On the
+    /// ten others both computations are within `eta` of the exact projections,
+    /// so a gap beyond `eta` is a verdict `triangle_box_overlap` shares; the
+    /// rest is left to it (exact contacts of lattice-aligned surfaces, mostly).
+    /// `near` uses the box normals and the triangle normal only: a superset
+    /// is all it needs to be.
+    #[inline]
+    pub(crate) fn child_masks(
+        &self,
+        t: u32,
+        c: [f64; 3],
+        side: f64,
+        want: u8,
+        leafy: u8,
+    ) -> ChildMasks {
+        let g = self.grow;
+        let mut exact = want & leafy;
+        let mut near = want;
+        let mut seg = 0xffu8;
+        let quarter = 0.5 * side;
+        let Aabb { min: lo3, max: hi3 } = self.bounds[t as usize];
+        for k in 0..3 {
+            let (lo, hi) = (lo3[k], hi3[k]);
+            // The children on the positive / negative side along `k` whose
+            // slab `[ck, ck + extent]` / `[ck - extent, ck]`, grown by `m`,
+            // meets the triangle's extent.
+            // Branch-free: these verdicts are close to random.
+            let bits = |b: bool, m: u8| (b as u8).wrapping_neg() & m;
+            let meets = |extent: f64, m: f64| {
+                bits((lo <= c[k] + extent + m) & (hi >= c[k] - m), POS[k])
+                    | bits((lo <= c[k] + m) & (hi >= c[k] - extent - m), NEG[k])
+            };
+            exact &= meets(side, 0.0);
+            near &= meets(side, g);
+            seg &= meets(quarter, g);
+        }
+        if near == 0 {
+            return ChildMasks::default();
+        }
+        if near & seg != 0 {
+            seg &= segments_meeting_box(c, quarter, lo3, hi3, g);
+        }
+        if exact == 0 && near & seg == 0 {
+            // No box verdict wanted and no segment to cross: the boxes alone
+            // give `near` (a superset is enough), without the projections.
+            return ChildMasks {
+                near,
+                ..ChildMasks::default()
+            };
+        }
+        let v = &self.tris[t as usize].v;
+        let r = v.map(|p| [p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
+        let rho = r.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let base = rho + side;
+        let u = f64::EPSILON;
+        let half = 0.5 * side;
+        let mut sep = 0u8;
+        let mut unsure = 0u8;
+
+        // Triangle normal, for every child: the closed boxes, the grown
+        // ones, and the side of the child's centre. A normal that is
+        // exactly zero here may not be zero there: leave every child to the
+        // exact test then.
+        //
+        // Error bounds: both computations take differences of coordinates
+        // up to `big`, products of a few of them, and projections with lever
+        // arms up to `base`; a few dozen ulps of those magnitudes bound the
+        // rounding of either, and 128 leaves room to spare.
+        let n = self.normals[t as usize];
+        let mut plane = 0xff;
+        if n == [0.0; 3] {
+            unsure = 0xff;
+        } else {
+            let eta = 128.0 * u * rho * (rho + self.big) * base;
+            let tiny = n
+                .iter()
+                .all(|x| x.abs() <= 256.0 * u * rho * (rho + self.big));
+            let p = r.map(|v| n[0] * v[0] + n[1] * v[1] + n[2] * v[2]);
+            let (t0, t1) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+            let rad = half * l1;
+            let h = [half * n[0], half * n[1], half * n[2]];
+            // The float plane is within `eta_p` of the fixed-point one.
+            let eta_p = if self.shift >= 0 {
+                64.0 * self.unit * base * base + eta
+            } else {
+                f64::INFINITY
+            };
+            let (s0, s1) = (t0 - eta_p, t1 + eta_p);
+            let (mut s, mut un, mut far, mut across) = (0u8, 0u8, 0u8, 0u8);
+            for i in 0..8 {
+                let x = SX[i] * h[0] + SY[i] * h[1] + SZ[i] * h[2];
+                let gap = (t0 - x - rad).max(x - rad - t1);
+                s |= ((gap > eta) as u8) << i;
+                un |= ((gap >= -eta) as u8) << i;
+                far |= ((gap > g * l1 + eta) as u8) << i;
+                let same = (s0 > 0.0 && s0 > x) || (s1 < 0.0 && s1 < x);
+                across |= (!same as u8) << i;
+            }
+            near &= !far;
+            plane = across;
+            if tiny {
+                unsure |= un;
+            } else {
+                sep |= s;
+                unsure |= un & !s;
+            }
+        }
+
+        // Edge x box-axis products, for the closed boxes still open. An axis
+        // here is zero iff the raw coordinates are equal, and then it is
+        // zero there too; a tiny one may be zero there only.
+        //
+        // On `a = e x k` (`e` the edge from vertex `j`), a point `x` projects
+        // to `(x x e)_k`: the edge to `(r_j x e)_k`, the opposite vertex to
+        // that minus `n_k`.
+        let mut open = exact & !sep;
+        if open != 0 {
+            let eta = 128.0 * u * (rho + self.big) * base;
+            let tiny_e = 16.0 * u * self.big;
+            for j in 0..3 {
+                let (p, q) = (v[j], v[(j + 1) % 3]);
+                let e = [q[0] - p[0], q[1] - p[1], q[2] - p[2]];
+                let w = r[j];
+                let pe = [
+                    w[1] * e[2] - w[2] * e[1],
+                    w[2] * e[0] - w[0] * e[2],
+                    w[0] * e[1] - w[1] * e[0],
+                ];
+                for (k, a) in [[0.0, e[2], -e[1]], [-e[2], 0.0, e[0]], [e[1], -e[0], 0.0]]
+                    .into_iter()
+                    .enumerate()
+                {
+                    let po = pe[k] - n[k];
+                    let (t0, t1) = (pe[k].min(po), pe[k].max(po));
+                    if (t0 < -eta && t1 > eta) || a == [0.0; 3] {
+                        // The parent's centre projects well inside the
+                        // triangle, so every child's box overlaps it here.
+                        continue;
+                    }
+                    let tiny = a.iter().all(|x| x.abs() <= tiny_e);
+                    let rad = half * (a[0].abs() + a[1].abs() + a[2].abs());
+                    let h = [half * a[0], half * a[1], half * a[2]];
+                    let mut m = open;
+                    while m != 0 {
+                        let i = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let x = SX[i] * h[0] + SY[i] * h[1] + SZ[i] * h[2];
+                        let gap = (t0 - x - rad).max(x - rad - t1);
+                        if gap > eta && !tiny {
+                            sep |= 1 << i;
+                            open &= !(1 << i);
+                        } else if gap >= -eta {
+                            unsure |= 1 << i;
+                        }
+                    }
+                }
+                if open == 0 {
+                    break;
+                }
+            }
+        }
+        let open = exact & !sep;
+        ChildMasks {
+            near,
+            touch: open & !unsure,
+            unsure: open & unsure,
+            plane,
+            seg,
+        }
+    }
+}
+
+/// Children whose segment from the parent's centre `c` to their own centre
+/// (`quarter` away on each axis) meets the box `[lo, hi]` grown by `g`: the
+/// parameter intervals of the three slabs along the diagonal must overlap.
+/// Rounding is covered by a margin far below `g` in space.
+#[inline]
+pub(crate) fn segments_meeting_box(
+    c: [f64; 3],
+    quarter: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    g: f64,
+) -> u8 {
+    const SLACK: f64 = 1e-9;
+    let inv = 1.0 / quarter;
+    // Along axis k, the positive children enter the slab at `u[k]` and leave
+    // at `w[k]`; the negative ones over `[-w[k], -u[k]]`.
+    let u: [f64; 3] = std::array::from_fn(|k| (lo[k] - g - c[k]) * inv);
+    let w: [f64; 3] = std::array::from_fn(|k| (hi[k] + g - c[k]) * inv);
+    let mut out = 0u8;
+    for i in 0..8 {
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for k in 0..3 {
+            let (a, b) = if i >> k & 1 != 0 {
+                (u[k], w[k])
+            } else {
+                (-w[k], -u[k])
+            };
+            t0 = t0.max(a);
+            t1 = t1.min(b);
+        }
+        out |= ((t0 <= t1 + SLACK) as u8) << i;
+    }
+    out
+}
+
+/// [`crosses`] for the eight segments from `p` to `p + h s` (`s` in
+/// `{-1, 1}^3`, child `i` has `s_k = +1` iff bit `k` of `i` is set), for the
+/// children in `mask`; returns the mask of those crossing and whether `p` is
+/// on the positive side. Shares the work that does not depend on the child.
+#[inline]
+pub(crate) fn crossings_from_center(p: [i64; 3], h: i64, t: &FixedTri, mask: u8) -> (u8, bool) {
+    let [a, b, c] = t.v;
+    let n = normal(&t.v);
+    let op = dot(n, sub(p, a));
+    let pside = if op != 0 { op > 0 } else { t.nsign > 0 };
+    let signed = |v: [i128; 3], i: u32| -> i128 {
+        let x = if i & 1 != 0 { v[0] } else { -v[0] };
+        let y = if i & 2 != 0 { v[1] } else { -v[1] };
+        let z = if i & 4 != 0 { v[2] } else { -v[2] };
+        x + y + z
+    };
+    let mut edges: Option<[[i128; 3]; 3]> = None;
+    let mut out = 0u8;
+    for i in 0..8u32 {
+        if mask & (1 << i) == 0 {
+            continue;
+        }
+        let oq = op + h as i128 * signed(n, i);
+        let qside = if oq != 0 { oq > 0 } else { t.nsign > 0 };
+        if pside == qside {
+            continue;
+        }
+        let w = edges.get_or_insert_with(|| {
+            let (ap, bp, cp) = (sub(a, p), sub(b, p), sub(c, p));
+            [cross(ap, bp), cross(bp, cp), cross(cp, ap)]
+        });
+        let s = [
+            if i & 1 != 0 { 1 } else { -1 },
+            if i & 2 != 0 { 1 } else { -1 },
+            if i & 4 != 0 { 1 } else { -1 },
+        ];
+        let side = |w: [i128; 3], a: [i64; 3], b: [i64; 3]| {
+            let o = signed(w, i);
+            if o != 0 {
+                o > 0
+            } else {
+                first_sign(cross(sub(a, b), s))
+            }
+        };
+        let e0 = side(w[0], a, b);
+        if e0 == side(w[1], b, c) && e0 == side(w[2], c, a) {
+            out |= 1 << i;
+        }
+    }
+    (out, pside)
+}
