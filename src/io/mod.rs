@@ -1,6 +1,7 @@
 //! Files octmesh writes and reads: leaf lists, VTK XML meshes (`vtu`), JSON
-//! statistics and reports (`json`), and (in `geometry::stl`) STL.
+//! statistics and reports (`json`), leak paths (`leak_path`), and (in `geometry::stl`) STL.
 
 pub mod json;
+pub mod leak_path;
 pub mod leaves;
 pub mod vtu;
