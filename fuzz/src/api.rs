@@ -239,8 +239,8 @@ pub fn run(data: &[u8]) {
     }
     for s in st.slots.iter_mut() {
         if let Some(s) = s.take() {
-            // SAFETY: a live handle, destroyed once.
-            unsafe { octmesh_destroy(s.h) };
+            // The C API's contract: a live handle, destroyed once.
+            octmesh_destroy(s.h);
         }
     }
 }
@@ -459,16 +459,16 @@ unsafe fn create(st: &mut State, b: &mut Bytes, hb: u8) {
     } else {
         &mut out as *mut _
     };
-    // SAFETY: valid or NULL pointers.
-    let s = unsafe { octmesh_create(comm, popts, pout) };
+    // The C API's contract: valid or NULL pointers.
+    let s = octmesh_create(comm, popts, pout);
     check_status(s, null(), "create");
     if ok(s) {
         assert!(!out.is_null());
         let small = !popts.is_null() && (1..=SMALL_LIMIT).contains(&opts.max_octants);
         let slot = &mut st.slots[(hb % 2) as usize];
         if let Some(old) = slot.take() {
-            // SAFETY: a live handle, destroyed once.
-            unsafe { octmesh_destroy(old.h) };
+            // The C API's contract: a live handle, destroyed once.
+            octmesh_destroy(old.h);
         }
         *slot = Some(Slot {
             h: out,
@@ -482,8 +482,8 @@ unsafe fn create(st: &mut State, b: &mut Bytes, hb: u8) {
 /// The local leaves of `h`, or None without an octree.
 fn leaves_of(h: *mut octmesh_t) -> Option<Vec<octmesh_octant_t>> {
     let (mut l, mut g) = (0i32, 0i64);
-    // SAFETY: valid out-pointers.
-    if !ok(unsafe { octmesh_octree_get_num_leaves(h, &mut l, &mut g) }) {
+    // The C API's contract: valid out-pointers.
+    if !ok(octmesh_octree_get_num_leaves(h, &mut l, &mut g)) {
         return None;
     }
     let mut v = vec![
@@ -495,8 +495,8 @@ fn leaves_of(h: *mut octmesh_t) -> Option<Vec<octmesh_octant_t>> {
         };
         l as usize
     ];
-    // SAFETY: room for the local leaves.
-    let s = unsafe { octmesh_octree_get_leaves(h, v.as_mut_ptr(), l) };
+    // The C API's contract: room for the local leaves.
+    let s = octmesh_octree_get_leaves(h, v.as_mut_ptr(), l);
     assert!(ok(s));
     Some(v)
 }
@@ -504,8 +504,8 @@ fn leaves_of(h: *mut octmesh_t) -> Option<Vec<octmesh_octant_t>> {
 /// The leaves tile the root cube in Morton order.
 fn check_leaves(h: *mut octmesh_t, n: usize, null_out: bool) {
     if null_out {
-        // SAFETY: NULL is refused before anything is written.
-        let s = unsafe { octmesh_octree_get_leaves(h, null_mut(), n as i32) };
+        // The C API's contract: NULL is refused before anything is written.
+        let s = octmesh_octree_get_leaves(h, null_mut(), n as i32);
         assert_eq!(s, octmesh_status_t::OCTMESH_STATUS_INVALID_ARGUMENT);
         return;
     }
@@ -626,8 +626,8 @@ unsafe fn write_vtu(st: &mut State, b: &mut Bytes, h: *mut octmesh_t) {
         _ => good.as_ptr(),
     };
     let mut c = octmesh_mesh_counts_t::default();
-    // SAFETY: valid out-pointer.
-    let nodes = if ok(unsafe { octmesh_mesh_get_counts(h, &mut c) }) {
+    // The C API's contract: valid out-pointer.
+    let nodes = if ok(octmesh_mesh_get_counts(h, &mut c)) {
         Some(c.local_nodes as usize)
     } else {
         None
@@ -658,8 +658,8 @@ unsafe fn write_vtu(st: &mut State, b: &mut Bytes, h: *mut octmesh_t) {
     };
     if nodes.is_none() && n > 0 && !pv.is_null() {
         // Without a mesh the call must fail before reading the values.
-        // SAFETY: valid pointers; the values are NULL.
-        let s = unsafe { octmesh_mesh_write_vtu_fields(h, path, n as i32, pn, pv) };
+        // The C API's contract: valid pointers; the values are NULL.
+        let s = octmesh_mesh_write_vtu_fields(h, path, n as i32, pn, pv);
         check_status(s, h, "write_vtu_fields");
         assert!(!ok(s));
         return;
@@ -667,7 +667,7 @@ unsafe fn write_vtu(st: &mut State, b: &mut Bytes, h: *mut octmesh_t) {
     // nfields beyond the arrays' length would make the library read past
     // them: pass the number of arrays unless it is the negative case.
     let nf = if nfields < 0 { nfields } else { n as i32 };
-    // SAFETY: valid pointers with `n` entries.
-    let s = unsafe { octmesh_mesh_write_vtu_fields(h, path, nf, pn, pv) };
+    // The C API's contract: valid pointers with `n` entries.
+    let s = octmesh_mesh_write_vtu_fields(h, path, nf, pn, pv);
     check_status(s, h, "write_vtu_fields");
 }

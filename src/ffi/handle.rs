@@ -144,7 +144,7 @@ impl octmesh_t {
 ///
 /// \param[out] out  the options
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_options_default(out: *mut octmesh_options_t) -> octmesh_status_t {
+pub extern "C" fn octmesh_options_default(out: *mut octmesh_options_t) -> octmesh_status_t {
     if out.is_null() {
         return fail_without_handle(&Error::invalid("argument 'out' is NULL"));
     }
@@ -207,7 +207,7 @@ fn create(comm: mpi_sys::MPI_Comm, opts: *const octmesh_options_t) -> Result<Box
 /// \param[in]  opts  options, or NULL for the defaults
 /// \param[out] out   the new handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_create(
+pub extern "C" fn octmesh_create(
     comm: mpi_sys::MPI_Comm,
     opts: *const octmesh_options_t,
     out: *mut *mut octmesh_t,
@@ -232,7 +232,7 @@ pub unsafe extern "C" fn octmesh_create(
 ///
 /// \param[in] h  the handle, or NULL
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_destroy(h: *mut octmesh_t) {
+pub extern "C" fn octmesh_destroy(h: *mut octmesh_t) {
     if h.is_null() {
         return;
     }
@@ -258,7 +258,7 @@ pub unsafe extern "C" fn octmesh_destroy(h: *mut octmesh_t) {
 ///
 /// \param[in] h  the handle, or NULL
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_last_error(h: *const octmesh_t) -> *const c_char {
+pub extern "C" fn octmesh_last_error(h: *const octmesh_t) -> *const c_char {
     // SAFETY: NULL or a live handle (requirement of the C API).
     match unsafe { h.as_ref() } {
         None => no_handle_error(),
@@ -286,7 +286,7 @@ pub extern "C" fn octmesh_status_name(status: i32) -> *const c_char {
 /// \param[in] origin  lowest corner, 3 values, user units
 /// \param[in] side    side, user units, > 0
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_domain_set(
+pub extern "C" fn octmesh_domain_set(
     h: *mut octmesh_t,
     origin: *const f64,
     side: f64,
@@ -310,7 +310,7 @@ pub unsafe extern "C" fn octmesh_domain_set(
 /// \param[out] origin  lowest corner, 3 values, user units
 /// \param[out] side    side, user units
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_domain_get(
+pub extern "C" fn octmesh_domain_get(
     h: *const octmesh_t,
     origin: *mut f64,
     side: *mut f64,

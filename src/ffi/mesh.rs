@@ -68,7 +68,7 @@ pub(crate) struct MeshArrays {
 /// \param[in] rule  for leaves touching the surface: one of
 ///                  `octmesh_cut_rule`
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_build(
+pub extern "C" fn octmesh_mesh_build(
     h: *mut octmesh_t,
     keep: octmesh_keep_t,
     rule: octmesh_cut_rule_t,
@@ -88,7 +88,7 @@ pub unsafe extern "C" fn octmesh_mesh_build(
 /// \param[in] h     the handle
 /// \param[in] rule  one of `octmesh_inside_rule`
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_set_inside_rule(
+pub extern "C" fn octmesh_mesh_set_inside_rule(
     h: *mut octmesh_t,
     rule: octmesh_inside_rule_t,
 ) -> octmesh_status_t {
@@ -114,7 +114,7 @@ pub unsafe extern "C" fn octmesh_mesh_set_inside_rule(
 /// \param[in]  h    the handle
 /// \param[out] out  one of `octmesh_inside_rule`
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_inside_rule(
+pub extern "C" fn octmesh_mesh_get_inside_rule(
     h: *const octmesh_t,
     out: *mut octmesh_inside_rule_t,
 ) -> octmesh_status_t {
@@ -159,7 +159,7 @@ fn i32_of(v: impl IntoIterator<Item = u32>) -> Vec<i32> {
 /// \param[in]  h    the handle
 /// \param[out] out  the counts
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_counts(
+pub extern "C" fn octmesh_mesh_get_counts(
     h: *const octmesh_t,
     out: *mut octmesh_mesh_counts_t,
 ) -> octmesh_status_t {
@@ -208,7 +208,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_counts(
 /// \param[out] out  8 * local_elements local node numbers, owned by the
 ///                  handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_connectivity(
+pub extern "C" fn octmesh_mesh_get_connectivity(
     h: *const octmesh_t,
     out: *mut *const i32,
 ) -> octmesh_status_t {
@@ -224,7 +224,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_connectivity(
 /// \param[out] out  3 * local_nodes doubles (x, y, z per node, user
 ///                  units), owned by the handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_coordinates(
+pub extern "C" fn octmesh_mesh_get_coordinates(
     h: *const octmesh_t,
     out: *mut *const f64,
 ) -> octmesh_status_t {
@@ -242,7 +242,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_coordinates(
 /// \param[out] out  num_independent global numbers (0-based), owned by the
 ///                  handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_global_ids(
+pub extern "C" fn octmesh_mesh_get_global_ids(
     h: *const octmesh_t,
     out: *mut *const i64,
 ) -> octmesh_status_t {
@@ -259,7 +259,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_global_ids(
 /// \param[in]  h    the handle
 /// \param[out] out  num_independent owner ranks, owned by the handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_owners(
+pub extern "C" fn octmesh_mesh_get_owners(
     h: *const octmesh_t,
     out: *mut *const i32,
 ) -> octmesh_status_t {
@@ -281,7 +281,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_owners(
 /// \param[out] ranks    the ranks using each node, sorted, owned by the
 ///                      handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_sharers(
+pub extern "C" fn octmesh_mesh_get_sharers(
     h: *const octmesh_t,
     offsets: *mut *const i32,
     ranks: *mut *const i32,
@@ -320,7 +320,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_sharers(
 /// \param[out] nodes       local node numbers shared with each neighbour,
 ///                         by increasing global number, owned by the handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_exchange(
+pub extern "C" fn octmesh_mesh_get_exchange(
     h: *const octmesh_t,
     nneighbors: *mut i32,
     ranks: *mut *const i32,
@@ -376,7 +376,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_exchange(
 /// \param[out] deps   4 per hanging node: its independent local nodes, -1
 ///                    for unused entries, owned by the handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_hanging(
+pub extern "C" fn octmesh_mesh_get_hanging(
     h: *const octmesh_t,
     count: *mut *const i32,
     deps: *mut *const i32,
@@ -407,7 +407,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_hanging(
 /// \param[out] out  local_elements classes (`octmesh_class`), owned by the
 ///                  handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_element_class(
+pub extern "C" fn octmesh_mesh_get_element_class(
     h: *const octmesh_t,
     out: *mut *const i8,
 ) -> octmesh_status_t {
@@ -420,7 +420,7 @@ pub unsafe extern "C" fn octmesh_mesh_get_element_class(
 /// \param[in]  h    the handle
 /// \param[out] out  local_elements levels, owned by the handle
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_get_element_level(
+pub extern "C" fn octmesh_mesh_get_element_level(
     h: *const octmesh_t,
     out: *mut *const i8,
 ) -> octmesh_status_t {
@@ -440,12 +440,11 @@ pub unsafe extern "C" fn octmesh_mesh_get_element_level(
 /// \param[in] h     the handle
 /// \param[in] pvtu  the PVTU path, ending in `.pvtu`, NUL-terminated
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_write_vtu(
+pub extern "C" fn octmesh_mesh_write_vtu(
     h: *mut octmesh_t,
     pvtu: *const c_char,
 ) -> octmesh_status_t {
-    // SAFETY: no fields, so no field pointer is read.
-    unsafe { octmesh_mesh_write_vtu_fields(h, pvtu, 0, std::ptr::null(), std::ptr::null()) }
+    octmesh_mesh_write_vtu_fields(h, pvtu, 0, std::ptr::null(), std::ptr::null())
 }
 
 /// Reads the `nfields` caller fields of `octmesh_mesh_write_vtu_fields`,
@@ -508,7 +507,7 @@ unsafe fn field_args<'a>(
 /// \param[in] names    nfields names, NUL-terminated
 /// \param[in] values   nfields arrays of local_nodes doubles
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_mesh_write_vtu_fields(
+pub extern "C" fn octmesh_mesh_write_vtu_fields(
     h: *mut octmesh_t,
     pvtu: *const c_char,
     nfields: i32,

@@ -47,10 +47,7 @@ fn level_arg(level: i32, name: &str) -> Result<u8> {
 /// \param[in] h      the handle
 /// \param[in] level  level of the leaves touching the surface, 0 to 18
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_refine_surface(
-    h: *mut octmesh_t,
-    level: i32,
-) -> octmesh_status_t {
+pub extern "C" fn octmesh_octree_refine_surface(h: *mut octmesh_t, level: i32) -> octmesh_status_t {
     with_mut(h, |h| {
         let level = h.agree(level_arg(level, "level"))?;
         h.session.refine_surface(level)
@@ -69,7 +66,7 @@ pub unsafe extern "C" fn octmesh_octree_refine_surface(
 /// \param[in] refine     the callback
 /// \param[in] ctx        passed to the callback unchanged
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_refine_callback(
+pub extern "C" fn octmesh_octree_refine_callback(
     h: *mut octmesh_t,
     max_level: i32,
     refine: octmesh_refine_fn,
@@ -99,7 +96,7 @@ pub unsafe extern "C" fn octmesh_octree_refine_callback(
 /// \param[in] h        the handle
 /// \param[in] connect  the contacts balanced: one of `octmesh_connect`
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_balance(
+pub extern "C" fn octmesh_octree_balance(
     h: *mut octmesh_t,
     connect: octmesh_connect_t,
 ) -> octmesh_status_t {
@@ -117,7 +114,7 @@ pub unsafe extern "C" fn octmesh_octree_balance(
 /// \param[in] weight  the weight callback, or NULL for equal counts
 /// \param[in] ctx     passed to the callback unchanged
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_partition(
+pub extern "C" fn octmesh_octree_partition(
     h: *mut octmesh_t,
     weight: octmesh_weight_fn,
     ctx: *mut c_void,
@@ -150,7 +147,7 @@ fn tree_of(h: &octmesh_t) -> Result<&LinearOctree> {
 /// \param[out] local   leaves on this rank
 /// \param[out] global  leaves over all ranks
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_get_num_leaves(
+pub extern "C" fn octmesh_octree_get_num_leaves(
     h: *const octmesh_t,
     local: *mut octmesh_locidx_t,
     global: *mut octmesh_gloidx_t,
@@ -173,7 +170,7 @@ pub unsafe extern "C" fn octmesh_octree_get_num_leaves(
 ///                       (`octmesh_octree_get_num_leaves`) are written
 /// \param[in]  capacity  the room in `out`, at least the local count
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_get_leaves(
+pub extern "C" fn octmesh_octree_get_leaves(
     h: *const octmesh_t,
     out: *mut octmesh_octant_t,
     capacity: octmesh_locidx_t,
@@ -204,7 +201,7 @@ pub unsafe extern "C" fn octmesh_octree_get_leaves(
 /// \param[in] h      the handle
 /// \param[in] point  3 values, user units
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_octree_check_leak(
+pub extern "C" fn octmesh_octree_check_leak(
     h: *mut octmesh_t,
     point: *const f64,
 ) -> octmesh_status_t {

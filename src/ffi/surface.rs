@@ -22,7 +22,7 @@ fn install(h: &mut octmesh_t, name: &str, loaded: Result<Surface>) -> Result<()>
 /// \param[in] h     the handle
 /// \param[in] path  the file's path, NUL-terminated
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_surface_from_stl(
+pub extern "C" fn octmesh_surface_from_stl(
     h: *mut octmesh_t,
     path: *const c_char,
 ) -> octmesh_status_t {
@@ -44,7 +44,7 @@ pub unsafe extern "C" fn octmesh_surface_from_stl(
 /// \param[in] xyz   9 * ntri doubles: x, y, z of the three vertices of
 ///                  each triangle, user units
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_surface_from_triangles(
+pub extern "C" fn octmesh_surface_from_triangles(
     h: *mut octmesh_t,
     ntri: octmesh_gloidx_t,
     xyz: *const f64,
@@ -73,7 +73,7 @@ pub unsafe extern "C" fn octmesh_surface_from_triangles(
 /// \param[in] h     the handle
 /// \param[in] name  `"sphere"` or `"torus"`, NUL-terminated
 #[no_mangle]
-pub unsafe extern "C" fn octmesh_surface_builtin(
+pub extern "C" fn octmesh_surface_builtin(
     h: *mut octmesh_t,
     name: *const c_char,
 ) -> octmesh_status_t {
