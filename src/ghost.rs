@@ -16,16 +16,16 @@ use crate::octant::{Connectivity, Octant};
 use crate::octree::{owner_of_cell, LinearOctree};
 
 /// Leaves of other ranks touching this rank's leaves, sorted in Morton order,
-/// each with its owner rank and one byte of user data sent along by the
-/// owner (the mesh sends each leaf's class).
+/// each with its owner rank and a word of data sent along by the owner (the
+/// mesh sends each leaf's class and element number).
 #[derive(Clone, Debug, Default)]
 pub struct GhostLayer {
     /// Ghost leaves in Morton order (those of lower ranks first).
     pub leaves: Vec<Octant>,
     /// Owner rank of each ghost.
     pub owners: Vec<u32>,
-    /// The byte the owner attached to each ghost.
-    pub data: Vec<u8>,
+    /// The word the owner attached to each ghost.
+    pub data: Vec<u64>,
     /// Number of ghosts that come before this rank's range.
     pub before: usize,
     /// Number of (local leaf, rank) pairs this rank sent.
@@ -44,10 +44,9 @@ impl GhostLayer {
     }
 }
 
-/// Builds the ghost layer of `tree`. `data[i]` travels with local leaf `i`.
+/// Builds the ghost layer of `tree`. `data(i)` travels with local leaf `i`.
 /// Collective.
-pub fn build_ghost_layer(tree: &LinearOctree, data: &[u8]) -> GhostLayer {
-    assert_eq!(data.len(), tree.local_len(), "one data byte per local leaf");
+pub fn build_ghost_layer(tree: &LinearOctree, data: impl Fn(usize) -> u64) -> GhostLayer {
     let comm: &dyn Comm = &**tree.comm();
     let p = comm.size();
     let me = comm.rank();
@@ -73,7 +72,7 @@ pub fn build_ghost_layer(tree: &LinearOctree, data: &[u8]) -> GhostLayer {
                 ranks.dedup();
                 for &r in &ranks {
                     per_rank[r].push(leaf.key());
-                    per_rank[r].push(data[i] as u64);
+                    per_rank[r].push(data(i));
                     sent += 1;
                 }
             });
@@ -92,7 +91,7 @@ pub fn build_ghost_layer(tree: &LinearOctree, data: &[u8]) -> GhostLayer {
         for pair in recv[at..at + c].chunks_exact(2) {
             g.leaves.push(Octant::from_key(pair[0]));
             g.owners.push(src as u32);
-            g.data.push(pair[1] as u8);
+            g.data.push(pair[1]);
         }
         if src < me {
             g.before = g.leaves.len();

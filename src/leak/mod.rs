@@ -92,7 +92,8 @@ pub fn find_leak(
     };
     let cell = agree(comm, local)?;
     let me = comm.rank();
-    let ghost = build_ghost_layer(tree, classes);
+    let ghost = build_ghost_layer(tree, |i| classes[i] as u64);
+    let ghost_class: Vec<u8> = ghost.data.iter().map(|&c| c as u8).collect();
     let leaves = tree.leaves();
     let (b, e) = tree.local_cells();
     let g = Graph {
@@ -101,7 +102,7 @@ pub fn find_leak(
         index: LeafIndex::new(leaves, b, e),
         range: (b, e),
         ghosts: &ghost.leaves,
-        ghost_class: &ghost.data,
+        ghost_class: &ghost_class,
     };
     let mut s = Search {
         g,

@@ -52,6 +52,7 @@
 //! the [`Domain`]); lattice coordinates are also available.
 
 pub(crate) mod dual;
+pub mod faces;
 pub(crate) mod numbering;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass};
@@ -64,6 +65,8 @@ use crate::octree::LinearOctree;
 use crate::report::PhaseTimer;
 
 use std::sync::Arc;
+
+pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, SURFACE_PATCH};
 
 use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
 
@@ -151,6 +154,10 @@ pub struct Mesh {
     shared_offsets: Vec<u32>,
     shared_ranks: Vec<u32>,
     first_global: u64,
+    /// Global number of local element 0.
+    first_element: u64,
+    /// Kept elements of other ranks touching local ones.
+    halo: Halo,
     counts: MeshCounts,
     /// Time, traffic, time inside collectives and peak memory per phase.
     timer: PhaseTimer,
@@ -185,7 +192,29 @@ impl Mesh {
         };
         let keep = |bits: u8| keeps(opts.keep, opts.cut_rule, bits);
 
-        let ghosts = timer.time(comm, "ghost", || build_ghost_layer(tree, local_class));
+        // Each leaf travels with its class and, when kept, its global
+        // element number, so the halo of the finite-volume faces needs no
+        // second exchange.
+        let element_index: Vec<u64> = local_class
+            .iter()
+            .scan(0u64, |n, &c| {
+                let i = *n;
+                *n += keep(c) as u64;
+                Some(i)
+            })
+            .collect();
+        let nkept = element_index
+            .last()
+            .map_or(0, |&i| i + keep(*local_class.last().unwrap_or(&0)) as u64);
+        let kept_counts = comm.allgather_u64(nkept);
+        let first_element: u64 = kept_counts[..comm.rank()].iter().sum();
+        let ghosts = timer.time(comm, "ghost", || {
+            build_ghost_layer(tree, |i| {
+                local_class[i] as u64 | (first_element + element_index[i]) << 8
+            })
+        });
+        drop(element_index);
+        let ghost_class: Vec<u8> = ghosts.data.iter().map(|&w| w as u8).collect();
         let b = ghosts.before;
         let merged = Merged {
             before: &ghosts.leaves[..b],
@@ -195,9 +224,9 @@ impl Mesh {
 
         let nodes = timer.time(comm, "nodes", || {
             let classes = Merged {
-                before: &ghosts.data[..b],
+                before: &ghost_class[..b],
                 local: local_class,
-                after: &ghosts.data[b..],
+                after: &ghost_class[b..],
             };
             let kept = Bits::from_fn(merged.len(), |i| keep(classes.get(i)));
             let d = dual::extract_nodes(merged, &kept)?;
@@ -215,6 +244,8 @@ impl Mesh {
             assemble(tree, domain, d, merged, &kept, local_class, numbering)
         });
         let mut mesh = crate::comm::agree(comm, mesh)?;
+        mesh.first_element = first_element;
+        mesh.halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
         let with_hanging = mesh
             .connectivity
             .iter()
@@ -797,6 +828,8 @@ fn assemble(
         shared_offsets,
         shared_ranks,
         first_global: num.first_global,
+        first_element: 0,
+        halo: Halo::default(),
         counts: MeshCounts {
             independent_nodes: num.global_count,
             ..MeshCounts::default()

@@ -1,0 +1,720 @@
+//! Finite-volume faces, boundary patches and the cell halo of a mesh.
+//!
+//! Every face of a kept element is listed once per rank that holds one of
+//! its two sides:
+//!
+//! - **internal**: between two local elements;
+//! - **boundary**: a kept element's face that no kept element shares, with
+//!   its patch (a side of the domain, or the surface);
+//! - **halo**: between a local element and an element of another rank,
+//!   listed on both ranks, each with its own element as the owner.
+//!
+//! Where a coarse element meets four finer ones (a 2:1 interface) its face
+//! is split into the four fine faces, as OpenFOAM's `hexRef8` does:
+//!
+//! ```text
+//!      coarse face           kept fine            dropped fine
+//!     +-----------+     +-----+-----+        +-----+-----+
+//!     |           |     |  c  |  d  |        |  ·  |  d  |   the parts of a
+//!     |     e     |  →  +-----+-----+   or   +-----+-----+   coarse face next
+//!     |           |     |  a  |  b  |        |  ·  |  b  |   to dropped fine
+//!     +-----------+     +-----+-----+        +-----+-----+   leaves (·) are
+//!                                                             boundary faces
+//! ```
+//!
+//! Each face is a planar quadrilateral, measured in halves of the emitting
+//! element's side: a whole face, a quarter, a half (two dropped quarters
+//! side by side) or, when three quarters are dropped, the two quadrilaterals
+//! the L-shaped remainder splits into along the diagonal from the centre to
+//! the far corner. Corners of faces are always corners of kept elements, so
+//! every point a finite-volume writer needs already exists.
+//!
+//! # Orderings
+//!
+//! [`Faces::faces`] lists the internal faces first, sorted by owner, then
+//! neighbour (upper-triangular: the owner is the lower local element), then
+//! the boundary faces grouped by patch (each group by element), then the
+//! halo faces grouped by neighbour rank, each group sorted by the global
+//! numbers of the lower rank's element, then the higher rank's: both ranks
+//! list their shared faces in the same order. A face's normal points from
+//! its owner to the other side (out of the domain on a boundary). Corners
+//! run counter-clockwise seen from the side the normal points to.
+//!
+//! # Patches
+//!
+//! Patch `0..6` are the sides of the domain, `xmin xmax ymin ymax zmin zmax`
+//! ([`SIDE_PATCHES`]); patch 6 is the surface. Names are given by the
+//! caller ([`PatchNames`]).
+
+use std::ops::Range;
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::octant::Octant;
+
+use super::Mesh;
+
+/// Names of the six domain-side patches, in patch-id order.
+pub const SIDE_PATCHES: [&str; 6] = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"];
+
+/// Patch id of the surface (the faces next to dropped leaves).
+pub const SURFACE_PATCH: u16 = 6;
+
+/// Number of patches: the six sides and the surface.
+pub const NUM_PATCHES: usize = 7;
+
+/// What lies on the other side of a face.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Other {
+    /// A local element.
+    Element(u32),
+    /// A halo element ([`Halo`] index), owned by another rank.
+    Halo(u32),
+    /// Nothing: a boundary face on this patch.
+    Patch(u16),
+}
+
+/// One face. See the module documentation for the conventions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Face {
+    /// The local element on this side (the owner).
+    pub owner: u32,
+    /// The other side.
+    pub other: Other,
+    /// Lowest lattice corner of the square the corners are measured in
+    /// (the emitting element's face).
+    pub origin: [u32; 3],
+    /// Half that square's side, lattice units.
+    pub half: u32,
+    /// Normal axis (0 x, 1 y, 2 z) in bits 0-1; bit 2 set when the normal
+    /// points towards decreasing coordinates.
+    pub normal: u8,
+    /// Four corners `(a, b)` with `a, b` in `0..=2`, 2 bits each, corner `k`
+    /// in bits `4k..4k+4` (`a` low): point `origin + half * (a e_u + b e_v)`
+    /// where `(e_u, e_v, e_axis)` is right-handed.
+    pub shape: u16,
+}
+
+/// The in-plane axes `(u, v)` of a face normal to `axis`, right-handed with
+/// it.
+pub const fn plane_axes(axis: usize) -> (usize, usize) {
+    ((axis + 1) % 3, (axis + 2) % 3)
+}
+
+/// The whole face: `(0,0) (2,0) (2,2) (0,2)`.
+const WHOLE: [(u8, u8); 4] = [(0, 0), (2, 0), (2, 2), (0, 2)];
+
+fn pack(corners: [(u8, u8); 4]) -> u16 {
+    // Counter-clockwise in (u, v) (positive shoelace area).
+    let area2: i32 = (0..4)
+        .map(|k| {
+            let (a, b) = corners[k];
+            let (c, d) = corners[(k + 1) % 4];
+            a as i32 * d as i32 - c as i32 * b as i32
+        })
+        .sum();
+    let mut c = corners;
+    if area2 < 0 {
+        c.swap(1, 3);
+    }
+    c.iter()
+        .enumerate()
+        .map(|(k, &(a, b))| ((a as u16) | (b as u16) << 2) << (4 * k))
+        .sum()
+}
+
+impl Face {
+    /// The normal axis, 0 to 2.
+    pub fn axis(&self) -> usize {
+        (self.normal & 3) as usize
+    }
+
+    /// Whether the normal points towards decreasing coordinates.
+    pub fn negative(&self) -> bool {
+        self.normal & 4 != 0
+    }
+
+    /// Corner `k` in halves, `(a, b)`, in the stored (counter-clockwise in
+    /// `(u, v)`) order.
+    fn corner_halves(&self, k: usize) -> (u32, u32) {
+        let w = (self.shape >> (4 * k)) & 15;
+        ((w & 3) as u32, (w >> 2) as u32)
+    }
+
+    /// The four corners in lattice coordinates, counter-clockwise seen from
+    /// the side the normal points to.
+    pub fn corners(&self) -> [[u32; 3]; 4] {
+        let (u, v) = plane_axes(self.axis());
+        let mut out = [[0u32; 3]; 4];
+        for (k, p) in out.iter_mut().enumerate() {
+            // A negative normal sees the (u, v) order clockwise: reverse.
+            let j = if self.negative() { (4 - k) % 4 } else { k };
+            let (a, b) = self.corner_halves(j);
+            *p = self.origin;
+            p[u] += a * self.half;
+            p[v] += b * self.half;
+        }
+        out
+    }
+
+    /// Area in lattice units squared.
+    pub fn lattice_area(&self) -> f64 {
+        let c: Vec<(f64, f64)> = (0..4)
+            .map(|k| {
+                let (a, b) = self.corner_halves(k);
+                (a as f64, b as f64)
+            })
+            .collect();
+        let twice: f64 = (0..4)
+            .map(|k| c[k].0 * c[(k + 1) % 4].1 - c[(k + 1) % 4].0 * c[k].1)
+            .sum();
+        0.5 * twice * (self.half as f64).powi(2)
+    }
+
+    /// Centroid in lattice coordinates.
+    pub fn lattice_centre(&self) -> [f64; 3] {
+        let (u, v) = plane_axes(self.axis());
+        let (mut a2, mut cu, mut cv) = (0.0, 0.0, 0.0);
+        for k in 0..4 {
+            let (x0, y0) = self.corner_halves(k);
+            let (x1, y1) = self.corner_halves((k + 1) % 4);
+            let (x0, y0, x1, y1) = (x0 as f64, y0 as f64, x1 as f64, y1 as f64);
+            let cross = x0 * y1 - x1 * y0;
+            a2 += cross;
+            cu += (x0 + x1) * cross;
+            cv += (y0 + y1) * cross;
+        }
+        let h = self.half as f64;
+        let mut c = [
+            self.origin[0] as f64,
+            self.origin[1] as f64,
+            self.origin[2] as f64,
+        ];
+        c[u] += cu / (3.0 * a2) * h;
+        c[v] += cv / (3.0 * a2) * h;
+        c
+    }
+
+    /// The unit normal, from the owner to the other side.
+    pub fn unit_normal(&self) -> [f64; 3] {
+        let mut n = [0.0; 3];
+        n[self.axis()] = if self.negative() { -1.0 } else { 1.0 };
+        n
+    }
+
+    /// The same face seen from the other side (normal reversed).
+    fn flipped(mut self, owner: u32, other: Other) -> Face {
+        self.normal ^= 4;
+        self.owner = owner;
+        self.other = other;
+        self
+    }
+}
+
+/// The kept elements of other ranks that touch a local element (by a face,
+/// an edge or a corner), in Morton order: the lower ranks' first.
+#[derive(Clone, Debug, Default)]
+pub struct Halo {
+    /// The elements.
+    pub leaves: Vec<Octant>,
+    /// Owner rank of each.
+    pub owners: Vec<u32>,
+    /// Global element number of each.
+    pub global: Vec<u64>,
+    /// How many come before this rank's range.
+    pub before: usize,
+}
+
+impl Halo {
+    /// The kept ghosts of `ghosts`: `data` holds each ghost's class in the
+    /// low byte and its global element number above it.
+    pub(crate) fn from_ghosts(
+        ghosts: &crate::ghost::GhostLayer,
+        class: &[u8],
+        keep: impl Fn(u8) -> bool,
+    ) -> Halo {
+        let mut h = Halo::default();
+        for (i, &leaf) in ghosts.leaves.iter().enumerate() {
+            if i == ghosts.before {
+                h.before = h.leaves.len();
+            }
+            if keep(class[i]) {
+                h.leaves.push(leaf);
+                h.owners.push(ghosts.owners[i]);
+                h.global.push(ghosts.data[i] >> 8);
+            }
+        }
+        if ghosts.before == ghosts.leaves.len() {
+            h.before = h.leaves.len();
+        }
+        h
+    }
+
+    /// Number of halo elements.
+    pub fn len(&self) -> usize {
+        self.leaves.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.leaves.is_empty()
+    }
+}
+
+/// Send and receive lists of a cell-centred halo exchange with each
+/// neighbour rank: the local elements sharing a face with the rank's
+/// elements, and those elements (as [`Halo`] indices), both sorted by
+/// global element number, so both sides list the same elements in the same
+/// order.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct CellHalo {
+    /// Neighbour ranks, increasing.
+    pub ranks: Vec<u32>,
+    /// Per neighbour rank, the local elements to send.
+    pub send: Vec<Vec<u32>>,
+    /// Per neighbour rank, the halo elements received (indices into
+    /// [`Halo`]).
+    pub recv: Vec<Vec<u32>>,
+}
+
+/// The faces of one rank's part of the mesh. See the module documentation.
+#[derive(Clone, Debug, Default)]
+pub struct Faces {
+    faces: Vec<Face>,
+    num_internal: usize,
+    /// Start of each patch's boundary faces, and the end of the last.
+    patch_start: [usize; NUM_PATCHES + 1],
+    /// Halo faces per neighbour rank.
+    halo_ranges: Vec<(u32, Range<usize>)>,
+}
+
+impl Faces {
+    /// Every face: internal, boundary by patch, halo by rank.
+    pub fn faces(&self) -> &[Face] {
+        &self.faces
+    }
+
+    /// Number of internal faces (the first ones).
+    pub fn num_internal(&self) -> usize {
+        self.num_internal
+    }
+
+    /// The boundary faces of patch `p` (a range of [`Faces::faces`]).
+    pub fn patch_range(&self, p: usize) -> Range<usize> {
+        self.patch_start[p]..self.patch_start[p + 1]
+    }
+
+    /// The halo faces per neighbour rank (ranks increasing).
+    pub fn halo_ranges(&self) -> &[(u32, Range<usize>)] {
+        &self.halo_ranges
+    }
+
+    /// The halo faces: from the end of the boundary faces to the end.
+    pub fn halo_range(&self) -> Range<usize> {
+        self.patch_start[NUM_PATCHES]..self.faces.len()
+    }
+}
+
+/// Where a kept element is: local index or halo index.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum At {
+    Local(u32),
+    Halo(u32),
+}
+
+/// The kept elements around this rank: halo before, local, halo after, all
+/// in Morton order.
+struct Kept<'a> {
+    local: &'a [Octant],
+    halo: &'a Halo,
+}
+
+impl Kept<'_> {
+    /// The kept element containing the first cell of `o` or, failing that,
+    /// `None`.
+    fn last_at_or_before(&self, o: Octant) -> Option<(At, Octant)> {
+        let c = o.cell_begin();
+        let before = &self.halo.leaves[..self.halo.before];
+        let after = &self.halo.leaves[self.halo.before..];
+        let find = |s: &[Octant]| s.partition_point(|l| l.cell_begin() <= c).checked_sub(1);
+        if let Some(j) = find(after) {
+            let k = self.halo.before + j;
+            return Some((At::Halo(k as u32), self.halo.leaves[k]));
+        }
+        if let Some(j) = find(self.local) {
+            return Some((At::Local(j as u32), self.local[j]));
+        }
+        find(before).map(|j| (At::Halo(j as u32), before[j]))
+    }
+
+    /// The kept element containing `o`, if one does.
+    fn containing(&self, o: Octant) -> Option<(At, Octant)> {
+        self.last_at_or_before(o)
+            .filter(|(_, l)| l.cell_begin() <= o.cell_begin() && o.cell_end() <= l.cell_end())
+    }
+
+    /// Whether `o` itself is a kept element.
+    fn exact(&self, o: Octant) -> Option<At> {
+        self.last_at_or_before(o)
+            .filter(|(_, l)| *l == o)
+            .map(|(a, _)| a)
+    }
+}
+
+fn other_of(a: At) -> Other {
+    match a {
+        At::Local(j) => Other::Element(j),
+        At::Halo(j) => Other::Halo(j),
+    }
+}
+
+/// The boundary pieces of a face whose fine neighbours `kept` (bit `2b + a`
+/// for the quarter at `(a, b)` in halves) are partly kept: the dropped
+/// quarters' union as quadrilaterals with corners on kept corners.
+fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
+    let quarter = |a: u8, b: u8| [(a, b), (a + 1, b), (a + 1, b + 1), (a, b + 1)];
+    let dropped: Vec<(u8, u8)> = (0..4)
+        .filter(|q| kept & (1 << q) == 0)
+        .map(|q| (q & 1, q >> 1))
+        .collect();
+    match dropped.len() {
+        1 => vec![quarter(dropped[0].0, dropped[0].1)],
+        2 => {
+            let (p, q) = (dropped[0], dropped[1]);
+            if p.0 == q.0 {
+                // One column: a half face.
+                let a = p.0;
+                vec![[(a, 0), (a + 1, 0), (a + 1, 2), (a, 2)]]
+            } else if p.1 == q.1 {
+                let b = p.1;
+                vec![[(0, b), (2, b), (2, b + 1), (0, b + 1)]]
+            } else {
+                vec![quarter(p.0, p.1), quarter(q.0, q.1)]
+            }
+        }
+        3 => {
+            // The kept quarter's outer corner K, the far corner O, the
+            // centre M; the L-shaped rest splits along M-O into two
+            // quadrilaterals whose corners are all kept corners.
+            let q = (0..4u8).find(|q| kept & (1 << q) != 0).unwrap_or(0);
+            let (ku, kv) = (2 * (q & 1), 2 * (q >> 1));
+            let (ou, ov) = (2 - ku, 2 - kv);
+            vec![
+                [(1, kv), (ou, kv), (ou, ov), (1, 1)],
+                [(1, 1), (ou, ov), (ku, ov), (ku, 1)],
+            ]
+        }
+        _ => Vec::new(),
+    }
+}
+
+impl Mesh {
+    /// Extracts this rank's faces (see [`crate::mesh::faces`]). Local work
+    /// only: the halo came with the mesh.
+    pub fn faces(&self) -> Result<Faces> {
+        let elements: &[Octant] = &self.elements;
+        if elements.len() > u32::MAX as usize {
+            return Err(Error::new(ErrorKind::Limit, "too many local elements"));
+        }
+        let kept = Kept {
+            local: elements,
+            halo: &self.halo,
+        };
+        let mut internal: Vec<Face> = Vec::with_capacity(3 * elements.len());
+        let mut boundary: Vec<Face> = Vec::new();
+        let mut halo: Vec<Face> = Vec::new();
+        for (i, &e) in elements.iter().enumerate() {
+            let i = i as u32;
+            let (c, s) = (e.coords(), e.side());
+            for (f, n) in e.face_neighbors().into_iter().enumerate() {
+                let (axis, plus) = (f / 2, f % 2 == 1);
+                let mut origin = c;
+                if plus {
+                    origin[axis] += s;
+                }
+                let face = |shape: [(u8, u8); 4], half: u32, origin: [u32; 3], other| Face {
+                    owner: i,
+                    other,
+                    origin,
+                    half,
+                    normal: axis as u8 | if plus { 0 } else { 4 },
+                    shape: pack(shape),
+                };
+                let Some(n) = n else {
+                    boundary.push(face(WHOLE, s / 2, origin, Other::Patch(f as u16)));
+                    continue;
+                };
+                if let Some((at, l)) = kept.containing(n) {
+                    if l.level() < e.level() || at_is_halo(at) {
+                        // Coarser (this fine side emits) or another rank's.
+                        let list = if at_is_halo(at) {
+                            &mut halo
+                        } else {
+                            &mut internal
+                        };
+                        list.push(face(WHOLE, s / 2, origin, other_of(at)));
+                    } else if let At::Local(j) = at {
+                        if i < j {
+                            internal.push(face(WHOLE, s / 2, origin, Other::Element(j)));
+                        }
+                    }
+                    continue;
+                }
+                // Finer neighbours or none: the four children of `n` facing
+                // this element.
+                let mut mask = 0u8;
+                let (u, v) = plane_axes(axis);
+                for q in 0..4u8 {
+                    let mut child = 0u32;
+                    if !plus {
+                        child |= 1 << axis;
+                    }
+                    child |= ((q & 1) as u32) << u;
+                    child |= ((q >> 1) as u32) << v;
+                    let fine = n.child(child);
+                    if let Some(at) = kept.exact(fine) {
+                        mask |= 1 << q;
+                        if let At::Halo(_) = at {
+                            // The fine side is remote: this side lists the
+                            // quarter.
+                            let shape = [
+                                (q & 1, q >> 1),
+                                ((q & 1) + 1, q >> 1),
+                                ((q & 1) + 1, (q >> 1) + 1),
+                                (q & 1, (q >> 1) + 1),
+                            ];
+                            halo.push(face(shape, s / 2, origin, other_of(at)));
+                        }
+                    }
+                }
+                if mask == 0 {
+                    boundary.push(face(WHOLE, s / 2, origin, Other::Patch(SURFACE_PATCH)));
+                } else {
+                    for shape in dropped_pieces(mask) {
+                        boundary.push(face(shape, s / 2, origin, Other::Patch(SURFACE_PATCH)));
+                    }
+                }
+            }
+        }
+        // Internal faces: the owner is the lower element.
+        for face in internal.iter_mut() {
+            if let Other::Element(j) = face.other {
+                if j < face.owner {
+                    *face = face.flipped(j, Other::Element(face.owner));
+                }
+            }
+        }
+        internal.sort_unstable_by_key(|f| (f.owner, f.other));
+        let num_internal = internal.len();
+        boundary.sort_by_key(|f| match f.other {
+            Other::Patch(p) => p,
+            _ => u16::MAX,
+        });
+        let mut patch_start = [0usize; NUM_PATCHES + 1];
+        for p in 0..NUM_PATCHES {
+            patch_start[p + 1] = patch_start[p]
+                + boundary
+                    .iter()
+                    .filter(|f| f.other == Other::Patch(p as u16))
+                    .count();
+        }
+        for s in patch_start.iter_mut() {
+            *s += num_internal;
+        }
+        let me = self.rank as u32;
+        let first = self.first_element;
+        let key = |f: &Face| -> (u32, u64, u64) {
+            let Other::Halo(h) = f.other else {
+                return (u32::MAX, 0, 0);
+            };
+            let (r, g) = (self.halo.owners[h as usize], self.halo.global[h as usize]);
+            let mine = first + f.owner as u64;
+            if me < r {
+                (r, mine, g)
+            } else {
+                (r, g, mine)
+            }
+        };
+        halo.sort_unstable_by_key(key);
+        let mut halo_ranges = Vec::new();
+        let base = num_internal + boundary.len();
+        let mut a = 0;
+        while a < halo.len() {
+            let r = key(&halo[a]).0;
+            let b = a + halo[a..].partition_point(|f| key(f).0 == r);
+            halo_ranges.push((r, base + a..base + b));
+            a = b;
+        }
+        let mut faces = internal;
+        faces.append(&mut boundary);
+        faces.append(&mut halo);
+        Ok(Faces {
+            faces,
+            num_internal,
+            patch_start,
+            halo_ranges,
+        })
+    }
+
+    /// The send and receive lists of a cell-centred halo exchange, from
+    /// `faces` (this mesh's [`Mesh::faces`]).
+    pub fn cell_halo(&self, faces: &Faces) -> CellHalo {
+        let mut out = CellHalo::default();
+        for (r, range) in faces.halo_ranges() {
+            let mut send: Vec<u32> = Vec::new();
+            let mut recv: Vec<u32> = Vec::new();
+            for f in &faces.faces()[range.clone()] {
+                send.push(f.owner);
+                if let Other::Halo(h) = f.other {
+                    recv.push(h);
+                }
+            }
+            send.sort_unstable();
+            send.dedup();
+            recv.sort_unstable_by_key(|&h| self.halo.global[h as usize]);
+            recv.dedup();
+            out.ranks.push(*r);
+            out.send.push(send);
+            out.recv.push(recv);
+        }
+        out
+    }
+
+    /// Global number of local element `i`: local elements are numbered
+    /// contiguously per rank, in rank order.
+    pub fn global_element(&self, i: usize) -> u64 {
+        self.first_element + i as u64
+    }
+
+    /// Global number of local element 0.
+    pub fn first_element(&self) -> u64 {
+        self.first_element
+    }
+
+    /// The kept elements of other ranks touching local ones.
+    pub fn halo(&self) -> &Halo {
+        &self.halo
+    }
+
+    /// The global element number across face `f` (`None` on a boundary).
+    pub fn other_global(&self, f: &Face) -> Option<u64> {
+        match f.other {
+            Other::Element(j) => Some(self.global_element(j as usize)),
+            Other::Halo(h) => Some(self.halo.global[h as usize]),
+            Other::Patch(_) => None,
+        }
+    }
+
+    /// Centre of local element `i`, user units.
+    pub fn element_centre(&self, i: usize) -> [f64; 3] {
+        let e = self.elements[i];
+        let (c, h) = (e.coords(), e.side() as f64 / 2.0);
+        self.domain
+            .from_lattice([c[0] as f64 + h, c[1] as f64 + h, c[2] as f64 + h])
+    }
+
+    /// Volume of local element `i`, user units.
+    pub fn element_volume(&self, i: usize) -> f64 {
+        self.cells_to_volume((self.elements[i].side() as u64).pow(3))
+    }
+
+    /// Area of face `f`, user units.
+    pub fn face_area(&self, f: &Face) -> f64 {
+        let h = 1.0 / self.domain.scale();
+        f.lattice_area() * h * h
+    }
+
+    /// Centre of face `f`, user units.
+    pub fn face_centre(&self, f: &Face) -> [f64; 3] {
+        self.domain.from_lattice(f.lattice_centre())
+    }
+}
+
+fn at_is_halo(a: At) -> bool {
+    matches!(a, At::Halo(_))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pieces_cover_the_dropped_quarters() {
+        for kept in 1u8..15 {
+            let pieces = dropped_pieces(kept);
+            let area: i32 = pieces
+                .iter()
+                .map(|p| {
+                    let twice: i32 = (0..4)
+                        .map(|k| {
+                            let (a, b) = p[k];
+                            let (c, d) = p[(k + 1) % 4];
+                            a as i32 * d as i32 - c as i32 * b as i32
+                        })
+                        .sum();
+                    twice.abs()
+                })
+                .sum();
+            let dropped = 4 - kept.count_ones() as i32;
+            assert_eq!(area, 2 * dropped, "kept {kept:04b}");
+            // No piece covers a kept quarter's centre.
+            for p in &pieces {
+                for q in 0..4u8 {
+                    if kept & (1 << q) != 0 {
+                        let c = ((q & 1) as f64 + 0.5, (q >> 1) as f64 + 0.5);
+                        assert!(!inside(p, c), "kept {kept:04b} piece {p:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    fn inside(p: &[(u8, u8); 4], c: (f64, f64)) -> bool {
+        let mut sign = 0.0f64;
+        for k in 0..4 {
+            let (a, b) = (p[k].0 as f64, p[k].1 as f64);
+            let (x, y) = (p[(k + 1) % 4].0 as f64, p[(k + 1) % 4].1 as f64);
+            let cross = (x - a) * (c.1 - b) - (y - b) * (c.0 - a);
+            if cross != 0.0 {
+                if sign != 0.0 && cross.signum() != sign {
+                    return false;
+                }
+                sign = cross.signum();
+            }
+        }
+        true
+    }
+
+    #[test]
+    fn corners_follow_the_normal() {
+        for normal in 0..6u8 {
+            let axis = normal / 2;
+            let f = Face {
+                owner: 0,
+                other: Other::Patch(0),
+                origin: [4, 4, 4],
+                half: 2,
+                normal: axis | if normal % 2 == 1 { 4 } else { 0 },
+                shape: pack(WHOLE),
+            };
+            let c = f.corners();
+            let d = |a: [u32; 3], b: [u32; 3]| [0, 1, 2].map(|k| b[k] as f64 - a[k] as f64);
+            let (p, q) = (d(c[0], c[1]), d(c[0], c[2]));
+            let cross = [
+                p[1] * q[2] - p[2] * q[1],
+                p[2] * q[0] - p[0] * q[2],
+                p[0] * q[1] - p[1] * q[0],
+            ];
+            let n = f.unit_normal();
+            let dot: f64 = (0..3).map(|k| cross[k] * n[k]).sum();
+            assert!(dot > 0.0, "normal {normal}: {c:?}");
+            assert_eq!(f.lattice_area(), 16.0);
+            assert_eq!(f.lattice_centre(), {
+                let mut m = [4.0; 3];
+                let (u, v) = plane_axes(axis as usize);
+                m[u] = 6.0;
+                m[v] = 6.0;
+                m
+            });
+        }
+    }
+}
