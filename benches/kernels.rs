@@ -262,6 +262,7 @@ fn bench_mesh(c: &mut Criterion, s: &Sphere) {
     let opts = MeshOptions {
         keep: Keep::All,
         cut_rule: CutRule::Center,
+        clean_walls: false,
     };
     let mesh = Mesh::build(&tree, &s.domain, Some(&classes), &opts).expect("mesh");
     eprintln!(

@@ -48,6 +48,7 @@ struct Case {
     keep: Keep,
     /// Weight the partition towards the bottom of the cube.
     skewed: bool,
+    clean_walls: bool,
 }
 
 fn build(comm: CommRef, case: &Case) -> Mesh {
@@ -68,6 +69,7 @@ fn build(comm: CommRef, case: &Case) -> Mesh {
     let opts = MeshOptions {
         keep: case.keep,
         cut_rule: CutRule::Center,
+        clean_walls: case.clean_walls,
     };
     Mesh::build(&t, &domain, Some(&classes), &opts).unwrap()
 }
@@ -309,6 +311,7 @@ fn child() {
             conn: Connectivity::Corner,
             keep: Keep::All,
             skewed: false,
+            clean_walls: false,
         },
         Case {
             shape: "torus",
@@ -316,6 +319,7 @@ fn child() {
             conn: Connectivity::Edge,
             keep: Keep::Outside,
             skewed: true,
+            clean_walls: false,
         },
         Case {
             shape: "sphere",
@@ -323,6 +327,7 @@ fn child() {
             conn: Connectivity::Corner,
             keep: Keep::Inside,
             skewed: true,
+            clean_walls: false,
         },
         Case {
             shape: "torus",
@@ -330,15 +335,33 @@ fn child() {
             conn: Connectivity::Corner,
             keep: Keep::Outside,
             skewed: false,
+            clean_walls: false,
+        },
+        Case {
+            shape: "torus",
+            level: 6,
+            conn: Connectivity::Corner,
+            keep: Keep::Inside,
+            skewed: true,
+            clean_walls: true,
+        },
+        Case {
+            shape: "sphere",
+            level: 6,
+            conn: Connectivity::Edge,
+            keep: Keep::Outside,
+            skewed: false,
+            clean_walls: true,
         },
     ];
     for case in &cases {
         let tag = format!(
-            "{} L{} {} keep {} np {}",
+            "{} L{} {} keep {}{} np {}",
             case.shape,
             case.level,
             case.conn.name(),
             case.keep.name(),
+            if case.clean_walls { " clean walls" } else { "" },
             comm.size()
         );
         let mesh = build(comm.clone(), case);

@@ -237,6 +237,7 @@ fn build(comm: CommRef, case: &Case) -> (Mesh, Domain) {
     let opts = MeshOptions {
         keep: case.keep,
         cut_rule: CutRule::Center,
+        clean_walls: false,
     };
     (
         Mesh::build(&t, &domain, Some(&classes), &opts).unwrap(),

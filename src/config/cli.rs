@@ -15,6 +15,7 @@ use super::case::CaseFile;
 use super::{Balance, Command, Config, ConfigError};
 use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
+use crate::io::openfoam::FoamFormat;
 use crate::error::{Error, Result};
 use crate::regions::Region;
 
@@ -38,11 +39,16 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("leak.path", "--leak-path"),
     ("mesh.keep", "--keep"),
     ("mesh.cut_rule", "--cut-rule"),
+    ("mesh.patches", "--patch"),
+    ("mesh.clean_walls", "--clean-walls"),
     ("output.quiet", "--quiet"),
     ("output.stats", "--stats"),
     ("output.leaves", "--write-leaves"),
     ("output.refined_leaves", "--write-refined"),
     ("output.vtu", "--out"),
+    ("output.openfoam", "--openfoam"),
+    ("output.openfoam_format", "--openfoam-format"),
+    ("output.overwrite", "--overwrite"),
     ("regions", "--region"),
 ];
 
@@ -187,6 +193,33 @@ struct MeshArgs {
     /// class; point data global_id, hanging)
     #[arg(long, value_name = "NAME.pvtu")]
     out: Option<PathBuf>,
+    /// Write an OpenFOAM case: DIR/constant/polyMesh on one rank,
+    /// DIR/processor<r>/constant/polyMesh on several (run solvers with
+    /// -parallel), and the system/ files that are absent
+    #[arg(long, value_name = "DIR")]
+    openfoam: Option<PathBuf>,
+    /// Lists in the OpenFOAM files: binary or ascii [default: binary]
+    #[arg(long, value_name = "FORMAT", value_parser = FoamFormat::parse)]
+    openfoam_format: Option<FoamFormat>,
+    /// Replace an existing OpenFOAM mesh
+    #[arg(long)]
+    overwrite: bool,
+    /// Rename a patch, OLD=NEW (repeatable): the sides xmin xmax ymin ymax
+    /// zmin zmax, the surface by its file's stem or as `surface`
+    #[arg(long, value_name = "OLD=NEW", value_parser = parse_rename)]
+    patch: Vec<(String, String)>,
+    /// Drop kept leaves touching the rest only along an edge or at a
+    /// corner, or with kept neighbours along fewer than three axes, so the
+    /// walls are manifold [default: true with --openfoam, else false]
+    #[arg(long, value_name = "BOOL")]
+    clean_walls: Option<bool>,
+}
+
+fn parse_rename(s: &str) -> std::result::Result<(String, String), String> {
+    match s.split_once('=') {
+        Some((a, b)) if !a.is_empty() => Ok((a.to_string(), b.to_string())),
+        _ => Err(format!("expects OLD=NEW, got '{s}'")),
+    }
 }
 
 /// The options of `check`.
@@ -245,7 +278,10 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
             })
         }
         CliCommand::Octree(o) => (Command::Octree, o, None),
-        CliCommand::Mesh(m) => (Command::Mesh, m.octree, Some((m.keep, m.cut_rule, m.out))),
+        CliCommand::Mesh(m) => {
+            let foam = (m.openfoam, m.openfoam_format, m.overwrite, m.patch, m.clean_walls);
+            (Command::Mesh, m.octree, Some((m.keep, m.cut_rule, m.out, foam)))
+        }
     };
     let case = if octree.input.ends_with(".toml") {
         Some(CaseFile::read(octree.input.as_ref())?)
@@ -351,7 +387,27 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
             *field = value.clone();
         }
     }
-    if let Some((keep, cut_rule, out)) = mesh {
+    if let Some((keep, cut_rule, out, (foam, format, overwrite, renames, clean))) = mesh {
+        if set("mesh.clean_walls", clean.is_some()) {
+            config.mesh.clean_walls = clean;
+        }
+        if set("output.openfoam", foam.is_some()) {
+            config.output.openfoam = foam;
+        }
+        if let Some(f) = format {
+            set("output.openfoam_format", true);
+            config.output.openfoam_format = f;
+        }
+        if set("output.overwrite", overwrite) {
+            config.output.overwrite = true;
+        }
+        if set("mesh.patches", !renames.is_empty()) {
+            for (a, b) in renames {
+                if config.mesh.patches.insert(a.clone(), b).is_some() {
+                    return Err(Error::invalid(format!("--patch renames '{a}' twice")));
+                }
+            }
+        }
         if let Some(k) = keep {
             set("mesh.keep", true);
             config.mesh.keep = k;

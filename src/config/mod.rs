@@ -64,6 +64,7 @@
 pub mod case;
 pub mod cli;
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
@@ -71,6 +72,8 @@ use serde::{Deserialize, Serialize};
 use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::domain::{Domain, DEFAULT_FIT};
+use crate::io::openfoam::FoamFormat;
+use crate::mesh::patches::PatchNames;
 use crate::octant::{Connectivity, MAX_LEVEL};
 use crate::regions::Region;
 
@@ -251,6 +254,16 @@ pub struct MeshConfig {
     /// their centre is on the kept side (`center`), always (`all`) or never
     /// (`none`).
     pub cut_rule: CutRule,
+    /// Patch renames, `{ default name = new name }`: the sides are `xmin
+    /// xmax ymin ymax zmin zmax`, the surface is named after its file's
+    /// stem (also reachable as `surface`). Names follow OpenFOAM's word
+    /// rules and must be unique.
+    pub patches: BTreeMap<String, String>,
+    /// Drop kept leaves that touch the rest only along an edge or at a
+    /// corner, or have kept neighbours along fewer than three axes, so the
+    /// walls are manifold (see [`crate::mesh::manifold`]). Unset: on when
+    /// writing an OpenFOAM case.
+    pub clean_walls: Option<bool>,
 }
 
 impl Default for MeshConfig {
@@ -258,6 +271,8 @@ impl Default for MeshConfig {
         MeshConfig {
             keep: Keep::All,
             cut_rule: CutRule::default(),
+            patches: BTreeMap::new(),
+            clean_walls: None,
         }
     }
 }
@@ -279,6 +294,14 @@ pub struct OutputConfig {
     /// The mesh: one binary VTU per rank and a PVTU (a name ending in
     /// `.pvtu`).
     pub vtu: Option<PathBuf>,
+    /// An OpenFOAM case directory: `constant/polyMesh` on one rank,
+    /// `processor<r>/constant/polyMesh` on several, and the `system/` files
+    /// that are absent.
+    pub openfoam: Option<PathBuf>,
+    /// `binary` (default) or `ascii` lists in the OpenFOAM files.
+    pub openfoam_format: FoamFormat,
+    /// Replace an existing OpenFOAM mesh.
+    pub overwrite: bool,
 }
 
 /// A problem with one key of a configuration. `message` follows the key's
@@ -336,11 +359,16 @@ pub const KEYS: &[&str] = &[
     "leak.path",
     "mesh.keep",
     "mesh.cut_rule",
+    "mesh.patches",
+    "mesh.clean_walls",
     "output.quiet",
     "output.stats",
     "output.leaves",
     "output.refined_leaves",
     "output.vtu",
+    "output.openfoam",
+    "output.openfoam_format",
+    "output.overwrite",
     "regions",
 ];
 
@@ -459,8 +487,22 @@ impl Config {
                     ));
                 }
             }
+            if let Err(e) = self.patch_names() {
+                return Err(ConfigError::new("mesh.patches", e.message().to_string()));
+            }
         }
         Ok(())
+    }
+
+    /// The patch names: the defaults for the configured surface, renamed
+    /// by `mesh.patches`.
+    pub fn patch_names(&self) -> crate::Result<PatchNames> {
+        PatchNames::new(&self.surface.file).renamed(
+            self.mesh
+                .patches
+                .iter()
+                .map(|(a, b)| (a.as_str(), b.as_str())),
+        )
     }
 
     /// The inside rule the run classifies with: the configured one, `auto`

@@ -1,7 +1,9 @@
 //! Files octmesh writes and reads: leaf lists, VTK XML meshes (`vtu`), JSON
-//! statistics and reports (`json`), leak paths (`leak_path`), and (in `geometry::stl`) STL.
+//! statistics and reports (`json`), leak paths (`leak_path`), OpenFOAM cases
+//! (`openfoam`), and (in `geometry::stl`) STL.
 
 pub mod json;
 pub mod leak_path;
 pub mod leaves;
+pub mod openfoam;
 pub mod vtu;

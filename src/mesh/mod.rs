@@ -53,6 +53,8 @@
 
 pub(crate) mod dual;
 pub mod faces;
+pub mod manifold;
+pub mod patches;
 pub(crate) mod numbering;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass};
@@ -82,6 +84,10 @@ pub struct MeshOptions {
     /// What happens to leaves touching the surface when keeping inside or
     /// outside.
     pub cut_rule: CutRule,
+    /// Drop the kept leaves that make the walls non-manifold or have kept
+    /// neighbours along fewer than three axes ([`manifold`]), as a
+    /// finite-volume code wants.
+    pub clean_walls: bool,
 }
 
 impl Default for MeshOptions {
@@ -89,6 +95,7 @@ impl Default for MeshOptions {
         MeshOptions {
             keep: Keep::All,
             cut_rule: CutRule::Center,
+            clean_walls: false,
         }
     }
 }
@@ -126,6 +133,9 @@ pub struct MeshCounts {
     pub elements_with_hanging: u64,
     /// Ghost leaves over all ranks.
     pub ghosts: u64,
+    /// Leaves the selection kept but the wall clean-up dropped
+    /// ([`MeshOptions::clean_walls`]).
+    pub cleaned: u64,
 }
 
 /// One rank's part of the mesh. See the module documentation.
@@ -190,7 +200,18 @@ impl Mesh {
                 &unclassified
             }
         };
-        let keep = |bits: u8| keeps(opts.keep, opts.cut_rule, bits);
+        let keep = |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);
+        let mut cleaned_classes;
+        let mut cleaned = 0;
+        let local_class: &[u8] = if opts.clean_walls && opts.keep != Keep::All {
+            cleaned_classes = local_class.to_vec();
+            cleaned = timer.time(comm, "clean", || {
+                manifold::clean_walls(tree, &mut cleaned_classes, keep)
+            });
+            &cleaned_classes
+        } else {
+            local_class
+        };
 
         // Each leaf travels with its class and, when kept, its global
         // element number, so the halo of the finite-volume faces needs no
@@ -264,6 +285,7 @@ impl Mesh {
         mesh.counts.edge_hanging_nodes = sums[2];
         mesh.counts.elements_with_hanging = sums[3];
         mesh.counts.ghosts = sums[4];
+        mesh.counts.cleaned = cleaned;
         mesh.timer = timer;
         Ok(mesh)
     }

@@ -5,7 +5,9 @@ use std::path::Path;
 use crate::classify::{CutRule, Keep};
 use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
+use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
 use crate::io::vtu::write_mesh;
+use crate::mesh::patches::PatchNames;
 use crate::mesh::{Mesh, MeshOptions};
 
 use super::*;
@@ -30,7 +32,17 @@ impl Session {
         let (tree, domain) = self.tree_or_state()?;
         let classes = self.classes.rule.map(|_| self.classes.bits.as_slice());
         let shown = self.progress("mesh", None);
-        let mesh = Mesh::build(tree, domain, classes, &MeshOptions { keep, cut_rule });
+        let clean_walls = self
+            .config
+            .mesh
+            .clean_walls
+            .unwrap_or(self.config.output.openfoam.is_some());
+        let opts = MeshOptions {
+            keep,
+            cut_rule,
+            clean_walls,
+        };
+        let mesh = Mesh::build(tree, domain, classes, &opts);
         drop(shown);
         let mesh = mesh?;
         self.timer.append(mesh.phase_timer());
@@ -40,6 +52,7 @@ impl Session {
                 "ghost" => Some(c.ghosts),
                 "nodes" => Some(c.independent_nodes + c.face_hanging_nodes + c.edge_hanging_nodes),
                 "connectivity" => Some(c.elements),
+                "clean" => Some(c.cleaned),
                 _ => None,
             };
             self.observer.event(&Event::Phase {
@@ -72,12 +85,7 @@ impl Session {
     /// caller's point `fields` (name, one value per local node). Phase
     /// `write`.
     pub fn write_vtu(&mut self, pvtu: &Path, fields: &[(&str, &[f64])]) -> Result<()> {
-        let local = self
-            .mesh
-            .as_ref()
-            .map(|_| ())
-            .ok_or_else(|| Error::new(ErrorKind::State, "there is no mesh: build it first"));
-        agree(&*self.comm, local)?;
+        self.mesh_or_state()?;
         let comm = self.comm.clone();
         let mesh = &self.mesh;
         self.timer.time(&*comm, "write", || match mesh {
@@ -87,5 +95,76 @@ impl Session {
         self.report_phase(None);
         self.observer.event(&Event::Wrote(pvtu));
         Ok(())
+    }
+
+    /// The mesh, or a state error on every rank.
+    fn mesh_or_state(&self) -> Result<()> {
+        let local = self
+            .mesh
+            .as_ref()
+            .map(|_| ())
+            .ok_or_else(|| Error::new(ErrorKind::State, "there is no mesh: build it first"));
+        agree(&*self.comm, local)
+    }
+
+    /// The current mesh's finite-volume faces ([`crate::mesh::faces`]),
+    /// extracted on first need. Phase `faces`.
+    pub fn faces(&mut self) -> Result<&Faces> {
+        self.mesh_or_state()?;
+        let current = self.faces.as_ref().map(|f| f.0) == Some(self.mesh_generation);
+        if !current {
+            let comm = self.comm.clone();
+            let mesh = self.mesh.as_ref();
+            let faces = self.timer.time(&*comm, "faces", || match mesh {
+                Some(m) => m.faces(),
+                None => Ok(Faces::default()),
+            });
+            let faces = agree(&*comm, faces)?;
+            let mut n = [faces.faces().len() as u64];
+            self.comm.sum_u64(&mut n);
+            self.report_phase(Some(n[0]));
+            self.faces = Some((self.mesh_generation, faces));
+        }
+        Ok(&self.faces.as_ref().expect("faces were just made").1)
+    }
+
+    /// The patch names: the sides, the surface named after it, renamed by
+    /// `mesh.patches`.
+    pub fn patch_names(&self) -> Result<PatchNames> {
+        let name = match (&self.surface, &self.released) {
+            (Some(s), _) => s.name.as_str(),
+            (None, Some((_, _, n))) => n.as_str(),
+            _ => "surface",
+        };
+        PatchNames::new(name).renamed(
+            self.config
+                .mesh
+                .patches
+                .iter()
+                .map(|(a, b)| (a.as_str(), b.as_str())),
+        )
+    }
+
+    /// Writes the mesh as an OpenFOAM case in `dir`
+    /// ([`crate::io::openfoam`]) with `output.openfoam_format`,
+    /// `output.overwrite` and the session's patch names. Phases `faces`
+    /// (when not extracted yet) and `openfoam`.
+    pub fn write_openfoam(&mut self, dir: &Path) -> Result<FoamCounts> {
+        let patches = agree(&*self.comm, self.patch_names())?;
+        self.faces()?;
+        let opts = FoamOptions {
+            format: self.config.output.openfoam_format,
+            overwrite: self.config.output.overwrite,
+            patches,
+        };
+        let comm = self.comm.clone();
+        let (mesh, faces) = (&self.mesh, &self.faces);
+        let counts = self.timer.time(&*comm, "openfoam", || match (mesh, faces) {
+            (Some(m), Some((_, f))) => write_case(&*comm, dir, m, f, &opts),
+            _ => Ok(FoamCounts::default()),
+        })?;
+        self.report_phase(None);
+        self.observer.event(&Event::Wrote(dir));
+        Ok(counts)
     }
 }

@@ -34,7 +34,7 @@ use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{diagnose, SurfaceReport};
 use crate::geometry::{Aabb, Surface};
-use crate::mesh::Mesh;
+use crate::mesh::{Faces, Mesh};
 use crate::octree::LinearOctree;
 use crate::progress::{self, Progress, Style};
 use crate::refine::{LeafEstimate, SurfaceIndex};
@@ -126,6 +126,8 @@ pub struct Session {
     tree: Option<(LinearOctree, Domain)>,
     classes: Classes,
     mesh: Option<Mesh>,
+    /// The faces of the mesh of a generation.
+    faces: Option<(u64, Faces)>,
     facts: Facts,
 }
 
@@ -147,6 +149,7 @@ impl Session {
             tree: None,
             classes: Classes::default(),
             mesh: None,
+            faces: None,
             facts: Facts {
                 rss_start: peak_rss_bytes(),
                 ..Facts::default()
@@ -323,6 +326,9 @@ impl Session {
             self.build_mesh(m.keep, m.cut_rule)?;
             if let Some(out) = self.config.output.vtu.clone() {
                 self.write_vtu(&out, &[])?;
+            }
+            if let Some(dir) = self.config.output.openfoam.clone() {
+                self.write_openfoam(&dir)?;
             }
         }
         let stats = self.stats(command);

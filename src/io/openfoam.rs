@@ -1,0 +1,626 @@
+//! OpenFOAM cases: `constant/polyMesh` on one rank, and on P ranks one
+//! `processor<r>/constant/polyMesh` per rank with processor patches, laid
+//! out as `decomposePar` does, so a solver runs on it with `-parallel`
+//! without decomposing.
+//!
+//! # What is written
+//!
+//! Per mesh: `points` (vectorField), `faces` (faceList, or faceCompactList
+//! in binary: offsets, then point labels), `owner`, `neighbour`
+//! (labelList), `boundary` (polyBoundaryMesh). Labels are 32-bit and
+//! scalars 64-bit (`arch "LSB;label=32;scalar=64"`, Debian's build).
+//!
+//! - Cells are the local elements in Morton order.
+//! - Faces are [`crate::mesh::Faces`] in their order: internal faces
+//!   upper-triangular, then the patches `xmin xmax ymin ymax zmin zmax` and
+//!   the surface (a `wall`), then one `procBoundary<me>to<r>` patch per
+//!   neighbour rank. Points run counter-clockwise seen from the side the
+//!   normal points to (right-hand rule: from owner to neighbour, out of
+//!   the domain on a boundary).
+//! - Every face lists every mesh point on its edges, so a face with a
+//!   hanging point on an edge is a polygon with that point (as OpenFOAM's
+//!   `hexRef8` leaves them). Points are this rank's: the corners of its
+//!   faces, in the order its faces first use them.
+//! - Both sides of a processor patch list the shared faces in the same
+//!   order ([`crate::mesh::faces`]), each starting at the same point (the
+//!   lowest in lattice order); the higher rank's then run the other way.
+//!
+//! `system/controlDict`, `fvSchemes`, `fvSolution` (and on P ranks
+//! `decomposeParDict`) are written when absent and never overwritten.
+//!
+//! # Failures
+//!
+//! An existing mesh is replaced only with `overwrite`. Each rank writes its
+//! mesh beside the final place (`polyMesh.octmesh-partial`) and the meshes
+//! are moved in only when every rank has written its own: a failure on one
+//! rank leaves no case looking complete, and every rank reports it.
+
+use std::collections::HashMap;
+use std::fs;
+use std::hash::{BuildHasherDefault, Hasher};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use crate::comm::{agree, Comm};
+use crate::error::{Error, ErrorKind, Result};
+use crate::mesh::faces::{Faces, Other, NUM_PATCHES, SURFACE_PATCH};
+use crate::mesh::patches::PatchNames;
+use crate::mesh::Mesh;
+
+crate::named_enum! {
+    /// Binary or ASCII list data.
+    #[derive(Default)]
+    pub enum FoamFormat: "OpenFOAM format" {
+        /// Raw little-endian lists (OpenFOAM's `format binary`).
+        #[default]
+        Binary = "binary",
+        /// Text.
+        Ascii = "ascii",
+    }
+}
+
+/// How to write a case.
+#[derive(Clone, Debug, Default)]
+pub struct FoamOptions {
+    /// List encoding.
+    pub format: FoamFormat,
+    /// Replace an existing mesh.
+    pub overwrite: bool,
+    /// Patch names.
+    pub patches: PatchNames,
+}
+
+/// Sizes of what one rank wrote.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FoamCounts {
+    /// Points.
+    pub points: u64,
+    /// Faces, all kinds.
+    pub faces: u64,
+    /// Internal faces.
+    pub internal_faces: u64,
+    /// Cells.
+    pub cells: u64,
+}
+
+/// Lattice point as one word: 21 bits per axis.
+fn key(p: [u32; 3]) -> u64 {
+    p[0] as u64 | (p[1] as u64) << 21 | (p[2] as u64) << 42
+}
+
+fn unkey(k: u64) -> [u32; 3] {
+    let m = (1u64 << 21) - 1;
+    [(k & m) as u32, (k >> 21 & m) as u32, (k >> 42) as u32]
+}
+
+/// A multiplicative hash for lattice keys: std's SipHash costs more than
+/// the rest of the point numbering (measured, see ARCHITECTURE.md).
+#[derive(Default)]
+struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x100_0000_01b3);
+        }
+    }
+    fn write_u64(&mut self, k: u64) {
+        let h = k.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        self.0 = h ^ (h >> 29);
+    }
+}
+
+type KeyMap = HashMap<u64, u32, BuildHasherDefault<KeyHasher>>;
+
+/// A point that exists but no face used yet.
+const UNUSED: u32 = u32::MAX;
+
+/// This rank's polyMesh in memory: points and faces as point labels.
+struct PolyMesh {
+    points: Vec<[u32; 3]>,
+    offsets: Vec<u32>,
+    labels: Vec<u32>,
+}
+
+/// The midpoint of `a`-`b` when they differ along one axis by an even
+/// length.
+fn midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
+    let diff: Vec<usize> = (0..3).filter(|&k| a[k] != b[k]).collect();
+    if diff.len() != 1 {
+        return None;
+    }
+    let k = diff[0];
+    let (lo, hi) = (a[k].min(b[k]), a[k].max(b[k]));
+    if (hi - lo) % 2 != 0 {
+        return None;
+    }
+    let mut m = a;
+    m[k] = lo + (hi - lo) / 2;
+    Some(m)
+}
+
+fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
+    // Every corner of a kept element near this rank is a mesh point.
+    let mut map = KeyMap::default();
+    map.reserve(mesh.num_nodes() + 8 * mesh.halo().len());
+    for x in mesh.node_lattice() {
+        map.insert(key(x), UNUSED);
+    }
+    for h in &mesh.halo().leaves {
+        let (c, s) = (h.coords(), h.side());
+        for k in 0..8 {
+            let p = [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 });
+            map.insert(key(p), UNUSED);
+        }
+    }
+    let halo_start = faces.halo_range().start;
+    let mut points: Vec<[u32; 3]> = Vec::new();
+    let mut offsets = Vec::with_capacity(faces.faces().len() + 1);
+    offsets.push(0u32);
+    let mut labels: Vec<u32> = Vec::with_capacity(4 * faces.faces().len());
+    let mut poly: Vec<u64> = Vec::with_capacity(8);
+    for (i, f) in faces.faces().iter().enumerate() {
+        poly.clear();
+        let c = f.corners();
+        for k in 0..4 {
+            poly.push(key(c[k]));
+            if let Some(m) = midpoint(c[k], c[(k + 1) % 4]) {
+                if map.contains_key(&key(m)) {
+                    poly.push(key(m));
+                }
+            }
+        }
+        if i >= halo_start {
+            // Both sides start at the lowest point.
+            let at = (0..poly.len()).min_by_key(|&k| poly[k]).unwrap_or(0);
+            poly.rotate_left(at);
+        }
+        for &k in &poly {
+            let slot = map.entry(k).or_insert(UNUSED);
+            if *slot == UNUSED {
+                *slot = points.len() as u32;
+                points.push(unkey(k));
+            }
+            labels.push(*slot);
+        }
+        if labels.len() > i32::MAX as usize {
+            return Err(Error::new(ErrorKind::Limit, "more than 2^31 face labels on one rank"));
+        }
+        offsets.push(labels.len() as u32);
+    }
+    Ok(PolyMesh {
+        points,
+        offsets,
+        labels,
+    })
+}
+
+/// The directory of this rank's mesh.
+fn mesh_dir(case: &Path, rank: usize, size: usize) -> PathBuf {
+    if size == 1 {
+        case.join("constant").join("polyMesh")
+    } else {
+        case.join(format!("processor{rank}"))
+            .join("constant")
+            .join("polyMesh")
+    }
+}
+
+fn partial(dir: &Path) -> PathBuf {
+    dir.with_file_name("polyMesh.octmesh-partial")
+}
+
+fn io_err(what: &Path, e: std::io::Error) -> Error {
+    Error::io(format!("{}: {e}", what.display()))
+}
+
+/// Writes the case `dir` for `mesh`'s `faces` (collective).
+pub fn write_case(
+    comm: &dyn Comm,
+    dir: &Path,
+    mesh: &Mesh,
+    faces: &Faces,
+    opts: &FoamOptions,
+) -> Result<FoamCounts> {
+    let (me, p) = (comm.rank(), comm.size());
+    let target = mesh_dir(dir, me, p);
+    let check = if mesh.counts().elements == 0 {
+        Err(Error::invalid(
+            "the mesh has no elements: there is nothing to write as an OpenFOAM case",
+        ))
+    } else if target.exists() && !opts.overwrite {
+        Err(Error::invalid(format!(
+            "{} exists: pass --overwrite (or set output.overwrite) to replace it",
+            target.display()
+        )))
+    } else {
+        Ok(())
+    };
+    agree(comm, check)?;
+    let scratch = partial(&target);
+    let written = (|| -> Result<FoamCounts> {
+        let _ = fs::remove_dir_all(&scratch);
+        fs::create_dir_all(&scratch).map_err(|e| io_err(&scratch, e))?;
+        let poly = build_polymesh(mesh, faces)?;
+        write_polymesh(&scratch, mesh, faces, &poly, opts, me, p)
+    })();
+    if written.is_err() {
+        let _ = fs::remove_dir_all(&scratch);
+    }
+    let counts = match agree(comm, written) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = fs::remove_dir_all(&scratch);
+            return Err(e);
+        }
+    };
+    let moved = (|| -> Result<()> {
+        if target.exists() {
+            fs::remove_dir_all(&target).map_err(|e| io_err(&target, e))?;
+        }
+        fs::rename(&scratch, &target).map_err(|e| io_err(&target, e))?;
+        if me == 0 {
+            write_system(dir, p)?;
+            if p > 1 {
+                remove_extra_processors(dir, p)?;
+            }
+        }
+        Ok(())
+    })();
+    agree(comm, moved)?;
+    Ok(counts)
+}
+
+/// Removes `processor<r>` directories for `r >= p` left by an earlier run
+/// on more ranks (OpenFOAM counts them).
+fn remove_extra_processors(dir: &Path, p: usize) -> Result<()> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if let Some(r) = name.strip_prefix("processor").and_then(|r| r.parse::<usize>().ok()) {
+            if r >= p {
+                fs::remove_dir_all(e.path()).map_err(|err| io_err(&e.path(), err))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn header(
+    out: &mut impl Write,
+    format: FoamFormat,
+    class: &str,
+    location: &str,
+    object: &str,
+    note: Option<&str>,
+) -> std::io::Result<()> {
+    writeln!(out, "/*--------------------------------*- C++ -*----------------------------------*\\")?;
+    writeln!(out, "  written by octmesh {}", env!("CARGO_PKG_VERSION"))?;
+    writeln!(out, "\\*---------------------------------------------------------------------------*/")?;
+    writeln!(out, "FoamFile\n{{")?;
+    writeln!(out, "    version     2.0;")?;
+    writeln!(out, "    format      {};", format.name())?;
+    writeln!(out, "    arch        \"LSB;label=32;scalar=64\";")?;
+    writeln!(out, "    class       {class};")?;
+    if let Some(n) = note {
+        writeln!(out, "    note        \"{n}\";")?;
+    }
+    writeln!(out, "    location    \"{location}\";")?;
+    writeln!(out, "    object      {object};")?;
+    writeln!(out, "}}\n")
+}
+
+fn write_labels(out: &mut impl Write, format: FoamFormat, v: &[u32]) -> std::io::Result<()> {
+    write!(out, "{}\n(", v.len())?;
+    match format {
+        FoamFormat::Binary => {
+            let mut buf = Vec::with_capacity(4 * v.len());
+            for &x in v {
+                buf.extend_from_slice(&(x as i32).to_le_bytes());
+            }
+            out.write_all(&buf)?;
+            writeln!(out, ")")
+        }
+        FoamFormat::Ascii => {
+            writeln!(out)?;
+            for &x in v {
+                writeln!(out, "{x}")?;
+            }
+            writeln!(out, ")")
+        }
+    }
+}
+
+fn create(path: &Path) -> Result<BufWriter<fs::File>> {
+    fs::File::create(path)
+        .map(|f| BufWriter::with_capacity(1 << 20, f))
+        .map_err(|e| io_err(path, e))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_polymesh(
+    dir: &Path,
+    mesh: &Mesh,
+    faces: &Faces,
+    poly: &PolyMesh,
+    opts: &FoamOptions,
+    me: usize,
+    p: usize,
+) -> Result<FoamCounts> {
+    let fmt = opts.format;
+    let location = if p == 1 {
+        "constant/polyMesh".to_string()
+    } else {
+        format!("processor{me}/constant/polyMesh")
+    };
+    let loc = location.as_str();
+    let domain = mesh.domain();
+    let nf = faces.faces().len();
+    let ni = faces.num_internal();
+    let counts = FoamCounts {
+        points: poly.points.len() as u64,
+        faces: nf as u64,
+        internal_faces: ni as u64,
+        cells: mesh.elements().len() as u64,
+    };
+    let note = format!(
+        "nPoints:{} nCells:{} nFaces:{} nInternalFaces:{}",
+        counts.points, counts.cells, counts.faces, counts.internal_faces
+    );
+    let path = dir.join("points");
+    let result = (|| -> std::io::Result<()> {
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(&mut w, fmt, "vectorField", loc, "points", None)?;
+        write!(w, "{}\n(", poly.points.len())?;
+        let user = |q: &[u32; 3]| domain.from_lattice([q[0] as f64, q[1] as f64, q[2] as f64]);
+        match fmt {
+            FoamFormat::Binary => {
+                let mut buf = Vec::with_capacity(24 * poly.points.len());
+                for q in &poly.points {
+                    for x in user(q) {
+                        buf.extend_from_slice(&x.to_le_bytes());
+                    }
+                }
+                w.write_all(&buf)?;
+                writeln!(w, ")")?;
+            }
+            FoamFormat::Ascii => {
+                writeln!(w)?;
+                for q in &poly.points {
+                    let x = user(q);
+                    writeln!(w, "({:.17e} {:.17e} {:.17e})", x[0], x[1], x[2])?;
+                }
+                writeln!(w, ")")?;
+            }
+        }
+        w.flush()?;
+
+        let path = dir.join("faces");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        match fmt {
+            FoamFormat::Binary => {
+                header(&mut w, fmt, "faceCompactList", loc, "faces", None)?;
+                write_labels(&mut w, fmt, &poly.offsets)?;
+                writeln!(w)?;
+                write_labels(&mut w, fmt, &poly.labels)?;
+            }
+            FoamFormat::Ascii => {
+                header(&mut w, fmt, "faceList", loc, "faces", None)?;
+                writeln!(w, "{nf}\n(")?;
+                for f in poly.offsets.windows(2) {
+                    let l = &poly.labels[f[0] as usize..f[1] as usize];
+                    write!(w, "{}(", l.len())?;
+                    for (k, x) in l.iter().enumerate() {
+                        if k > 0 {
+                            write!(w, " ")?;
+                        }
+                        write!(w, "{x}")?;
+                    }
+                    writeln!(w, ")")?;
+                }
+                writeln!(w, ")")?;
+            }
+        }
+        w.flush()?;
+
+        let owner: Vec<u32> = faces.faces().iter().map(|f| f.owner).collect();
+        let path = dir.join("owner");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(&mut w, fmt, "labelList", loc, "owner", Some(&note))?;
+        write_labels(&mut w, fmt, &owner)?;
+        w.flush()?;
+
+        let neighbour: Vec<u32> = faces.faces()[..ni]
+            .iter()
+            .map(|f| match f.other {
+                Other::Element(j) => j,
+                _ => 0,
+            })
+            .collect();
+        let path = dir.join("neighbour");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(&mut w, fmt, "labelList", loc, "neighbour", Some(&note))?;
+        write_labels(&mut w, fmt, &neighbour)?;
+        w.flush()?;
+
+        let path = dir.join("boundary");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(&mut w, FoamFormat::Ascii, "polyBoundaryMesh", loc, "boundary", None)?;
+        let halo = faces.halo_ranges();
+        writeln!(w, "{}\n(", NUM_PATCHES + halo.len())?;
+        for q in 0..NUM_PATCHES {
+            let r = faces.patch_range(q);
+            writeln!(w, "    {}\n    {{", opts.patches.name(q))?;
+            if q == SURFACE_PATCH as usize {
+                writeln!(w, "        type            wall;")?;
+                writeln!(w, "        inGroups        List<word> 1(wall);")?;
+            } else {
+                writeln!(w, "        type            patch;")?;
+            }
+            writeln!(w, "        nFaces          {};", r.len())?;
+            writeln!(w, "        startFace       {};", r.start)?;
+            writeln!(w, "    }}")?;
+        }
+        for (r, range) in halo {
+            writeln!(w, "    procBoundary{me}to{r}\n    {{")?;
+            writeln!(w, "        type            processor;")?;
+            writeln!(w, "        inGroups        List<word> 1(processor);")?;
+            writeln!(w, "        nFaces          {};", range.len())?;
+            writeln!(w, "        startFace       {};", range.start)?;
+            writeln!(w, "        matchTolerance  0.0001;")?;
+            writeln!(w, "        transform       unknown;")?;
+            writeln!(w, "        myProcNo        {me};")?;
+            writeln!(w, "        neighbProcNo    {r};")?;
+            writeln!(w, "    }}")?;
+        }
+        writeln!(w, ")")?;
+        w.flush()
+    })();
+    result.map_err(|e| Error::io(format!("writing {}: {e}", dir.display())))?;
+    Ok(counts)
+}
+
+/// Writes the minimal `system/` files that are absent.
+fn write_system(case: &Path, p: usize) -> Result<()> {
+    let sys = case.join("system");
+    fs::create_dir_all(&sys).map_err(|e| io_err(&sys, e))?;
+    let mut files = vec![
+        ("controlDict", CONTROL_DICT.to_string()),
+        ("fvSchemes", FV_SCHEMES.to_string()),
+        ("fvSolution", FV_SOLUTION.to_string()),
+    ];
+    if p > 1 {
+        files.push((
+            "decomposeParDict",
+            format!("numberOfSubdomains {p};\n\nmethod          scotch;\n"),
+        ));
+    }
+    for (name, body) in files {
+        let path = sys.join(name);
+        if path.exists() {
+            continue;
+        }
+        let mut text = Vec::new();
+        header(&mut text, FoamFormat::Ascii, "dictionary", "system", name, None)
+            .and_then(|_| text.write_all(body.as_bytes()))
+            .map_err(|e| io_err(&path, e))?;
+        fs::write(&path, text).map_err(|e| io_err(&path, e))?;
+    }
+    Ok(())
+}
+
+const CONTROL_DICT: &str = "application     simpleFoam;
+
+startFrom       latestTime;
+startTime       0;
+stopAt          endTime;
+endTime         500;
+deltaT          1;
+writeControl    timeStep;
+writeInterval   100;
+purgeWrite      0;
+writeFormat     binary;
+writePrecision  8;
+writeCompression off;
+timeFormat      general;
+timePrecision   6;
+runTimeModifiable true;
+";
+
+const FV_SCHEMES: &str = "ddtSchemes
+{
+    default         steadyState;
+}
+
+gradSchemes
+{
+    default         Gauss linear;
+}
+
+divSchemes
+{
+    default         none;
+    div(phi,U)      bounded Gauss linearUpwind grad(U);
+    div((nuEff*dev2(T(grad(U))))) Gauss linear;
+    div(div(phi,U)) Gauss linear;
+}
+
+laplacianSchemes
+{
+    default         Gauss linear corrected;
+}
+
+interpolationSchemes
+{
+    default         linear;
+}
+
+snGradSchemes
+{
+    default         corrected;
+}
+";
+
+const FV_SOLUTION: &str = "solvers
+{
+    p
+    {
+        solver          GAMG;
+        smoother        GaussSeidel;
+        tolerance       1e-7;
+        relTol          0.01;
+    }
+
+    Phi
+    {
+        $p;
+    }
+
+    U
+    {
+        solver          smoothSolver;
+        smoother        GaussSeidel;
+        tolerance       1e-8;
+        relTol          0.1;
+    }
+}
+
+SIMPLE
+{
+    nNonOrthogonalCorrectors 0;
+    consistent      yes;
+}
+
+potentialFlow
+{
+    nNonOrthogonalCorrectors 3;
+}
+
+relaxationFactors
+{
+    equations
+    {
+        U               0.9;
+        \".*\"            0.9;
+    }
+}
+";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_round_trip_and_midpoints() {
+        let p = [1 << 19, 12345, 0];
+        assert_eq!(unkey(key(p)), p);
+        assert_eq!(midpoint([0, 0, 0], [4, 0, 0]), Some([2, 0, 0]));
+        assert_eq!(midpoint([0, 0, 0], [3, 0, 0]), None);
+        assert_eq!(midpoint([0, 0, 0], [2, 2, 0]), None);
+    }
+}

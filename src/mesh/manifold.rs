@@ -1,0 +1,380 @@
+//! Clean walls: drop kept leaves until the boundary of the kept region is a
+//! manifold and every element has kept neighbours along all three axes, as
+//! snappyHexMesh's castellated stage leaves its meshes.
+//!
+//! Two kept elements that touch only along an edge or at a corner make the
+//! wall patch non-manifold (OpenFOAM's `checkMesh`: "multiply connected
+//! (shared edge)"), and an element whose kept neighbours all lie along one
+//! or two axes has a singular least-squares stencil ("cells with small
+//! determinant"). At every corner `v` of a kept leaf the eight finest cells
+//! around `v` are looked at, each kept or not (outside the domain counts as
+//! not kept):
+//!
+//! ```text
+//!     kept ■  dropped □           ■ □      the kept cells of the 2x2x2 block
+//!                                 □ ■  ←   must be face-connected, and so
+//!       (one layer of the block)           must the dropped ones
+//! ```
+//!
+//! - when the kept cells fall in several face-connected groups, the leaves
+//!   outside the largest group (ties: the group with the lowest cell) go;
+//! - when the dropped cells do, the lowest kept cell touching two dropped
+//!   groups goes;
+//! - a kept leaf with no kept face neighbour across either face normal to
+//!   some axis goes.
+//!
+//! Every rank decides for its own leaves from the statuses of the previous
+//! sweep (its own and its ghosts'), so the result does not depend on the
+//! partition. Sweeps repeat around the leaves dropped last until none is.
+
+use crate::comm::Comm;
+use crate::ghost::build_ghost_layer;
+use crate::octant::{morton_encode, Octant, ROOT_LEN};
+use crate::octree::LinearOctree;
+
+/// Class bit of a leaf the clean-up dropped.
+pub const REMOVED: u8 = 0x80;
+/// Class bit of a leaf dropped in the last sweep.
+const JUST_REMOVED: u8 = 0x40;
+
+/// Drops kept leaves (sets [`REMOVED`] in their class byte) as the module
+/// documentation says; `keep` tells which class bytes are kept before. Returns
+/// the number dropped over all ranks. Collective.
+pub(crate) fn clean_walls(
+    tree: &LinearOctree,
+    classes: &mut [u8],
+    keep: impl Fn(u8) -> bool + Copy,
+) -> u64 {
+    let comm: &dyn Comm = &**tree.comm();
+    let kept = move |b: u8| b & REMOVED == 0 && keep(b);
+    let mut total = 0u64;
+    let mut first = true;
+    loop {
+        let ghosts = build_ghost_layer(tree, |i| classes[i] as u64);
+        let b = ghosts.before;
+        let nl = tree.local_len();
+        let mut leaves: Vec<Octant> = Vec::with_capacity(ghosts.len() + nl);
+        leaves.extend_from_slice(&ghosts.leaves[..b]);
+        leaves.extend_from_slice(tree.leaves());
+        leaves.extend_from_slice(&ghosts.leaves[b..]);
+        let mut class: Vec<u8> = Vec::with_capacity(leaves.len());
+        class.extend(ghosts.data[..b].iter().map(|&w| w as u8));
+        class.extend_from_slice(classes);
+        class.extend(ghosts.data[b..].iter().map(|&w| w as u8));
+        let view = View {
+            begins: leaves.iter().map(|l| l.cell_begin()).collect(),
+            leaves: &leaves,
+            class: &class,
+            kept: &kept,
+        };
+        let local = b..b + nl;
+        // Candidates: kept local leaves with a face neighbour that is not
+        // kept (first sweep; no other kept leaf can go, see the module
+        // documentation), then the kept local leaves around those dropped
+        // in the last sweep.
+        let mut candidates: Vec<usize> = Vec::new();
+        if first {
+            for i in local.clone() {
+                if kept(class[i]) && view.open_face(i) {
+                    candidates.push(i);
+                }
+            }
+        } else {
+            for j in 0..leaves.len() {
+                if class[j] & JUST_REMOVED != 0 {
+                    view.ring(j, |k| {
+                        if local.contains(&k) && kept(class[k]) {
+                            candidates.push(k);
+                        }
+                    });
+                }
+            }
+            candidates.sort_unstable();
+            candidates.dedup();
+        }
+        let drop: Vec<usize> = candidates
+            .into_iter()
+            .filter(|&i| view.must_go(i))
+            .map(|i| i - b)
+            .collect();
+        for c in classes.iter_mut() {
+            *c &= !JUST_REMOVED;
+        }
+        for &i in &drop {
+            classes[i] |= REMOVED | JUST_REMOVED;
+        }
+        let mut n = [drop.len() as u64];
+        comm.sum_u64(&mut n);
+        total += n[0];
+        first = false;
+        if n[0] == 0 {
+            break;
+        }
+    }
+    for c in classes.iter_mut() {
+        *c &= !JUST_REMOVED;
+    }
+    total
+}
+
+/// Local and ghost leaves in Morton order with their class bytes.
+struct View<'a, K: Fn(u8) -> bool> {
+    begins: Vec<u64>,
+    leaves: &'a [Octant],
+    class: &'a [u8],
+    kept: &'a K,
+}
+
+impl<K: Fn(u8) -> bool> View<'_, K> {
+    /// The leaf holding the finest cell at `x`, searched outwards from leaf
+    /// `hint` (neighbours are usually close in Morton order).
+    fn at(&self, x: [i64; 3], hint: usize) -> Option<usize> {
+        if x.iter().any(|&c| c < 0 || c >= ROOT_LEN as i64) {
+            return None;
+        }
+        let m = morton_encode(x[0] as u32, x[1] as u32, x[2] as u32);
+        let b = &self.begins;
+        let n = b.len();
+        // Bracket the answer by doubling steps from the hint.
+        let (mut lo, mut hi);
+        if b[hint] <= m {
+            lo = hint;
+            let mut step = 1;
+            while lo + step < n && b[lo + step] <= m {
+                lo += step;
+                step *= 2;
+            }
+            hi = (lo + step).min(n);
+        } else {
+            hi = hint;
+            let mut step = 1;
+            while hi >= step && b[hi - step] > m {
+                hi -= step;
+                step *= 2;
+            }
+            lo = hi.saturating_sub(step);
+            if b[lo] > m {
+                return None;
+            }
+        }
+        lo += b[lo..hi].partition_point(|&c| c <= m) - 1;
+        hi = lo;
+        (self.leaves[hi].cell_end() > m).then_some(hi)
+    }
+
+    fn kept_at(&self, x: [i64; 3], hint: usize) -> bool {
+        self.at(x, hint)
+            .is_some_and(|j| (self.kept)(self.class[j]))
+    }
+
+    /// Whether some face neighbour of leaf `i` is not kept (or outside).
+    fn open_face(&self, i: usize) -> bool {
+        let l = self.leaves[i];
+        let (c, s) = (l.coords().map(|v| v as i64), l.side() as i64);
+        let h = (s / 2).max(1);
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for plus in [false, true] {
+                let mut p = c;
+                p[axis] += if plus { s } else { -1 };
+                for (a, b) in [(0, 0), (h, 0), (0, h), (h, h)] {
+                    let mut q = p;
+                    q[u] += a;
+                    q[v] += b;
+                    if !self.kept_at(q, i) {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+
+    /// Calls `f` with every leaf touching leaf `i` (some more than once):
+    /// the leaves holding the ring of half-size cells around it, which
+    /// under 2:1 balance are all of them.
+    fn ring(&self, i: usize, mut f: impl FnMut(usize)) {
+        let l = self.leaves[i];
+        let (c, s) = (l.coords().map(|v| v as i64), l.side() as i64);
+        let h = (s / 2).max(1);
+        for k in 0..64 {
+            let g = [k & 3, (k >> 2) & 3, k >> 4].map(|v| v as i64);
+            if g.iter().all(|&v| v == 1 || v == 2) {
+                continue;
+            }
+            let x: [i64; 3] = std::array::from_fn(|a| {
+                c[a] + match g[a] {
+                    0 => -1,
+                    1 => 0,
+                    2 => h,
+                    _ => s,
+                }
+            });
+            if let Some(j) = self.at(x, i) {
+                f(j);
+            }
+        }
+    }
+
+    /// Whether kept leaf `i` must go.
+    fn must_go(&self, i: usize) -> bool {
+        let l = self.leaves[i];
+        let (c, s) = (l.coords().map(|v| v as i64), l.side() as i64);
+        let h = (s / 2).max(1);
+        // Statuses of a 4x4x4 grid of half-size cells centred on the leaf
+        // (the leaf is the middle 2x2x2): the cells next to the leaf's
+        // faces, edges and corners.
+        let mut grid = [true; 64];
+        for (k, cell) in grid.iter_mut().enumerate() {
+            let g = [k & 3, (k >> 2) & 3, k >> 4];
+            if g.iter().all(|&v| v == 1 || v == 2) {
+                continue;
+            }
+            let x: [i64; 3] = std::array::from_fn(|a| {
+                c[a] + match g[a] {
+                    0 => -1,
+                    1 => 0,
+                    2 => h,
+                    _ => s,
+                }
+            });
+            *cell = self.kept_at(x, i);
+        }
+        let at = |g: [usize; 3]| grid[g[0] | g[1] << 2 | g[2] << 4];
+        // Kept neighbours along each axis.
+        for axis in 0..3 {
+            let any = [0usize, 3].iter().any(|&side| {
+                (1..3).any(|p| {
+                    (1..3).any(|q| {
+                        let mut g = [0; 3];
+                        g[axis] = side;
+                        g[(axis + 1) % 3] = p;
+                        g[(axis + 2) % 3] = q;
+                        at(g)
+                    })
+                })
+            });
+            if !any {
+                return true;
+            }
+        }
+        // The 2x2x2 blocks at the corners: corner bit a set = the high side,
+        // block cells from grid index 1 or 2 (the leaf's) outwards.
+        for corner in 0..8usize {
+            let kept: [bool; 8] = std::array::from_fn(|k| {
+                at(std::array::from_fn(|a| {
+                    let hi = (corner >> a) & 1 == 1;
+                    let bit = (k >> a) & 1;
+                    // Block cell bit 0 is the low side of the corner.
+                    match (hi, bit) {
+                        (false, 0) => 0,
+                        (false, _) => 1,
+                        (true, 0) => 2,
+                        (true, _) => 3,
+                    }
+                }))
+            });
+            let own = (0..3).fold(0usize, |k, a| k | (((corner >> a) & 1) ^ 1) << a);
+            if block_drops(&kept, own) {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// Face-connected groups of the cells `member` selects in a 2x2x2 block:
+/// a group label per cell (`u8::MAX` for non-members), labels numbered by
+/// lowest cell.
+fn groups(member: &[bool; 8]) -> ([u8; 8], usize) {
+    let mut label = [u8::MAX; 8];
+    let mut n = 0;
+    for start in 0..8 {
+        if !member[start] || label[start] != u8::MAX {
+            continue;
+        }
+        let mut stack = vec![start];
+        label[start] = n as u8;
+        while let Some(k) = stack.pop() {
+            for a in 0..3 {
+                let j = k ^ (1 << a);
+                if member[j] && label[j] == u8::MAX {
+                    label[j] = n as u8;
+                    stack.push(j);
+                }
+            }
+        }
+        n += 1;
+    }
+    (label, n)
+}
+
+/// Whether block cell `own` (kept) must go, by the block rules.
+fn block_drops(kept: &[bool; 8], own: usize) -> bool {
+    let (label, n) = groups(kept);
+    if n > 1 {
+        let mut size = vec![0usize; n];
+        for k in 0..8 {
+            if kept[k] {
+                size[label[k] as usize] += 1;
+            }
+        }
+        // Largest group; ties go to the lowest label (the lowest cell).
+        let best = (0..n).max_by_key(|&g| (size[g], std::cmp::Reverse(g))).unwrap_or(0);
+        return label[own] as usize != best;
+    }
+    let dropped: [bool; 8] = std::array::from_fn(|k| !kept[k]);
+    let (dl, dn) = groups(&dropped);
+    if dn > 1 {
+        let bridge = (0..8).find(|&k| {
+            kept[k] && {
+                let mut seen = [false; 8];
+                let mut count = 0;
+                for a in 0..3 {
+                    let j = k ^ (1 << a);
+                    if dropped[j] && !seen[dl[j] as usize] {
+                        seen[dl[j] as usize] = true;
+                        count += 1;
+                    }
+                }
+                count >= 2
+            }
+        });
+        return bridge == Some(own);
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn block(cells: &[usize]) -> [bool; 8] {
+        std::array::from_fn(|k| cells.contains(&k))
+    }
+
+    #[test]
+    fn block_rules() {
+        // Two cells sharing an edge only (0 and 3 differ in x and y): the
+        // higher one goes.
+        let b = block(&[0, 3]);
+        assert!(!block_drops(&b, 0));
+        assert!(block_drops(&b, 3));
+        // Corner contact only.
+        let b = block(&[1, 6]);
+        assert!(!block_drops(&b, 1) && block_drops(&b, 6));
+        // A larger group wins.
+        let b = block(&[0, 1, 6]);
+        assert!(!block_drops(&b, 0) && !block_drops(&b, 1) && block_drops(&b, 6));
+        // Manifold configurations keep everything.
+        for cells in [&[0usize][..], &[0, 1], &[0, 1, 2, 3], &[0, 1, 2, 3, 4, 5, 6, 7]] {
+            let b = block(cells);
+            assert!(cells.iter().all(|&k| !block_drops(&b, k)), "{cells:?}");
+        }
+        // Dropped cells touching along an edge only: a kept cell bridging
+        // both goes (the lowest).
+        let b = block(&[1, 2, 4, 5, 6, 7]);
+        let gone: Vec<usize> = (0..8).filter(|&k| b[k] && block_drops(&b, k)).collect();
+        assert_eq!(gone, vec![1]);
+    }
+}
