@@ -13,7 +13,7 @@ cargo test --release --no-fail-fast 2>&1 | tee target/test.log || status=1
 bash scripts/test_cmake.sh target/cmake-test 2>&1 | tee -a target/test.log || status=1
 # One closing line for the whole run (cargo's last line is the doc-test summary).
 awk '/test result:/ { for (i = 1; i <= NF; i++) { if ($i ~ /^passed/) p += $(i-1); if ($i ~ /^failed/) f += $(i-1) } }
-     /^mpi_(balance|mesh): [0-9]+ passed/ { p += $2; f += $4 }
+     /^mpi_(balance|mesh|faces): [0-9]+ passed/ { p += $2; f += $4 }
      /^cmake tests: / { p += $3; f += $5 }
      END { printf "tests: %d passed, %d failed\n", p, f }' target/test.log
 exit $status

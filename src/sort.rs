@@ -85,3 +85,67 @@ mod tests {
         assert_eq!(v, w);
     }
 }
+
+/// The last index `j` with `key(j) <= m` among `n` keys sorted ascending,
+/// searched outwards from `hint` by doubling steps: `O(log d)` for an
+/// answer `d` places away, so neighbour look-ups in Morton order stay in
+/// cache. `None` when every key is above `m`.
+#[inline]
+pub fn gallop_last_le(n: usize, hint: usize, m: u64, key: impl Fn(usize) -> u64) -> Option<usize> {
+    if n == 0 {
+        return None;
+    }
+    let hint = hint.min(n - 1);
+    let (mut lo, mut hi);
+    if key(hint) <= m {
+        lo = hint;
+        let mut step = 1;
+        while lo + step < n && key(lo + step) <= m {
+            lo += step;
+            step *= 2;
+        }
+        hi = (lo + step).min(n);
+    } else {
+        hi = hint;
+        let mut step = 1;
+        while hi >= step && key(hi - step) > m {
+            hi -= step;
+            step *= 2;
+        }
+        lo = hi.saturating_sub(step);
+        if key(lo) > m {
+            return None;
+        }
+    }
+    // key(lo) <= m < key(hi) (or hi == n): bisect.
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if key(mid) <= m {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    Some(lo)
+}
+
+#[cfg(test)]
+mod gallop_tests {
+    use super::gallop_last_le;
+
+    #[test]
+    fn gallop_matches_partition_point() {
+        let keys: Vec<u64> = (0..200).map(|i| 3 * i + (i % 3)).collect();
+        for hint in [0, 1, 50, 199, 500] {
+            for m in 0..700 {
+                let want = keys.partition_point(|&k| k <= m).checked_sub(1);
+                assert_eq!(
+                    gallop_last_le(keys.len(), hint, m, |j| keys[j]),
+                    want,
+                    "hint {hint} m {m}"
+                );
+            }
+        }
+        assert_eq!(gallop_last_le(0, 0, 5, |_| 0), None);
+    }
+}

@@ -71,8 +71,25 @@ pub fn run(data: &[u8]) {
     let opts = MeshOptions {
         keep,
         cut_rule: CutRule::Center,
+        clean_walls: data.len().is_multiple_of(2),
     };
     let mesh = Mesh::build(&tree, &domain, Some(&classes), &opts).expect("mesh");
+    // Every element's faces close.
+    let faces = mesh.faces().expect("faces");
+    let mut sum = vec![[0f64; 3]; mesh.elements().len()];
+    for f in faces.faces() {
+        let (a, n) = (f.lattice_area(), f.unit_normal());
+        for k in 0..3 {
+            sum[f.owner as usize][k] += a * n[k];
+            if let octmesh::mesh::Other::Element(j) = f.other {
+                sum[j as usize][k] -= a * n[k];
+            }
+        }
+    }
+    assert!(
+        sum.iter().all(|s| *s == [0.0; 3]),
+        "an element does not close"
+    );
     let nodes = mesh.num_nodes() as u32;
     for e in mesh.connectivity() {
         assert!(e.iter().all(|&n| n < nodes));

@@ -15,8 +15,8 @@ use super::case::CaseFile;
 use super::{Balance, Command, Config, ConfigError};
 use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
-use crate::io::openfoam::FoamFormat;
 use crate::error::{Error, Result};
+use crate::io::openfoam::FoamFormat;
 use crate::regions::Region;
 
 /// The option that fills each key.
@@ -279,8 +279,18 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         }
         CliCommand::Octree(o) => (Command::Octree, o, None),
         CliCommand::Mesh(m) => {
-            let foam = (m.openfoam, m.openfoam_format, m.overwrite, m.patch, m.clean_walls);
-            (Command::Mesh, m.octree, Some((m.keep, m.cut_rule, m.out, foam)))
+            let foam = (
+                m.openfoam,
+                m.openfoam_format,
+                m.overwrite,
+                m.patch,
+                m.clean_walls,
+            );
+            (
+                Command::Mesh,
+                m.octree,
+                Some((m.keep, m.cut_rule, m.out, foam)),
+            )
         }
     };
     let case = if octree.input.ends_with(".toml") {

@@ -35,9 +35,7 @@
 //! are moved in only when every rank has written its own: a failure on one
 //! rank leaves no case looking complete, and every rank reports it.
 
-use std::collections::HashMap;
 use std::fs;
-use std::hash::{BuildHasherDefault, Hasher};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -46,6 +44,8 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, NUM_PATCHES, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::Mesh;
+use crate::octant::morton_encode;
+use crate::sort::{gallop_last_le, radix_sort_bits};
 
 crate::named_enum! {
     /// Binary or ASCII list data.
@@ -83,40 +83,32 @@ pub struct FoamCounts {
     pub cells: u64,
 }
 
-/// Lattice point as one word: 21 bits per axis.
+/// Lattice point as its Morton code (21 bits per axis): sorted codes keep
+/// the points of neighbouring faces close together.
 fn key(p: [u32; 3]) -> u64 {
-    p[0] as u64 | (p[1] as u64) << 21 | (p[2] as u64) << 42
+    morton_encode(p[0], p[1], p[2])
 }
-
-fn unkey(k: u64) -> [u32; 3] {
-    let m = (1u64 << 21) - 1;
-    [(k & m) as u32, (k >> 21 & m) as u32, (k >> 42) as u32]
-}
-
-/// A multiplicative hash for lattice keys: std's SipHash costs more than
-/// the rest of the point numbering (measured, see ARCHITECTURE.md).
-#[derive(Default)]
-struct KeyHasher(u64);
-
-impl Hasher for KeyHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ b as u64).wrapping_mul(0x100_0000_01b3);
-        }
-    }
-    fn write_u64(&mut self, k: u64) {
-        let h = k.wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        self.0 = h ^ (h >> 29);
-    }
-}
-
-type KeyMap = HashMap<u64, u32, BuildHasherDefault<KeyHasher>>;
 
 /// A point that exists but no face used yet.
 const UNUSED: u32 = u32::MAX;
+
+/// The mesh points near this rank, sorted by Morton code, each with its
+/// polyMesh label once a face uses it. Faces come in Morton order, so each
+/// look-up gallops from the last one and stays in cache.
+struct Points {
+    keys: Vec<u64>,
+    label: Vec<u32>,
+    hint: usize,
+}
+
+impl Points {
+    fn find(&mut self, k: u64) -> Option<usize> {
+        let keys = &self.keys;
+        let j = gallop_last_le(keys.len(), self.hint, k, |i| keys[i])?;
+        self.hint = j;
+        (keys[j] == k).then_some(j)
+    }
+}
 
 /// This rank's polyMesh in memory: points and faces as point labels.
 struct PolyMesh {
@@ -128,11 +120,11 @@ struct PolyMesh {
 /// The midpoint of `a`-`b` when they differ along one axis by an even
 /// length.
 fn midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
-    let diff: Vec<usize> = (0..3).filter(|&k| a[k] != b[k]).collect();
-    if diff.len() != 1 {
+    let differ = [a[0] != b[0], a[1] != b[1], a[2] != b[2]];
+    if differ.iter().filter(|&&d| d).count() != 1 {
         return None;
     }
-    let k = diff[0];
+    let k = differ.iter().position(|&d| d)?;
     let (lo, hi) = (a[k].min(b[k]), a[k].max(b[k]));
     if (hi - lo) % 2 != 0 {
         return None;
@@ -144,50 +136,67 @@ fn midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
 
 fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
-    let mut map = KeyMap::default();
-    map.reserve(mesh.num_nodes() + 8 * mesh.halo().len());
-    for x in mesh.node_lattice() {
-        map.insert(key(x), UNUSED);
-    }
+    let mut keys: Vec<u64> = mesh.node_lattice().into_iter().map(key).collect();
     for h in &mesh.halo().leaves {
         let (c, s) = (h.coords(), h.side());
         for k in 0..8 {
-            let p = [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 });
-            map.insert(key(p), UNUSED);
+            keys.push(key(
+                [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 })
+            ));
         }
     }
+    let mut tmp = Vec::new();
+    radix_sort_bits(&mut keys, &mut tmp, 0, 63);
+    drop(tmp);
+    keys.dedup();
+    let n = keys.len();
+    let mut set = Points {
+        keys,
+        label: vec![UNUSED; n],
+        hint: 0,
+    };
     let halo_start = faces.halo_range().start;
     let mut points: Vec<[u32; 3]> = Vec::new();
     let mut offsets = Vec::with_capacity(faces.faces().len() + 1);
     offsets.push(0u32);
-    let mut labels: Vec<u32> = Vec::with_capacity(4 * faces.faces().len());
-    let mut poly: Vec<u64> = Vec::with_capacity(8);
+    let mut labels: Vec<u32> =
+        Vec::with_capacity(4 * faces.faces().len() + faces.faces().len() / 2);
+    let mut poly: Vec<(u64, [u32; 3])> = Vec::with_capacity(8);
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
         let c = f.corners();
         for k in 0..4 {
-            poly.push(key(c[k]));
+            poly.push((key(c[k]), c[k]));
             if let Some(m) = midpoint(c[k], c[(k + 1) % 4]) {
-                if map.contains_key(&key(m)) {
-                    poly.push(key(m));
+                let km = key(m);
+                if set.find(km).is_some() {
+                    poly.push((km, m));
                 }
             }
         }
         if i >= halo_start {
             // Both sides start at the lowest point.
-            let at = (0..poly.len()).min_by_key(|&k| poly[k]).unwrap_or(0);
+            let at = (0..poly.len()).min_by_key(|&k| poly[k].0).unwrap_or(0);
             poly.rotate_left(at);
         }
-        for &k in &poly {
-            let slot = map.entry(k).or_insert(UNUSED);
-            if *slot == UNUSED {
-                *slot = points.len() as u32;
-                points.push(unkey(k));
+        for &(k, x) in &poly {
+            let Some(j) = set.find(k) else {
+                return Err(Error::new(
+                    ErrorKind::Internal,
+                    format!("face corner {x:?} is no element's corner"),
+                ));
+            };
+            if set.label[j] == UNUSED {
+                set.label[j] = points.len() as u32;
+                points.push(x);
             }
-            labels.push(*slot);
+            labels.push(set.label[j]);
         }
         if labels.len() > i32::MAX as usize {
-            return Err(Error::new(ErrorKind::Limit, "more than 2^31 face labels on one rank"));
+            return Err(Error::new(
+                ErrorKind::Limit,
+                "more than 2^31 face labels on one rank",
+            ));
         }
         offsets.push(labels.len() as u32);
     }
@@ -282,7 +291,10 @@ fn remove_extra_processors(dir: &Path, p: usize) -> Result<()> {
     };
     for e in entries.flatten() {
         let name = e.file_name().to_string_lossy().into_owned();
-        if let Some(r) = name.strip_prefix("processor").and_then(|r| r.parse::<usize>().ok()) {
+        if let Some(r) = name
+            .strip_prefix("processor")
+            .and_then(|r| r.parse::<usize>().ok())
+        {
             if r >= p {
                 fs::remove_dir_all(e.path()).map_err(|err| io_err(&e.path(), err))?;
             }
@@ -299,9 +311,15 @@ fn header(
     object: &str,
     note: Option<&str>,
 ) -> std::io::Result<()> {
-    writeln!(out, "/*--------------------------------*- C++ -*----------------------------------*\\")?;
+    writeln!(
+        out,
+        "/*--------------------------------*- C++ -*----------------------------------*\\"
+    )?;
     writeln!(out, "  written by octmesh {}", env!("CARGO_PKG_VERSION"))?;
-    writeln!(out, "\\*---------------------------------------------------------------------------*/")?;
+    writeln!(
+        out,
+        "\\*---------------------------------------------------------------------------*/"
+    )?;
     writeln!(out, "FoamFile\n{{")?;
     writeln!(out, "    version     2.0;")?;
     writeln!(out, "    format      {};", format.name())?;
@@ -450,7 +468,14 @@ fn write_polymesh(
 
         let path = dir.join("boundary");
         let mut w = create(&path).map_err(std::io::Error::other)?;
-        header(&mut w, FoamFormat::Ascii, "polyBoundaryMesh", loc, "boundary", None)?;
+        header(
+            &mut w,
+            FoamFormat::Ascii,
+            "polyBoundaryMesh",
+            loc,
+            "boundary",
+            None,
+        )?;
         let halo = faces.halo_ranges();
         writeln!(w, "{}\n(", NUM_PATCHES + halo.len())?;
         for q in 0..NUM_PATCHES {
@@ -506,9 +531,16 @@ fn write_system(case: &Path, p: usize) -> Result<()> {
             continue;
         }
         let mut text = Vec::new();
-        header(&mut text, FoamFormat::Ascii, "dictionary", "system", name, None)
-            .and_then(|_| text.write_all(body.as_bytes()))
-            .map_err(|e| io_err(&path, e))?;
+        header(
+            &mut text,
+            FoamFormat::Ascii,
+            "dictionary",
+            "system",
+            name,
+            None,
+        )
+        .and_then(|_| text.write_all(body.as_bytes()))
+        .map_err(|e| io_err(&path, e))?;
         fs::write(&path, text).map_err(|e| io_err(&path, e))?;
     }
     Ok(())
@@ -616,9 +648,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn keys_round_trip_and_midpoints() {
-        let p = [1 << 19, 12345, 0];
-        assert_eq!(unkey(key(p)), p);
+    fn midpoints() {
         assert_eq!(midpoint([0, 0, 0], [4, 0, 0]), Some([2, 0, 0]));
         assert_eq!(midpoint([0, 0, 0], [3, 0, 0]), None);
         assert_eq!(midpoint([0, 0, 0], [2, 2, 0]), None);

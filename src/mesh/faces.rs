@@ -44,7 +44,7 @@
 //!
 //! Patch `0..6` are the sides of the domain, `xmin xmax ymin ymax zmin zmax`
 //! ([`SIDE_PATCHES`]); patch 6 is the surface. Names are given by the
-//! caller ([`PatchNames`]).
+//! caller ([`crate::mesh::patches::PatchNames`]).
 
 use std::ops::Range;
 
@@ -329,32 +329,35 @@ struct Kept<'a> {
 }
 
 impl Kept<'_> {
-    /// The kept element containing the first cell of `o` or, failing that,
-    /// `None`.
-    fn last_at_or_before(&self, o: Octant) -> Option<(At, Octant)> {
+    /// The last kept element starting at or before the first cell of `o`;
+    /// `hint` is a local element near it.
+    fn last_at_or_before(&self, o: Octant, hint: usize) -> Option<(At, Octant)> {
         let c = o.cell_begin();
         let before = &self.halo.leaves[..self.halo.before];
         let after = &self.halo.leaves[self.halo.before..];
         let find = |s: &[Octant]| s.partition_point(|l| l.cell_begin() <= c).checked_sub(1);
-        if let Some(j) = find(after) {
-            let k = self.halo.before + j;
+        if after.first().is_some_and(|a| a.cell_begin() <= c) {
+            let k = self.halo.before + find(after)?;
             return Some((At::Halo(k as u32), self.halo.leaves[k]));
         }
-        if let Some(j) = find(self.local) {
-            return Some((At::Local(j as u32), self.local[j]));
+        let local = self.local;
+        if let Some(j) =
+            crate::sort::gallop_last_le(local.len(), hint, c, |k| local[k].cell_begin())
+        {
+            return Some((At::Local(j as u32), local[j]));
         }
         find(before).map(|j| (At::Halo(j as u32), before[j]))
     }
 
     /// The kept element containing `o`, if one does.
-    fn containing(&self, o: Octant) -> Option<(At, Octant)> {
-        self.last_at_or_before(o)
+    fn containing(&self, o: Octant, hint: usize) -> Option<(At, Octant)> {
+        self.last_at_or_before(o, hint)
             .filter(|(_, l)| l.cell_begin() <= o.cell_begin() && o.cell_end() <= l.cell_end())
     }
 
     /// Whether `o` itself is a kept element.
-    fn exact(&self, o: Octant) -> Option<At> {
-        self.last_at_or_before(o)
+    fn exact(&self, o: Octant, hint: usize) -> Option<At> {
+        self.last_at_or_before(o, hint)
             .filter(|(_, l)| *l == o)
             .map(|(a, _)| a)
     }
@@ -443,7 +446,7 @@ impl Mesh {
                     boundary.push(face(WHOLE, s / 2, origin, Other::Patch(f as u16)));
                     continue;
                 };
-                if let Some((at, l)) = kept.containing(n) {
+                if let Some((at, l)) = kept.containing(n, i as usize) {
                     if l.level() < e.level() || at_is_halo(at) {
                         // Coarser (this fine side emits) or another rank's.
                         let list = if at_is_halo(at) {
@@ -471,7 +474,7 @@ impl Mesh {
                     child |= ((q & 1) as u32) << u;
                     child |= ((q >> 1) as u32) << v;
                     let fine = n.child(child);
-                    if let Some(at) = kept.exact(fine) {
+                    if let Some(at) = kept.exact(fine, i as usize) {
                         mask |= 1 << q;
                         if let At::Halo(_) = at {
                             // The fine side is remote: this side lists the

@@ -133,38 +133,12 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
             return None;
         }
         let m = morton_encode(x[0] as u32, x[1] as u32, x[2] as u32);
-        let b = &self.begins;
-        let n = b.len();
-        // Bracket the answer by doubling steps from the hint.
-        let (mut lo, mut hi);
-        if b[hint] <= m {
-            lo = hint;
-            let mut step = 1;
-            while lo + step < n && b[lo + step] <= m {
-                lo += step;
-                step *= 2;
-            }
-            hi = (lo + step).min(n);
-        } else {
-            hi = hint;
-            let mut step = 1;
-            while hi >= step && b[hi - step] > m {
-                hi -= step;
-                step *= 2;
-            }
-            lo = hi.saturating_sub(step);
-            if b[lo] > m {
-                return None;
-            }
-        }
-        lo += b[lo..hi].partition_point(|&c| c <= m) - 1;
-        hi = lo;
-        (self.leaves[hi].cell_end() > m).then_some(hi)
+        let j = crate::sort::gallop_last_le(self.begins.len(), hint, m, |k| self.begins[k])?;
+        (self.leaves[j].cell_end() > m).then_some(j)
     }
 
     fn kept_at(&self, x: [i64; 3], hint: usize) -> bool {
-        self.at(x, hint)
-            .is_some_and(|j| (self.kept)(self.class[j]))
+        self.at(x, hint).is_some_and(|j| (self.kept)(self.class[j]))
     }
 
     /// Whether some face neighbour of leaf `i` is not kept (or outside).
@@ -177,11 +151,22 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
             for plus in [false, true] {
                 let mut p = c;
                 p[axis] += if plus { s } else { -1 };
+                // One leaf covering the whole neighbour region settles it.
+                let Some(j) = self.at(p, i) else {
+                    return true;
+                };
+                let n = self.leaves[j];
+                if n.side() as i64 >= s {
+                    if !(self.kept)(self.class[j]) {
+                        return true;
+                    }
+                    continue;
+                }
                 for (a, b) in [(0, 0), (h, 0), (0, h), (h, h)] {
                     let mut q = p;
                     q[u] += a;
                     q[v] += b;
-                    if !self.kept_at(q, i) {
+                    if !self.kept_at(q, j) {
                         return true;
                     }
                 }
@@ -225,9 +210,19 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
         // (the leaf is the middle 2x2x2): the cells next to the leaf's
         // faces, edges and corners.
         let mut grid = [true; 64];
-        for (k, cell) in grid.iter_mut().enumerate() {
+        let mut known = 0u64;
+        let edge = |g: usize| -> i64 {
+            match g {
+                0 => -h,
+                1 => 0,
+                2 => h,
+                3 => s,
+                _ => s + h,
+            }
+        };
+        for k in 0..64 {
             let g = [k & 3, (k >> 2) & 3, k >> 4];
-            if g.iter().all(|&v| v == 1 || v == 2) {
+            if known >> k & 1 == 1 || g.iter().all(|&v| v == 1 || v == 2) {
                 continue;
             }
             let x: [i64; 3] = std::array::from_fn(|a| {
@@ -238,7 +233,33 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
                     _ => s,
                 }
             });
-            *cell = self.kept_at(x, i);
+            let Some(j) = self.at(x, i) else {
+                grid[k] = false;
+                continue;
+            };
+            let status = (self.kept)(self.class[j]);
+            // The leaf covers every grid cell inside its box: settle them
+            // all with this one look-up.
+            let (lc, ls) = (self.leaves[j].coords(), self.leaves[j].side() as i64);
+            let lo: [i64; 3] = std::array::from_fn(|a| lc[a] as i64);
+            let mut range = [(0usize, 0usize); 3];
+            for a in 0..3 {
+                let first = (0..4).find(|&t| c[a] + edge(t) >= lo[a]).unwrap_or(4);
+                let last = (0..4).rev().find(|&t| c[a] + edge(t + 1) <= lo[a] + ls);
+                range[a] = match last {
+                    Some(l) if l >= first => (first, l),
+                    _ => (g[a], g[a]),
+                };
+            }
+            for z in range[2].0..=range[2].1 {
+                for y in range[1].0..=range[1].1 {
+                    for x in range[0].0..=range[0].1 {
+                        let q = x | y << 2 | z << 4;
+                        grid[q] = status;
+                        known |= 1 << q;
+                    }
+                }
+            }
         }
         let at = |g: [usize; 3]| grid[g[0] | g[1] << 2 | g[2] << 4];
         // Kept neighbours along each axis.
@@ -320,7 +341,9 @@ fn block_drops(kept: &[bool; 8], own: usize) -> bool {
             }
         }
         // Largest group; ties go to the lowest label (the lowest cell).
-        let best = (0..n).max_by_key(|&g| (size[g], std::cmp::Reverse(g))).unwrap_or(0);
+        let best = (0..n)
+            .max_by_key(|&g| (size[g], std::cmp::Reverse(g)))
+            .unwrap_or(0);
         return label[own] as usize != best;
     }
     let dropped: [bool; 8] = std::array::from_fn(|k| !kept[k]);
@@ -367,7 +390,12 @@ mod tests {
         let b = block(&[0, 1, 6]);
         assert!(!block_drops(&b, 0) && !block_drops(&b, 1) && block_drops(&b, 6));
         // Manifold configurations keep everything.
-        for cells in [&[0usize][..], &[0, 1], &[0, 1, 2, 3], &[0, 1, 2, 3, 4, 5, 6, 7]] {
+        for cells in [
+            &[0usize][..],
+            &[0, 1],
+            &[0, 1, 2, 3],
+            &[0, 1, 2, 3, 4, 5, 6, 7],
+        ] {
             let b = block(cells);
             assert!(cells.iter().all(|&k| !block_drops(&b, k)), "{cells:?}");
         }

@@ -54,8 +54,8 @@
 pub(crate) mod dual;
 pub mod faces;
 pub mod manifold;
-pub mod patches;
 pub(crate) mod numbering;
+pub mod patches;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass};
 use crate::comm::{Comm, Traffic};
@@ -200,7 +200,8 @@ impl Mesh {
                 &unclassified
             }
         };
-        let keep = |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);
+        let keep =
+            |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);
         let mut cleaned_classes;
         let mut cleaned = 0;
         let local_class: &[u8] = if opts.clean_walls && opts.keep != Keep::All {

@@ -171,14 +171,28 @@ mod tests {
             .renamed([("xmin", "xmax"), ("xmax", "xmin")])
             .unwrap();
         assert_eq!(swapped.names()[..2], ["xmax", "xmin"]);
-        let e = PatchNames::new("sphere").renamed([("xmin", "ymin")]).unwrap_err();
+        let e = PatchNames::new("sphere")
+            .renamed([("xmin", "ymin")])
+            .unwrap_err();
         assert!(e.message().contains("unique"), "{e}");
         assert_eq!(p.names()[..2], ["inlet", "outlet"]);
         assert_eq!(p.name(6), "wall");
         let mut q = p.clone();
-        assert!(q.rename("xmin", "x").unwrap_err().message().contains("unknown patch"));
-        assert!(q.rename("inlet", "outlet").unwrap_err().message().contains("unique"));
-        assert!(q.rename("inlet", "in let").unwrap_err().message().contains("not a valid"));
+        assert!(q
+            .rename("xmin", "x")
+            .unwrap_err()
+            .message()
+            .contains("unknown patch"));
+        assert!(q
+            .rename("inlet", "outlet")
+            .unwrap_err()
+            .message()
+            .contains("unique"));
+        assert!(q
+            .rename("inlet", "in let")
+            .unwrap_err()
+            .message()
+            .contains("not a valid"));
         assert!(q.rename("inlet", "").is_err());
         assert!(q.rename("inlet", "a;b").is_err());
         assert!(q.rename("inlet", "1a").is_err());

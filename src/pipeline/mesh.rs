@@ -159,10 +159,12 @@ impl Session {
         };
         let comm = self.comm.clone();
         let (mesh, faces) = (&self.mesh, &self.faces);
-        let counts = self.timer.time(&*comm, "openfoam", || match (mesh, faces) {
-            (Some(m), Some((_, f))) => write_case(&*comm, dir, m, f, &opts),
-            _ => Ok(FoamCounts::default()),
-        })?;
+        let counts = self
+            .timer
+            .time(&*comm, "openfoam", || match (mesh, faces) {
+                (Some(m), Some((_, f))) => write_case(&*comm, dir, m, f, &opts),
+                _ => Ok(FoamCounts::default()),
+            })?;
         self.report_phase(None);
         self.observer.event(&Event::Wrote(dir));
         Ok(counts)

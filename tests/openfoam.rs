@@ -1,0 +1,487 @@
+//! OpenFOAM cases written by `octmesh mesh --openfoam`, judged by OpenFOAM
+//! itself (Debian's `openfoam` package, v1912, installed by
+//! `scripts/setup.sh`) and by an independent reading of the written files.
+//!
+//! - `checkMesh -allTopology -allGeometry` on the sphere, bunny, tangaroa
+//!   (outside), armadillo (inside) and torus (all), on 1 rank and on 3
+//!   (`-parallel`, processor directories): one region, no multiply
+//!   connected patch, cells and volume equal to octmesh's, and no failed
+//!   check but "concave cells (using face planes)", which flags every cell
+//!   with two coplanar faces and so every split 2:1 face: snappyHexMesh's
+//!   own castellated meshes fail it the same way (see the closing note of
+//!   the issue). Plain `checkMesh -allTopology` must say `Mesh OK.`.
+//! - `potentialFoam` around the sphere: the mean speed in a shell over the
+//!   equator within 3 % of the same run on snappyHexMesh's castellated mesh
+//!   (`../shared/openfoam/sphere_castellated`: 1.693).
+//! - The ASCII files read back here: every cell closes, each side patch
+//!   covers its side.
+//! - Bad input: an existing mesh without `--overwrite`, bad patch names, an
+//!   empty kept region, an unwritable directory.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use common::{octmesh_bin, run_with_limit, scratch, shared_model};
+
+/// The OpenFOAM environment file, or `None` (reason printed) when OpenFOAM
+/// is not installed (`scripts/setup.sh` installs it).
+fn openfoam() -> Option<PathBuf> {
+    let rc = PathBuf::from("/usr/share/openfoam/etc/bashrc");
+    if rc.is_file() && Path::new("/usr/bin/checkMesh").is_file() {
+        Some(rc)
+    } else {
+        println!("SKIP: OpenFOAM is not installed (run scripts/setup.sh)");
+        None
+    }
+}
+
+/// Runs an OpenFOAM command line in `case` with its environment.
+fn foam(rc: &Path, case: &Path, line: &str) -> String {
+    let script = format!(
+        "set +u; source {} >/dev/null 2>&1; cd '{}' && {line}",
+        rc.display(),
+        case.display()
+    );
+    let mut cmd = Command::new("bash");
+    cmd.arg("-c")
+        .arg(script)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
+    let out = run_with_limit(cmd, Duration::from_secs(600));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.status.success(),
+        "{line} failed in {}:\n{text}",
+        case.display()
+    );
+    text
+}
+
+/// Runs octmesh on `np` ranks; returns its statistics.
+fn octmesh(np: usize, args: &[&str], stats: &Path) -> serde_json::Value {
+    let mut all: Vec<&str> = args.to_vec();
+    let s = stats.to_str().unwrap();
+    all.extend(["--stats", s, "--quiet"]);
+    let out = common::mpirun(np, &octmesh_bin(), &all, Duration::from_secs(600));
+    assert!(
+        out.status.success(),
+        "octmesh {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(stats).unwrap()).unwrap()
+}
+
+fn number_after(text: &str, label: &str) -> f64 {
+    let at = text
+        .find(label)
+        .unwrap_or_else(|| panic!("no '{label}' in:\n{text}"));
+    text[at + label.len()..]
+        .split_whitespace()
+        .next()
+        .and_then(|w| w.trim_end_matches(['.', ';']).parse().ok())
+        .unwrap_or_else(|| panic!("no number after '{label}'"))
+}
+
+/// checkMesh's verdict on `case`, asserted as the module says.
+fn judge(rc: &Path, case: &Path, np: usize, stats: &serde_json::Value, tag: &str) {
+    let par = if np > 1 {
+        format!("mpirun --oversubscribe -np {np} checkMesh -parallel")
+    } else {
+        "checkMesh".to_string()
+    };
+    let all = foam(rc, case, &format!("{par} -allTopology -allGeometry"));
+    assert!(
+        all.contains("Number of regions: 1 (OK)"),
+        "{tag}: regions:\n{all}"
+    );
+    assert!(
+        !all.contains("multiply connected ("),
+        "{tag}: a patch is not manifold:\n{all}"
+    );
+    for line in all.lines().filter(|l| l.contains("***")) {
+        assert!(
+            line.contains("Concave cells (using face planes)"),
+            "{tag}: checkMesh failed a check: {line}\n{all}"
+        );
+    }
+    let cells = number_after(&all, "cells:");
+    assert_eq!(
+        cells as u64,
+        stats["elements"].as_u64().unwrap(),
+        "{tag}: cells"
+    );
+    let volume = number_after(&all, "Total volume =");
+    let kept = stats["kept_volume"].as_f64().unwrap();
+    assert!(
+        ((volume - kept) / kept).abs() < 1e-6,
+        "{tag}: OpenFOAM's volume {volume} is not octmesh's {kept}"
+    );
+    let plain = foam(rc, case, &format!("{par} -allTopology"));
+    assert!(
+        plain.contains("\nMesh OK."),
+        "{tag}: checkMesh -allTopology:\n{plain}"
+    );
+    println!(
+        "{tag}: checkMesh: {cells} cells, volume {volume:.6e} = octmesh's, one region, manifold patches, Mesh OK"
+    );
+}
+
+#[test]
+fn checkmesh_accepts_the_cases_octmesh_writes() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("openfoam_checkmesh");
+    let mut cases: Vec<(String, &str, &str, usize)> = vec![
+        ("sphere".into(), "outside", "5", 1),
+        ("sphere".into(), "outside", "5", 3),
+        ("torus".into(), "all", "5", 1),
+        ("torus".into(), "inside", "6", 3),
+    ];
+    for (model, keep, level) in [
+        ("bunny.stl", "outside", "7"),
+        ("tangaroa.stl", "outside", "7"),
+        ("armadillo.stl", "inside", "7"),
+    ] {
+        if let Some(p) = shared_model(model) {
+            cases.push((p.to_string_lossy().into_owned(), keep, level, 1));
+        }
+    }
+    for (k, (surface, keep, level, np)) in cases.iter().enumerate() {
+        let case = dir.join(format!("case{k}"));
+        let stats = dir.join(format!("case{k}.json"));
+        let tag = format!(
+            "{} level {level} keep {keep} np {np}",
+            Path::new(surface).file_name().unwrap().to_string_lossy()
+        );
+        let s = octmesh(
+            *np,
+            &[
+                "mesh",
+                surface,
+                "--level",
+                level,
+                "--keep",
+                keep,
+                "--openfoam",
+                case.to_str().unwrap(),
+            ],
+            &stats,
+        );
+        judge(&rc, &case, *np, &s, &tag);
+    }
+}
+
+#[test]
+fn potential_flow_around_the_sphere_matches_snappyhexmesh() {
+    let Some(rc) = openfoam() else { return };
+    let reference = common::repo().join("../shared/openfoam/sphere_castellated");
+    if !reference.is_dir() {
+        println!("SKIP: {} not found", reference.display());
+        return;
+    }
+    let case = scratch("openfoam_potential");
+    // The reference's fields and settings; octmesh adds the mesh only.
+    std::fs::create_dir_all(case.join("system")).unwrap();
+    for f in ["controlDict", "fvSchemes", "fvSolution"] {
+        std::fs::copy(
+            reference.join("system").join(f),
+            case.join("system").join(f),
+        )
+        .unwrap();
+    }
+    std::fs::create_dir_all(case.join("0")).unwrap();
+    for f in ["U", "p"] {
+        std::fs::copy(reference.join("0").join(f), case.join("0").join(f)).unwrap();
+    }
+    let stats = case.join("stats.json");
+    let c = case.to_str().unwrap();
+    octmesh(
+        1,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "6",
+            "--keep",
+            "outside",
+            "--openfoam",
+            c,
+        ],
+        &stats,
+    );
+    foam(&rc, &case, "potentialFoam -writep");
+    foam(&rc, &case, "postProcess -func writeCellCentres -time 0");
+    let u = read_vectors(&case.join("0/U"));
+    let centres = read_vectors(&case.join("0/C"));
+    assert_eq!(u.len(), centres.len());
+    let shell: Vec<f64> = (0..u.len())
+        .filter(|&i| {
+            let c = centres[i];
+            let r = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            c[0].abs() < 0.15 && r > 1.1 && r < 1.4
+        })
+        .map(|i| (u[i][0] * u[i][0] + u[i][1] * u[i][1] + u[i][2] * u[i][2]).sqrt())
+        .collect();
+    assert!(shell.len() > 100, "too few shell cells: {}", shell.len());
+    let mean = shell.iter().sum::<f64>() / shell.len() as f64;
+    let snappy = 1.693;
+    println!(
+        "potentialFoam around the sphere, level 6: shell mean speed {mean:.4} over {} cells \
+         (snappyHexMesh castellated: {snappy})",
+        shell.len()
+    );
+    assert!(
+        ((mean - snappy) / snappy).abs() < 0.03,
+        "shell mean speed {mean} is not within 3 % of snappyHexMesh's {snappy}"
+    );
+}
+
+/// The internal field of an ASCII `volVectorField`.
+fn read_vectors(path: &Path) -> Vec<[f64; 3]> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let at = text.find("internalField").expect("internalField");
+    let rest = &text[at..];
+    let open = rest.find("\n(").expect("a list");
+    let n: usize = rest[..open]
+        .split_whitespace()
+        .last()
+        .and_then(|w| w.parse().ok())
+        .expect("list size");
+    rest[open + 2..]
+        .lines()
+        .filter(|l| l.starts_with('('))
+        .take(n)
+        .map(|l| {
+            let v: Vec<f64> = l
+                .trim_matches(|c| c == '(' || c == ')')
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}
+
+/// The body of an ASCII list file: the lines between the outer parentheses.
+fn list_lines(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let body = &text[text.find("}").unwrap()..];
+    let open = body.find("\n(").unwrap();
+    let close = body.rfind(')').unwrap();
+    body[open + 2..close]
+        .lines()
+        .map(|l| l.trim().to_string())
+        .filter(|l| !l.is_empty())
+        .collect()
+}
+
+#[test]
+fn ascii_files_read_back_close_every_cell() {
+    let dir = scratch("openfoam_ascii");
+    let case = dir.join("torus");
+    let stats = dir.join("stats.json");
+    let s = octmesh(
+        1,
+        &[
+            "mesh",
+            "torus",
+            "--level",
+            "5",
+            "--openfoam",
+            case.to_str().unwrap(),
+            "--openfoam-format",
+            "ascii",
+        ],
+        &stats,
+    );
+    let mesh = case.join("constant/polyMesh");
+    let points: Vec<[f64; 3]> = list_lines(&mesh.join("points"))
+        .iter()
+        .map(|l| {
+            let v: Vec<f64> = l
+                .trim_matches(|c| c == '(' || c == ')')
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    let faces: Vec<Vec<usize>> = list_lines(&mesh.join("faces"))
+        .iter()
+        .map(|l| {
+            let inner = &l[l.find('(').unwrap() + 1..l.len() - 1];
+            inner
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect()
+        })
+        .collect();
+    let owner: Vec<usize> = list_lines(&mesh.join("owner"))
+        .iter()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    let neighbour: Vec<usize> = list_lines(&mesh.join("neighbour"))
+        .iter()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    assert_eq!(owner.len(), faces.len());
+    let cells = owner.iter().chain(&neighbour).max().unwrap() + 1;
+    assert_eq!(cells as u64, s["elements"].as_u64().unwrap());
+    // Newell area vectors.
+    let area = |f: &[usize]| {
+        let mut a = [0.0f64; 3];
+        for k in 0..f.len() {
+            let (p, q) = (points[f[k]], points[f[(k + 1) % f.len()]]);
+            a[0] += (p[1] - q[1]) * (p[2] + q[2]);
+            a[1] += (p[2] - q[2]) * (p[0] + q[0]);
+            a[2] += (p[0] - q[0]) * (p[1] + q[1]);
+        }
+        a.map(|x| x / 2.0)
+    };
+    let mut sum = vec![[0.0f64; 3]; cells];
+    let mut total = vec![0.0f64; cells];
+    for (i, f) in faces.iter().enumerate() {
+        let a = area(f);
+        let m = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        for k in 0..3 {
+            sum[owner[i]][k] += a[k];
+        }
+        total[owner[i]] += m;
+        if i < neighbour.len() {
+            assert!(
+                owner[i] < neighbour[i],
+                "face {i}: owner must be the lower cell"
+            );
+            for k in 0..3 {
+                sum[neighbour[i]][k] -= a[k];
+            }
+            total[neighbour[i]] += m;
+        }
+    }
+    for c in 0..cells {
+        let m = sum[c].iter().map(|x| x.abs()).fold(0.0, f64::max);
+        assert!(m < 1e-9 * total[c], "cell {c} does not close: {:?}", sum[c]);
+    }
+    // Each side patch covers its side of the cube (everything is kept).
+    let boundary = std::fs::read_to_string(mesh.join("boundary")).unwrap();
+    let side = s["domain_side"].as_f64().unwrap();
+    for name in ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"] {
+        let at = boundary.find(&format!("    {name}\n")).unwrap();
+        let n = number_after(&boundary[at..], "nFaces") as usize;
+        let start = number_after(&boundary[at..], "startFace") as usize;
+        let a: f64 = faces[start..start + n]
+            .iter()
+            .map(|f| {
+                let v = area(f);
+                (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+            })
+            .sum();
+        assert!(
+            ((a - side * side) / (side * side)).abs() < 1e-12,
+            "{name}: area {a}"
+        );
+    }
+    println!(
+        "torus level 5: {} points, {} faces, {cells} cells read back: every cell closes, each side patch covers its side",
+        points.len(),
+        faces.len()
+    );
+}
+
+fn octmesh_err(args: &[&str]) -> String {
+    let out = Command::new(octmesh_bin()).args(args).output().unwrap();
+    assert!(!out.status.success(), "octmesh {args:?} should fail");
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+#[test]
+fn bad_openfoam_requests_fail_clearly() {
+    let dir = scratch("openfoam_bad");
+    let case = dir.join("case");
+    let c = case.to_str().unwrap();
+    let base = ["mesh", "sphere", "--keep", "outside", "--openfoam", c];
+    let stats = dir.join("s.json");
+    octmesh(1, &[&base[..], &["--level", "3"]].concat(), &stats);
+    let before = std::fs::read(case.join("constant/polyMesh/owner")).unwrap();
+    // An existing mesh stays unless --overwrite.
+    let e = octmesh_err(&[&base[..], &["--level", "4"]].concat());
+    assert!(e.contains("exists") && e.contains("--overwrite"), "{e}");
+    assert_eq!(
+        std::fs::read(case.join("constant/polyMesh/owner")).unwrap(),
+        before
+    );
+    octmesh(
+        1,
+        &[&base[..], &["--level", "4", "--overwrite"]].concat(),
+        &stats,
+    );
+    assert_ne!(
+        std::fs::read(case.join("constant/polyMesh/owner")).unwrap(),
+        before
+    );
+    assert!(!case.join("constant/polyMesh.octmesh-partial").exists());
+    // Patch names.
+    let base = [&base[..], &["--level", "3"]].concat();
+    let e = octmesh_err(&[&base[..], &["--patch", "xmin=in let"]].concat());
+    assert!(
+        e.contains("--patch") && e.contains("not a valid patch name"),
+        "{e}"
+    );
+    let e = octmesh_err(&[&base[..], &["--patch", "xmin=ymin"]].concat());
+    assert!(e.contains("unique"), "{e}");
+    let e = octmesh_err(&[&base[..], &["--patch", "nowhere=a"]].concat());
+    assert!(e.contains("unknown patch 'nowhere'"), "{e}");
+    // Renamed patches reach the boundary file.
+    octmesh(
+        1,
+        &[
+            &base[..],
+            &[
+                "--overwrite",
+                "--patch",
+                "xmin=inlet",
+                "--patch",
+                "sphere=body",
+            ],
+        ]
+        .concat(),
+        &stats,
+    );
+    let b = std::fs::read_to_string(case.join("constant/polyMesh/boundary")).unwrap();
+    assert!(
+        b.contains("    inlet\n") && b.contains("    body\n") && !b.contains("    xmin\n"),
+        "{b}"
+    );
+    // Nothing kept.
+    let empty = dir.join("empty");
+    let e = octmesh_err(&[
+        "mesh",
+        "sphere",
+        "--level",
+        "1",
+        "--keep",
+        "inside",
+        "--cut-rule",
+        "none",
+        "--openfoam",
+        empty.to_str().unwrap(),
+    ]);
+    assert!(e.contains("no elements"), "{e}");
+    assert!(!empty.join("constant/polyMesh").exists());
+    // An unwritable place.
+    let e = octmesh_err(&[
+        "mesh",
+        "sphere",
+        "--level",
+        "3",
+        "--openfoam",
+        "/proc/octmesh-case",
+    ]);
+    assert!(e.contains("/proc/octmesh-case"), "{e}");
+}
