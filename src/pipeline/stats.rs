@@ -208,7 +208,9 @@ impl Session {
             keys.push("leak_check");
         }
         if meshed.is_some() {
+            keys.extend(["clean"].into_iter().filter(|k| ran(k)));
             keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
+            keys.extend(["faces", "openfoam"].into_iter().filter(|k| ran(k)));
         }
         let keys_total: Vec<&str> = keys.iter().copied().chain(["total"]).collect();
         let t = &self.timer;
