@@ -219,20 +219,6 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
     }
 }
 
-fn gather(comm: &CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
-    let p = comm.size();
-    let mut counts = vec![0; p];
-    counts[0] = v.len();
-    let (all, c) = comm.alltoallv_u64(&v, &counts);
-    let mut out = Vec::new();
-    let mut at = 0;
-    for n in c {
-        out.push(all[at..at + n].to_vec());
-        at += n;
-    }
-    out
-}
-
 fn flatten_faces(v: &[GlobalFace]) -> Vec<u64> {
     v.iter()
         .flat_map(|f| [f.0, f.1, f.2[0], f.2[1], f.2[2], f.3])
@@ -367,8 +353,8 @@ fn child() {
         let mesh = build(comm.clone(), case);
         let faces = mesh.faces().unwrap();
         check_closure(&mesh, &faces, &tag);
-        let parts = gather(&comm, flatten_faces(&global_faces(&mesh, &faces)));
-        let lists = gather(&comm, shared(&mesh, &faces));
+        let parts = common::gather(&comm, flatten_faces(&global_faces(&mesh, &faces)));
+        let lists = common::gather(&comm, shared(&mesh, &faces));
         if rank == 0 {
             let dist: BTreeSet<Vec<u64>> = parts.concat().chunks(6).map(|c| c.to_vec()).collect();
             let n: usize = parts.iter().map(|p| p.len() / 6).sum();

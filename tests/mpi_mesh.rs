@@ -176,21 +176,6 @@ fn unflatten(parts: &[Vec<u64>], tag: &str) -> GlobalMesh {
     g
 }
 
-/// Gathers every rank's record on rank 0.
-fn gather(comm: &CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
-    let p = comm.size();
-    let mut counts = vec![0; p];
-    counts[0] = v.len();
-    let (all, c) = comm.alltoallv_u64(&v, &counts);
-    let mut out = Vec::new();
-    let mut at = 0;
-    for n in c {
-        out.push(all[at..at + n].to_vec());
-        at += n;
-    }
-    out
-}
-
 /// How the balanced octree is spread over the ranks before meshing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Skew {
@@ -304,7 +289,7 @@ fn child() {
             comm.size()
         );
         let (mesh, _) = build(comm.clone(), case);
-        let parts = gather(&comm, flatten(&mesh));
+        let parts = common::gather(&comm, flatten(&mesh));
         if rank == 0 {
             let dist = unflatten(&parts, &tag);
             let serial: CommRef = Rc::new(SerialComm);

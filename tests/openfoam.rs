@@ -257,15 +257,18 @@ fn read_vectors(path: &Path) -> Vec<[f64; 3]> {
         .lines()
         .filter(|l| l.starts_with('('))
         .take(n)
-        .map(|l| {
-            let v: Vec<f64> = l
-                .trim_matches(|c| c == '(' || c == ')')
-                .split_whitespace()
-                .map(|w| w.parse().unwrap())
-                .collect();
-            [v[0], v[1], v[2]]
-        })
+        .map(parse_vector)
         .collect()
+}
+
+/// An ASCII vector, `(x y z)`.
+fn parse_vector(line: &str) -> [f64; 3] {
+    let v: Vec<f64> = line
+        .trim_matches(|c| c == '(' || c == ')')
+        .split_whitespace()
+        .map(|w| w.parse().unwrap())
+        .collect();
+    [v[0], v[1], v[2]]
 }
 
 /// The body of an ASCII list file: the lines between the outer parentheses.
@@ -303,14 +306,7 @@ fn ascii_files_read_back_close_every_cell() {
     let mesh = case.join("constant/polyMesh");
     let points: Vec<[f64; 3]> = list_lines(&mesh.join("points"))
         .iter()
-        .map(|l| {
-            let v: Vec<f64> = l
-                .trim_matches(|c| c == '(' || c == ')')
-                .split_whitespace()
-                .map(|w| w.parse().unwrap())
-                .collect();
-            [v[0], v[1], v[2]]
-        })
+        .map(|l| parse_vector(l))
         .collect();
     let faces: Vec<Vec<usize>> = list_lines(&mesh.join("faces"))
         .iter()

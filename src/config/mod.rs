@@ -497,7 +497,13 @@ impl Config {
     /// The patch names: the defaults for the configured surface, renamed
     /// by `mesh.patches`.
     pub fn patch_names(&self) -> crate::Result<PatchNames> {
-        PatchNames::new(&self.surface.file).renamed(
+        self.patch_names_for(&self.surface.file)
+    }
+
+    /// The patch names for a surface called `surface` (a file or a
+    /// built-in name), renamed by `mesh.patches`.
+    pub fn patch_names_for(&self, surface: &str) -> crate::Result<PatchNames> {
+        PatchNames::new(surface).renamed(
             self.mesh
                 .patches
                 .iter()

@@ -103,17 +103,21 @@ pub const fn plane_axes(axis: usize) -> (usize, usize) {
 /// The whole face: `(0,0) (2,0) (2,2) (0,2)`.
 const WHOLE: [(u8, u8); 4] = [(0, 0), (2, 0), (2, 2), (0, 2)];
 
-fn pack(corners: [(u8, u8); 4]) -> u16 {
-    // Counter-clockwise in (u, v) (positive shoelace area).
-    let area2: i32 = (0..4)
+/// Twice the signed (shoelace) area of a quadrilateral in halves,
+/// positive when counter-clockwise in `(u, v)`.
+fn twice_area(corners: &[(u8, u8); 4]) -> i32 {
+    (0..4)
         .map(|k| {
             let (a, b) = corners[k];
             let (c, d) = corners[(k + 1) % 4];
             a as i32 * d as i32 - c as i32 * b as i32
         })
-        .sum();
+        .sum()
+}
+
+fn pack(corners: [(u8, u8); 4]) -> u16 {
     let mut c = corners;
-    if area2 < 0 {
+    if twice_area(&corners) < 0 {
         c.swap(1, 3);
     }
     c.iter()
@@ -158,16 +162,11 @@ impl Face {
 
     /// Area in lattice units squared.
     pub fn lattice_area(&self) -> f64 {
-        let c: Vec<(f64, f64)> = (0..4)
-            .map(|k| {
-                let (a, b) = self.corner_halves(k);
-                (a as f64, b as f64)
-            })
-            .collect();
-        let twice: f64 = (0..4)
-            .map(|k| c[k].0 * c[(k + 1) % 4].1 - c[(k + 1) % 4].0 * c[k].1)
-            .sum();
-        0.5 * twice * (self.half as f64).powi(2)
+        let c = std::array::from_fn(|k| {
+            let (a, b) = self.corner_halves(k);
+            (a as u8, b as u8)
+        });
+        0.5 * twice_area(&c) as f64 * (self.half as f64).powi(2)
     }
 
     /// Centroid in lattice coordinates.
@@ -447,9 +446,9 @@ impl Mesh {
                     continue;
                 };
                 if let Some((at, l)) = kept.containing(n, i as usize) {
-                    if l.level() < e.level() || at_is_halo(at) {
+                    if l.level() < e.level() || matches!(at, At::Halo(_)) {
                         // Coarser (this fine side emits) or another rank's.
-                        let list = if at_is_halo(at) {
+                        let list = if matches!(at, At::Halo(_)) {
                             &mut halo
                         } else {
                             &mut internal
@@ -512,16 +511,14 @@ impl Mesh {
             Other::Patch(p) => p,
             _ => u16::MAX,
         });
-        let mut patch_start = [0usize; NUM_PATCHES + 1];
-        for p in 0..NUM_PATCHES {
-            patch_start[p + 1] = patch_start[p]
-                + boundary
-                    .iter()
-                    .filter(|f| f.other == Other::Patch(p as u16))
-                    .count();
+        let mut patch_start = [num_internal; NUM_PATCHES + 1];
+        for f in &boundary {
+            if let Other::Patch(p) = f.other {
+                patch_start[p as usize + 1] += 1;
+            }
         }
-        for s in patch_start.iter_mut() {
-            *s += num_internal;
+        for p in 0..NUM_PATCHES {
+            patch_start[p + 1] += patch_start[p] - num_internal;
         }
         let me = self.rank as u32;
         let first = self.first_element;
@@ -632,10 +629,6 @@ impl Mesh {
     }
 }
 
-fn at_is_halo(a: At) -> bool {
-    matches!(a, At::Halo(_))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -644,19 +637,7 @@ mod tests {
     fn pieces_cover_the_dropped_quarters() {
         for kept in 1u8..15 {
             let pieces = dropped_pieces(kept);
-            let area: i32 = pieces
-                .iter()
-                .map(|p| {
-                    let twice: i32 = (0..4)
-                        .map(|k| {
-                            let (a, b) = p[k];
-                            let (c, d) = p[(k + 1) % 4];
-                            a as i32 * d as i32 - c as i32 * b as i32
-                        })
-                        .sum();
-                    twice.abs()
-                })
-                .sum();
+            let area: i32 = pieces.iter().map(|p| twice_area(p).abs()).sum();
             let dropped = 4 - kept.count_ones() as i32;
             assert_eq!(area, 2 * dropped, "kept {kept:04b}");
             // No piece covers a kept quarter's centre.

@@ -62,7 +62,6 @@ pub(crate) fn clean_walls(
         class.extend_from_slice(classes);
         class.extend(ghosts.data[b..].iter().map(|&w| w as u8));
         let view = View {
-            begins: leaves.iter().map(|l| l.cell_begin()).collect(),
             leaves: &leaves,
             class: &class,
             kept: &kept,
@@ -119,7 +118,6 @@ pub(crate) fn clean_walls(
 
 /// Local and ghost leaves in Morton order with their class bytes.
 struct View<'a, K: Fn(u8) -> bool> {
-    begins: Vec<u64>,
     leaves: &'a [Octant],
     class: &'a [u8],
     kept: &'a K,
@@ -133,7 +131,8 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
             return None;
         }
         let m = morton_encode(x[0] as u32, x[1] as u32, x[2] as u32);
-        let j = crate::sort::gallop_last_le(self.begins.len(), hint, m, |k| self.begins[k])?;
+        let leaves = self.leaves;
+        let j = crate::sort::gallop_last_le(leaves.len(), hint, m, |k| leaves[k].cell_begin())?;
         (self.leaves[j].cell_end() > m).then_some(j)
     }
 
@@ -176,25 +175,10 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
     }
 
     /// Calls `f` with every leaf touching leaf `i` (some more than once):
-    /// the leaves holding the ring of half-size cells around it, which
-    /// under 2:1 balance are all of them.
+    /// the leaves holding its [`ring_cells`], which under 2:1 balance are
+    /// all of them.
     fn ring(&self, i: usize, mut f: impl FnMut(usize)) {
-        let l = self.leaves[i];
-        let (c, s) = (l.coords().map(|v| v as i64), l.side() as i64);
-        let h = (s / 2).max(1);
-        for k in 0..64 {
-            let g = [k & 3, (k >> 2) & 3, k >> 4].map(|v| v as i64);
-            if g.iter().all(|&v| v == 1 || v == 2) {
-                continue;
-            }
-            let x: [i64; 3] = std::array::from_fn(|a| {
-                c[a] + match g[a] {
-                    0 => -1,
-                    1 => 0,
-                    2 => h,
-                    _ => s,
-                }
-            });
+        for (_, x) in ring_cells(self.leaves[i]) {
             if let Some(j) = self.at(x, i) {
                 f(j);
             }
@@ -220,19 +204,11 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
                 _ => s + h,
             }
         };
-        for k in 0..64 {
-            let g = [k & 3, (k >> 2) & 3, k >> 4];
-            if known >> k & 1 == 1 || g.iter().all(|&v| v == 1 || v == 2) {
+        for (k, x) in ring_cells(l) {
+            if known >> k & 1 == 1 {
                 continue;
             }
-            let x: [i64; 3] = std::array::from_fn(|a| {
-                c[a] + match g[a] {
-                    0 => -1,
-                    1 => 0,
-                    2 => h,
-                    _ => s,
-                }
-            });
+            let g = [k & 3, (k >> 2) & 3, k >> 4];
             let Some(j) = self.at(x, i) else {
                 grid[k] = false;
                 continue;
@@ -302,6 +278,31 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
         }
         false
     }
+}
+
+/// The 56 cells of the 4x4x4 grid of half-size cells centred on `leaf`
+/// (index `x | y << 2 | z << 4`; the leaf is the middle 2x2x2) that lie
+/// outside it, each with the finest cell sampled for it: the one touching
+/// the leaf, so that corner cells see the leaf's corner neighbour even
+/// under edge balance.
+fn ring_cells(leaf: Octant) -> impl Iterator<Item = (usize, [i64; 3])> {
+    let (c, s) = (leaf.coords().map(|v| v as i64), leaf.side() as i64);
+    let h = (s / 2).max(1);
+    (0..64usize).filter_map(move |k| {
+        let g = [k & 3, (k >> 2) & 3, k >> 4];
+        if g.iter().all(|&v| v == 1 || v == 2) {
+            return None;
+        }
+        let x = std::array::from_fn(|a| {
+            c[a] + match g[a] {
+                0 => -1,
+                1 => 0,
+                2 => h,
+                _ => s,
+            }
+        });
+        Some((k, x))
+    })
 }
 
 /// Face-connected groups of the cells `member` selects in a 2x2x2 block:

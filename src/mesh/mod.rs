@@ -217,17 +217,20 @@ impl Mesh {
         // Each leaf travels with its class and, when kept, its global
         // element number, so the halo of the finite-volume faces needs no
         // second exchange.
-        let element_index: Vec<u64> = local_class
-            .iter()
-            .scan(0u64, |n, &c| {
-                let i = *n;
-                *n += keep(c) as u64;
-                Some(i)
-            })
-            .collect();
-        let nkept = element_index
-            .last()
-            .map_or(0, |&i| i + keep(*local_class.last().unwrap_or(&0)) as u64);
+        let nkept = local_class.iter().filter(|&&c| keep(c)).count() as u64;
+        // Only leaves sent to other ranks need their number: none on one.
+        let element_index: Vec<u64> = if comm.size() > 1 {
+            local_class
+                .iter()
+                .scan(0u64, |n, &c| {
+                    let i = *n;
+                    *n += keep(c) as u64;
+                    Some(i)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         let kept_counts = comm.allgather_u64(nkept);
         let first_element: u64 = kept_counts[..comm.rank()].iter().sum();
         let ghosts = timer.time(comm, "ghost", || {

@@ -136,13 +136,7 @@ impl Session {
             (None, Some((_, _, n))) => n.as_str(),
             _ => "surface",
         };
-        PatchNames::new(name).renamed(
-            self.config
-                .mesh
-                .patches
-                .iter()
-                .map(|(a, b)| (a.as_str(), b.as_str())),
-        )
+        self.config.patch_names_for(name)
     }
 
     /// Writes the mesh as an OpenFOAM case in `dir`

@@ -360,3 +360,19 @@ pub fn num(v: &serde_json::Value, k: &str) -> f64 {
     v[k].as_f64()
         .unwrap_or_else(|| panic!("no number '{k}' in {v}"))
 }
+
+/// Gathers every rank's `v` on rank 0 (one vector per rank there, empty
+/// vectors elsewhere).
+pub fn gather(comm: &octmesh::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
+    let p = comm.size();
+    let mut counts = vec![0; p];
+    counts[0] = v.len();
+    let (all, c) = comm.alltoallv_u64(&v, &counts);
+    let mut out = Vec::new();
+    let mut at = 0;
+    for n in c {
+        out.push(all[at..at + n].to_vec());
+        at += n;
+    }
+    out
+}
