@@ -44,6 +44,9 @@ module octmesh
   ! Element classes (octmesh_class).
   integer(c_int8_t), parameter, public :: OCTMESH_CLASS_OUTSIDE = 0, &
        OCTMESH_CLASS_INSIDE = 1, OCTMESH_CLASS_CUT = 2
+  ! OpenFOAM list encodings (octmesh_foam_format).
+  integer(c_int32_t), parameter, public :: OCTMESH_FOAM_FORMAT_BINARY = 0, &
+       OCTMESH_FOAM_FORMAT_ASCII = 1
   !> Lattice units per side of the root cube.
   integer(c_int32_t), parameter, public :: OCTMESH_ROOT_LEN = 2**19
 
@@ -54,6 +57,32 @@ module octmesh
      integer(c_int32_t) :: verbosity
      integer(c_int64_t) :: memory_budget
   end type octmesh_options_t
+
+  !> octmesh_faces_t: the finite-volume faces and cells (see octmesh.h).
+  !> Arrays are C pointers to 0-based data owned by the handle; read them
+  !> with c_f_pointer, e.g. call c_f_pointer(f%owner, owner, [f%num_faces]).
+  type, bind(c), public :: octmesh_faces_t
+     integer(c_int32_t) :: num_faces, num_internal, num_patches
+     type(c_ptr) :: owner, neighbour, area, centre, normal, patch_offsets
+     type(c_ptr) :: cell_centre, cell_volume
+     integer(c_int64_t) :: first_element, global_elements
+  end type octmesh_faces_t
+
+  !> octmesh_cell_halo_t: halo elements and the exchange lists per
+  !> neighbour rank (0-based indices, see octmesh.h).
+  type, bind(c), public :: octmesh_cell_halo_t
+     integer(c_int32_t) :: num_halo
+     type(c_ptr) :: halo_global, halo_rank
+     integer(c_int32_t) :: num_ranks
+     type(c_ptr) :: ranks, face_offsets, send_offsets, send, recv_offsets, recv
+  end type octmesh_cell_halo_t
+
+  !> octmesh_boundary_t: boundary element faces (element, face, patch) and
+  !> each node's patches (0-based, see octmesh.h).
+  type, bind(c), public :: octmesh_boundary_t
+     integer(c_int32_t) :: num_faces
+     type(c_ptr) :: faces, node_offsets, node_patches
+  end type octmesh_boundary_t
 
   !> octmesh_octant_t: lowest corner (lattice units) and level.
   type, bind(c), public :: octmesh_octant_t
@@ -79,6 +108,9 @@ module octmesh
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
+  public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
+  public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
+  public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
 
   interface
      function octmesh_status_name(status) bind(c, name="octmesh_status_name")
@@ -312,6 +344,58 @@ module octmesh
        integer(c_int) :: octmesh_mesh_write_vtu_fields
      end function octmesh_mesh_write_vtu_fields
 
+     function octmesh_mesh_build_faces(h) bind(c, name="octmesh_mesh_build_faces")
+       import :: c_ptr, c_int
+       type(c_ptr), value :: h
+       integer(c_int) :: octmesh_mesh_build_faces
+     end function octmesh_mesh_build_faces
+
+     function octmesh_mesh_get_faces(h, out) bind(c, name="octmesh_mesh_get_faces")
+       import :: c_ptr, c_int, octmesh_faces_t
+       type(c_ptr), value :: h
+       type(octmesh_faces_t), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_faces
+     end function octmesh_mesh_get_faces
+
+     function octmesh_mesh_get_cell_halo(h, out) bind(c, name="octmesh_mesh_get_cell_halo")
+       import :: c_ptr, c_int, octmesh_cell_halo_t
+       type(c_ptr), value :: h
+       type(octmesh_cell_halo_t), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_cell_halo
+     end function octmesh_mesh_get_cell_halo
+
+     function octmesh_mesh_get_boundary(h, out) bind(c, name="octmesh_mesh_get_boundary")
+       import :: c_ptr, c_int, octmesh_boundary_t
+       type(c_ptr), value :: h
+       type(octmesh_boundary_t), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_boundary
+     end function octmesh_mesh_get_boundary
+
+     function c_octmesh_mesh_get_patch_name(h, patch, name) &
+          bind(c, name="octmesh_mesh_get_patch_name")
+       import :: c_ptr, c_int, c_int32_t
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: patch
+       type(c_ptr), intent(out) :: name
+       integer(c_int) :: c_octmesh_mesh_get_patch_name
+     end function c_octmesh_mesh_get_patch_name
+
+     function c_octmesh_mesh_rename_patch(h, from, to) bind(c, name="octmesh_mesh_rename_patch")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: from(*), to(*)
+       integer(c_int) :: c_octmesh_mesh_rename_patch
+     end function c_octmesh_mesh_rename_patch
+
+     function c_octmesh_mesh_write_openfoam(h, dir, format, overwrite) &
+          bind(c, name="octmesh_mesh_write_openfoam")
+       import :: c_ptr, c_char, c_int, c_int32_t
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: dir(*)
+       integer(c_int32_t), value :: format, overwrite
+       integer(c_int) :: c_octmesh_mesh_write_openfoam
+     end function c_octmesh_mesh_write_openfoam
+
      function c_strlen(s) bind(c, name="strlen")
        import :: c_ptr, c_size_t
        type(c_ptr), value :: s
@@ -424,5 +508,42 @@ contains
     if (size(values, 2) /= n) nfields = -1_c_int32_t
     status = octmesh_mesh_write_vtu_fields(h, trim(pvtu) // c_null_char, nfields, pn, pv)
   end function octmesh_mesh_write_vtu_fields_f
+
+  !> The name of patch `patch` (0-based: 0..5 the sides xmin..zmax, 6 the
+  !> surface). `status` is the C call's.
+  function octmesh_mesh_get_patch_name_f(h, patch, status) result(name)
+    type(c_ptr), intent(in) :: h
+    integer, intent(in) :: patch
+    integer(c_int), intent(out) :: status
+    character(len=:), allocatable :: name
+    type(c_ptr) :: p
+    p = c_null_ptr
+    status = c_octmesh_mesh_get_patch_name(h, int(patch, c_int32_t), p)
+    name = c_to_f_string(p)
+  end function octmesh_mesh_get_patch_name_f
+
+  !> Renames patch `from` to `to` (an OpenFOAM word). Collective.
+  function octmesh_mesh_rename_patch_f(h, from, to) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: from, to
+    integer(c_int) :: status
+    status = c_octmesh_mesh_rename_patch(h, trim(from) // c_null_char, trim(to) // c_null_char)
+  end function octmesh_mesh_rename_patch_f
+
+  !> Writes the mesh as an OpenFOAM case in `dir` (format
+  !> OCTMESH_FOAM_FORMAT_BINARY or _ASCII; an existing mesh is replaced only
+  !> when `overwrite`). Collective.
+  function octmesh_mesh_write_openfoam_f(h, dir, format, overwrite) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: dir
+    integer, intent(in) :: format
+    logical, intent(in) :: overwrite
+    integer(c_int) :: status
+    integer(c_int32_t) :: ow
+    ow = 0
+    if (overwrite) ow = 1
+    status = c_octmesh_mesh_write_openfoam(h, trim(dir) // c_null_char, &
+         int(format, c_int32_t), ow)
+  end function octmesh_mesh_write_openfoam_f
 
 end module octmesh

@@ -169,11 +169,207 @@ typedef enum {
 } octmesh_class;
 
 /**
+ * List encoding of OpenFOAM files (values of `octmesh_foam_format_t`).
+ */
+typedef enum {
+  /**
+   * Raw little-endian lists (OpenFOAM's `format binary`).
+   */
+  OCTMESH_FOAM_FORMAT_BINARY = 0,
+  /**
+   * Text.
+   */
+  OCTMESH_FOAM_FORMAT_ASCII = 1,
+} octmesh_foam_format;
+
+/**
  * Opaque handle: a communicator, the pipeline's session (surface, octree,
  * mesh) and the last error. Created by `octmesh_create`, freed by
  * `octmesh_destroy`. A handle must not be used by two threads at once.
  */
 typedef struct octmesh_t octmesh_t;
+
+/**
+ * A local count or index (elements, nodes, leaves of one rank): 32 bits.
+ */
+typedef int32_t octmesh_locidx_t;
+
+/**
+ * A global count or number (over all ranks): 64 bits.
+ */
+typedef int64_t octmesh_gloidx_t;
+
+/**
+ * The finite-volume view of this rank's part of the mesh (arrays owned
+ * by the handle). Cells are the local elements, in the mesh's order.
+ */
+typedef struct {
+  /**
+   * Faces of this rank: internal, boundary and shared.
+   */
+  octmesh_locidx_t num_faces;
+  /**
+   * The first `num_internal` faces are between two local elements.
+   */
+  octmesh_locidx_t num_internal;
+  /**
+   * Patches: 0..6 the sides `xmin xmax ymin ymax zmin zmax`, 6 the
+   * surface (`octmesh_mesh_get_patch_name`).
+   */
+  int32_t num_patches;
+  /**
+   * Owner element of each face (local, 0-based).
+   */
+  const octmesh_locidx_t *owner;
+  /**
+   * Other side of each face: the local element for internal faces
+   * (greater than the owner), `-1 - patch` for boundary faces, and the
+   * index into `halo_global`/`halo_rank` of `octmesh_cell_halo_t` for
+   * faces shared with another rank.
+   */
+  const octmesh_locidx_t *neighbour;
+  /**
+   * Area of each face.
+   */
+  const double *area;
+  /**
+   * Centroid of each face, x y z.
+   */
+  const double *centre;
+  /**
+   * Unit normal of each face, x y z, from the owner to the other side.
+   */
+  const double *normal;
+  /**
+   * `num_patches + 1` face indices: patch `p`'s boundary faces are
+   * `patch_offsets[p] .. patch_offsets[p + 1]`.
+   */
+  const octmesh_locidx_t *patch_offsets;
+  /**
+   * Centre of each local element, x y z.
+   */
+  const double *cell_centre;
+  /**
+   * Volume of each local element.
+   */
+  const double *cell_volume;
+  /**
+   * Global number of local element 0: local element `e` is global
+   * element `first_element + e` (contiguous per rank, in rank order).
+   */
+  octmesh_gloidx_t first_element;
+  /**
+   * Elements over all ranks.
+   */
+  octmesh_gloidx_t global_elements;
+} octmesh_faces_t;
+
+/**
+ * What a cell-centred code needs to exchange its unknowns with the other
+ * ranks (arrays owned by the handle).
+ *
+ * ```text
+ *   for k in 0 .. num_ranks:        with rank ranks[k]
+ *     send  the values of local elements send[send_offsets[k] .. send_offsets[k+1]]
+ *     recv  into halo elements        recv[recv_offsets[k] .. recv_offsets[k+1]]
+ * ```
+ *
+ * Both ranks of a pair list the same elements in the same order (by
+ * global element number), so plain `MPI_Isend`/`MPI_Irecv` of the packed
+ * values match.
+ */
+typedef struct {
+  /**
+   * Halo elements: elements of other ranks touching a local element.
+   */
+  octmesh_locidx_t num_halo;
+  /**
+   * Global element number of each halo element.
+   */
+  const octmesh_gloidx_t *halo_global;
+  /**
+   * Owner rank of each halo element.
+   */
+  const int32_t *halo_rank;
+  /**
+   * Neighbour ranks (sharing at least one face), increasing.
+   */
+  int32_t num_ranks;
+  /**
+   * The neighbour ranks.
+   */
+  const int32_t *ranks;
+  /**
+   * `num_ranks + 1` face indices: the faces shared with `ranks[k]` are
+   * `face_offsets[k] .. face_offsets[k + 1]`, in the same order on
+   * both ranks.
+   */
+  const octmesh_locidx_t *face_offsets;
+  /**
+   * `num_ranks + 1` offsets into `send`.
+   */
+  const octmesh_locidx_t *send_offsets;
+  /**
+   * Local elements to send, per neighbour rank.
+   */
+  const octmesh_locidx_t *send;
+  /**
+   * `num_ranks + 1` offsets into `recv`.
+   */
+  const octmesh_locidx_t *recv_offsets;
+  /**
+   * Halo elements (indices into `halo_global`) received, per neighbour
+   * rank.
+   */
+  const octmesh_locidx_t *recv;
+} octmesh_cell_halo_t;
+
+/**
+ * The finite-element boundary of this rank's part of the mesh (arrays
+ * owned by the handle).
+ *
+ * ```text
+ *   local faces of an element (p4est order):
+ *              z
+ *              |   3 (+y)
+ *              |  /            face  normal
+ *         +----5----+           0     -x
+ *        /|   /    /|           1     +x
+ *       +---------+ |           2     -y
+ *       | |       | 1 --- x     3     +y
+ *       0 |       | |           4     -z
+ *       | +------2--+           5     +z
+ *       |/        |/
+ *       +----4----+
+ * ```
+ */
+typedef struct {
+  /**
+   * Element faces wholly or partly on the boundary.
+   */
+  octmesh_locidx_t num_faces;
+  /**
+   * `3 * num_faces` values: local element, local face (0..6, above),
+   * patch; sorted by element then face.
+   */
+  const octmesh_locidx_t *faces;
+  /**
+   * `local_nodes + 1` offsets into `node_patches`.
+   */
+  const octmesh_locidx_t *node_offsets;
+  /**
+   * The patches of each local node (hanging nodes included), increasing:
+   * node `n` lies on `node_patches[node_offsets[n] .. node_offsets[n+1]]`
+   * (none off the boundary). Every rank holding a node gives it the
+   * same patches.
+   */
+  const octmesh_locidx_t *node_patches;
+} octmesh_boundary_t;
+
+/**
+ * One of the `octmesh_foam_format` constants.
+ */
+typedef int32_t octmesh_foam_format_t;
 
 /**
  * Options of a handle, read once by `octmesh_create`. Initialise with
@@ -221,16 +417,6 @@ typedef int32_t octmesh_cut_rule_t;
  * One of the `octmesh_inside_rule` constants.
  */
 typedef int32_t octmesh_inside_rule_t;
-
-/**
- * A local count or index (elements, nodes, leaves of one rank): 32 bits.
- */
-typedef int32_t octmesh_locidx_t;
-
-/**
- * A global count or number (over all ranks): 64 bits.
- */
-typedef int64_t octmesh_gloidx_t;
 
 /**
  * Sizes of the mesh: this rank's part and global totals (the same on
@@ -539,6 +725,87 @@ octmesh_status_t octmesh_octree_get_leaves(const octmesh_t *h,
 octmesh_status_t octmesh_octree_check_leak(octmesh_t *h, const double *point);
 
 /* ---- The mesh: building it, its arrays, output ---- */
+
+/**
+ * Extracts the finite-volume faces, the cell halo and the finite-element
+ * boundary of the current mesh, for the getters of this section. Needs a
+ * mesh. Collective.
+ *
+ * \param[in] h  the handle
+ */
+octmesh_status_t octmesh_mesh_build_faces(octmesh_t *h);
+
+/**
+ * Writes the finite-volume faces and cells to `*out`. Needs
+ * `octmesh_mesh_build_faces`. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  counts and arrays owned by the handle
+ */
+octmesh_status_t octmesh_mesh_get_faces(const octmesh_t *h, octmesh_faces_t *out);
+
+/**
+ * Writes the cell halo and its exchange lists to `*out`. Needs
+ * `octmesh_mesh_build_faces`. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  counts and arrays owned by the handle
+ */
+octmesh_status_t octmesh_mesh_get_cell_halo(const octmesh_t *h, octmesh_cell_halo_t *out);
+
+/**
+ * Writes the finite-element boundary (element faces and node patches) to
+ * `*out`. Needs `octmesh_mesh_build_faces`. Not collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  counts and arrays owned by the handle
+ */
+octmesh_status_t octmesh_mesh_get_boundary(const octmesh_t *h, octmesh_boundary_t *out);
+
+/**
+ * Sets `*name` to patch `patch`'s name (NUL-terminated, owned by the
+ * handle, valid until a rename or the handle's destruction). Needs a
+ * surface or a mesh (the surface patch is named after the surface). Not
+ * collective.
+ *
+ * \param[in]  h      the handle
+ * \param[in]  patch  0 .. num_patches - 1
+ * \param[out] name   the name
+ */
+octmesh_status_t octmesh_mesh_get_patch_name(const octmesh_t *h, int32_t patch, const char **name);
+
+/**
+ * Renames patch `from` (its current name, e.g. `xmin`) to `to` (an
+ * OpenFOAM word: letters, digits and `_`, not starting with a digit, not
+ * another patch's name), like the command's `--patch from=to`. Used by
+ * `octmesh_mesh_write_openfoam` and `octmesh_mesh_get_patch_name`; patch
+ * ids do not change. Collective (every rank must rename alike).
+ *
+ * \param[in] h     the handle
+ * \param[in] from  the current name, NUL-terminated
+ * \param[in] to    the new name, NUL-terminated
+ */
+octmesh_status_t octmesh_mesh_rename_patch(octmesh_t *h, const char *from, const char *to);
+
+/**
+ * Writes the mesh as an OpenFOAM case in `dir`, like the command's
+ * `--openfoam`: `dir/constant/polyMesh` on one rank, else
+ * `dir/processor<r>/constant/polyMesh` with processor patches (ready for
+ * `mpirun -np P solver -parallel`), and a minimal `dir/system` when it is
+ * absent. Patches are named by `octmesh_mesh_rename_patch`. An existing
+ * mesh is replaced only when `overwrite` is non-zero. All or nothing: if
+ * one rank fails, no rank's mesh is left in place. Needs a mesh.
+ * Collective.
+ *
+ * \param[in] h          the handle
+ * \param[in] dir        the case directory, NUL-terminated
+ * \param[in] format     one of `octmesh_foam_format`
+ * \param[in] overwrite  non-zero to replace an existing mesh
+ */
+octmesh_status_t octmesh_mesh_write_openfoam(octmesh_t *h,
+                                             const char *dir,
+                                             octmesh_foam_format_t format,
+                                             int32_t overwrite);
 
 /**
  * Builds the mesh of the octree, replacing any previous one. The elements

@@ -168,6 +168,42 @@ class Mesher {
     detail::check(octmesh_mesh_get_coordinates(h_, &p), h_, "octmesh_mesh_get_coordinates");
     return p;
   }
+  /// Extracts the faces, cell halo and boundary (collective); then the
+  /// three getters below.
+  void build_faces() {
+    detail::check(octmesh_mesh_build_faces(h_), h_, "octmesh_mesh_build_faces");
+  }
+  octmesh_faces_t faces() const {
+    octmesh_faces_t f;
+    detail::check(octmesh_mesh_get_faces(h_, &f), h_, "octmesh_mesh_get_faces");
+    return f;
+  }
+  octmesh_cell_halo_t cell_halo() const {
+    octmesh_cell_halo_t c;
+    detail::check(octmesh_mesh_get_cell_halo(h_, &c), h_, "octmesh_mesh_get_cell_halo");
+    return c;
+  }
+  octmesh_boundary_t boundary() const {
+    octmesh_boundary_t b;
+    detail::check(octmesh_mesh_get_boundary(h_, &b), h_, "octmesh_mesh_get_boundary");
+    return b;
+  }
+  std::string patch_name(int32_t patch) const {
+    const char *name = nullptr;
+    detail::check(octmesh_mesh_get_patch_name(h_, patch, &name), h_,
+                  "octmesh_mesh_get_patch_name");
+    return name;
+  }
+  void rename_patch(const std::string &from, const std::string &to) {
+    detail::check(octmesh_mesh_rename_patch(h_, from.c_str(), to.c_str()), h_,
+                  "octmesh_mesh_rename_patch");
+  }
+  void write_openfoam(const std::string &dir,
+                      octmesh_foam_format_t format = OCTMESH_FOAM_FORMAT_BINARY,
+                      bool overwrite = false) {
+    detail::check(octmesh_mesh_write_openfoam(h_, dir.c_str(), format, overwrite ? 1 : 0), h_,
+                  "octmesh_mesh_write_openfoam");
+  }
   void write_vtu(const std::string &pvtu) {
     detail::check(octmesh_mesh_write_vtu(h_, pvtu.c_str()), h_, "octmesh_mesh_write_vtu");
   }

@@ -128,6 +128,26 @@ fn pipeline_from_c_on_1_and_2_ranks() {
     );
 }
 
+/// Faces, cell halo, boundary and OpenFOAM output through the C API: the
+/// program checks the arrays against each other and MPI exchanges; the
+/// global counts it prints must not depend on the number of ranks.
+#[test]
+fn faces_from_c_on_1_2_and_3_ranks() {
+    let dir = scratch("c_api_faces");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("faces", &lib, &dir);
+    let mut lines = Vec::new();
+    for np in [1, 2, 3] {
+        let case = dir.join(format!("case_np{np}"));
+        let out = run_ok(np, &exe, &[case.to_str().unwrap()]);
+        assert_eq!(out.matches("FACES OK").count(), np, "{out}");
+        lines.push(line_starting(&out, "FACES internal").to_string());
+    }
+    assert_eq!(lines[0], lines[1], "np 1 and 2 differ");
+    assert_eq!(lines[0], lines[2], "np 1 and 3 differ");
+}
+
 #[test]
 fn misuse_from_c_on_1_and_2_ranks() {
     let dir = scratch("c_api_misuse");

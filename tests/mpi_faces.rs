@@ -168,6 +168,8 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
     let max_side = boxes.iter().map(|b| b.1).max().unwrap_or(0);
     let mut pairs = BTreeSet::new();
     let mut shared_area = 0f64;
+    // Area each element's face shares with kept elements, p4est face order.
+    let mut covered = vec![[0i64; 6]; el.len()];
     for (a, &i) in order.iter().enumerate() {
         let (p, s) = boxes[i];
         for &j in &order[a + 1..] {
@@ -183,7 +185,12 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
             let touching = ov.iter().filter(|&&o| o == 0).count();
             if touching == 1 && ov.iter().all(|&o| o >= 0) {
                 pairs.insert((i.min(j) as u32, i.max(j) as u32));
-                shared_area += ov.iter().filter(|&&o| o > 0).product::<i64>() as f64;
+                let area = ov.iter().filter(|&&o| o > 0).product::<i64>();
+                shared_area += area as f64;
+                let k = ov.iter().position(|&o| o == 0).unwrap();
+                let j_above = q[k] == p[k] + s;
+                covered[i][2 * k + usize::from(j_above)] += area;
+                covered[j][2 * k + usize::from(!j_above)] += area;
             }
         }
     }
@@ -205,6 +212,36 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
         .map(|x| x.lattice_area())
         .sum();
     assert_eq!(boundary, total - 2.0 * shared_area, "{tag}: boundary area");
+    // The finite-element boundary: every element face not wholly shared,
+    // on its side's patch at the domain's sides, else on the surface.
+    let mut expected = Vec::new();
+    for (i, &(p, s)) in boxes.iter().enumerate() {
+        for (face, &area) in covered[i].iter().enumerate() {
+            if area == (s as i64).pow(2) {
+                continue;
+            }
+            let (k, plus) = (face / 2, face % 2 == 1);
+            let at_side = if plus {
+                p[k] + s == ROOT_LEN
+            } else {
+                p[k] == 0
+            };
+            let patch = if at_side { face as u16 } else { SURFACE_PATCH };
+            expected.push((i as u32, face as u8, patch));
+        }
+    }
+    let serial = octmesh::comm::SerialComm;
+    let got: Vec<(u32, u8, u16)> = m
+        .boundary(&serial, f)
+        .unwrap()
+        .faces()
+        .iter()
+        .map(|b| (b.element, b.face, b.patch))
+        .collect();
+    assert_eq!(
+        got, expected,
+        "{tag}: boundary element faces differ from brute force"
+    );
     let root = (ROOT_LEN as f64).powi(2);
     for p in 0..6 {
         let side: f64 = f.faces()[f.patch_range(p)]
@@ -223,6 +260,69 @@ fn flatten_faces(v: &[GlobalFace]) -> Vec<u64> {
     v.iter()
         .flat_map(|f| [f.0, f.1, f.2[0], f.2[1], f.2[2], f.3])
         .collect()
+}
+
+/// Each local node's lattice point and patch mask, flattened as
+/// `[x, y, z, mask]`.
+fn node_patches(comm: &CommRef, m: &Mesh, f: &Faces) -> Vec<u64> {
+    let b = m.boundary(&**comm, f).unwrap();
+    let mut v = Vec::new();
+    for (n, p) in m.node_lattice().iter().enumerate() {
+        let mask: u64 = b.node_patches(n).iter().map(|&q| 1u64 << q).sum();
+        v.extend([p[0] as u64, p[1] as u64, p[2] as u64, mask]);
+    }
+    v
+}
+
+/// The patches of the boundary faces through lattice point `p` from the
+/// whole mesh's elements (sorted, all on one rank): each pair of the eight
+/// finest cells around `p` across a plane through it, one in an element and
+/// one not, is a boundary face through `p`.
+fn brute_node_mask(all: &[octmesh::octant::Octant], p: [u64; 3]) -> u64 {
+    let root = ROOT_LEN as u64;
+    let cell = |b: usize| -> Option<[u64; 3]> {
+        let mut q = [0u64; 3];
+        for a in 0..3 {
+            if b >> a & 1 == 1 {
+                if p[a] >= root {
+                    return None;
+                }
+                q[a] = p[a];
+            } else {
+                if p[a] == 0 {
+                    return None;
+                }
+                q[a] = p[a] - 1;
+            }
+        }
+        Some(q)
+    };
+    let kept = |q: [u64; 3]| {
+        // The last element starting at or before the cell in Morton order
+        // is the only one that may hold it.
+        let cell = octmesh::octant::morton_encode(q[0] as u32, q[1] as u32, q[2] as u32);
+        let k = all.partition_point(|e| e.cell_begin() <= cell);
+        k > 0 && {
+            let e = all[k - 1];
+            let (c, s) = (e.coords(), e.side() as u64);
+            (0..3).all(|a| c[a] as u64 <= q[a] && q[a] < c[a] as u64 + s)
+        }
+    };
+    let state: Vec<Option<bool>> = (0..8).map(|b| cell(b).map(kept)).collect();
+    let mut mask = 0u64;
+    for b in 0..8 {
+        if state[b] != Some(true) {
+            continue;
+        }
+        for a in 0..3 {
+            match state[b ^ (1 << a)] {
+                Some(true) => {}
+                Some(false) => mask |= 1 << SURFACE_PATCH,
+                None => mask |= 1 << (2 * a + (b >> a & 1 ^ 1)),
+            }
+        }
+    }
+    mask
 }
 
 /// For each neighbour rank: the shared faces (global pairs, lower rank's
@@ -355,6 +455,7 @@ fn child() {
         check_closure(&mesh, &faces, &tag);
         let parts = common::gather(&comm, flatten_faces(&global_faces(&mesh, &faces)));
         let lists = common::gather(&comm, shared(&mesh, &faces));
+        let nodes = common::gather(&comm, node_patches(&comm, &mesh, &faces));
         if rank == 0 {
             let dist: BTreeSet<Vec<u64>> = parts.concat().chunks(6).map(|c| c.to_vec()).collect();
             let n: usize = parts.iter().map(|p| p.len() / 6).sum();
@@ -369,6 +470,28 @@ fn child() {
                 .map(|c| c.to_vec())
                 .collect();
             assert_eq!(dist, alone, "{tag}: faces differ from one process's");
+            // Every rank's nodes carry the patches brute force finds (so
+            // shared nodes agree); the check is quadratic, so a sample.
+            let all = one.elements();
+            let mut on_boundary = 0;
+            for (r, v) in nodes.iter().enumerate() {
+                for (k, c) in v.chunks(4).enumerate() {
+                    if k % 7 != 0 && c[3] == 0 {
+                        continue;
+                    }
+                    let want = brute_node_mask(all, [c[0], c[1], c[2]]);
+                    assert_eq!(
+                        c[3],
+                        want,
+                        "{tag}: rank {r} node at {:?}: patches {:b}, brute force {:b}",
+                        &c[..3],
+                        c[3],
+                        want
+                    );
+                    on_boundary += usize::from(want != 0);
+                }
+            }
+            assert!(on_boundary > 0, "{tag}: no boundary node");
             let lists = unflatten_shared(&lists);
             let mut pairs = 0;
             for (a, map) in lists.iter().enumerate() {

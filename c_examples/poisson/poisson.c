@@ -22,13 +22,9 @@
  *   nodes; the exchange lists then add the partial sums of the other ranks
  *   using the same nodes, so every rank holds full sums on all its
  *   independent nodes. Dot products run over owned nodes only.
- * - Boundary: an independent node is interior iff it is a corner of exactly
- *   8 kept elements (summed over ranks like the operator). Each element
- *   having the node as a corner covers one of the 8 octants around it; an
- *   octant covered by a kept element that does not have the node as a corner
- *   would put the node inside that element's face or edge, which makes it a
- *   hanging node, not an independent one. So fewer than 8 means some octant
- *   around the node is outside the solid: the node is on the boundary.
+ * - Boundary: the nodes octmesh puts on a patch (octmesh_mesh_get_boundary:
+ *   the solid's surface and the cube's sides), the same on every rank that
+ *   holds the node.
  * - Dirichlet: u = u_D + w, u_D = exact on boundary nodes and 0 elsewhere,
  *   w solves the interior rows of (P^T K P) w = b - (P^T K P) u_D.
  *
@@ -253,14 +249,13 @@ int main(int argc, char **argv) {
   for (int64_t e = 0; e < pb.ne; e++)
     pb.h[e] = pb.xyz[3 * pb.conn[8 * e + 6]] - pb.xyz[3 * pb.conn[8 * e]];
 
-  /* Boundary: corners of fewer than 8 kept elements (summed over ranks). */
-  memset(pb.rfull, 0, sizeof(double) * nl);
-  for (int64_t e = 0; e < 8 * pb.ne; e++) pb.rfull[pb.conn[e]] += 1.0;
-  for (int64_t i = 0; i < pb.ni; i++) b[i] = pb.rfull[i];
-  exchange_sum(&pb, b);
+  /* Boundary: the nodes on any patch. */
+  TRY(octmesh_mesh_build_faces(h));
+  octmesh_boundary_t bd;
+  TRY(octmesh_mesh_get_boundary(h, &bd));
   long nbnd = 0, gbnd = 0;
   for (int64_t i = 0; i < pb.ni; i++) {
-    pb.bnd[i] = b[i] < 7.5;
+    pb.bnd[i] = bd.node_offsets[i + 1] > bd.node_offsets[i];
     if (i < pb.nown) nbnd += pb.bnd[i];
   }
   MPI_Allreduce(&nbnd, &gbnd, 1, MPI_LONG, MPI_SUM, MPI_COMM_WORLD);

@@ -55,6 +55,8 @@ pub(crate) struct MeshArrays {
     exchange: OnceCell<(Vec<i32>, Vec<i32>, Vec<i32>)>,
     hanging: OnceCell<(Vec<i32>, Vec<i32>)>,
     levels: OnceCell<Vec<i8>>,
+    /// The faces' arrays ([`super::faces`]).
+    pub(crate) faces: super::faces::FaceCells,
 }
 
 /// Builds the mesh of the octree, replacing any previous one. The elements

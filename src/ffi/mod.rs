@@ -50,6 +50,7 @@
 // rustdoc would read as links.
 #![allow(rustdoc::broken_intra_doc_links)]
 
+pub mod faces;
 pub mod handle;
 pub mod mesh;
 pub mod octree;
@@ -261,6 +262,24 @@ c_enum_conversions!(octmesh_inside_rule, "inside rule", crate::classify::InsideR
     OCTMESH_INSIDE_RULE_AUTO <=> crate::classify::InsideRule::Auto,
     OCTMESH_INSIDE_RULE_PARITY <=> crate::classify::InsideRule::Parity,
     OCTMESH_INSIDE_RULE_WINDING <=> crate::classify::InsideRule::Winding,
+});
+
+/// List encoding of OpenFOAM files (values of `octmesh_foam_format_t`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum octmesh_foam_format {
+    /// Raw little-endian lists (OpenFOAM's `format binary`).
+    OCTMESH_FOAM_FORMAT_BINARY = 0,
+    /// Text.
+    OCTMESH_FOAM_FORMAT_ASCII = 1,
+}
+
+/// One of the `octmesh_foam_format` constants.
+pub type octmesh_foam_format_t = i32;
+
+c_enum_conversions!(octmesh_foam_format, "format", crate::io::openfoam::FoamFormat {
+    OCTMESH_FOAM_FORMAT_BINARY <=> crate::io::openfoam::FoamFormat::Binary,
+    OCTMESH_FOAM_FORMAT_ASCII <=> crate::io::openfoam::FoamFormat::Ascii,
 });
 
 /// Class of an element, as stored in the array of

@@ -43,9 +43,8 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, NUM_PATCHES, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
+use crate::mesh::points::{face_polygon, point_key, PointIndex};
 use crate::mesh::Mesh;
-use crate::octant::morton_encode;
-use crate::sort::{gallop_last_le, radix_sort_bits};
 
 crate::named_enum! {
     /// Binary or ASCII list data.
@@ -83,32 +82,8 @@ pub struct FoamCounts {
     pub cells: u64,
 }
 
-/// Lattice point as its Morton code (21 bits per axis): sorted codes keep
-/// the points of neighbouring faces close together.
-fn key(p: [u32; 3]) -> u64 {
-    morton_encode(p[0], p[1], p[2])
-}
-
 /// A point that exists but no face used yet.
 const UNUSED: u32 = u32::MAX;
-
-/// The mesh points near this rank, sorted by Morton code, each with its
-/// polyMesh label once a face uses it. Faces come in Morton order, so each
-/// look-up gallops from the last one and stays in cache.
-struct Points {
-    keys: Vec<u64>,
-    label: Vec<u32>,
-    hint: usize,
-}
-
-impl Points {
-    fn find(&mut self, k: u64) -> Option<usize> {
-        let keys = &self.keys;
-        let j = gallop_last_le(keys.len(), self.hint, k, |i| keys[i])?;
-        self.hint = j;
-        (keys[j] == k).then_some(j)
-    }
-}
 
 /// This rank's polyMesh in memory: points and faces as point labels.
 struct PolyMesh {
@@ -117,44 +92,19 @@ struct PolyMesh {
     labels: Vec<u32>,
 }
 
-/// The midpoint of `a`-`b` when they differ along one axis by an even
-/// length.
-fn midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
-    let differ = [a[0] != b[0], a[1] != b[1], a[2] != b[2]];
-    if differ.iter().filter(|&&d| d).count() != 1 {
-        return None;
-    }
-    let k = differ.iter().position(|&d| d)?;
-    let (lo, hi) = (a[k].min(b[k]), a[k].max(b[k]));
-    if (hi - lo) % 2 != 0 {
-        return None;
-    }
-    let mut m = a;
-    m[k] = lo + (hi - lo) / 2;
-    Some(m)
-}
-
 fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
-    let mut keys: Vec<u64> = mesh.node_lattice().into_iter().map(key).collect();
+    let mut keys: Vec<u64> = mesh.node_lattice().into_iter().map(point_key).collect();
     for h in &mesh.halo().leaves {
         let (c, s) = (h.coords(), h.side());
         for k in 0..8 {
-            keys.push(key(
-                [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 })
+            keys.push(point_key(
+                [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 }),
             ));
         }
     }
-    let mut tmp = Vec::new();
-    radix_sort_bits(&mut keys, &mut tmp, 0, 63);
-    drop(tmp);
-    keys.dedup();
-    let n = keys.len();
-    let mut set = Points {
-        keys,
-        label: vec![UNUSED; n],
-        hint: 0,
-    };
+    let mut set = PointIndex::new(keys);
+    let mut label = vec![UNUSED; set.len()];
     let halo_start = faces.halo_range().start;
     let mut points: Vec<[u32; 3]> = Vec::new();
     let mut offsets = Vec::with_capacity(faces.faces().len() + 1);
@@ -164,16 +114,7 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     let mut poly: Vec<(u64, [u32; 3])> = Vec::with_capacity(8);
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
-        let c = f.corners();
-        for k in 0..4 {
-            poly.push((key(c[k]), c[k]));
-            if let Some(m) = midpoint(c[k], c[(k + 1) % 4]) {
-                let km = key(m);
-                if set.find(km).is_some() {
-                    poly.push((km, m));
-                }
-            }
-        }
+        face_polygon(&f.corners(), |k| set.find(k).is_some(), &mut poly);
         if i >= halo_start {
             // Both sides start at the lowest point.
             let at = (0..poly.len()).min_by_key(|&k| poly[k].0).unwrap_or(0);
@@ -186,11 +127,11 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
                     format!("face corner {x:?} is no element's corner"),
                 ));
             };
-            if set.label[j] == UNUSED {
-                set.label[j] = points.len() as u32;
+            if label[j] == UNUSED {
+                label[j] = points.len() as u32;
                 points.push(x);
             }
-            labels.push(set.label[j]);
+            labels.push(label[j]);
         }
         if labels.len() > i32::MAX as usize {
             return Err(Error::new(
@@ -642,15 +583,3 @@ relaxationFactors
     }
 }
 ";
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn midpoints() {
-        assert_eq!(midpoint([0, 0, 0], [4, 0, 0]), Some([2, 0, 0]));
-        assert_eq!(midpoint([0, 0, 0], [3, 0, 0]), None);
-        assert_eq!(midpoint([0, 0, 0], [2, 2, 0]), None);
-    }
-}

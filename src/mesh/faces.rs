@@ -297,6 +297,11 @@ impl Faces {
         self.num_internal
     }
 
+    /// Number of patches (sides and surface).
+    pub fn num_patches(&self) -> usize {
+        NUM_PATCHES
+    }
+
     /// The boundary faces of patch `p` (a range of [`Faces::faces`]).
     pub fn patch_range(&self, p: usize) -> Range<usize> {
         self.patch_start[p]..self.patch_start[p + 1]
@@ -315,23 +320,28 @@ impl Faces {
 
 /// Where a kept element is: local index or halo index.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-enum At {
+pub(super) enum At {
     Local(u32),
     Halo(u32),
 }
 
 /// The kept elements around this rank: halo before, local, halo after, all
 /// in Morton order.
-struct Kept<'a> {
-    local: &'a [Octant],
-    halo: &'a Halo,
+pub(super) struct Kept<'a> {
+    pub(super) local: &'a [Octant],
+    pub(super) halo: &'a Halo,
 }
 
 impl Kept<'_> {
     /// The last kept element starting at or before the first cell of `o`;
     /// `hint` is a local element near it.
     fn last_at_or_before(&self, o: Octant, hint: usize) -> Option<(At, Octant)> {
-        let c = o.cell_begin();
+        self.last_at_or_before_cell(o.cell_begin(), hint)
+    }
+
+    /// The last kept element starting at or before finest cell `c` (a
+    /// Morton cell index).
+    fn last_at_or_before_cell(&self, c: u64, hint: usize) -> Option<(At, Octant)> {
         let before = &self.halo.leaves[..self.halo.before];
         let after = &self.halo.leaves[self.halo.before..];
         let find = |s: &[Octant]| s.partition_point(|l| l.cell_begin() <= c).checked_sub(1);
@@ -352,6 +362,12 @@ impl Kept<'_> {
     fn containing(&self, o: Octant, hint: usize) -> Option<(At, Octant)> {
         self.last_at_or_before(o, hint)
             .filter(|(_, l)| l.cell_begin() <= o.cell_begin() && o.cell_end() <= l.cell_end())
+    }
+
+    /// The kept element holding finest cell `c`, if one does.
+    pub(super) fn holding_cell(&self, c: u64, hint: usize) -> Option<(At, Octant)> {
+        self.last_at_or_before_cell(c, hint)
+            .filter(|(_, l)| c < l.cell_end())
     }
 
     /// Whether `o` itself is a kept element.

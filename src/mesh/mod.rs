@@ -51,11 +51,13 @@
 //! top face in the same order. Coordinates are in the user's units (through
 //! the [`Domain`]); lattice coordinates are also available.
 
+pub mod boundary;
 pub(crate) mod dual;
 pub mod faces;
 pub mod manifold;
 pub(crate) mod numbering;
 pub mod patches;
+pub mod points;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass};
 use crate::comm::{Comm, Traffic};
@@ -68,6 +70,7 @@ use crate::report::PhaseTimer;
 
 use std::sync::Arc;
 
+pub use boundary::{Boundary, BoundaryFace};
 pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, SURFACE_PATCH};
 
 use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};

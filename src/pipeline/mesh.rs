@@ -8,7 +8,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
 use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
-use crate::mesh::{Mesh, MeshOptions};
+use crate::mesh::{Boundary, Mesh, MeshOptions};
 
 use super::*;
 
@@ -128,15 +128,88 @@ impl Session {
         Ok(&self.faces.as_ref().expect("faces were just made").1)
     }
 
-    /// The patch names: the sides, the surface named after it, renamed by
-    /// `mesh.patches`.
-    pub fn patch_names(&self) -> Result<PatchNames> {
-        let name = match (&self.surface, &self.released) {
+    /// The current mesh's faces if [`Session::faces`] made them (not
+    /// collective).
+    pub fn current_faces(&self) -> Option<&Faces> {
+        self.faces
+            .as_ref()
+            .filter(|f| f.0 == self.mesh_generation)
+            .map(|f| &f.1)
+    }
+
+    /// The current mesh's finite-element boundary
+    /// ([`crate::mesh::boundary`]), made on first need with the faces.
+    /// Collective. Phase `boundary`.
+    pub fn boundary(&mut self) -> Result<&Boundary> {
+        self.faces()?;
+        let current = self.boundary.as_ref().map(|b| b.0) == Some(self.mesh_generation);
+        if !current {
+            let comm = self.comm.clone();
+            let (mesh, faces) = (&self.mesh, &self.faces);
+            let boundary = self.timer.time(&*comm, "boundary", || match (mesh, faces) {
+                (Some(m), Some((_, f))) => m.boundary(&*comm, f),
+                _ => Ok(Boundary::default()),
+            });
+            let boundary = agree(&*comm, boundary)?;
+            self.report_phase(None);
+            self.boundary = Some((self.mesh_generation, boundary));
+        }
+        Ok(&self
+            .boundary
+            .as_ref()
+            .expect("the boundary was just made")
+            .1)
+    }
+
+    /// The current mesh's boundary if [`Session::boundary`] made it (not
+    /// collective).
+    pub fn current_boundary(&self) -> Option<&Boundary> {
+        self.boundary
+            .as_ref()
+            .filter(|b| b.0 == self.mesh_generation)
+            .map(|b| &b.1)
+    }
+
+    /// Renames patch `from` (its current name) to `to` in the session's
+    /// configuration (`mesh.patches`); a bad, unknown or duplicate name
+    /// is an error and changes nothing. Not collective: every rank must
+    /// make the same renames.
+    pub fn rename_patch(&mut self, from: &str, to: &str) -> Result<()> {
+        let now = self.patch_names()?;
+        let id = now.id(from).ok_or_else(|| {
+            Error::invalid(format!(
+                "there is no patch '{from}' (patches: {})",
+                now.names().join(" ")
+            ))
+        })?;
+        let original = PatchNames::new(self.surface_name()).name(id).to_string();
+        let before = self.config.mesh.patches.clone();
+        if original == to {
+            self.config.mesh.patches.remove(&original);
+        } else {
+            self.config.mesh.patches.insert(original, to.to_string());
+        }
+        if let Err(e) = self.patch_names() {
+            self.config.mesh.patches = before;
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// The name the surface patch is made from: the surface's file or
+    /// built-in name.
+    fn surface_name(&self) -> &str {
+        match (&self.surface, &self.released) {
             (Some(s), _) => s.name.as_str(),
             (None, Some((_, _, n))) => n.as_str(),
             _ => "surface",
-        };
-        self.config.patch_names_for(name)
+        }
+    }
+
+    /// The patch names: the sides, the surface named after it, renamed by
+    /// `mesh.patches`.
+    pub fn patch_names(&self) -> Result<PatchNames> {
+        self.config.patch_names_for(self.surface_name())
     }
 
     /// Writes the mesh as an OpenFOAM case in `dir`

@@ -34,7 +34,7 @@ use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{diagnose, SurfaceReport};
 use crate::geometry::{Aabb, Surface};
-use crate::mesh::{Faces, Mesh};
+use crate::mesh::{Boundary, Faces, Mesh};
 use crate::octree::LinearOctree;
 use crate::progress::{self, Progress, Style};
 use crate::refine::{LeafEstimate, SurfaceIndex};
@@ -128,6 +128,8 @@ pub struct Session {
     mesh: Option<Mesh>,
     /// The faces of the mesh of a generation.
     faces: Option<(u64, Faces)>,
+    /// The finite-element boundary of the mesh of a generation.
+    boundary: Option<(u64, Boundary)>,
     facts: Facts,
 }
 
@@ -150,6 +152,7 @@ impl Session {
             classes: Classes::default(),
             mesh: None,
             faces: None,
+            boundary: None,
             facts: Facts {
                 rss_start: peak_rss_bytes(),
                 ..Facts::default()

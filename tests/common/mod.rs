@@ -339,7 +339,8 @@ pub fn compile_c_test(name: &str, lib: &Path, out_dir: &Path) -> PathBuf {
         .arg("-L")
         .arg(lib)
         .arg(format!("-Wl,-rpath,{}", lib.display()))
-        .arg("-loctmesh");
+        .arg("-loctmesh")
+        .arg("-lm");
     let out = run_with_limit(cmd, Duration::from_secs(120));
     assert!(
         out.status.success(),

@@ -1,0 +1,227 @@
+//! Finite-element boundaries: the element faces on each patch and the
+//! patches of each node.
+//!
+//! A finite-element code applies its boundary conditions on element faces
+//! (Neumann, Robin) and on nodes (Dirichlet). [`Mesh::boundary`] lists
+//!
+//! - the **boundary element faces**: `(local element, local face, patch)`
+//!   for every face of a local element that lies wholly or partly on the
+//!   boundary, sorted by element then face. Local faces follow p4est's
+//!   order:
+//!
+//!   ```text
+//!              z
+//!              |   3 (+y, back)
+//!              |  /
+//!         +----5----+            face  normal
+//!        /|   /    /|             0     -x
+//!       +---------+ |             1     +x
+//!       | |       | 1 --- x       2     -y
+//!       0 |       | |             3     +y
+//!       | +------2--+             4     -z
+//!       |/        |/              5     +z
+//!       +----4----+
+//!   ```
+//!
+//!   A face is partly on the boundary where some of the finer elements
+//!   across it were dropped (the finite-volume faces, [`super::faces`],
+//!   give the exact pieces and their areas);
+//! - the **patches of each local node**, every node (independent or
+//!   hanging) lying on a boundary face gets every patch it touches: a node
+//!   on an edge of the domain is on two side patches, a node where the
+//!   surface meets a side on both.
+//!
+//! A node's patches are found from the kept elements around it, not from
+//! this rank's faces: the eight finest cells around the node are each kept
+//! or not, and every kept/not-kept pair across a plane through the node
+//! is a piece of boundary face holding the node, on a side patch when the
+//! other cell is outside the domain and on the surface patch otherwise.
+//! The halo holds every kept element touching a local one, so this is
+//! exact at every corner of a local element. The other nodes (independent
+//! nodes a hanging node depends on, corners of other ranks' elements) take
+//! their patches from the ranks sharing them, in one exchange over the
+//! node exchange lists; every rank holding a node then gives it the same
+//! patches.
+
+use crate::comm::Comm;
+use crate::error::Result;
+use crate::octant::ROOT_LEN;
+
+use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
+use super::Mesh;
+
+/// A local element's face on the boundary.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct BoundaryFace {
+    /// The local element.
+    pub element: u32,
+    /// Its face, in p4est's order (`2 axis + 1` for the face on the
+    /// positive side of `axis`).
+    pub face: u8,
+    /// The face's patch ([`super::faces`]: sides `0..6`, then the surface).
+    pub patch: u16,
+}
+
+/// The finite-element boundary of one rank's part of the mesh; see the
+/// module documentation.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Boundary {
+    faces: Vec<BoundaryFace>,
+    /// Node `n`'s patches are `node_patches[node_start[n]..node_start[n + 1]]`.
+    node_start: Vec<u32>,
+    node_patches: Vec<u16>,
+}
+
+impl Boundary {
+    /// The boundary element faces, sorted by element, then face.
+    pub fn faces(&self) -> &[BoundaryFace] {
+        &self.faces
+    }
+
+    /// The patches of local node `n`, increasing (empty off the boundary).
+    pub fn node_patches(&self, n: usize) -> &[u16] {
+        &self.node_patches[self.node_start[n] as usize..self.node_start[n + 1] as usize]
+    }
+
+    /// Offsets into [`Boundary::patch_list`], one per local node and one
+    /// past the end (compressed rows).
+    pub fn node_offsets(&self) -> &[u32] {
+        &self.node_start
+    }
+
+    /// Every node's patches, node after node.
+    pub fn patch_list(&self) -> &[u16] {
+        &self.node_patches
+    }
+}
+
+/// The p4est face number of a finite-volume face's normal.
+fn element_face(axis: usize, negative: bool) -> u8 {
+    2 * axis as u8 + u8::from(!negative)
+}
+
+impl Mesh {
+    /// This rank's finite-element boundary, from `faces` (this mesh's
+    /// [`Mesh::faces`]). Collective: one exchange with the ranks sharing
+    /// nodes.
+    pub fn boundary(&self, comm: &dyn Comm, faces: &Faces) -> Result<Boundary> {
+        let mut list: Vec<BoundaryFace> = faces.faces()
+            [faces.num_internal()..faces.halo_range().start]
+            .iter()
+            .filter_map(|f| match f.other {
+                Other::Patch(p) => Some(BoundaryFace {
+                    element: f.owner,
+                    face: element_face(f.axis(), f.negative()),
+                    patch: p,
+                }),
+                _ => None,
+            })
+            .collect();
+        list.sort_unstable();
+        list.dedup();
+        let masks = self.node_patch_masks(comm);
+        let mut node_start = Vec::with_capacity(masks.len() + 1);
+        node_start.push(0u32);
+        let mut node_patches: Vec<u16> = Vec::new();
+        for mask in masks {
+            node_patches.extend((0..=SURFACE_PATCH).filter(|&b| mask & 1 << b != 0));
+            node_start.push(node_patches.len() as u32);
+        }
+        Ok(Boundary {
+            faces: list,
+            node_start,
+            node_patches,
+        })
+    }
+
+    /// Each local node's patches, bit `p` for patch `p`.
+    fn node_patch_masks(&self, comm: &dyn Comm) -> Vec<u64> {
+        let kept = Kept {
+            local: &self.elements,
+            halo: &self.halo,
+        };
+        let lattice = self.node_lattice();
+        // A local element at each node, as the look-ups' starting point.
+        let mut near = vec![0u32; lattice.len()];
+        for (e, c) in self.connectivity.iter().enumerate() {
+            for &n in c {
+                near[n as usize] = e as u32;
+            }
+        }
+        let mut masks: Vec<u64> = lattice
+            .iter()
+            .zip(&near)
+            .map(|(&p, &e)| node_patch_mask(&kept, p, e as usize))
+            .collect();
+        // Nodes no local element has as a corner: the halo may not reach
+        // around them, so they take what the sharing ranks found.
+        for &(n, _) in &self.dep_only {
+            masks[n as usize] = 0;
+        }
+        if comm.size() > 1 {
+            let lists = self.exchange_lists();
+            let mut counts = vec![0usize; comm.size()];
+            let mut send = Vec::new();
+            for (r, nodes) in &lists {
+                counts[*r as usize] = nodes.len();
+                send.extend(nodes.iter().map(|&n| masks[n as usize]));
+            }
+            let (recv, got) = comm.alltoallv_u64(&send, &counts);
+            let mut at = 0;
+            for (r, &n) in got.iter().enumerate() {
+                if let Ok(k) = lists.binary_search_by_key(&(r as u32), |l| l.0) {
+                    for (&node, &m) in lists[k].1.iter().zip(&recv[at..at + n]) {
+                        masks[node as usize] |= m;
+                    }
+                }
+                at += n;
+            }
+        }
+        masks
+    }
+}
+
+/// The patches (bit `p` for patch `p`) of the boundary faces holding
+/// lattice point `p`.
+fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize) -> u64 {
+    // Cell `b` (bit `a` of `b` set: on the positive side of axis `a`),
+    // kept or not; `outside[b]` when it leaves the domain.
+    let mut inside = [false; 8];
+    let mut outside = [false; 8];
+    for b in 0..8 {
+        let mut q = [0u32; 3];
+        for a in 0..3 {
+            let plus = b >> a & 1 == 1;
+            if plus {
+                outside[b] |= p[a] >= ROOT_LEN;
+                q[a] = p[a];
+            } else {
+                outside[b] |= p[a] == 0;
+                q[a] = p[a].wrapping_sub(1);
+            }
+        }
+        if !outside[b] {
+            let cell = crate::octant::morton_encode(q[0], q[1], q[2]);
+            inside[b] = kept.holding_cell(cell, hint).is_some();
+        }
+    }
+    let mut mask = 0u64;
+    for b in 0..8 {
+        if !inside[b] {
+            continue;
+        }
+        for a in 0..3 {
+            let c = b ^ (1 << a);
+            if inside[c] {
+                continue;
+            }
+            mask |= if outside[c] {
+                // The side the missing cell lies beyond: xmin is patch 0.
+                1 << (2 * a + (b >> a & 1 ^ 1))
+            } else {
+                1 << SURFACE_PATCH
+            };
+        }
+    }
+    mask
+}

@@ -1,0 +1,127 @@
+//! Lattice points found by their Morton code: the sorted index the
+//! boundary tagging ([`super::boundary`]) and the OpenFOAM writer share to
+//! turn a face's corners into point numbers.
+//!
+//! Faces come in Morton order, so consecutive look-ups land near each
+//! other: each one gallops from the previous hit and stays in cache.
+
+use crate::octant::morton_encode;
+use crate::sort::{gallop_last_le, radix_sort_bits};
+
+/// A lattice point's Morton code (21 bits per axis, so the far corner of
+/// the root fits): sorted codes keep neighbouring points close together.
+pub fn point_key(p: [u32; 3]) -> u64 {
+    morton_encode(p[0], p[1], p[2])
+}
+
+/// A set of lattice points, sorted by [`point_key`], each known by its
+/// position in the set.
+#[derive(Clone, Debug, Default)]
+pub struct PointIndex {
+    keys: Vec<u64>,
+    hint: usize,
+}
+
+impl PointIndex {
+    /// The set of the points with these keys (duplicates merged).
+    pub fn new(mut keys: Vec<u64>) -> PointIndex {
+        let mut tmp = Vec::new();
+        radix_sort_bits(&mut keys, &mut tmp, 0, 63);
+        keys.dedup();
+        PointIndex { keys, hint: 0 }
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// Whether the set is empty.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+
+    /// The position of the point with key `k`, if it is in the set.
+    pub fn find(&mut self, k: u64) -> Option<usize> {
+        let keys = &self.keys;
+        let j = gallop_last_le(keys.len(), self.hint, k, |i| keys[i])?;
+        self.hint = j;
+        (keys[j] == k).then_some(j)
+    }
+}
+
+/// The midpoint of `a`-`b` when they differ along one axis by an even
+/// length (an edge that may carry a hanging point).
+pub fn edge_midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
+    let differ = [a[0] != b[0], a[1] != b[1], a[2] != b[2]];
+    if differ.iter().filter(|&&d| d).count() != 1 {
+        return None;
+    }
+    let k = differ.iter().position(|&d| d)?;
+    let (lo, hi) = (a[k].min(b[k]), a[k].max(b[k]));
+    if (hi - lo) % 2 != 0 {
+        return None;
+    }
+    let mut m = a;
+    m[k] = lo + (hi - lo) / 2;
+    Some(m)
+}
+
+/// The polygon of a quadrilateral face as mesh points: its corners in
+/// order with, between two corners, their midpoint when `exists` says the
+/// mesh has a point there (a hanging point on the edge). Appends
+/// `(key, point)` pairs to `out`.
+pub fn face_polygon(
+    corners: &[[u32; 3]; 4],
+    mut exists: impl FnMut(u64) -> bool,
+    out: &mut Vec<(u64, [u32; 3])>,
+) {
+    for k in 0..4 {
+        out.push((point_key(corners[k]), corners[k]));
+        if let Some(m) = edge_midpoint(corners[k], corners[(k + 1) % 4]) {
+            let km = point_key(m);
+            if exists(km) {
+                out.push((km, m));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn midpoints() {
+        assert_eq!(edge_midpoint([0, 0, 0], [4, 0, 0]), Some([2, 0, 0]));
+        assert_eq!(edge_midpoint([0, 4, 0], [0, 0, 0]), Some([0, 2, 0]));
+        assert_eq!(edge_midpoint([0, 0, 0], [3, 0, 0]), None);
+        assert_eq!(edge_midpoint([0, 0, 0], [2, 2, 0]), None);
+        assert_eq!(edge_midpoint([1, 1, 1], [1, 1, 1]), None);
+    }
+
+    #[test]
+    fn index_finds_members_only() {
+        let pts = [[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [2, 0, 0]];
+        let mut idx = PointIndex::new(pts.iter().map(|&p| point_key(p)).collect());
+        assert_eq!(idx.len(), 4);
+        for p in pts {
+            let j = idx.find(point_key(p)).expect("a member");
+            assert!(j < 4);
+        }
+        assert_eq!(idx.find(point_key([1, 0, 0])), None);
+        assert_eq!(idx.find(point_key([9, 9, 9])), None);
+    }
+
+    #[test]
+    fn polygon_takes_existing_midpoints() {
+        let c = [[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]];
+        let mut out = Vec::new();
+        face_polygon(&c, |k| k == point_key([4, 2, 0]), &mut out);
+        let pts: Vec<[u32; 3]> = out.iter().map(|p| p.1).collect();
+        assert_eq!(
+            pts,
+            vec![[0, 0, 0], [4, 0, 0], [4, 2, 0], [4, 4, 0], [0, 4, 0]]
+        );
+    }
+}
