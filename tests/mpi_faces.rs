@@ -232,7 +232,7 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
     }
     let serial = octmesh::comm::SerialComm;
     let got: Vec<(u32, u8, u16)> = m
-        .boundary(&serial, f)
+        .boundary(&serial, f, None)
         .unwrap()
         .faces()
         .iter()
@@ -265,7 +265,7 @@ fn flatten_faces(v: &[GlobalFace]) -> Vec<u64> {
 /// Each local node's lattice point and patch mask, flattened as
 /// `[x, y, z, mask]`.
 fn node_patches(comm: &CommRef, m: &Mesh, f: &Faces) -> Vec<u64> {
-    let b = m.boundary(&**comm, f).unwrap();
+    let b = m.boundary(&**comm, f, None).unwrap();
     let mut v = Vec::new();
     for (n, p) in m.node_lattice().iter().enumerate() {
         let mask: u64 = b.node_patches(n).iter().map(|&q| 1u64 << q).sum();

@@ -390,6 +390,137 @@ fn ascii_files_read_back_close_every_cell() {
     );
 }
 
+/// Writes the built-in sphere as ASCII STL: one solid, or two (`top`
+/// above z = 0, `bottom` below).
+fn write_sphere_solids(path: &Path, split: bool) {
+    let s = octmesh::geometry::shapes::default_sphere();
+    let mut blocks: Vec<(&str, String)> = vec![("top", String::new()), ("bottom", String::new())];
+    for t in s.triangles() {
+        let k = usize::from(split && t.centroid()[2] <= 0.0);
+        let b = &mut blocks[k].1;
+        b.push_str("facet normal 0 0 0\n outer loop\n");
+        for v in &t.v {
+            b.push_str(&format!("  vertex {:e} {:e} {:e}\n", v[0], v[1], v[2]));
+        }
+        b.push_str(" endloop\nendfacet\n");
+    }
+    let mut text = String::new();
+    for (name, body) in blocks.iter().filter(|b| !b.1.is_empty()) {
+        text.push_str(&format!("solid {name}\n{body}endsolid {name}\n"));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// `(nFaces, startFace)` of each patch of a `boundary` file.
+fn patches_of(boundary: &Path) -> Vec<(String, usize, usize)> {
+    let text = std::fs::read_to_string(boundary).unwrap();
+    let mut out = Vec::new();
+    let lines: Vec<&str> = text.lines().collect();
+    for (i, l) in lines.iter().enumerate() {
+        if lines.get(i + 1).is_some_and(|n| n.trim() == "{") && l.starts_with("    ") {
+            let rest = lines[i..].join("\n");
+            let n = number_after(&rest, "nFaces") as usize;
+            let start = number_after(&rest, "startFace") as usize;
+            out.push((l.trim().to_string(), n, start));
+        }
+    }
+    out
+}
+
+#[test]
+fn solids_of_an_ascii_stl_become_patches() {
+    let dir = scratch("openfoam_solids");
+    let two = dir.join("halves.stl");
+    let one = dir.join("whole.stl");
+    write_sphere_solids(&two, true);
+    write_sphere_solids(&one, false);
+    let run = |stl: &Path, case: &Path, np: usize, extra: &[&str]| {
+        let mut args = vec![
+            "mesh",
+            stl.to_str().unwrap(),
+            "--level",
+            "5",
+            "--keep",
+            "outside",
+            "--openfoam",
+            case.to_str().unwrap(),
+            "--openfoam-format",
+            "ascii",
+        ];
+        args.extend(extra);
+        octmesh(np, &args, &dir.join("stats.json"))
+    };
+    let case = dir.join("halves");
+    let stats = run(&two, &case, 1, &["--patch", "bottom=floor"]);
+    let whole = dir.join("whole");
+    run(&one, &whole, 1, &[]);
+    let mesh = case.join("constant/polyMesh");
+    let patches = patches_of(&mesh.join("boundary"));
+    let names: Vec<&str> = patches.iter().map(|p| p.0.as_str()).collect();
+    assert_eq!(
+        names,
+        ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax", "top", "floor"]
+    );
+    let single = patches_of(&whole.join("constant/polyMesh/boundary"));
+    assert_eq!(
+        single[6].0, "top",
+        "one named solid names the surface patch"
+    );
+    assert!(patches[6].1 > 0 && patches[7].1 > 0);
+    assert_eq!(
+        patches[6].1 + patches[7].1,
+        single[6].1,
+        "the halves split the surface"
+    );
+    // Each face sits on its half: its centre's height has the half's sign
+    // (within a cell of the equator).
+    let points: Vec<[f64; 3]> = list_lines(&mesh.join("points"))
+        .iter()
+        .map(|l| parse_vector(l))
+        .collect();
+    let faces: Vec<Vec<usize>> = list_lines(&mesh.join("faces"))
+        .iter()
+        .map(|l| {
+            l[l.find('(').unwrap() + 1..l.len() - 1]
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect()
+        })
+        .collect();
+    let cell = stats["domain_side"].as_f64().unwrap() / 32.0;
+    for (k, sign) in [(6, 1.0), (7, -1.0)] {
+        let (_, n, start) = patches[k];
+        for f in &faces[start..start + n] {
+            let z = f.iter().map(|&p| points[p][2]).sum::<f64>() / f.len() as f64;
+            assert!(
+                sign * z > -cell,
+                "a face at z = {z} on patch {}",
+                patches[k].0
+            );
+        }
+    }
+    // The same patches on 3 ranks: per-patch face counts add up.
+    let par = dir.join("halves_np3");
+    run(&two, &par, 3, &["--patch", "bottom=floor"]);
+    let mut counts = [0usize; 8];
+    for r in 0..3 {
+        let b = par.join(format!("processor{r}/constant/polyMesh/boundary"));
+        for (k, p) in patches_of(&b).iter().take(8).enumerate() {
+            assert_eq!(p.0, names[k]);
+            counts[k] += p.1;
+        }
+    }
+    let serial: Vec<usize> = patches.iter().map(|p| p.1).collect();
+    assert_eq!(counts.to_vec(), serial, "patch sizes differ on 3 ranks");
+    if let Some(rc) = openfoam() {
+        judge(&rc, &case, 1, &stats, "two solids");
+    }
+    println!(
+        "sphere as two solids: top {} and floor {} faces (one solid: {}), each on its half, same on 3 ranks",
+        patches[6].1, patches[7].1, single[6].1
+    );
+}
+
 fn octmesh_err(args: &[&str]) -> String {
     let out = Command::new(octmesh_bin()).args(args).output().unwrap();
     assert!(!out.status.success(), "octmesh {args:?} should fail");

@@ -487,23 +487,29 @@ impl Config {
                     ));
                 }
             }
-            if let Err(e) = self.patch_names() {
-                return Err(ConfigError::new("mesh.patches", e.message().to_string()));
+            // The patches renamed must exist, which only the surface's
+            // parts tell (checked once it is read); the new names are
+            // checked here.
+            for (i, (_, to)) in self.mesh.patches.iter().enumerate() {
+                if let Err(e) = crate::mesh::patches::check_word(to) {
+                    return Err(ConfigError::new("mesh.patches", e.message().to_string()));
+                }
+                if self.mesh.patches.values().take(i).any(|t| t == to) {
+                    return Err(ConfigError::new(
+                        "mesh.patches",
+                        format!("two patches are renamed '{to}': names must be unique"),
+                    ));
+                }
             }
         }
         Ok(())
     }
 
-    /// The patch names: the defaults for the configured surface, renamed
-    /// by `mesh.patches`.
-    pub fn patch_names(&self) -> crate::Result<PatchNames> {
-        self.patch_names_for(&self.surface.file)
-    }
-
     /// The patch names for a surface called `surface` (a file or a
-    /// built-in name), renamed by `mesh.patches`.
-    pub fn patch_names_for(&self, surface: &str) -> crate::Result<PatchNames> {
-        PatchNames::new(surface).renamed(
+    /// built-in name) with named `parts` (none for most files), renamed by
+    /// `mesh.patches`.
+    pub fn patch_names_for(&self, surface: &str, parts: &[String]) -> crate::Result<PatchNames> {
+        PatchNames::with_parts(surface, parts).renamed(
             self.mesh
                 .patches
                 .iter()

@@ -282,14 +282,29 @@ pub fn clean(
     } else {
         vec![false; tris.len()]
     };
-    let kept: Vec<Triangle> = tris
+    let keep: Vec<bool> = tris
         .iter()
         .zip(&dup)
-        .filter(|(t, &d)| !(d || drop_degenerate && t.is_degenerate()))
+        .map(|(t, &d)| !(d || drop_degenerate && t.is_degenerate()))
+        .collect();
+    let kept: Vec<Triangle> = tris
+        .iter()
+        .zip(&keep)
+        .filter(|(_, &k)| k)
         .map(|(t, _)| *t)
         .collect();
     let dropped = tris.len() - kept.len();
-    Ok((Surface::new(kept)?, dropped))
+    let mut parts = surface.parts().clone();
+    if !parts.of.is_empty() {
+        parts.of = parts
+            .of
+            .iter()
+            .zip(&keep)
+            .filter(|(_, &k)| k)
+            .map(|(&p, _)| p)
+            .collect();
+    }
+    Ok((Surface::new(kept)?.with_parts(parts)?, dropped))
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@ pub mod bvh;
 pub mod diagnostics;
 pub mod distance;
 pub mod intersect;
+pub mod parts;
 pub mod predicates;
 pub mod shapes;
 pub mod stl;
@@ -186,7 +187,24 @@ impl Triangle {
 pub struct Surface {
     triangles: Vec<Triangle>,
     bbox: Aabb,
+    parts: Parts,
 }
+
+/// The named parts of a surface: the `solid` blocks of an ASCII STL file.
+/// Each becomes a boundary patch ([`crate::mesh::patches`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Parts {
+    /// Part names in order of first appearance (`solid` blocks with the
+    /// same name are one part; an unnamed block's name is empty). Empty
+    /// when the file names no part (binary STL, built-in shapes).
+    pub names: Vec<String>,
+    /// The part of each triangle; empty when there are fewer than two
+    /// parts.
+    pub of: Vec<u16>,
+}
+
+/// Most parts a surface may have (each is a patch, tracked as a bit).
+pub const MAX_PARTS: usize = 57;
 
 impl Surface {
     /// Validates `triangles` and builds a surface.
@@ -236,7 +254,36 @@ impl Surface {
                 triangles.len()
             )));
         }
-        Ok(Surface { triangles, bbox })
+        Ok(Surface {
+            triangles,
+            bbox,
+            parts: Parts::default(),
+        })
+    }
+
+    /// The surface with these parts (`parts.of`, when not empty, has one
+    /// entry per triangle below `parts.names.len()`).
+    pub fn with_parts(mut self, parts: Parts) -> Result<Surface> {
+        if parts.names.len() > MAX_PARTS {
+            return Err(Error::new(
+                ErrorKind::Limit,
+                format!(
+                    "the surface has {} named parts (solids), more than the supported {MAX_PARTS}",
+                    parts.names.len()
+                ),
+            ));
+        }
+        let bad_len = !parts.of.is_empty() && parts.of.len() != self.triangles.len();
+        if bad_len || parts.of.iter().any(|&p| p as usize >= parts.names.len()) {
+            return Err(Error::invalid("surface parts do not match the triangles"));
+        }
+        self.parts = parts;
+        Ok(self)
+    }
+
+    /// The named parts.
+    pub fn parts(&self) -> &Parts {
+        &self.parts
     }
 
     /// The triangles, in input order.
@@ -296,7 +343,11 @@ impl Surface {
             })
             .collect();
         let bbox = bbox_of(&triangles);
-        Surface { triangles, bbox }
+        Surface {
+            triangles,
+            bbox,
+            parts: self.parts.clone(),
+        }
     }
 }
 

@@ -19,14 +19,15 @@
 //!
 //! Binary files are decoded here; ASCII files go through `stl_io` after a
 //! light normalisation (keywords lower-cased, normals replaced since they
-//! are ignored, consecutive solids merged). Coordinates are `f32` in the
+//! are ignored, consecutive solids merged into one surface whose
+//! [`Parts`] remember each triangle's solid). Coordinates are `f32` in the
 //! file and widened to `f64`.
 
 use std::io::Cursor;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::Path;
 
-use super::{Surface, Triangle};
+use super::{Parts, Surface, Triangle};
 use crate::error::{Error, Result};
 
 const HEADER: usize = 80;
@@ -181,7 +182,7 @@ fn looks_binary(bytes: &[u8]) -> bool {
 
 fn read_ascii(bytes: &[u8]) -> Result<Surface> {
     let text = String::from_utf8_lossy(bytes);
-    let normalized = normalize_ascii(&text)?;
+    let (normalized, solids) = normalize_ascii(&text)?;
     // stl_io is not expected to panic, but a malformed file must never take
     // the whole program down.
     let parsed = catch_unwind(AssertUnwindSafe(|| {
@@ -204,14 +205,14 @@ fn read_ascii(bytes: &[u8]) -> Result<Surface> {
             v: f.vertices.map(|p| p.0.map(f64::from)),
         })
         .collect();
-    Surface::new(tris)
+    Surface::new(tris)?.with_parts(parts_of(&solids))
 }
 
 /// Rewrites ASCII STL into the strict form `stl_io` accepts: a first line
 /// `solid <name>`, lower-case keywords, finite normals, and one solid.
 /// Non-finite vertex coordinates are reported here, as `stl_io` would reject
 /// them with a message that does not say which triangle is affected.
-fn normalize_ascii(text: &str) -> Result<String> {
+fn normalize_ascii(text: &str) -> Result<(String, Vec<(String, usize)>)> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .split(['\n', '\r'])
@@ -220,7 +221,9 @@ fn normalize_ascii(text: &str) -> Result<String> {
         .peekable();
     let mut out = String::with_capacity(text.len() + 64);
     // The caller checked that the first token starts with "solid".
-    lines.next();
+    let name_of = |t: &[&str]| t[1..].join(" ");
+    let mut solids: Vec<(String, usize)> = Vec::new();
+    solids.push((lines.next().map(|t| name_of(&t)).unwrap_or_default(), 0));
     out.push_str("solid octmesh\n");
     let mut facet: Option<usize> = None;
     while let Some(tokens) = lines.next() {
@@ -228,6 +231,9 @@ fn normalize_ascii(text: &str) -> Result<String> {
         match key.as_str() {
             "facet" => {
                 facet = Some(facet.map_or(0, |f| f + 1));
+                if let Some(last) = solids.last_mut() {
+                    last.1 += 1;
+                }
                 let plain = tokens.len() == 1
                     || (tokens.len() == 5 && tokens[1].eq_ignore_ascii_case("normal"));
                 if plain {
@@ -255,7 +261,8 @@ fn normalize_ascii(text: &str) -> Result<String> {
                     .peek()
                     .is_some_and(|t| t[0].eq_ignore_ascii_case("solid"));
                 if another {
-                    lines.next();
+                    let next = lines.next().map(|t| name_of(&t)).unwrap_or_default();
+                    solids.push((next, 0));
                 } else {
                     out.push_str("endsolid\n");
                 }
@@ -263,7 +270,32 @@ fn normalize_ascii(text: &str) -> Result<String> {
             _ => push_line(&mut out, &tokens, 0),
         }
     }
-    Ok(out)
+    Ok((out, solids))
+}
+
+/// The parts of an ASCII file's solids (`(name, facets)` in file order):
+/// solids with the same name are one part; no part when the only solid is
+/// unnamed.
+fn parts_of(solids: &[(String, usize)]) -> Parts {
+    let mut names: Vec<String> = Vec::new();
+    let mut of: Vec<u16> = Vec::new();
+    for (name, n) in solids {
+        let p = match names.iter().position(|m| m == name) {
+            Some(p) => p,
+            None => {
+                names.push(name.clone());
+                names.len() - 1
+            }
+        };
+        of.extend(std::iter::repeat_n(p.min(u16::MAX as usize) as u16, *n));
+    }
+    if names.len() == 1 && names[0].is_empty() {
+        names.clear();
+    }
+    if names.len() < 2 {
+        of.clear();
+    }
+    Parts { names, of }
 }
 
 /// Appends the tokens as one line, lower-casing the first `keywords` tokens.
@@ -392,6 +424,21 @@ mod tests {
             read_stl_bytes(two.as_bytes()).unwrap().triangles(),
             &tris[..]
         );
+        // ... and remembered as parts: "test part" and "TEST PART".
+        let parts = read_stl_bytes(two.as_bytes()).unwrap().parts().clone();
+        assert_eq!(parts.names, ["test part", "TEST PART"]);
+        assert_eq!(parts.of, [0, 0, 1, 1]);
+        // Solids with the same name are one part; a single named solid is
+        // a part without per-triangle ids.
+        let same = format!("{}{}", ascii(&tris[..1], false), ascii(&tris[1..], false));
+        let parts = read_stl_bytes(same.as_bytes()).unwrap().parts().clone();
+        assert_eq!((parts.names.len(), parts.of.len()), (1, 0));
+        let unnamed = ascii(&tris, false).replace("solid test part", "solid");
+        assert!(read_stl_bytes(unnamed.as_bytes())
+            .unwrap()
+            .parts()
+            .names
+            .is_empty());
         // Normals are ignored, even when they are NaN.
         let nan_normal = ascii(&tris, false).replace("normal 0 0 1", "normal nan nan nan");
         assert_eq!(read_stl_bytes(nan_normal.as_bytes()).unwrap().len(), 4);

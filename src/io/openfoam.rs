@@ -41,7 +41,7 @@ use std::path::{Path, PathBuf};
 
 use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
-use crate::mesh::faces::{Faces, Other, NUM_PATCHES, SURFACE_PATCH};
+use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{face_polygon, point_key, PointIndex};
 use crate::mesh::Mesh;
@@ -418,11 +418,18 @@ fn write_polymesh(
             None,
         )?;
         let halo = faces.halo_ranges();
-        writeln!(w, "{}\n(", NUM_PATCHES + halo.len())?;
-        for q in 0..NUM_PATCHES {
+        let np = faces.num_patches();
+        if opts.patches.names().len() != np {
+            return Err(std::io::Error::other(format!(
+                "{} patch names for {np} patches",
+                opts.patches.names().len()
+            )));
+        }
+        writeln!(w, "{}\n(", np + halo.len())?;
+        for q in 0..np {
             let r = faces.patch_range(q);
             writeln!(w, "    {}\n    {{", opts.patches.name(q))?;
-            if q == SURFACE_PATCH as usize {
+            if q >= SURFACE_PATCH as usize {
                 writeln!(w, "        type            wall;")?;
                 writeln!(w, "        inGroups        List<word> 1(wall);")?;
             } else {

@@ -48,6 +48,7 @@ use crate::error::Result;
 use crate::octant::ROOT_LEN;
 
 use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
+use super::points::{face_polygon, point_key, PointIndex};
 use super::Mesh;
 
 /// A local element's face on the boundary.
@@ -102,9 +103,17 @@ fn element_face(axis: usize, negative: bool) -> u8 {
 
 impl Mesh {
     /// This rank's finite-element boundary, from `faces` (this mesh's
-    /// [`Mesh::faces`]). Collective: one exchange with the ranks sharing
-    /// nodes.
-    pub fn boundary(&self, comm: &dyn Comm, faces: &Faces) -> Result<Boundary> {
+    /// [`Mesh::faces`]). When `faces` has one surface patch per part
+    /// ([`Faces::split_surface`]), a node on the surface gets the parts of
+    /// the surface faces through it, or `part_at(its position)` when no
+    /// local face passes through it. Collective: one exchange with the
+    /// ranks sharing nodes.
+    pub fn boundary(
+        &self,
+        comm: &dyn Comm,
+        faces: &Faces,
+        part_at: Option<&dyn Fn([f64; 3]) -> u16>,
+    ) -> Result<Boundary> {
         let mut list: Vec<BoundaryFace> = faces.faces()
             [faces.num_internal()..faces.halo_range().start]
             .iter()
@@ -119,12 +128,12 @@ impl Mesh {
             .collect();
         list.sort_unstable();
         list.dedup();
-        let masks = self.node_patch_masks(comm);
+        let masks = self.node_patch_masks(comm, faces, part_at);
         let mut node_start = Vec::with_capacity(masks.len() + 1);
         node_start.push(0u32);
         let mut node_patches: Vec<u16> = Vec::new();
         for mask in masks {
-            node_patches.extend((0..=SURFACE_PATCH).filter(|&b| mask & 1 << b != 0));
+            node_patches.extend((0..64u16).filter(|&b| mask & 1 << b != 0));
             node_start.push(node_patches.len() as u32);
         }
         Ok(Boundary {
@@ -135,7 +144,12 @@ impl Mesh {
     }
 
     /// Each local node's patches, bit `p` for patch `p`.
-    fn node_patch_masks(&self, comm: &dyn Comm) -> Vec<u64> {
+    fn node_patch_masks(
+        &self,
+        comm: &dyn Comm,
+        faces: &Faces,
+        part_at: Option<&dyn Fn([f64; 3]) -> u16>,
+    ) -> Vec<u64> {
         let kept = Kept {
             local: &self.elements,
             halo: &self.halo,
@@ -158,6 +172,9 @@ impl Mesh {
         for &(n, _) in &self.dep_only {
             masks[n as usize] = 0;
         }
+        if faces.num_patches() > SURFACE_PATCH as usize + 1 {
+            self.surface_parts(&lattice, faces, part_at, &mut masks);
+        }
         if comm.size() > 1 {
             let lists = self.exchange_lists();
             let mut counts = vec![0usize; comm.size()];
@@ -178,6 +195,52 @@ impl Mesh {
             }
         }
         masks
+    }
+}
+
+impl Mesh {
+    /// Replaces the surface bit of each node on the surface by the bits of
+    /// its parts' patches: those of the surface faces through it.
+    fn surface_parts(
+        &self,
+        lattice: &[[u32; 3]],
+        faces: &Faces,
+        part_at: Option<&dyn Fn([f64; 3]) -> u16>,
+        masks: &mut [u64],
+    ) {
+        let mut index = PointIndex::new(lattice.iter().map(|&p| point_key(p)).collect());
+        let mut node_at = vec![0u32; index.len()];
+        for (n, &p) in lattice.iter().enumerate() {
+            if let Some(j) = index.find(point_key(p)) {
+                node_at[j] = n as u32;
+            }
+        }
+        let mut parts = vec![0u64; lattice.len()];
+        let mut poly = Vec::with_capacity(8);
+        let surface = SURFACE_PATCH as usize;
+        for p in surface..faces.num_patches() {
+            for f in &faces.faces()[faces.patch_range(p)] {
+                poly.clear();
+                face_polygon(&f.corners(), |k| index.find(k).is_some(), &mut poly);
+                for &(k, _) in &poly {
+                    if let Some(j) = index.find(k) {
+                        parts[node_at[j] as usize] |= 1 << p;
+                    }
+                }
+            }
+        }
+        for (n, mask) in masks.iter_mut().enumerate() {
+            if *mask & 1 << surface == 0 {
+                continue;
+            }
+            let mut found = parts[n];
+            if found == 0 {
+                let q = lattice[n].map(f64::from);
+                let part = part_at.map_or(0, |f| f(self.domain.from_lattice(q)));
+                found = 1 << (surface + part as usize);
+            }
+            *mask = (*mask & !(1 << surface)) | found;
+        }
     }
 }
 

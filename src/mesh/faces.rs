@@ -276,14 +276,25 @@ pub struct CellHalo {
 }
 
 /// The faces of one rank's part of the mesh. See the module documentation.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Faces {
     faces: Vec<Face>,
     num_internal: usize,
     /// Start of each patch's boundary faces, and the end of the last.
-    patch_start: [usize; NUM_PATCHES + 1],
+    patch_start: Vec<usize>,
     /// Halo faces per neighbour rank.
     halo_ranges: Vec<(u32, Range<usize>)>,
+}
+
+impl Default for Faces {
+    fn default() -> Faces {
+        Faces {
+            faces: Vec::new(),
+            num_internal: 0,
+            patch_start: vec![0; NUM_PATCHES + 1],
+            halo_ranges: Vec::new(),
+        }
+    }
 }
 
 impl Faces {
@@ -297,9 +308,35 @@ impl Faces {
         self.num_internal
     }
 
-    /// Number of patches (sides and surface).
+    /// Number of patches: the six sides, then the surface's (one, or one
+    /// per part after [`Faces::split_surface`]).
     pub fn num_patches(&self) -> usize {
-        NUM_PATCHES
+        self.patch_start.len().saturating_sub(1)
+    }
+
+    /// Splits the surface patch into `n` patches, ids `SURFACE_PATCH ..
+    /// SURFACE_PATCH + n`: `part(face)` (below `n`) gives each surface
+    /// face's. Each new patch keeps the faces in element order.
+    pub fn split_surface(&mut self, n: usize, mut part: impl FnMut(&Face) -> u16) {
+        let s = SURFACE_PATCH as usize;
+        if n < 2 || self.num_patches() != NUM_PATCHES {
+            return;
+        }
+        let range = self.patch_range(s);
+        let mut counts = vec![0usize; n];
+        let surface = &mut self.faces[range.clone()];
+        for f in surface.iter_mut() {
+            let p = part(f).min(n as u16 - 1);
+            counts[p as usize] += 1;
+            f.other = Other::Patch(SURFACE_PATCH + p);
+        }
+        surface.sort_by_key(|f| f.other);
+        self.patch_start.truncate(s + 1);
+        for c in counts {
+            let last = self.patch_start[self.patch_start.len() - 1];
+            self.patch_start.push(last + c);
+        }
+        debug_assert_eq!(self.patch_start[self.patch_start.len() - 1], range.end);
     }
 
     /// The boundary faces of patch `p` (a range of [`Faces::faces`]).
@@ -314,7 +351,7 @@ impl Faces {
 
     /// The halo faces: from the end of the boundary faces to the end.
     pub fn halo_range(&self) -> Range<usize> {
-        self.patch_start[NUM_PATCHES]..self.faces.len()
+        self.patch_start[self.patch_start.len() - 1]..self.faces.len()
     }
 }
 
@@ -527,7 +564,7 @@ impl Mesh {
             Other::Patch(p) => p,
             _ => u16::MAX,
         });
-        let mut patch_start = [num_internal; NUM_PATCHES + 1];
+        let mut patch_start = vec![num_internal; NUM_PATCHES + 1];
         for f in &boundary {
             if let Other::Patch(p) = f.other {
                 patch_start[p as usize + 1] += 1;

@@ -16,8 +16,38 @@ impl PatchNames {
     /// surface's, derived from `surface` (an STL path or a built-in name)
     /// by [`surface_patch_name`].
     pub fn new(surface: &str) -> PatchNames {
+        PatchNames::with_parts(surface, &[])
+    }
+
+    /// The default names for a surface with named parts (the solids of an
+    /// ASCII STL file, [`crate::geometry::Parts`]): the sides, then one
+    /// patch per part, in part order, named after it (characters a patch
+    /// name cannot hold become `_`; an unnamed part is called after the
+    /// file stem, with `_<k>` when there are several parts; a name met
+    /// twice gets `_<k>` too). Without parts, one surface patch named
+    /// after the file stem.
+    pub fn with_parts(surface: &str, parts: &[String]) -> PatchNames {
         let mut names: Vec<String> = SIDE_PATCHES.iter().map(|s| s.to_string()).collect();
-        names.push(surface_patch_name(surface));
+        let stem = surface_patch_name(surface);
+        if parts.is_empty() {
+            names.push(stem);
+            return PatchNames { names };
+        }
+        for (k, part) in parts.iter().enumerate() {
+            let mut name = if part.trim().is_empty() {
+                if parts.len() == 1 {
+                    stem.clone()
+                } else {
+                    format!("{stem}_{k}")
+                }
+            } else {
+                word_of(part)
+            };
+            if names.contains(&name) {
+                name = format!("{name}_{k}");
+            }
+            names.push(name);
+        }
         PatchNames { names }
     }
 
@@ -131,7 +161,14 @@ pub fn surface_patch_name(surface: &str) -> String {
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let mut name: String = stem
+    word_of(&stem)
+}
+
+/// `text` made a valid patch name: characters a name cannot hold become
+/// `_`, a `_` goes before a leading digit, and a side's name gets
+/// `_surface`.
+fn word_of(text: &str) -> String {
+    let mut name: String = text
         .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || "_.-+:".contains(c) {
@@ -148,6 +185,7 @@ pub fn surface_patch_name(surface: &str) -> String {
         name.push_str("_surface");
     }
     debug_assert_eq!(NUM_PATCHES, SIDE_PATCHES.len() + 1);
+    name.truncate(255);
     name
 }
 
@@ -197,5 +235,27 @@ mod tests {
         assert!(q.rename("inlet", "a;b").is_err());
         assert!(q.rename("inlet", "1a").is_err());
         assert_eq!(q, p, "a failed rename changes nothing");
+    }
+
+    #[test]
+    fn parts_become_patches() {
+        let parts = [
+            "hull".to_string(),
+            "deck house".into(),
+            "".into(),
+            "hull2".into(),
+        ];
+        let p = PatchNames::with_parts("boat.stl", &parts);
+        assert_eq!(p.names()[6..], ["hull", "deck_house", "boat_2", "hull2"]);
+        let one = PatchNames::with_parts("boat.stl", &["".to_string()]);
+        assert_eq!(one.names()[6..], ["boat"]);
+        let clash =
+            PatchNames::with_parts("a.stl", &["xmin".to_string(), "b c".into(), "b_c".into()]);
+        assert_eq!(clash.names()[6..], ["xmin_surface", "b_c", "b_c_2"]);
+        for n in clash.names() {
+            check_word(n).unwrap();
+        }
+        let renamed = p.renamed([("deck_house", "house")]).unwrap();
+        assert_eq!(renamed.name(7), "house");
     }
 }

@@ -5,6 +5,7 @@ use std::path::Path;
 use crate::classify::{CutRule, Keep};
 use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
+use crate::geometry::parts::PartLocator;
 use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
 use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
@@ -115,8 +116,24 @@ impl Session {
         if !current {
             let comm = self.comm.clone();
             let mesh = self.mesh.as_ref();
+            if self.locator.is_none() {
+                if let Some(s) = &self.surface {
+                    self.locator = PartLocator::new(&s.surface);
+                }
+            }
+            let (locator, parts) = (&self.locator, self.parts.len());
             let faces = self.timer.time(&*comm, "faces", || match mesh {
-                Some(m) => m.faces(),
+                Some(m) => {
+                    let mut f = m.faces()?;
+                    if let Some(loc) = locator {
+                        let mut scratch = Vec::new();
+                        f.split_surface(parts, |face| {
+                            let r = m.face_area(face).sqrt();
+                            loc.nearest_part(m.face_centre(face), r, &mut scratch)
+                        });
+                    }
+                    Ok(f)
+                }
                 None => Ok(Faces::default()),
             });
             let faces = agree(&*comm, faces)?;
@@ -145,9 +162,17 @@ impl Session {
         let current = self.boundary.as_ref().map(|b| b.0) == Some(self.mesh_generation);
         if !current {
             let comm = self.comm.clone();
-            let (mesh, faces) = (&self.mesh, &self.faces);
+            let (mesh, faces, locator) = (&self.mesh, &self.faces, &self.locator);
             let boundary = self.timer.time(&*comm, "boundary", || match (mesh, faces) {
-                (Some(m), Some((_, f))) => m.boundary(&*comm, f),
+                (Some(m), Some((_, f))) => match locator {
+                    Some(loc) => {
+                        let scratch = std::cell::RefCell::new(Vec::new());
+                        let part_at =
+                            |p: [f64; 3]| loc.nearest_part(p, 0.0, &mut scratch.borrow_mut());
+                        m.boundary(&*comm, f, Some(&part_at))
+                    }
+                    None => m.boundary(&*comm, f, None),
+                },
                 _ => Ok(Boundary::default()),
             });
             let boundary = agree(&*comm, boundary)?;
@@ -182,7 +207,9 @@ impl Session {
                 now.names().join(" ")
             ))
         })?;
-        let original = PatchNames::new(self.surface_name()).name(id).to_string();
+        let original = PatchNames::with_parts(self.surface_name(), &self.parts)
+            .name(id)
+            .to_string();
         let before = self.config.mesh.patches.clone();
         if original == to {
             self.config.mesh.patches.remove(&original);
@@ -209,7 +236,8 @@ impl Session {
     /// The patch names: the sides, the surface named after it, renamed by
     /// `mesh.patches`.
     pub fn patch_names(&self) -> Result<PatchNames> {
-        self.config.patch_names_for(self.surface_name())
+        self.config
+            .patch_names_for(self.surface_name(), &self.parts)
     }
 
     /// Writes the mesh as an OpenFOAM case in `dir`

@@ -33,6 +33,7 @@ use crate::config::{Command, Config};
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{diagnose, SurfaceReport};
+use crate::geometry::parts::PartLocator;
 use crate::geometry::{Aabb, Surface};
 use crate::mesh::{Boundary, Faces, Mesh};
 use crate::octree::LinearOctree;
@@ -130,6 +131,10 @@ pub struct Session {
     faces: Option<(u64, Faces)>,
     /// The finite-element boundary of the mesh of a generation.
     boundary: Option<(u64, Boundary)>,
+    /// The named parts of the surface (patches), kept when it is released.
+    parts: Vec<String>,
+    /// Which part is nearest a point, for surfaces of several parts.
+    locator: Option<PartLocator>,
     facts: Facts,
 }
 
@@ -153,6 +158,8 @@ impl Session {
             mesh: None,
             faces: None,
             boundary: None,
+            parts: Vec::new(),
+            locator: None,
             facts: Facts {
                 rss_start: peak_rss_bytes(),
                 ..Facts::default()
@@ -293,6 +300,10 @@ impl Session {
         self.inside = self.config.inside_rule(command);
         self.plan = command;
         self.load_surface()?;
+        if command == Command::Mesh {
+            // Renames name the surface's parts: check them before the work.
+            agree(&*self.comm, self.patch_names())?;
+        }
         self.refine_surface(level)?;
         self.refine_curvature()?;
         self.refine_regions()?;

@@ -12,6 +12,7 @@ use crate::refine::{estimate_leaves, SurfaceIndex};
 use crate::report::peak_rss_bytes;
 
 use super::*;
+use crate::geometry::parts::PartLocator;
 
 impl Session {
     /// Reads the configured surface (`surface.file`: an STL file, `sphere`
@@ -95,6 +96,8 @@ impl Session {
         self.facts.report = state.report.get().cloned();
         // The phase's row comes after the facts it found.
         self.report_phase(None);
+        self.parts = state.surface.parts().names.clone();
+        self.locator = None;
         self.surface = Some(state);
         self.released = None;
         self.classes = Classes::default();
@@ -105,6 +108,10 @@ impl Session {
     /// meshing does not, and its memory then goes before the mesh's.
     pub fn release_surface(&mut self) {
         if let Some(s) = self.surface.take() {
+            if self.locator.is_none() {
+                // Faces on the surface still need their part.
+                self.locator = PartLocator::new(&s.surface);
+            }
             self.released = Some((s.bbox, s.volume, s.name));
         }
     }
