@@ -43,8 +43,9 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
-use crate::mesh::points::{face_polygon, point_key, PointIndex};
+use crate::mesh::points::{edge_midpoint, point_key, PointFilter, PointIndex};
 use crate::mesh::Mesh;
+use crate::mesh::VTK_TO_MORTON;
 
 crate::named_enum! {
     /// Binary or ASCII list data.
@@ -94,7 +95,8 @@ struct PolyMesh {
 
 fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
-    let mut keys: Vec<u64> = mesh.node_lattice().into_iter().map(point_key).collect();
+    let lattice = mesh.node_lattice();
+    let mut keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
     for h in &mesh.halo().leaves {
         let (c, s) = (h.coords(), h.side());
         for k in 0..8 {
@@ -103,7 +105,34 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
             ));
         }
     }
+    let filter = PointFilter::new(&keys);
     let mut set = PointIndex::new(keys);
+    let missing = |x: [u32; 3]| {
+        Error::new(
+            ErrorKind::Internal,
+            format!("face corner {x:?} is no element's corner"),
+        )
+    };
+    // Each local node's place in the set: the corners of a face that is
+    // an element's whole face come from its connectivity, with no search.
+    let mut node_at = Vec::with_capacity(lattice.len());
+    for &p in &lattice {
+        node_at.push(set.find(point_key(p)).ok_or_else(|| missing(p))? as u32);
+    }
+    let (elements, conn) = (mesh.elements(), mesh.connectivity());
+    // Element `e`'s corner at `p`, if `p` is one: (lowest corner, side).
+    let corner_of = |e: u32, (c, s): ([u32; 3], u32), p: [u32; 3]| -> Option<usize> {
+        let mut m = 0;
+        for a in 0..3 {
+            if p[a] == c[a] + s {
+                m |= 1 << a;
+            } else if p[a] != c[a] {
+                return None;
+            }
+        }
+        Some(node_at[conn[e as usize][VTK_TO_MORTON[m]] as usize] as usize)
+    };
+    let cube = |e: u32| (elements[e as usize].coords(), elements[e as usize].side());
     let mut label = vec![UNUSED; set.len()];
     let halo_start = faces.halo_range().start;
     let mut points: Vec<[u32; 3]> = Vec::new();
@@ -111,22 +140,41 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     offsets.push(0u32);
     let mut labels: Vec<u32> =
         Vec::with_capacity(4 * faces.faces().len() + faces.faces().len() / 2);
-    let mut poly: Vec<(u64, [u32; 3])> = Vec::with_capacity(8);
+    let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
-        face_polygon(&f.corners(), |k| set.find(k).is_some(), &mut poly);
+        let c = f.corners();
+        // The element whose whole face this is, when it is local: the
+        // owner, or a finer local neighbour.
+        let mut emitter = (f.owner, cube(f.owner));
+        if 2 * f.half != emitter.1 .1 {
+            if let Other::Element(j) = f.other {
+                emitter = (j, cube(j));
+            }
+        }
+        for k in 0..4 {
+            let j = match corner_of(emitter.0, emitter.1, c[k]) {
+                Some(j) => j,
+                None => set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?,
+            };
+            poly.push((j, c[k]));
+            if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
+                let km = point_key(m);
+                if filter.may_hold(km) {
+                    if let Some(j) = set.find(km) {
+                        poly.push((j, m));
+                    }
+                }
+            }
+        }
         if i >= halo_start {
             // Both sides start at the lowest point.
-            let at = (0..poly.len()).min_by_key(|&k| poly[k].0).unwrap_or(0);
+            let at = (0..poly.len())
+                .min_by_key(|&k| point_key(poly[k].1))
+                .unwrap_or(0);
             poly.rotate_left(at);
         }
-        for &(k, x) in &poly {
-            let Some(j) = set.find(k) else {
-                return Err(Error::new(
-                    ErrorKind::Internal,
-                    format!("face corner {x:?} is no element's corner"),
-                ));
-            };
+        for &(j, x) in &poly {
             if label[j] == UNUSED {
                 label[j] = points.len() as u32;
                 points.push(x);

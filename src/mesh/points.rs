@@ -50,6 +50,42 @@ impl PointIndex {
     }
 }
 
+/// A one-hash bit filter over a set of point keys: `false` means the point
+/// is surely absent. Most face edges carry no hanging point, and the
+/// filter (a few bits per point, in cache) answers those without a search.
+#[derive(Clone, Debug)]
+pub struct PointFilter {
+    bits: Vec<u64>,
+    shift: u32,
+}
+
+impl PointFilter {
+    /// The filter of `keys`.
+    pub fn new(keys: &[u64]) -> PointFilter {
+        // About 16 bits per point: a false positive costs one search.
+        let n = (16 * keys.len().max(1)).next_power_of_two().max(64);
+        let mut f = PointFilter {
+            bits: vec![0; n / 64],
+            shift: 64 - n.trailing_zeros(),
+        };
+        for &k in keys {
+            let h = f.slot(k);
+            f.bits[h >> 6] |= 1 << (h & 63);
+        }
+        f
+    }
+
+    fn slot(&self, k: u64) -> usize {
+        (k.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> self.shift) as usize
+    }
+
+    /// Whether the point with key `k` may be in the set.
+    pub fn may_hold(&self, k: u64) -> bool {
+        let h = self.slot(k);
+        self.bits[h >> 6] >> (h & 63) & 1 == 1
+    }
+}
+
 /// The midpoint of `a`-`b` when they differ along one axis by an even
 /// length (an edge that may carry a hanging point).
 pub fn edge_midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
@@ -111,6 +147,17 @@ mod tests {
         }
         assert_eq!(idx.find(point_key([1, 0, 0])), None);
         assert_eq!(idx.find(point_key([9, 9, 9])), None);
+    }
+
+    #[test]
+    fn filter_never_misses() {
+        let keys: Vec<u64> = (0..1000u32).map(|i| point_key([i, 2 * i, 3 * i])).collect();
+        let f = PointFilter::new(&keys);
+        assert!(keys.iter().all(|&k| f.may_hold(k)));
+        let false_hits = (0..1000u32)
+            .filter(|&i| f.may_hold(point_key([i + 1, 2 * i, 3 * i])))
+            .count();
+        assert!(false_hits < 100, "{false_hits} false positives");
     }
 
     #[test]
