@@ -462,6 +462,33 @@ fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
     }
 }
 
+/// `faces` sorted by owner, then other side: a counting sort by owner
+/// (most faces already come in owner order), then each owner's few faces
+/// in place.
+fn sort_by_owner(faces: Vec<Face>, owners: usize) -> Vec<Face> {
+    let mut start = vec![0u32; owners + 1];
+    for f in &faces {
+        start[f.owner as usize + 1] += 1;
+    }
+    for e in 0..owners {
+        start[e + 1] += start[e];
+    }
+    let mut next = start.clone();
+    let Some(&first) = faces.first() else {
+        return faces;
+    };
+    let mut out = vec![first; faces.len()];
+    for f in faces {
+        let at = &mut next[f.owner as usize];
+        out[*at as usize] = f;
+        *at += 1;
+    }
+    for e in 0..owners {
+        out[start[e] as usize..start[e + 1] as usize].sort_unstable_by_key(|f| f.other);
+    }
+    out
+}
+
 impl Mesh {
     /// Extracts this rank's faces (see [`crate::mesh::faces`]). Local work
     /// only: the halo came with the mesh.
@@ -558,7 +585,7 @@ impl Mesh {
                 }
             }
         }
-        internal.sort_unstable_by_key(|f| (f.owner, f.other));
+        let internal = sort_by_owner(internal, elements.len());
         let num_internal = internal.len();
         boundary.sort_by_key(|f| match f.other {
             Other::Patch(p) => p,

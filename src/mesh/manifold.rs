@@ -315,14 +315,20 @@ fn groups(member: &[bool; 8]) -> ([u8; 8], usize) {
         if !member[start] || label[start] != u8::MAX {
             continue;
         }
-        let mut stack = vec![start];
+        // Each cell is pushed at most once: eight slots suffice.
+        let mut stack = [0usize; 8];
+        let mut top = 1;
+        stack[0] = start;
         label[start] = n as u8;
-        while let Some(k) = stack.pop() {
+        while top > 0 {
+            top -= 1;
+            let k = stack[top];
             for a in 0..3 {
                 let j = k ^ (1 << a);
                 if member[j] && label[j] == u8::MAX {
                     label[j] = n as u8;
-                    stack.push(j);
+                    stack[top] = j;
+                    top += 1;
                 }
             }
         }
