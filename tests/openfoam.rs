@@ -13,6 +13,12 @@
 //! - `potentialFoam` around the sphere: the mean speed in a shell over the
 //!   equator within 3 % of the same run on snappyHexMesh's castellated mesh
 //!   (`../shared/openfoam/sphere_castellated`: 1.693).
+//! - A laminar `simpleFoam` run around the bunny (level 7, the settings of
+//!   `../shared/openfoam/bunny_simplefoam`) on 1 and 2 ranks: the force on
+//!   the body within 2 % of the same run on snappyHexMesh's castellated
+//!   mesh (0.729, 0.067, 0.086), and the same on both rank counts.
+//! - An ASCII STL with two solids gives two surface patches, each face on
+//!   its solid's side, the same on 3 ranks, accepted by checkMesh.
 //! - The ASCII files read back here: every cell closes, each side patch
 //!   covers its side.
 //! - Bad input: an existing mesh without `--overwrite`, bad patch names, an
@@ -239,6 +245,157 @@ fn potential_flow_around_the_sphere_matches_snappyhexmesh() {
     assert!(
         ((mean - snappy) / snappy).abs() < 0.03,
         "shell mean speed {mean} is not within 3 % of snappyHexMesh's {snappy}"
+    );
+}
+
+/// The reference case's field file `name` (`U` or `p`) for an octmesh case:
+/// the reference's one `sides` patch is octmesh's four side patches, and
+/// on several ranks the processor patches are declared.
+fn field_for_octmesh(reference: &Path, name: &str, parallel: bool) -> String {
+    let text = std::fs::read_to_string(reference.join("0").join(name)).unwrap();
+    let mut out = String::new();
+    for line in text.lines() {
+        if let Some(rest) = line.strip_prefix("    sides ") {
+            out.push_str(&format!("    \"(ymin|ymax|zmin|zmax)\" {rest}\n"));
+            if parallel {
+                out.push_str("    \"procBoundary.*\" { type processor; }\n");
+            }
+        } else {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    assert!(
+        out.contains("ymin|ymax"),
+        "no sides patch in the reference's 0/{name}"
+    );
+    out
+}
+
+/// The total force `Sum of forces / Total : (x y z)` a forces function
+/// object printed.
+fn total_force(log: &str) -> [f64; 3] {
+    let at = log.find("Sum of forces").expect("a force in the log");
+    let line = log[at..]
+        .lines()
+        .find(|l| l.trim_start().starts_with("Total"))
+        .expect("a total force");
+    parse_vector(line[line.find('(').unwrap()..].trim())
+}
+
+#[test]
+fn simplefoam_force_on_the_bunny_matches_snappyhexmesh() {
+    let Some(rc) = openfoam() else { return };
+    let reference = common::repo().join("../shared/openfoam/bunny_simplefoam");
+    if !reference.is_dir() {
+        println!("SKIP: {} not found", reference.display());
+        return;
+    }
+    let Some(bunny) = shared_model("bunny.stl") else {
+        return;
+    };
+    // snappyHexMesh's castellated mesh at the same level, same run.
+    let snappy = [0.729, 0.067, 0.086];
+    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let mut forces = Vec::new();
+    for np in [1usize, 2] {
+        let case = scratch(&format!("openfoam_simplefoam_np{np}"));
+        let c = case.to_str().unwrap();
+        let stats = case.with_extension("json");
+        octmesh(
+            np,
+            &[
+                "mesh",
+                bunny.to_str().unwrap(),
+                "--level",
+                "7",
+                "--keep",
+                "outside",
+                "--openfoam",
+                c,
+                "--patch",
+                "xmin=inlet",
+                "--patch",
+                "xmax=outlet",
+            ],
+            &stats,
+        );
+        // The reference's settings and fields; octmesh gives the mesh.
+        let mut constants = vec![case.join("constant")];
+        let mut times = vec![case.join("0")];
+        if np > 1 {
+            constants = (0..np)
+                .map(|r| case.join(format!("processor{r}/constant")))
+                .chain(constants)
+                .collect();
+            times = (0..np)
+                .map(|r| case.join(format!("processor{r}/0")))
+                .collect();
+        }
+        for dir in &constants {
+            std::fs::create_dir_all(dir).unwrap();
+            for f in ["transportProperties", "turbulenceProperties"] {
+                std::fs::copy(reference.join("constant").join(f), dir.join(f)).unwrap();
+            }
+        }
+        for f in ["controlDict", "fvSchemes", "fvSolution"] {
+            std::fs::copy(
+                reference.join("system").join(f),
+                case.join("system").join(f),
+            )
+            .unwrap();
+        }
+        for dir in &times {
+            std::fs::create_dir_all(dir).unwrap();
+            for f in ["U", "p"] {
+                std::fs::write(dir.join(f), field_for_octmesh(&reference, f, np > 1)).unwrap();
+            }
+        }
+        let run = |solver: &str| {
+            if np > 1 {
+                format!("mpirun --oversubscribe -np {np} {solver} -parallel")
+            } else {
+                solver.to_string()
+            }
+        };
+        foam(&rc, &case, &run("potentialFoam"));
+        let log = foam(&rc, &case, &run("simpleFoam"));
+        assert!(log.contains("\nEnd"), "simpleFoam did not finish:\n{log}");
+        let log = foam(
+            &rc,
+            &case,
+            &format!(
+                "{} -postProcess -latestTime -func \"forcesIncompressible(patches=(bunny),rhoInf=1)\"",
+                run("simpleFoam")
+            ),
+        );
+        let f = total_force(&log);
+        let diff = [f[0] - snappy[0], f[1] - snappy[1], f[2] - snappy[2]];
+        let rel = norm(diff) / norm(snappy);
+        println!(
+            "simpleFoam around the bunny, level 7, {np} rank(s): force ({:.4}, {:.4}, {:.4}), \
+             {:.2} % from snappyHexMesh's ({}, {}, {})",
+            f[0],
+            f[1],
+            f[2],
+            100.0 * rel,
+            snappy[0],
+            snappy[1],
+            snappy[2]
+        );
+        assert!(
+            rel < 0.02,
+            "force {f:?} is {:.2} % from snappyHexMesh's {snappy:?} (at most 2 %)",
+            100.0 * rel
+        );
+        forces.push(f);
+    }
+    let d = [0, 1, 2].map(|k| forces[1][k] - forces[0][k]);
+    assert!(
+        norm(d) < 0.01 * norm(forces[0]),
+        "the force on 2 ranks {:?} differs from 1 rank's {:?}",
+        forces[1],
+        forces[0]
     );
 }
 
