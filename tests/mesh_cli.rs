@@ -1,5 +1,6 @@
 //! The `octmesh mesh` command: solid and fluid selections, volumes, the
-//! PVTU read back by an independent reader, and its errors.
+//! PVTU read back by an independent reader (meshio), the boundary faces'
+//! PVTP read back by VTK itself, and its errors.
 
 mod common;
 use common::*;
@@ -161,6 +162,117 @@ fn pvtu_is_read_back_by_meshio() {
             "{keep}: hanging points flagged"
         );
     }
+}
+
+/// `tools/check_vtp.py` (VTK's own reader) on a boundary PVTP.
+fn check_vtp(pvtp: &Path) -> serde_json::Value {
+    let out = Command::new(python_with("vtk", "python3-vtk9"))
+        .arg(repo().join("tools/check_vtp.py"))
+        .arg(pvtp)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "check_vtp.py {}: {}",
+        pvtp.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn boundary_pvtp_is_read_back_by_vtk() {
+    let dir = scratch("mesh_boundary_vtp");
+    // Everything kept: each side patch covers its side, outwards.
+    let all = dir.join("all.pvtu");
+    let s = mesh_stats(2, "sphere", 4, &["--out", all.to_str().unwrap()], &dir);
+    let side = s["domain_side"].as_f64().unwrap();
+    let v = check_vtp(&dir.join("all_boundary.pvtp"));
+    for p in 0..6 {
+        let e = &v["patches"][p.to_string()];
+        let area = e["area"].as_f64().unwrap();
+        assert!(
+            ((area - side * side) / (side * side)).abs() < 1e-12,
+            "side {p}: {area}"
+        );
+        let n = e["normal"][p / 2].as_f64().unwrap();
+        let out = if p % 2 == 0 { -1.0 } else { 1.0 };
+        assert!(
+            (n - out * area).abs() < 1e-9 * area,
+            "side {p} does not face out"
+        );
+    }
+    assert!(
+        v["patches"].get("6").is_none(),
+        "no surface faces when all is kept"
+    );
+    // The fluid around the sphere on 1 and 3 ranks: the same patches, and
+    // the faces of the OpenFOAM case written in the same run.
+    let mut seen = Vec::new();
+    for np in [1usize, 3] {
+        let pvtu = dir.join(format!("fluid{np}.pvtu"));
+        let case = dir.join(format!("case{np}"));
+        mesh_stats(
+            np,
+            "sphere",
+            5,
+            &[
+                "--keep",
+                "outside",
+                "--out",
+                pvtu.to_str().unwrap(),
+                "--openfoam",
+                case.to_str().unwrap(),
+            ],
+            &dir,
+        );
+        let v = check_vtp(&dir.join(format!("fluid{np}_boundary.pvtp")));
+        assert_eq!(v["names"]["6"], "sphere");
+        let counts: Vec<u64> = (0..7)
+            .map(|p| v["patches"][p.to_string()]["faces"].as_u64().unwrap_or(0))
+            .collect();
+        let polymesh = if np == 1 {
+            vec![case.join("constant/polyMesh/boundary")]
+        } else {
+            (0..np)
+                .map(|r| case.join(format!("processor{r}/constant/polyMesh/boundary")))
+                .collect()
+        };
+        let names = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax", "sphere"];
+        let mut foam = vec![0u64; 7];
+        for b in polymesh {
+            let text = std::fs::read_to_string(b).unwrap();
+            for (k, name) in names.iter().enumerate() {
+                let at = text.find(&format!("    {name}\n")).unwrap();
+                let n = text[at..].split("nFaces").nth(1).unwrap();
+                let n: u64 = n
+                    .trim_start()
+                    .split(';')
+                    .next()
+                    .unwrap()
+                    .trim()
+                    .parse()
+                    .unwrap();
+                foam[k] += n;
+            }
+        }
+        assert_eq!(
+            counts, foam,
+            "np {np}: PVTP faces per patch against the polyMesh"
+        );
+        // The surface patch is closed: its area vectors cancel.
+        let s6 = &v["patches"]["6"];
+        let area = s6["area"].as_f64().unwrap();
+        for k in 0..3 {
+            assert!(s6["normal"][k].as_f64().unwrap().abs() < 1e-9 * area);
+        }
+        seen.push(counts);
+    }
+    assert_eq!(seen[0], seen[1], "patches differ between 1 and 3 ranks");
+    println!(
+        "boundary PVTP: sides cover the cube, faces per patch {:?} on 1 and 3 ranks = polyMesh",
+        seen[0]
+    );
 }
 
 #[test]

@@ -1,4 +1,5 @@
-//! Files octmesh writes and reads: leaf lists, VTK XML meshes (`vtu`), JSON
+//! Files octmesh writes and reads: leaf lists, VTK XML meshes (`vtu`) and
+//! boundary faces (`vtp`), JSON
 //! statistics and reports (`json`), leak paths (`leak_path`), OpenFOAM cases
 //! (`openfoam`), and (in `geometry::stl`) STL.
 
@@ -6,4 +7,5 @@ pub mod json;
 pub mod leak_path;
 pub mod leaves;
 pub mod openfoam;
+pub mod vtp;
 pub mod vtu;

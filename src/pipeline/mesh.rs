@@ -1,12 +1,13 @@
 //! Stages: the mesh and its files.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::classify::{CutRule, Keep};
 use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::parts::PartLocator;
 use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
+use crate::io::vtp::write_boundary;
 use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
 use crate::mesh::{Boundary, Mesh, MeshOptions};
@@ -143,6 +144,25 @@ impl Session {
             self.faces = Some((self.mesh_generation, faces));
         }
         Ok(&self.faces.as_ref().expect("faces were just made").1)
+    }
+
+    /// Writes the boundary faces with their patch ids beside the PVTU
+    /// `pvtu` ([`crate::io::vtp`]): `NAME_boundary.pvtp` and a piece per
+    /// rank. Phases `faces` (when not extracted yet) and `write boundary`.
+    pub fn write_boundary_vtp(&mut self, pvtu: &Path) -> Result<PathBuf> {
+        let patches = agree(&*self.comm, self.patch_names())?;
+        self.faces()?;
+        let comm = self.comm.clone();
+        let (mesh, faces) = (&self.mesh, &self.faces);
+        let path = self
+            .timer
+            .time(&*comm, "write boundary", || match (mesh, faces) {
+                (Some(m), Some((_, f))) => write_boundary(&*comm, pvtu, m, f, &patches),
+                _ => Ok(crate::io::vtp::boundary_path(pvtu)),
+            })?;
+        self.report_phase(None);
+        self.observer.event(&Event::Wrote(&path));
+        Ok(path)
     }
 
     /// The current mesh's faces if [`Session::faces`] made them (not

@@ -340,6 +340,7 @@ impl Session {
             self.build_mesh(m.keep, m.cut_rule)?;
             if let Some(out) = self.config.output.vtu.clone() {
                 self.write_vtu(&out, &[])?;
+                self.write_boundary_vtp(&out)?;
             }
             if let Some(dir) = self.config.output.openfoam.clone() {
                 self.write_openfoam(&dir)?;

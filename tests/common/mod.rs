@@ -249,6 +249,28 @@ pub fn write_stl(path: &Path, tris: &[[[f32; 3]; 3]], header: &[u8]) {
 /// A Python that can import meshio: `$OCTMESH_PYTHON`, else `python3`, else
 /// `/usr/bin/python3` (a `python3` from pyenv first in PATH does not see
 /// Debian's python3-meshio). Panics, never skips, when there is none.
+/// A Python that can `import module` (`python3` in PATH, else the
+/// system's), for the independent readers in `tools/`.
+pub fn python_with(module: &str, package: &str) -> String {
+    let candidates: Vec<String> = match std::env::var("OCTMESH_PYTHON") {
+        Ok(p) => vec![p],
+        Err(_) => vec!["python3".into(), "/usr/bin/python3".into()],
+    };
+    for c in &candidates {
+        let ok = Command::new(c)
+            .args(["-c", &format!("import {module}")])
+            .output()
+            .is_ok_and(|o| o.status.success());
+        if ok {
+            return c.clone();
+        }
+    }
+    panic!(
+        "no Python with {module} found (tried {candidates:?}): install Debian's {package} \
+         (scripts/setup.sh does) or set OCTMESH_PYTHON"
+    )
+}
+
 pub fn python_with_meshio() -> String {
     let candidates: Vec<String> = match std::env::var("OCTMESH_PYTHON") {
         Ok(p) => vec![p],
