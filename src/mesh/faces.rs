@@ -409,9 +409,12 @@ impl Kept<'_> {
 
     /// Whether `o` itself is a kept element.
     fn exact(&self, o: Octant, hint: usize) -> Option<At> {
-        self.last_at_or_before(o, hint)
-            .filter(|(_, l)| *l == o)
-            .map(|(a, _)| a)
+        // Matched, not filtered: the optimiser then never compares the
+        // leaf of a `None` (which memcheck reports as uninitialised).
+        match self.last_at_or_before(o, hint) {
+            Some((a, l)) => (l == o).then_some(a),
+            None => None,
+        }
     }
 }
 

@@ -1,0 +1,47 @@
+# Runs the Fortran finite-volume example at each of LEVELS on 1, 2 and 4
+# ranks: at each level the cells and errors must be the same on every count
+# of ranks (errors to 1e-6 relative: the reductions sum in another order),
+# and the L2 error must fall by at least RATIO from one level to the next.
+# -DMPIRUN=... -DEXE=fv_poisson -DLEVELS="L;L+1" -DRATIO=1.5
+set(_prev "")
+foreach(level ${LEVELS})
+  set(_first "")
+  foreach(np 1 2 4)
+    execute_process(COMMAND ${MPIRUN} -np ${np} "${EXE}" ${level}
+      RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+    message("${out}")
+    if(NOT rc EQUAL 0)
+      message(FATAL_ERROR "fv_poisson level ${level} on ${np} ranks failed (${rc}):\n${err}")
+    endif()
+    if(NOT out MATCHES "cells=([0-9]+) .*l2_error= *([0-9.eE+-]+) max_error= *([0-9.eE+-]+)")
+      message(FATAL_ERROR "no FVPOISSON line in the output:\n${out}")
+    endif()
+    set(cells "${CMAKE_MATCH_1}")
+    set(l2 "${CMAKE_MATCH_2}")
+    set(mx "${CMAKE_MATCH_3}")
+    if(_first)
+      list(GET _first 0 c1)
+      list(GET _first 1 l1)
+      list(GET _first 2 m1)
+      if(NOT cells EQUAL c1)
+        message(FATAL_ERROR "level ${level}: ${cells} cells on ${np} ranks, ${c1} on 1")
+      endif()
+      execute_process(COMMAND awk "BEGIN { d = ${l2} - ${l1}; e = ${mx} - ${m1};
+        exit !(d * d <= 1e-12 * ${l1} * ${l1} && e * e <= 1e-12 * ${m1} * ${m1}) }"
+        RESULT_VARIABLE same)
+      if(NOT same EQUAL 0)
+        message(FATAL_ERROR "level ${level}: errors ${l2} ${mx} on ${np} ranks, ${l1} ${m1} on 1")
+      endif()
+    else()
+      set(_first "${cells};${l2};${mx}")
+    endif()
+  endforeach()
+  if(_prev)
+    execute_process(COMMAND awk "BEGIN { exit !(${l2} * ${RATIO} < ${_prev}) }" RESULT_VARIABLE falls)
+    if(NOT falls EQUAL 0)
+      message(FATAL_ERROR "L2 error does not fall by ${RATIO}: ${_prev} -> ${l2} at level ${level}")
+    endif()
+    message("L2 error falls: ${_prev} -> ${l2}")
+  endif()
+  set(_prev "${l2}")
+endforeach()
