@@ -44,6 +44,18 @@ fn openfoam() -> Option<PathBuf> {
     }
 }
 
+/// The reference case `../shared/openfoam/<name>`, or `None` (reason
+/// printed) when it is absent.
+fn reference_case(name: &str) -> Option<PathBuf> {
+    let dir = common::repo().join("../shared/openfoam").join(name);
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!("SKIP: {} not found", dir.display());
+        None
+    }
+}
+
 /// Runs an OpenFOAM command line in `case` with its environment.
 fn foam(rc: &Path, case: &Path, line: &str) -> String {
     let script = format!(
@@ -186,11 +198,9 @@ fn checkmesh_accepts_the_cases_octmesh_writes() {
 #[test]
 fn potential_flow_around_the_sphere_matches_snappyhexmesh() {
     let Some(rc) = openfoam() else { return };
-    let reference = common::repo().join("../shared/openfoam/sphere_castellated");
-    if !reference.is_dir() {
-        println!("SKIP: {} not found", reference.display());
+    let Some(reference) = reference_case("sphere_castellated") else {
         return;
-    }
+    };
     let case = scratch("openfoam_potential");
     // The reference's fields and settings; octmesh adds the mesh only.
     std::fs::create_dir_all(case.join("system")).unwrap();
@@ -286,11 +296,9 @@ fn total_force(log: &str) -> [f64; 3] {
 #[test]
 fn simplefoam_force_on_the_bunny_matches_snappyhexmesh() {
     let Some(rc) = openfoam() else { return };
-    let reference = common::repo().join("../shared/openfoam/bunny_simplefoam");
-    if !reference.is_dir() {
-        println!("SKIP: {} not found", reference.display());
+    let Some(reference) = reference_case("bunny_simplefoam") else {
         return;
-    }
+    };
     let Some(bunny) = shared_model("bunny.stl") else {
         return;
     };

@@ -47,20 +47,26 @@ cell_actor.GetProperty().EdgeVisibilityOn()
 cell_actor.GetProperty().SetEdgeColor(0.35, 0.35, 0.35)
 cell_actor.GetProperty().SetLineWidth(0.5)
 
-# Patches: the surface, and the sides that close the picture (behind and
-# below), coloured by patch id.
-keep = vtk.vtkThreshold()
-keep.SetInputConnection(faces.GetOutputPort())
-keep.SetInputArrayToProcess(0, 0, 0, vtk.vtkDataObject.FIELD_ASSOCIATION_CELLS, "patch")
-keep.SetLowerThreshold(6)
-keep.SetUpperThreshold(1000)
-keep.SetThresholdFunction(vtk.vtkThreshold.THRESHOLD_BETWEEN)
-keep_cut = vtk.vtkExtractGeometry()
-keep_cut.SetInputConnection(keep.GetOutputPort())
-keep_cut.SetImplicitFunction(plane)
-keep_cut.ExtractInsideOn()
-geometry = vtk.vtkGeometryFilter()
-geometry.SetInputConnection(keep_cut.GetOutputPort())
+# Patches, coloured by id: the surface's (6 and up) and the inlet and
+# outlet sides (xmin, xmax), each behind the cut.
+def patches_behind(low, high):
+    """The boundary faces of patches low..high behind the cutting plane."""
+    keep = vtk.vtkThreshold()
+    keep.SetInputConnection(faces.GetOutputPort())
+    keep.SetInputArrayToProcess(0, 0, 0, vtk.vtkDataObject.FIELD_ASSOCIATION_CELLS, "patch")
+    keep.SetLowerThreshold(low)
+    keep.SetUpperThreshold(high)
+    keep.SetThresholdFunction(vtk.vtkThreshold.THRESHOLD_BETWEEN)
+    behind = vtk.vtkExtractGeometry()
+    behind.SetInputConnection(keep.GetOutputPort())
+    behind.SetImplicitFunction(plane)
+    behind.ExtractInsideOn()
+    polygons = vtk.vtkGeometryFilter()
+    polygons.SetInputConnection(behind.GetOutputPort())
+    return polygons
+
+
+geometry = patches_behind(6, 1000)
 lut = vtk.vtkLookupTable()
 lut.SetNumberOfTableValues(7)
 colours = [(0.2, 0.4, 0.9), (0.9, 0.3, 0.2), (0.5, 0.5, 0.5), (0.5, 0.5, 0.5),
@@ -78,20 +84,7 @@ patch_mapper.SetScalarRange(0, 6)
 patch_actor = vtk.vtkActor()
 patch_actor.SetMapper(patch_mapper)
 
-# The inlet (xmin) and outlet (xmax) sides behind the cut, as coloured
-# frames: only their faces with y above the centre.
-sides = vtk.vtkThreshold()
-sides.SetInputConnection(faces.GetOutputPort())
-sides.SetInputArrayToProcess(0, 0, 0, vtk.vtkDataObject.FIELD_ASSOCIATION_CELLS, "patch")
-sides.SetLowerThreshold(0)
-sides.SetUpperThreshold(1)
-sides.SetThresholdFunction(vtk.vtkThreshold.THRESHOLD_BETWEEN)
-side_cut = vtk.vtkExtractGeometry()
-side_cut.SetInputConnection(sides.GetOutputPort())
-side_cut.SetImplicitFunction(plane)
-side_cut.ExtractInsideOn()
-side_geometry = vtk.vtkGeometryFilter()
-side_geometry.SetInputConnection(side_cut.GetOutputPort())
+side_geometry = patches_behind(0, 1)
 side_mapper = vtk.vtkPolyDataMapper()
 side_mapper.SetInputConnection(side_geometry.GetOutputPort())
 side_mapper.SetScalarModeToUseCellFieldData()

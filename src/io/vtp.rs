@@ -51,6 +51,17 @@ fn names_comment(names: &PatchNames) -> String {
     format!("<!-- octmesh boundary faces: {} -->", list.join(", "))
 }
 
+/// The XML declaration, the patch list and the opening `VTKFile` tag.
+fn header(w: &mut impl Write, kind: &str, names: &PatchNames) -> std::io::Result<()> {
+    writeln!(w, "<?xml version=\"1.0\"?>")?;
+    writeln!(w, "{}", names_comment(names))?;
+    writeln!(
+        w,
+        "<VTKFile type=\"{kind}\" version=\"1.0\" byte_order=\"LittleEndian\" \
+         header_type=\"UInt64\">"
+    )
+}
+
 /// One rank's boundary faces as arrays.
 struct Piece {
     points: Vec<f64>,
@@ -97,13 +108,7 @@ fn write_piece(path: &Path, piece: &Piece, names: &PatchNames) -> Result<()> {
     }
     let write = || -> std::io::Result<()> {
         let mut w = BufWriter::with_capacity(1 << 20, File::create(path)?);
-        writeln!(w, "<?xml version=\"1.0\"?>")?;
-        writeln!(w, "{}", names_comment(names))?;
-        writeln!(
-            w,
-            "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" \
-             header_type=\"UInt64\">"
-        )?;
+        header(&mut w, "PolyData", names)?;
         writeln!(w, "  <PolyData>")?;
         writeln!(
             w,
@@ -156,13 +161,7 @@ fn write_piece(path: &Path, piece: &Piece, names: &PatchNames) -> Result<()> {
 fn write_index(pvtp: &Path, ranks: usize, names: &PatchNames) -> Result<()> {
     let write = || -> std::io::Result<()> {
         let mut w = BufWriter::new(File::create(pvtp)?);
-        writeln!(w, "<?xml version=\"1.0\"?>")?;
-        writeln!(w, "{}", names_comment(names))?;
-        writeln!(
-            w,
-            "<VTKFile type=\"PPolyData\" version=\"1.0\" byte_order=\"LittleEndian\" \
-             header_type=\"UInt64\">"
-        )?;
+        header(&mut w, "PPolyData", names)?;
         writeln!(w, "  <PPolyData GhostLevel=\"0\">")?;
         writeln!(w, "    <PCellData>")?;
         writeln!(w, "      <PDataArray type=\"Int32\" Name=\"patch\"/>")?;
