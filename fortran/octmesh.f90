@@ -108,6 +108,7 @@ module octmesh
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
+  public :: octmesh_octree_refine_curvature, octmesh_octree_refine_regions_f
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
@@ -344,6 +345,26 @@ module octmesh
        integer(c_int) :: octmesh_mesh_write_vtu_fields
      end function octmesh_mesh_write_vtu_fields
 
+     function octmesh_octree_refine_curvature(h, min_level, max_level, feature_angle) &
+          bind(c, name="octmesh_octree_refine_curvature")
+       import :: c_ptr, c_int, c_int32_t, c_double
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: min_level, max_level
+       real(c_double), value :: feature_angle
+       integer(c_int) :: octmesh_octree_refine_curvature
+     end function octmesh_octree_refine_curvature
+
+     function c_octmesh_octree_refine_regions(h, min_level, nregions, regions, nbands, &
+          distances, levels) bind(c, name="octmesh_octree_refine_regions")
+       import :: c_ptr, c_int, c_int32_t, c_double
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: min_level, nregions, nbands
+       type(c_ptr), intent(in) :: regions(*)
+       real(c_double), intent(in) :: distances(*)
+       integer(c_int32_t), intent(in) :: levels(*)
+       integer(c_int) :: c_octmesh_octree_refine_regions
+     end function c_octmesh_octree_refine_regions
+
      function octmesh_mesh_build_faces(h) bind(c, name="octmesh_mesh_build_faces")
        import :: c_ptr, c_int
        type(c_ptr), value :: h
@@ -545,5 +566,40 @@ contains
     status = c_octmesh_mesh_write_openfoam(h, trim(dir) // c_null_char, &
          int(format, c_int32_t), ow)
   end function octmesh_mesh_write_openfoam_f
+
+  !> Region refinement (like the command's --min-level, --region and
+  !> --distance): `regions(k)` in the command's form, e.g.
+  !> "box:0,0,0,1,1,1:6" or "sphere:0,0,0,0.5:7:outside"; `distances` and
+  !> `levels` the bands (same size, distances increasing). Collective.
+  function octmesh_octree_refine_regions_f(h, min_level, regions, distances, levels) &
+       result(status)
+    type(c_ptr), intent(in) :: h
+    integer, intent(in) :: min_level
+    character(len=*), intent(in) :: regions(:)
+    real(c_double), intent(in) :: distances(:)
+    integer(c_int32_t), intent(in) :: levels(:)
+    integer(c_int) :: status
+    character(kind=c_char, len=len(regions) + 1), allocatable, target :: cregions(:)
+    type(c_ptr), allocatable :: pr(:)
+    real(c_double) :: d(max(size(distances), 1))
+    integer(c_int32_t) :: l(max(size(levels), 1)), nbands
+    integer :: k
+    allocate(cregions(size(regions)), pr(max(size(regions), 1)))
+    pr = c_null_ptr
+    do k = 1, size(regions)
+       cregions(k) = trim(regions(k)) // c_null_char
+       pr(k) = c_loc(cregions(k))
+    end do
+    d = 0
+    l = 0
+    d(1:size(distances)) = distances
+    l(1:size(levels)) = levels
+    ! Mismatched sizes go on as an invalid count: every rank still joins
+    ! the collective call and fails with the others.
+    nbands = int(size(distances), c_int32_t)
+    if (size(levels) /= size(distances)) nbands = -1_c_int32_t
+    status = c_octmesh_octree_refine_regions(h, int(min_level, c_int32_t), &
+         int(size(regions), c_int32_t), pr, nbands, d, l)
+  end function octmesh_octree_refine_regions_f
 
 end module octmesh

@@ -641,6 +641,55 @@ octmesh_status_t octmesh_surface_builtin(octmesh_t *h, const char *name);
 octmesh_status_t octmesh_octree_refine_surface(octmesh_t *h, int32_t level);
 
 /**
+ * Curvature refinement after `octmesh_octree_refine_surface(h,
+ * min_level)`, like the command's `--level MIN:MAX --feature-angle DEG`:
+ * a leaf touching the surface is split, up to `max_level`, while the unit
+ * normals of the triangles touching it differ by more than
+ * `feature_angle` degrees. Needs an octree refined to the surface and the
+ * surface. Drops the balance and the mesh. Collective.
+ *
+ * \param[in] h              the handle
+ * \param[in] min_level      the surface level the octree was refined to
+ * \param[in] max_level      the finest level, min_level to 18
+ * \param[in] feature_angle  degrees, in (0, 180); 30 is the command's
+ *                           default
+ */
+octmesh_status_t octmesh_octree_refine_curvature(octmesh_t *h,
+                                                 int32_t min_level,
+                                                 int32_t max_level,
+                                                 double feature_angle);
+
+/**
+ * Region refinement of the current octree, like the command's
+ * `--min-level`, `--region` and `--distance`: every leaf is split until
+ * it is at least `min_level`, at least each region's level where its box
+ * (closed) overlaps the region, and at least each band's level where its
+ * box comes within the band's distance of the surface (exact distances).
+ * The result is the coarsest octree that satisfies every rule. Drops the
+ * balance and the mesh. Collective: every rank passes the same rules.
+ *
+ * \param[in] h          the handle
+ * \param[in] min_level  0 to 18 (0: no minimum)
+ * \param[in] nregions   number of regions, >= 0
+ * \param[in] regions    nregions NUL-terminated strings in the command's
+ *                       form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
+ *                       `sphere:CX,CY,CZ,R:LEVEL` or
+ *                       `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`, each
+ *                       optionally followed by `:outside`; user units
+ * \param[in] nbands     number of distance bands, >= 0 (bands need the
+ *                       surface)
+ * \param[in] distances  nbands increasing distances, user units
+ * \param[in] levels     nbands levels, 0 to 18
+ */
+octmesh_status_t octmesh_octree_refine_regions(octmesh_t *h,
+                                               int32_t min_level,
+                                               int32_t nregions,
+                                               const char *const *regions,
+                                               int32_t nbands,
+                                               const double *distances,
+                                               const int32_t *levels);
+
+/**
  * Refines by a callback: a leaf is split while `refine(ctx, &octant)`
  * returns non-zero and its level is below `max_level`. Without an octree,
  * builds one from the root (in the cube of `octmesh_domain_set`, else

@@ -106,6 +106,26 @@ class Mesher {
     detail::check(octmesh_octree_refine_callback(h_, max_level, tramp, (void *)&f), h_,
                   "octmesh_octree_refine_callback");
   }
+  void refine_curvature(int min_level, int max_level, double feature_angle = 30.0) {
+    detail::check(octmesh_octree_refine_curvature(h_, min_level, max_level, feature_angle), h_,
+                  "octmesh_octree_refine_curvature");
+  }
+  /// Regions in the command's form ("box:X0,Y0,Z0,X1,Y1,Z1:LEVEL[:outside]", ...)
+  /// and distance bands (distance, level), increasing.
+  void refine_regions(int min_level, const std::vector<std::string> &regions = {},
+                      const std::vector<std::pair<double, int32_t>> &bands = {}) {
+    std::vector<const char *> r;
+    for (const auto &x : regions) r.push_back(x.c_str());
+    std::vector<double> d;
+    std::vector<int32_t> l;
+    for (const auto &b : bands) {
+      d.push_back(b.first);
+      l.push_back(b.second);
+    }
+    detail::check(octmesh_octree_refine_regions(h_, min_level, (int32_t)r.size(), r.data(),
+                                                (int32_t)d.size(), d.data(), l.data()),
+                  h_, "octmesh_octree_refine_regions");
+  }
   void balance(octmesh_connect_t connect = OCTMESH_CONNECT_CORNER) {
     detail::check(octmesh_octree_balance(h_, connect), h_, "octmesh_octree_balance");
   }

@@ -238,13 +238,26 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             ["sphere", "4", "0", "2", "1", "3", "0.9"],
         ),
     ];
+    // Refinement controls: (max level, feature angle, min level, bands,
+    // regions) for the command and for `octmesh_octree_refine_curvature`
+    // and `octmesh_octree_refine_regions`; none for the first cases.
+    let controls: &[Option<(&str, &str, &str, &str, &[&str])>] = &[
+        None,
+        Some((
+            "7",
+            "20",
+            "3",
+            "0.3:6,0.8:5",
+            &["box:-2,-2,-2,0,2,0:5", "sphere:1,0,0,0.5:6:outside"],
+        )),
+        Some(("4", "30", "2", "-", &["cylinder:-1,0,0,1,0,0,0.4:6"])),
+    ];
     for (i, (words, values)) in cases.iter().enumerate() {
         let [surface, level, keep, cut, inside, balance, fit] = *words;
-        let args = [
+        let level_range;
+        let mut args = vec![
             "mesh",
             surface,
-            "--level",
-            level,
             "--keep",
             keep,
             "--cut-rule",
@@ -256,6 +269,23 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             "--fit",
             fit,
         ];
+        let mut values: Vec<&str> = values.to_vec();
+        match controls[i] {
+            None => args.extend(["--level", level]),
+            Some((max, angle, min, bands, regions)) => {
+                level_range = format!("{level}:{max}");
+                args.extend(["--level", &level_range, "--feature-angle", angle]);
+                args.extend(["--min-level", min]);
+                if bands != "-" {
+                    args.extend(["--distance", bands]);
+                }
+                for r in regions {
+                    args.extend(["--region", r]);
+                }
+                values.extend([max, angle, min, bands]);
+                values.extend(regions.iter());
+            }
+        }
         let case = dir.join(format!("case{i}.toml"));
         let printed = common::octmesh_ok(1, &[&args[..], &["--print-case"]].concat());
         std::fs::write(&case, &printed.stdout).unwrap();
@@ -281,7 +311,7 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
         .map(|k| common::int(&j, k))
         .collect();
         for np in [1, 2] {
-            let out = run_ok(np, &exe, values);
+            let out = run_ok(np, &exe, &values);
             let c: Vec<u64> = line_starting(&out, "COUNTS")
                 .split_whitespace()
                 .skip(1)

@@ -22,29 +22,12 @@
 ! Output on rank 0: "FVPOISSON level=... ranks=... cells=... iterations=...
 ! l2_error=... max_error=..." (volume-weighted L2 and max over cells of
 ! u - exact at the cell centres).
-module fv_refine
-  use, intrinsic :: iso_c_binding
-  use octmesh
-  implicit none
-contains
-  !> Refines every octant coarser than the level `ctx` points to.
-  integer(c_int32_t) function coarser_than(ctx, o) bind(c)
-    type(c_ptr), value :: ctx
-    type(octmesh_octant_t), intent(in) :: o
-    integer(c_int32_t), pointer :: floor_level
-    call c_f_pointer(ctx, floor_level)
-    coarser_than = merge(1, 0, o%level < floor_level)
-  end function coarser_than
-end module fv_refine
-
 program fv_poisson
   use, intrinsic :: iso_c_binding
   use mpi_f08
   use octmesh
-  use fv_refine
   implicit none
   type(c_ptr) :: h
-  integer(c_int32_t), target :: floor_level
   type(octmesh_faces_t) :: fc
   type(octmesh_cell_halo_t) :: hl
   integer :: rank, nranks, ierr, level, it, i, o, nc, nf, nh, nr
@@ -68,9 +51,9 @@ program fv_poisson
   call check(octmesh_create_f(MPI_COMM_WORLD%MPI_VAL, h), c_null_ptr)
   call check(octmesh_surface_builtin_f(h, "torus"), h)
   call check(octmesh_octree_refine_surface(h, int(level, c_int32_t)), h)
-  floor_level = int(max(level - 2, 0), c_int32_t)
-  call check(octmesh_octree_refine_callback(h, floor_level, c_funloc(coarser_than), &
-       c_loc(floor_level)), h)
+  ! Every leaf at least level - 2 (no regions, no distance bands).
+  call check(octmesh_octree_refine_regions_f(h, max(level - 2, 0), [character(len=1) ::], &
+       [real(c_double) ::], [integer(c_int32_t) ::]), h)
   call check(octmesh_octree_partition(h, c_null_funptr, c_null_ptr), h)
   call check(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h)
   call check(octmesh_octree_partition(h, c_null_funptr, c_null_ptr), h)

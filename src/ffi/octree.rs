@@ -1,6 +1,6 @@
 //! The octree: refinement, balance, partition, leaves, leak check.
 
-use std::ffi::c_void;
+use std::ffi::{c_char, c_void, CStr};
 
 use super::handle::octmesh_t;
 use super::{
@@ -9,6 +9,7 @@ use super::{
 };
 use crate::error::{Error, ErrorKind, Result};
 use crate::octree::LinearOctree;
+use crate::regions::Region;
 use crate::{Connectivity, Octant, MAX_LEVEL};
 
 /// Refinement callback: returns non-zero to refine the octant. It must give
@@ -52,6 +53,167 @@ pub extern "C" fn octmesh_octree_refine_surface(h: *mut octmesh_t, level: i32) -
         let level = h.agree(level_arg(level, "level"))?;
         h.session.refine_surface(level)
     })
+}
+
+/// Curvature refinement after `octmesh_octree_refine_surface(h,
+/// min_level)`, like the command's `--level MIN:MAX --feature-angle DEG`:
+/// a leaf touching the surface is split, up to `max_level`, while the unit
+/// normals of the triangles touching it differ by more than
+/// `feature_angle` degrees. Needs an octree refined to the surface and the
+/// surface. Drops the balance and the mesh. Collective.
+///
+/// \param[in] h              the handle
+/// \param[in] min_level      the surface level the octree was refined to
+/// \param[in] max_level      the finest level, min_level to 18
+/// \param[in] feature_angle  degrees, in (0, 180); 30 is the command's
+///                           default
+#[no_mangle]
+pub extern "C" fn octmesh_octree_refine_curvature(
+    h: *mut octmesh_t,
+    min_level: i32,
+    max_level: i32,
+    feature_angle: f64,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let checked = level_arg(min_level, "min_level").and_then(|lo| {
+            let hi = level_arg(max_level, "max_level")?;
+            if hi < lo {
+                return Err(Error::invalid(format!(
+                    "max_level {hi} is below min_level {lo}"
+                )));
+            }
+            if !(feature_angle > 0.0 && feature_angle < 180.0) {
+                return Err(Error::invalid(format!(
+                    "feature_angle {feature_angle} is not in (0, 180) degrees"
+                )));
+            }
+            Ok((lo, hi))
+        });
+        let (lo, hi) = h.agree(checked)?;
+        let octree = &mut h.session.config_mut().octree;
+        let before = (octree.level, octree.max_level, octree.feature_angle);
+        (octree.level, octree.max_level, octree.feature_angle) =
+            (Some(lo), Some(hi), Some(feature_angle));
+        let done = h.session.refine_curvature();
+        if done.is_err() {
+            let octree = &mut h.session.config_mut().octree;
+            (octree.level, octree.max_level, octree.feature_angle) = before;
+        }
+        done
+    })
+}
+
+/// Region refinement of the current octree, like the command's
+/// `--min-level`, `--region` and `--distance`: every leaf is split until
+/// it is at least `min_level`, at least each region's level where its box
+/// (closed) overlaps the region, and at least each band's level where its
+/// box comes within the band's distance of the surface (exact distances).
+/// The result is the coarsest octree that satisfies every rule. Drops the
+/// balance and the mesh. Collective: every rank passes the same rules.
+///
+/// \param[in] h          the handle
+/// \param[in] min_level  0 to 18 (0: no minimum)
+/// \param[in] nregions   number of regions, >= 0
+/// \param[in] regions    nregions NUL-terminated strings in the command's
+///                       form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
+///                       `sphere:CX,CY,CZ,R:LEVEL` or
+///                       `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`, each
+///                       optionally followed by `:outside`; user units
+/// \param[in] nbands     number of distance bands, >= 0 (bands need the
+///                       surface)
+/// \param[in] distances  nbands increasing distances, user units
+/// \param[in] levels     nbands levels, 0 to 18
+#[no_mangle]
+pub extern "C" fn octmesh_octree_refine_regions(
+    h: *mut octmesh_t,
+    min_level: i32,
+    nregions: i32,
+    regions: *const *const c_char,
+    nbands: i32,
+    distances: *const f64,
+    levels: *const i32,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        // SAFETY: the arrays are the caller's, of the documented lengths.
+        let checked = level_arg(min_level, "min_level")
+            .and_then(|m| Ok((m, unsafe { region_args(nregions, regions) }?)))
+            .and_then(|(m, r)| Ok((m, r, unsafe { band_args(nbands, distances, levels) }?)));
+        let (min, regions, bands) = h.agree(checked)?;
+        let config = h.session.config_mut();
+        let before = (
+            config.octree.min_level,
+            config.regions.clone(),
+            config.octree.distance.clone(),
+        );
+        (
+            config.octree.min_level,
+            config.regions,
+            config.octree.distance,
+        ) = (min, regions, bands);
+        let done = h.session.refine_regions();
+        if done.is_err() {
+            let config = h.session.config_mut();
+            (
+                config.octree.min_level,
+                config.regions,
+                config.octree.distance,
+            ) = before;
+        }
+        done
+    })
+}
+
+/// Reads `n` region strings.
+///
+/// # Safety
+/// `p` points to `n` NUL-terminated strings (when `n > 0`).
+unsafe fn region_args(n: i32, p: *const *const c_char) -> Result<Vec<Region>> {
+    let n = usize::try_from(n)
+        .map_err(|_| Error::invalid(format!("nregions is {n}, must be at least 0")))?;
+    if n == 0 {
+        return Ok(Vec::new());
+    }
+    // SAFETY: `n` pointers (requirement of the API).
+    let ptrs = unsafe { slice_arg(p, n, "regions") }?;
+    let mut out = Vec::with_capacity(n);
+    for (k, &s) in ptrs.iter().enumerate() {
+        non_null(s, &format!("regions[{k}]"))?;
+        // SAFETY: non-NULL and NUL-terminated (requirement of the API).
+        let text = unsafe { CStr::from_ptr(s) }
+            .to_str()
+            .map_err(|_| Error::invalid(format!("regions[{k}] is not UTF-8")))?;
+        out.push(
+            Region::parse(text)
+                .map_err(|e| Error::invalid(format!("regions[{k}]: {}", e.message())))?,
+        );
+    }
+    Ok(out)
+}
+
+/// Reads `n` distance bands.
+///
+/// # Safety
+/// `d` and `l` point to `n` values each (when `n > 0`).
+unsafe fn band_args(n: i32, d: *const f64, l: *const i32) -> Result<Vec<(f64, u8)>> {
+    let n = usize::try_from(n)
+        .map_err(|_| Error::invalid(format!("nbands is {n}, must be at least 0")))?;
+    if n == 0 {
+        return Ok(Vec::new());
+    }
+    // SAFETY: `n` values each (requirement of the API).
+    let (d, l) = unsafe { (slice_arg(d, n, "distances")?, slice_arg(l, n, "levels")?) };
+    let mut out = Vec::with_capacity(n);
+    for k in 0..n {
+        let level = level_arg(l[k], &format!("levels[{k}]"))?;
+        if !(d[k].is_finite() && d[k] > 0.0) || (k > 0 && d[k] <= d[k - 1]) {
+            return Err(Error::invalid(format!(
+                "distances must be positive and increasing: distances[{k}] = {}",
+                d[k]
+            )));
+        }
+        out.push((d[k], level));
+    }
+    Ok(out)
 }
 
 /// Refines by a callback: a leaf is split while `refine(ctx, &octant)`

@@ -1,6 +1,9 @@
 /* One meshing run from command-line-like settings, through the C API:
  *   settings SURFACE LEVEL KEEP CUT_RULE INSIDE_RULE CONNECT FIT
- * with KEEP, CUT_RULE, INSIDE_RULE and CONNECT as the C constants' values.
+ *            [MAX_LEVEL ANGLE MIN_LEVEL BANDS [REGION ...]]
+ * with KEEP, CUT_RULE, INSIDE_RULE and CONNECT as the C constants' values;
+ * MAX_LEVEL and ANGLE for curvature refinement (MAX_LEVEL = LEVEL: none),
+ * BANDS as "D1:L1,D2:L2" or "-", REGIONS in the command's form.
  * Prints "COUNTS elements independent face_hanging edge_hanging" on rank 0,
  * for comparison with the octmesh command on the same settings. */
 #include <stdlib.h>
@@ -8,8 +11,9 @@
 
 int main(int argc, char **argv) {
   MPI_Init(&argc, &argv);
-  if (argc != 8) {
-    fprintf(stderr, "usage: settings SURFACE LEVEL KEEP CUT_RULE INSIDE_RULE CONNECT FIT\n");
+  if (argc != 8 && argc < 12) {
+    fprintf(stderr, "usage: settings SURFACE LEVEL KEEP CUT_RULE INSIDE_RULE CONNECT FIT "
+                    "[MAX_LEVEL ANGLE MIN_LEVEL BANDS [REGION ...]]\n");
     MPI_Abort(MPI_COMM_WORLD, 2);
   }
   octmesh_options_t opts;
@@ -22,6 +26,20 @@ int main(int argc, char **argv) {
   else
     OK(octmesh_surface_from_stl(h, argv[1]), h);
   OK(octmesh_octree_refine_surface(h, atoi(argv[2])), h);
+  if (argc >= 12) {
+    if (atoi(argv[8]) > atoi(argv[2]))
+      OK(octmesh_octree_refine_curvature(h, atoi(argv[2]), atoi(argv[8]), atof(argv[9])), h);
+    double d[16];
+    int32_t l[16], nb = 0;
+    for (char *t = strcmp(argv[11], "-") ? strtok(argv[11], ",") : NULL; t && nb < 16;
+         t = strtok(NULL, ",")) {
+      d[nb] = atof(t);
+      l[nb++] = atoi(strchr(t, ':') + 1);
+    }
+    OK(octmesh_octree_refine_regions(h, atoi(argv[10]), argc - 12, (const char *const *)argv + 12,
+                                     nb, d, l),
+       h);
+  }
   OK(octmesh_octree_partition(h, NULL, NULL), h);
   OK(octmesh_octree_balance(h, atoi(argv[6])), h);
   OK(octmesh_octree_partition(h, NULL, NULL), h);
