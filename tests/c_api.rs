@@ -214,6 +214,16 @@ fn leak_check_from_c_on_1_and_2_ranks() {
     }
 }
 
+/// Refinement controls of one case: max level, feature angle, min level,
+/// distance bands (`D:L,...` or `-`), regions.
+type Controls = (
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static str,
+    &'static [&'static str],
+);
+
 /// The C API and the command (through a case file from `--print-case`) on
 /// the same settings give the same global counts.
 #[test]
@@ -241,7 +251,7 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
     // Refinement controls: (max level, feature angle, min level, bands,
     // regions) for the command and for `octmesh_octree_refine_curvature`
     // and `octmesh_octree_refine_regions`; none for the first cases.
-    let controls: &[Option<(&str, &str, &str, &str, &[&str])>] = &[
+    let controls: &[Option<Controls>] = &[
         None,
         Some((
             "7",
