@@ -148,6 +148,47 @@ fn faces_from_c_on_1_2_and_3_ranks() {
     assert_eq!(lines[0], lines[2], "np 1 and 3 differ");
 }
 
+/// The memory budget of `octmesh_options_t`: refused before refining, and
+/// stopped in the run when the estimate was too low, with the handle
+/// usable after both (issue 22). The in-run budget is computed like the
+/// command's test: between the estimate and the real size.
+#[test]
+fn memory_budget_from_c_on_1_and_2_ranks() {
+    use octmesh::budget::{BASE_BYTES, BYTES_PER_OCTANT_MESH, BYTES_PER_TRIANGLE};
+    let dir = scratch("c_api_budget");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("budget", &lib, &dir);
+    for np in [1, 2] {
+        let stats = dir.join(format!("s{np}.json"));
+        common::octmesh_ok(
+            np,
+            &[
+                "mesh",
+                "sphere",
+                "--level",
+                "6",
+                "--quiet",
+                "--stats",
+                stats.to_str().unwrap(),
+            ],
+        );
+        let j = common::json_file(&stats);
+        let (estimate, real) = (
+            common::int(&j, "estimated_octants"),
+            common::int(&j, "octants_balanced"),
+        );
+        assert!(
+            estimate < real,
+            "the in-run case needs an estimate below the real count"
+        );
+        let base = BASE_BYTES + common::int(&j, "triangles") * BYTES_PER_TRIANGLE;
+        let budget = base + (estimate + real) / 2 * BYTES_PER_OCTANT_MESH / np as u64;
+        let out = run_ok(np, &exe, &[&budget.to_string()]);
+        assert_eq!(out.matches("BUDGET OK").count(), np, "{out}");
+    }
+}
+
 #[test]
 fn misuse_from_c_on_1_and_2_ranks() {
     let dir = scratch("c_api_misuse");
