@@ -193,6 +193,24 @@ fn run(comm: &CommRef, args: &[String]) -> Result<()> {
             Ok(())
         }
         Invocation::Run {
+            config,
+            dry_run: true,
+            ..
+        } => {
+            let mut session = Session::new(comm.clone(), (*config).clone());
+            let rows = session.estimate()?;
+            if comm.rank() == 0 {
+                let mut text = String::from(
+                    "dry run: estimated octants after balance, per control (nothing built)\n",
+                );
+                for (what, n) in rows {
+                    text.push_str(&format!("  {what:<48} {n:>16}\n"));
+                }
+                let _ = write!(std::io::stdout(), "{text}");
+            }
+            Ok(())
+        }
+        Invocation::Run {
             command, config, ..
         } => {
             let mut session = Session::new(comm.clone(), (*config).clone());

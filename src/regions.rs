@@ -147,6 +147,54 @@ impl Region {
         Ok(())
     }
 
+    /// The region's bounding box, user units.
+    pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
+        match *self {
+            Region::Box { min, max, .. } => (min, max),
+            Region::Sphere { center, radius, .. } => {
+                (center.map(|c| c - radius), center.map(|c| c + radius))
+            }
+            Region::Cylinder {
+                start, end, radius, ..
+            } => (
+                std::array::from_fn(|a| start[a].min(end[a]) - radius),
+                std::array::from_fn(|a| start[a].max(end[a]) + radius),
+            ),
+        }
+    }
+
+    /// A box inside the region (`None` for a cylinder): the box itself, or
+    /// the cube inscribed in a sphere.
+    pub fn inner_box(&self) -> Option<([f64; 3], [f64; 3])> {
+        match *self {
+            Region::Box { min, max, .. } => Some((min, max)),
+            Region::Sphere { center, radius, .. } => {
+                let h = radius / 3f64.sqrt();
+                Some((center.map(|c| c - h), center.map(|c| c + h)))
+            }
+            Region::Cylinder { .. } => None,
+        }
+    }
+
+    /// The region in the command line's form.
+    pub fn describe(&self) -> String {
+        let list = |v: &[f64]| {
+            v.iter()
+                .map(|x| x.to_string())
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        let numbers = match *self {
+            Region::Box { min, max, .. } => list(&[min, max].concat()),
+            Region::Sphere { center, radius, .. } => list(&[&center[..], &[radius]].concat()),
+            Region::Cylinder {
+                start, end, radius, ..
+            } => list(&[&start[..], &end[..], &[radius]].concat()),
+        };
+        let outside = if self.outside() { ":outside" } else { "" };
+        format!("{}:{numbers}:{}{outside}", self.shape(), self.level())
+    }
+
     /// Parses the command line's form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
     /// `sphere:CX,CY,CZ,R:LEVEL` or `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`,
     /// each optionally followed by `:outside`.

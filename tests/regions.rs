@@ -264,3 +264,81 @@ fn distance_bands_follow_the_exact_distance() {
         assert!(in_band > 0);
     }
 }
+
+/// `--dry-run` prints the estimate of every control and builds nothing: the
+/// surface row is the estimate a real run reports, a minimum level and a
+/// region covering the cube are exact, and no output file appears.
+#[test]
+fn dry_run_prints_an_estimate_per_control_and_builds_nothing() {
+    let dir = scratch("regions_dry_run");
+    let out = dir.join("never.pvtu");
+    let stats = dir.join("never.json");
+    let args = [
+        "mesh",
+        "sphere",
+        "--level",
+        "6:8",
+        "--min-level",
+        "4",
+        "--region",
+        "box:-9,-9,-9,9,9,9:5",
+        "--region",
+        "sphere:0,0,0,0.5:7:outside",
+        "--distance",
+        "0.1:7",
+        "--out",
+        out.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+        "--dry-run",
+    ];
+    let printed = String::from_utf8_lossy(&octmesh_ok(2, &args).stdout).into_owned();
+    let value = |label: &str| -> u64 {
+        let line = printed
+            .lines()
+            .find(|l| l.trim_start().starts_with(label))
+            .unwrap_or_else(|| panic!("no '{label}' row in:\n{printed}"));
+        line.split_whitespace().last().unwrap().parse().unwrap()
+    };
+    assert!(!out.exists() && !stats.exists(), "a dry run wrote files");
+    assert_eq!(value("min level 4"), 8u64.pow(4));
+    assert_eq!(value("region box:-9,-9,-9,9,9,9:5"), 8u64.pow(5));
+    assert!(value("region sphere:0,0,0,0.5:7:outside") > 0);
+    assert!(value("curvature up to level 8") > value("surface level 6"));
+    assert!(value("distance 0.1 at level 7") > 0);
+    let rows = [
+        "surface level 6",
+        "curvature up to level 8",
+        "min level 4",
+        "region box",
+        "region sphere",
+        "distance 0.1",
+    ];
+    let sum: u64 = rows.iter().map(|r| value(r)).sum();
+    assert_eq!(value("total"), sum);
+    // The surface row is the estimate of the real run.
+    let real = dir.join("real.json");
+    octmesh_ok(
+        1,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "6",
+            "--quiet",
+            "--stats",
+            real.to_str().unwrap(),
+        ],
+    );
+    let j = json_file(&real);
+    let once = String::from_utf8_lossy(
+        &octmesh_ok(1, &["mesh", "sphere", "--level", "6", "--dry-run"]).stdout,
+    )
+    .into_owned();
+    assert!(
+        once.contains(&format!(" {}\n", int(&j, "estimated_octants"))),
+        "the surface estimate {} is not in:\n{once}",
+        int(&j, "estimated_octants")
+    );
+    println!("{printed}");
+}

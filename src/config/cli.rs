@@ -173,6 +173,10 @@ struct OctreeArgs {
     /// Print the case file (TOML) equivalent to this command line and stop
     #[arg(long)]
     print_case: bool,
+    /// Print the estimated octant count of each refinement control and
+    /// stop, without building anything
+    #[arg(long)]
+    dry_run: bool,
 }
 
 /// The options of `mesh`.
@@ -246,6 +250,8 @@ pub enum Invocation {
         config: Box<Config>,
         /// Print the case file instead of running.
         print_case: bool,
+        /// Print the estimates instead of running.
+        dry_run: bool,
     },
     /// Diagnose a surface.
     Check {
@@ -441,6 +447,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         command,
         config: Box::new(config),
         print_case: octree.print_case,
+        dry_run: octree.dry_run,
     })
 }
 

@@ -229,6 +229,91 @@ impl Session {
         self.refined(refined, budget, limit, "region refinement")
     }
 
+    /// Estimated balanced octants per refinement control of the
+    /// configuration, for `--dry-run`: `(control, octants)` rows, then their
+    /// sum (controls overlap, and grading adds coarser leaves around each:
+    /// an order of magnitude, not a bound). Loads the surface
+    /// first when there is none; builds nothing. Collective.
+    ///
+    /// - surface level `L`: the estimate of the surface refinement
+    ///   ([`estimate_leaves`]); curvature up to `MAX`: the same at `MAX` (what
+    ///   refinement to `MAX` everywhere on the surface would give);
+    /// - minimum level `M`: `8^M`, exact;
+    /// - a region at level `l`: the level-`l` cells overlapping its
+    ///   bounding box, or for an outside region all cells but those within
+    ///   a box it contains (the 2:1 grading around it comes on top);
+    /// - a distance band `(d, l)`: the surface's level-`l` estimate plus the
+    ///   cells of a slab of thickness `2 d` over the surface's area.
+    pub fn estimate(&mut self) -> Result<Vec<(String, u64)>> {
+        if self.surface.is_none() {
+            self.load_surface()?;
+        }
+        let domain = agree(&*self.comm, self.next_domain())?;
+        let octree = self.config.octree.clone();
+        let regions = self.config.regions.clone();
+        let level = octree.level.unwrap_or(0);
+        let (area, index) = {
+            let s = self.surface.as_ref().expect("just loaded");
+            (s.surface.area(), self.index_for(domain)?)
+        };
+        let mut rows = vec![(
+            format!("surface level {level}"),
+            estimate_leaves(index, level).balanced,
+        )];
+        if let Some(max) = octree.max_level.filter(|&m| m > level) {
+            let at_max = estimate_leaves(index, max).balanced;
+            rows.push((format!("curvature up to level {max} (at most)"), at_max));
+        }
+        if octree.min_level > 0 {
+            rows.push((
+                format!("min level {}", octree.min_level),
+                8u64.saturating_pow(octree.min_level as u32),
+            ));
+        }
+        let cell = |l: u8| domain.side / (1u64 << l) as f64;
+        let cells_per_axis = |l: u8| (1u64 << l) as f64;
+        for r in &regions {
+            let l = r.level();
+            // Inside: the cells overlapping the bounding box; outside: all
+            // cells but those within a box the region contains.
+            let count = |(lo, hi): ([f64; 3], [f64; 3]), overlapping: bool| -> f64 {
+                (0..3)
+                    .map(|a| {
+                        let (x0, x1) = (
+                            (lo[a] - domain.origin[a]) / cell(l),
+                            (hi[a] - domain.origin[a]) / cell(l),
+                        );
+                        let (first, last) = if overlapping {
+                            (x0.floor(), x1.ceil())
+                        } else {
+                            (x0.ceil(), x1.floor())
+                        };
+                        (last.min(cells_per_axis(l)) - first.max(0.0)).max(0.0)
+                    })
+                    .product()
+            };
+            let n = if r.outside() {
+                let inner = r.inner_box().map_or(0.0, |b| count(b, false));
+                cells_per_axis(l).powi(3) - inner
+            } else {
+                count(r.bounding_box(), true)
+            };
+            rows.push((format!("region {}", r.describe()), n.round() as u64));
+        }
+        for &(d, l) in &octree.distance {
+            let slab = 2.0 * d * area / cell(l).powi(3);
+            let n = estimate_leaves(index, l).balanced as f64 + slab;
+            let all = cells_per_axis(l).powi(3);
+            rows.push((
+                format!("distance {d} at level {l}"),
+                n.min(all).round() as u64,
+            ));
+        }
+        let total = rows.iter().fold(0u64, |t, r| t.saturating_add(r.1));
+        rows.push(("total (sum of the controls)".to_string(), total));
+        Ok(rows)
+    }
+
     /// Ends a refinement stage: its error (in the budget's words when the
     /// budget stopped it), its row, the new counts, the stale classes and
     /// mesh dropped.
