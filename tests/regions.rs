@@ -342,3 +342,60 @@ fn dry_run_prints_an_estimate_per_control_and_builds_nothing() {
     );
     println!("{printed}");
 }
+
+/// Cell sizes in user units give the level whose cell is not larger:
+/// `--size`, `--size S:FINE` and `--min-size` build the same octrees as the
+/// levels they round to, on either side of a level's cell size; sizes
+/// that clash with levels, or are not positive, are refused.
+#[test]
+fn sizes_round_to_the_level_whose_cell_is_not_larger() {
+    let dir = scratch("regions_sizes");
+    let stats = |args: &[&str], tag: &str| -> serde_json::Value {
+        let path = dir.join(format!("{tag}.json"));
+        let mut all = args.to_vec();
+        all.extend(["--quiet", "--stats", path.to_str().unwrap()]);
+        octmesh_ok(2, &all);
+        json_file(&path)
+    };
+    let base = stats(&["octree", "sphere", "--level", "5"], "base");
+    let side = base["domain_side"].as_f64().unwrap();
+    let cell5 = side / 32.0;
+    for (size, level) in [(cell5 * 1.001, 5u64), (cell5 * 0.999, 6), (cell5 * 2.0, 4)] {
+        let s = size.to_string();
+        let by_size = stats(&["octree", "sphere", "--size", &s], &format!("s{level}"));
+        let l = level.to_string();
+        let by_level = stats(&["octree", "sphere", "--level", &l], &format!("l{level}"));
+        assert_eq!(int(&by_size, "level"), level, "--size {s}");
+        assert_eq!(
+            int(&by_size, "octants_balanced"),
+            int(&by_level, "octants_balanced"),
+            "--size {s} against --level {level}"
+        );
+    }
+    // A range and a minimum size.
+    let (coarse, fine, floor) = (
+        (cell5 * 1.001).to_string(),
+        (cell5 / 4.0).to_string(),
+        (cell5 * 4.0).to_string(),
+    );
+    let range = format!("{coarse}:{fine}");
+    let by_size = stats(
+        &["mesh", "sphere", "--size", &range, "--min-size", &floor],
+        "range_size",
+    );
+    let by_level = stats(
+        &["mesh", "sphere", "--level", "5:7", "--min-level", "3"],
+        "range_level",
+    );
+    for k in ["octants_balanced", "elements", "independent_nodes"] {
+        assert_eq!(int(&by_size, k), int(&by_level, k), "{k}");
+    }
+    let e = octmesh_fails(&["octree", "sphere", "--size", "0.1", "--level", "4"]);
+    assert!(e.contains("--size excludes --level"), "{e}");
+    let e = octmesh_fails(&["octree", "sphere", "--size=-1"]);
+    assert!(e.contains("positive size"), "{e}");
+    let e = octmesh_fails(&["octree", "sphere", "--size", "0.1:0.2"]);
+    assert!(e.contains("larger than the surface size"), "{e}");
+    let e = octmesh_fails(&["octree", "sphere", "--size", "1e-9"]);
+    assert!(e.contains("above the maximum level"), "{e}");
+}

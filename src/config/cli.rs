@@ -29,6 +29,9 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("octree.level", "--level"),
     ("octree.min_level", "--min-level"),
     ("octree.max_level", "--level"),
+    ("octree.size", "--size"),
+    ("octree.max_size", "--size"),
+    ("octree.min_size", "--min-size"),
     ("octree.feature_angle", "--feature-angle"),
     ("octree.distance", "--distance"),
     ("octree.balance", "--balance"),
@@ -106,6 +109,14 @@ struct OctreeArgs {
     /// Every leaf at least this level [default: 0]
     #[arg(long, value_name = "L", value_parser = parse_level)]
     min_level: Option<u8>,
+    /// The surface level as a cell size in user units instead of --level:
+    /// the coarsest level whose cell is not larger; S:FINE gives the
+    /// curvature refinement's finest size
+    #[arg(long, value_name = "S[:FINE]", value_parser = parse_size_range)]
+    size: Option<(f64, Option<f64>)>,
+    /// --min-level as a cell size: every leaf at most this large
+    #[arg(long, value_name = "S", value_parser = parse_finite)]
+    min_size: Option<f64>,
     /// Distance bands around the surface, D1:L1,D2:L2,... with increasing
     /// distances D (user units): leaves within D of the surface get level L
     #[arg(long, value_name = "D:L,...", value_parser = parse_bands)]
@@ -324,6 +335,16 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
             config.octree.max_level = max;
         }
     }
+    if let Some((size, fine)) = o.size {
+        set("octree.size", true);
+        config.octree.size = Some(size);
+        if set("octree.max_size", fine.is_some()) {
+            config.octree.max_size = fine;
+        }
+    }
+    if set("octree.min_size", o.min_size.is_some()) {
+        config.octree.min_size = o.min_size;
+    }
     if set("octree.feature_angle", o.feature_angle.is_some()) {
         config.octree.feature_angle = o.feature_angle;
     }
@@ -516,6 +537,13 @@ fn parse_bands(s: &str) -> std::result::Result<Bands, String> {
 }
 
 /// `L` or `MIN:MAX`.
+fn parse_size_range(s: &str) -> std::result::Result<(f64, Option<f64>), String> {
+    match s.split_once(':') {
+        None => Ok((parse_finite(s)?, None)),
+        Some((a, b)) => Ok((parse_finite(a)?, Some(parse_finite(b)?))),
+    }
+}
+
 fn parse_level_range(s: &str) -> std::result::Result<(u8, Option<u8>), String> {
     match s.split_once(':') {
         None => Ok((parse_level(s)?, None)),

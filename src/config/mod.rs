@@ -197,6 +197,15 @@ pub struct OctreeConfig {
     pub feature_angle: Option<f64>,
     /// Every leaf at least this level (default 0).
     pub min_level: u8,
+    /// The surface level as a cell size in user units instead of
+    /// `level` (cfMesh style): the coarsest level whose cell is not larger
+    /// (`--size S`).
+    pub size: Option<f64>,
+    /// `max_level` as a cell size (`--size S:FINE`).
+    pub max_size: Option<f64>,
+    /// `min_level` as a cell size: every leaf at most this large
+    /// (`--min-size S`).
+    pub min_size: Option<f64>,
     /// Distance bands around the surface, `[[distance, level], ...]` with
     /// increasing distances (user units): a leaf is refined while its level
     /// is below a band's and its box comes within the band's distance of
@@ -349,6 +358,9 @@ pub const KEYS: &[&str] = &[
     "octree.level",
     "octree.min_level",
     "octree.max_level",
+    "octree.size",
+    "octree.max_size",
+    "octree.min_size",
     "octree.feature_angle",
     "octree.distance",
     "octree.balance",
@@ -381,6 +393,12 @@ impl Config {
                 "surface.file",
                 "is required: no surface given",
             ));
+        }
+        self.check_sizes()?;
+        if self.octree.level.is_none() && self.octree.size.is_some() {
+            // The levels follow once the domain is known
+            // (`Config::with_sizes`); the rest is checked then.
+            return Ok(());
         }
         let Some(level) = self.octree.level else {
             return Err(ConfigError::new("octree.level", "is required"));
@@ -503,6 +521,79 @@ impl Config {
             }
         }
         Ok(())
+    }
+
+    /// Sizes are positive, finite, each exclusive with its level, and the
+    /// fine size not larger than the surface size.
+    fn check_sizes(&self) -> Result<(), ConfigError> {
+        let o = &self.octree;
+        let sizes = [
+            ("octree.size", o.size),
+            ("octree.max_size", o.max_size),
+            ("octree.min_size", o.min_size),
+        ];
+        for (key, v) in sizes {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(ConfigError::new(
+                    key,
+                    format!("must be a positive size, got {v}"),
+                ));
+            }
+        }
+        let clash = [
+            (
+                "octree.size",
+                o.size.is_some() && o.level.is_some(),
+                "{octree.level}",
+            ),
+            (
+                "octree.max_size",
+                o.max_size.is_some() && o.max_level.is_some(),
+                "{octree.max_level}",
+            ),
+            (
+                "octree.min_size",
+                o.min_size.is_some() && o.min_level > 0,
+                "{octree.min_level}",
+            ),
+        ];
+        if let Some((key, _, other)) = clash.iter().find(|c| c.1) {
+            return Err(ConfigError::new(
+                key,
+                format!("excludes {other}: give one of them"),
+            ));
+        }
+        if o.max_size.is_some() && o.size.is_none() {
+            return Err(ConfigError::new("octree.max_size", "needs {octree.size}"));
+        }
+        if let (Some(s), Some(f)) = (o.size, o.max_size) {
+            if f > s {
+                return Err(ConfigError::new(
+                    "octree.max_size",
+                    format!("has a finest size {f} larger than the surface size {s}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The configuration with its sizes turned into levels for a domain of
+    /// side `side` (user units): each the coarsest level whose cell is not
+    /// larger than the size. Unchanged without sizes.
+    pub fn with_sizes(&self, side: f64) -> crate::Result<Config> {
+        let mut c = self.clone();
+        let o = &mut c.octree;
+        let level = |s: f64| crate::regions::level_for_size(side, s);
+        if let Some(s) = o.size.take() {
+            o.level = Some(level(s)?);
+        }
+        if let Some(s) = o.max_size.take() {
+            o.max_level = Some(level(s)?);
+        }
+        if let Some(s) = o.min_size.take() {
+            o.min_level = level(s)?;
+        }
+        Ok(c)
     }
 
     /// The patch names for a surface called `surface` (a file or a

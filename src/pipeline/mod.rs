@@ -290,6 +290,10 @@ impl Session {
     /// valid ([`Config::validate`]). A leak found is returned as its error
     /// after the statistics are written.
     pub fn run(&mut self, command: Command) -> Result<Stats> {
+        self.inside = self.config.inside_rule(command);
+        self.plan = command;
+        self.load_surface()?;
+        // Known now: sizes became levels once the domain was.
         let level = agree(
             &*self.comm,
             self.config
@@ -297,9 +301,6 @@ impl Session {
                 .level
                 .ok_or_else(|| Error::invalid("octree.level is required")),
         )?;
-        self.inside = self.config.inside_rule(command);
-        self.plan = command;
-        self.load_surface()?;
         if command == Command::Mesh {
             // Renames name the surface's parts: check them before the work.
             agree(&*self.comm, self.patch_names())?;

@@ -72,6 +72,7 @@ impl Session {
             })
         });
         let state = agree(&*self.comm, loaded)?;
+        self.resolve_sizes(state.index_domain.side)?;
         self.facts.rss_read = peak_rss_bytes();
         let level = self.config.octree.level;
         let estimate = level.map(|l| estimate_leaves(&state.index, l));
@@ -101,6 +102,23 @@ impl Session {
         self.surface = Some(state);
         self.released = None;
         self.classes = Classes::default();
+        Ok(())
+    }
+
+    /// Turns the configuration's cell sizes (`octree.size`, `max_size`,
+    /// `min_size`) into levels for a domain of side `side`, and checks the
+    /// levels they give. Nothing to do without sizes.
+    fn resolve_sizes(&mut self, side: f64) -> Result<()> {
+        let o = &self.config.octree;
+        if o.size.is_none() && o.max_size.is_none() && o.min_size.is_none() {
+            return Ok(());
+        }
+        let resolved = self.config.with_sizes(side).and_then(|c| {
+            c.validate(self.plan)
+                .map_err(|e| Error::invalid(e.render(|k| k.to_string())))?;
+            Ok(c)
+        });
+        self.config = agree(&*self.comm, resolved)?;
         Ok(())
     }
 
