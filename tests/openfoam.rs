@@ -436,6 +436,24 @@ fn parse_vector(line: &str) -> [f64; 3] {
     [v[0], v[1], v[2]]
 }
 
+/// The points and the faces (point labels) of an ASCII polyMesh.
+fn read_points_and_faces(mesh: &Path) -> (Vec<[f64; 3]>, Vec<Vec<usize>>) {
+    let points = list_lines(&mesh.join("points"))
+        .iter()
+        .map(|l| parse_vector(l))
+        .collect();
+    let faces = list_lines(&mesh.join("faces"))
+        .iter()
+        .map(|l| {
+            l[l.find('(').unwrap() + 1..l.len() - 1]
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect()
+        })
+        .collect();
+    (points, faces)
+}
+
 /// The body of an ASCII list file: the lines between the outer parentheses.
 fn list_lines(path: &Path) -> Vec<String> {
     let text = std::fs::read_to_string(path).unwrap();
@@ -469,20 +487,7 @@ fn ascii_files_read_back_close_every_cell() {
         &stats,
     );
     let mesh = case.join("constant/polyMesh");
-    let points: Vec<[f64; 3]> = list_lines(&mesh.join("points"))
-        .iter()
-        .map(|l| parse_vector(l))
-        .collect();
-    let faces: Vec<Vec<usize>> = list_lines(&mesh.join("faces"))
-        .iter()
-        .map(|l| {
-            let inner = &l[l.find('(').unwrap() + 1..l.len() - 1];
-            inner
-                .split_whitespace()
-                .map(|w| w.parse().unwrap())
-                .collect()
-        })
-        .collect();
+    let (points, faces) = read_points_and_faces(&mesh);
     let owner: Vec<usize> = list_lines(&mesh.join("owner"))
         .iter()
         .map(|l| l.parse().unwrap())
@@ -639,19 +644,7 @@ fn solids_of_an_ascii_stl_become_patches() {
     );
     // Each face sits on its half: its centre's height has the half's sign
     // (within a cell of the equator).
-    let points: Vec<[f64; 3]> = list_lines(&mesh.join("points"))
-        .iter()
-        .map(|l| parse_vector(l))
-        .collect();
-    let faces: Vec<Vec<usize>> = list_lines(&mesh.join("faces"))
-        .iter()
-        .map(|l| {
-            l[l.find('(').unwrap() + 1..l.len() - 1]
-                .split_whitespace()
-                .map(|w| w.parse().unwrap())
-                .collect()
-        })
-        .collect();
+    let (points, faces) = read_points_and_faces(&mesh);
     let cell = stats["domain_side"].as_f64().unwrap() / 32.0;
     for (k, sign) in [(6, 1.0), (7, -1.0)] {
         let (_, n, start) = patches[k];

@@ -22,12 +22,12 @@
 //! the fine faces, so a cell can have more than six faces.
 
 use std::cell::OnceCell;
-use std::ffi::{c_char, CStr, CString};
+use std::ffi::{c_char, CString};
 
 use super::handle::octmesh_t;
 use super::{
     non_null, octmesh_foam_format_t, octmesh_gloidx_t, octmesh_locidx_t, octmesh_status_t,
-    path_arg, with_mut, with_ref, write_out, FromC,
+    path_arg, str_arg, with_mut, with_ref, write_out, FromC,
 };
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::openfoam::FoamFormat;
@@ -416,15 +416,6 @@ pub extern "C" fn octmesh_mesh_get_patch_name(
         write_out(name, names[p].as_ptr());
         Ok(())
     })
-}
-
-/// A NUL-terminated UTF-8 argument.
-fn str_arg<'a>(p: *const c_char, name: &str) -> Result<&'a str> {
-    non_null(p, name)?;
-    // SAFETY: non-NULL and NUL-terminated (requirement of the C API).
-    unsafe { CStr::from_ptr(p) }
-        .to_str()
-        .map_err(|_| Error::invalid(format!("argument '{name}' is not UTF-8")))
 }
 
 /// Renames patch `from` (its current name, e.g. `xmin`) to `to` (an

@@ -9,12 +9,13 @@
 //! independent, the rest hang.
 
 use std::cell::OnceCell;
-use std::ffi::{c_char, CStr};
+use std::ffi::c_char;
 
 use super::handle::octmesh_t;
 use super::{
     non_null, octmesh_cut_rule_t, octmesh_gloidx_t, octmesh_inside_rule_t, octmesh_keep_t,
-    octmesh_locidx_t, octmesh_status_t, path_arg, slice_arg, with_mut, with_ref, write_out, FromC,
+    octmesh_locidx_t, octmesh_status_t, path_arg, slice_arg, str_arg, with_mut, with_ref,
+    write_out, FromC,
 };
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::error::{Error, ErrorKind, Result};
@@ -474,11 +475,7 @@ unsafe fn field_args<'a>(
     };
     let mut out = Vec::with_capacity(n);
     for k in 0..n {
-        non_null(names[k], &format!("names[{k}]"))?;
-        // SAFETY: non-NULL and NUL-terminated (requirement of the API).
-        let name = unsafe { CStr::from_ptr(names[k]) }
-            .to_str()
-            .map_err(|_| Error::invalid(format!("names[{k}] is not UTF-8")))?;
+        let name = str_arg(names[k], &format!("names[{k}]"))?;
         let v: &[f64] = if nodes == 0 {
             &[]
         } else {

@@ -495,6 +495,15 @@ pub(crate) fn path_arg(p: *const c_char, name: &str) -> Result<PathBuf> {
     }
 }
 
+/// A NUL-terminated UTF-8 argument called `name` in errors.
+pub(crate) fn str_arg<'a>(p: *const c_char, name: &str) -> Result<&'a str> {
+    non_null(p, name)?;
+    // SAFETY: non-NULL and NUL-terminated (requirement of the C API).
+    unsafe { CStr::from_ptr(p) }
+        .to_str()
+        .map_err(|_| Error::invalid(format!("argument '{name}' is not UTF-8")))
+}
+
 /// Writes `value` through an out-pointer already checked to be non-NULL.
 pub(crate) fn write_out<T>(p: *mut T, value: T) {
     // SAFETY: checked non-NULL by the caller; the C API requires it to be

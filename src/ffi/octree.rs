@@ -1,11 +1,11 @@
 //! The octree: refinement, balance, partition, leaves, leak check.
 
-use std::ffi::{c_char, c_void, CStr};
+use std::ffi::{c_char, c_void};
 
 use super::handle::octmesh_t;
 use super::{
     non_null, octmesh_connect_t, octmesh_gloidx_t, octmesh_locidx_t, octmesh_octant_t,
-    octmesh_status_t, out_slice, slice_arg, with_mut, with_ref, write_out, FromC,
+    octmesh_status_t, out_slice, slice_arg, str_arg, with_mut, with_ref, write_out, FromC,
 };
 use crate::error::{Error, ErrorKind, Result};
 use crate::octree::LinearOctree;
@@ -177,11 +177,7 @@ unsafe fn region_args(n: i32, p: *const *const c_char) -> Result<Vec<Region>> {
     let ptrs = unsafe { slice_arg(p, n, "regions") }?;
     let mut out = Vec::with_capacity(n);
     for (k, &s) in ptrs.iter().enumerate() {
-        non_null(s, &format!("regions[{k}]"))?;
-        // SAFETY: non-NULL and NUL-terminated (requirement of the API).
-        let text = unsafe { CStr::from_ptr(s) }
-            .to_str()
-            .map_err(|_| Error::invalid(format!("regions[{k}] is not UTF-8")))?;
+        let text = str_arg(s, &format!("regions[{k}]"))?;
         out.push(
             Region::parse(text)
                 .map_err(|e| Error::invalid(format!("regions[{k}]: {}", e.message())))?,

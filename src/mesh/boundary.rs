@@ -196,9 +196,7 @@ impl Mesh {
         }
         masks
     }
-}
 
-impl Mesh {
     /// Replaces the surface bit of each node on the surface by the bits of
     /// its parts' patches: those of the surface faces through it.
     fn surface_parts(
