@@ -20,6 +20,7 @@
 //! are kept in Morton order, each rank holding a contiguous run.
 
 pub mod balance;
+pub mod brick;
 pub mod budget;
 pub mod classify;
 pub mod comm;

@@ -9,6 +9,7 @@
 
 use std::sync::Arc;
 
+use crate::brick::Brick;
 use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
 use crate::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
@@ -21,6 +22,8 @@ pub struct LinearOctree {
     first_cell: Vec<u64>,
     offsets: Vec<u64>,
     balanced: Option<Connectivity>,
+    /// The root cells of the domain (the cube unless set).
+    brick: Brick,
 }
 
 impl std::fmt::Debug for LinearOctree {
@@ -34,6 +37,17 @@ impl std::fmt::Debug for LinearOctree {
 }
 
 impl LinearOctree {
+    /// The root cells of the domain the octree lives in: balance skips the
+    /// void outside a brick.
+    pub fn brick(&self) -> Brick {
+        self.brick
+    }
+
+    /// Places the octree in a brick of root cells (see [`crate::brick`]).
+    pub fn set_brick(&mut self, brick: Brick) {
+        self.brick = brick;
+    }
+
     /// Wraps this rank's sorted leaves. Collective. The union over ranks
     /// must be a complete linear octree in rank order; that is checked
     /// cheaply here (local order and contiguity, and that the ranks' ranges
@@ -47,6 +61,7 @@ impl LinearOctree {
             first_cell: Vec::new(),
             offsets: Vec::new(),
             balanced: None,
+            brick: Brick::CUBE,
         };
         t.refresh()?;
         Ok(t)

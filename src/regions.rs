@@ -25,6 +25,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::brick::Brick;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::octant::{Octant, MAX_LEVEL};
@@ -251,6 +252,9 @@ impl Region {
 /// The regions mapped to the lattice of a domain, ready for octant tests.
 pub struct RegionRules<'a> {
     min_level: u8,
+    /// The domain's root cells: void octants never split, the others at
+    /// least to the trees' level.
+    brick: Brick,
     rules: Vec<(Lattice, u8, bool)>,
     /// Distance bands (lattice units, level), increasing distances, and the
     /// surface they measure from.
@@ -268,7 +272,9 @@ enum Lattice {
 
 impl<'a> RegionRules<'a> {
     /// The rules of `regions` and `min_level` in the lattice of `domain`.
+    /// Levels count from the domain's root cells.
     pub fn new(domain: &Domain, min_level: u8, regions: &[Region]) -> RegionRules<'a> {
+        let k = domain.brick.level();
         let s = domain.scale();
         let rules = regions
             .iter()
@@ -288,11 +294,12 @@ impl<'a> RegionRules<'a> {
                         radius * s,
                     ),
                 };
-                (shape, r.level(), r.outside())
+                (shape, r.level() + k, r.outside())
             })
             .collect();
         RegionRules {
-            min_level,
+            min_level: min_level + k,
+            brick: domain.brick,
             rules,
             bands: Vec::new(),
             surface: None,
@@ -311,7 +318,7 @@ impl<'a> RegionRules<'a> {
     ) -> RegionRules<'a> {
         self.bands = bands
             .iter()
-            .map(|&(d, l)| (d * domain.scale(), l))
+            .map(|&(d, l)| (d * domain.scale(), l + domain.brick.level()))
             .collect();
         self.surface = Some(surface);
         self
@@ -336,6 +343,9 @@ impl<'a> RegionRules<'a> {
 
     /// Whether leaf `o` must be split; `buf` is scratch space.
     pub fn splits(&self, o: Octant, buf: &mut Vec<u32>) -> bool {
+        if self.brick.is_void(o) {
+            return false;
+        }
         if o.level() < self.min_level {
             return true;
         }

@@ -26,6 +26,8 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("surface.drop_duplicates", "--drop-duplicates"),
     ("domain.fit", "--fit"),
     ("domain.cube", "--domain"),
+    ("domain.box", "--box"),
+    ("domain.roots", "--roots"),
     ("octree.level", "--level"),
     ("octree.min_level", "--min-level"),
     ("octree.max_level", "--level"),
@@ -137,6 +139,14 @@ struct OctreeArgs {
     /// units
     #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z,S", value_parser = parse_numbers::<4>)]
     domain: Option<[f64; 4]>,
+    /// A box domain instead of the cube: lowest corner X0,Y0,Z0 and highest
+    /// X1,Y1,Z1, user units, split into the --roots cubic root cells
+    #[arg(long = "box", allow_hyphen_values = true, value_name = "X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_numbers::<6>)]
+    bbox: Option<[f64; 6]>,
+    /// Root cells of --box along x, y, z (trees of the forest; levels count
+    /// from them) [default: 1,1,1]
+    #[arg(long, value_name = "NX,NY,NZ", value_parser = parse_roots)]
+    roots: Option<[u32; 3]>,
     /// Stop with an error instead of building more than N leaves (refinement
     /// and balance); refused before refining when the estimate is above 2N
     #[arg(long, value_name = "N", value_parser = parse_count)]
@@ -363,23 +373,40 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         set("octree.balance", true);
         config.octree.balance = b;
     }
-    if o.fit.is_some() && o.domain.is_some() {
-        return Err(Error::invalid(
-            "--fit and --domain exclude each other: give one",
-        ));
+    let domains = [
+        ("--fit", o.fit.is_some()),
+        ("--domain", o.domain.is_some()),
+        ("--box", o.bbox.is_some()),
+    ];
+    let named: Vec<&str> = domains.iter().filter(|g| g.1).map(|g| g.0).collect();
+    if named.len() > 1 {
+        return Err(Error::invalid(format!(
+            "{} exclude each other: give one",
+            named.join(" and ")
+        )));
     }
     if set("domain.fit", o.fit.is_some()) {
-        // The command line's cube choice replaces the case file's.
+        // The command line's domain choice replaces the case file's.
         config.domain = super::DomainConfig {
             fit: o.fit,
-            cube: None,
+            ..Default::default()
         };
     }
     if set("domain.cube", o.domain.is_some()) {
         config.domain = super::DomainConfig {
-            fit: None,
             cube: o.domain,
+            ..Default::default()
         };
+    }
+    if set("domain.box", o.bbox.is_some()) {
+        config.domain = super::DomainConfig {
+            bbox: o.bbox,
+            roots: config.domain.roots,
+            ..Default::default()
+        };
+    }
+    if set("domain.roots", o.roots.is_some()) {
+        config.domain.roots = o.roots;
     }
     if set("octree.max_octants", o.max_octants.is_some()) {
         config.octree.max_octants = o.max_octants;
@@ -554,6 +581,17 @@ fn parse_level_range(s: &str) -> std::result::Result<(u8, Option<u8>), String> {
 fn parse_count(s: &str) -> std::result::Result<u64, String> {
     s.parse()
         .map_err(|_| format!("expects a non-negative integer, got '{s}'"))
+}
+
+/// `NX,NY,NZ`: three positive counts.
+fn parse_roots(s: &str) -> std::result::Result<[u32; 3], String> {
+    let bad = || format!("expects three comma-separated positive integers NX,NY,NZ, got '{s}'");
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<u32>().ok().filter(|&n| n > 0))
+        .collect::<Option<_>>()
+        .ok_or_else(bad)?;
+    v.try_into().map_err(|_| bad())
 }
 
 fn parse_finite(s: &str) -> std::result::Result<f64, String> {

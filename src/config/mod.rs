@@ -19,6 +19,8 @@
 //!
 //! [domain]
 //! fit = 0.7                 # or: cube = [x, y, z, side] (user units)
+//! # box = [x0, y0, z0, x1, y1, z1]   # or a box of cubic root cells:
+//! # roots = [6, 2, 1]                # NX x NY x NZ trees (levels count from them)
 //!
 //! [octree]
 //! level = 9
@@ -153,7 +155,8 @@ pub struct SurfaceConfig {
     pub drop_duplicates: bool,
 }
 
-/// `[domain]`: the root cube, fitted around the surface or given.
+/// `[domain]`: the root cube, fitted around the surface or given, or a box
+/// of cubic root cells.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DomainConfig {
@@ -164,6 +167,14 @@ pub struct DomainConfig {
     /// An explicit cube `[x, y, z, side]`: lowest corner and side, user
     /// units. Excludes `fit`.
     pub cube: Option<[f64; 4]>,
+    /// A box `[x0, y0, z0, x1, y1, z1]` (lowest and highest corner, user
+    /// units) split into `roots` cubic root cells, each a tree of the
+    /// forest (like a blockMesh background). Excludes `fit` and `cube`.
+    #[serde(rename = "box")]
+    pub bbox: Option<[f64; 6]>,
+    /// Root cells of `box` along x, y and z (unset: 1 x 1 x 1). Levels
+    /// count from them: a leaf at level `l` has side `2^-l` of a root cell.
+    pub roots: Option<[u32; 3]>,
 }
 
 impl DomainConfig {
@@ -174,10 +185,20 @@ impl DomainConfig {
 
     /// The root cube for a surface with bounding box `min..max`.
     pub fn resolve(&self, min: [f64; 3], max: [f64; 3]) -> crate::Result<Domain> {
+        if let Some(b) = self.bbox {
+            let roots = self.roots.unwrap_or([1, 1, 1]);
+            return Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], roots);
+        }
         match self.cube {
             Some([x, y, z, s]) => Domain::cube([x, y, z], s),
             None => Domain::around(min, max, self.fit()),
         }
+    }
+
+    /// Whether the domain does not depend on the surface (a cube or a box
+    /// is given).
+    pub fn is_explicit(&self) -> bool {
+        self.cube.is_some() || self.bbox.is_some()
     }
 }
 
@@ -355,6 +376,8 @@ pub const KEYS: &[&str] = &[
     "surface.drop_duplicates",
     "domain.fit",
     "domain.cube",
+    "domain.box",
+    "domain.roots",
     "octree.level",
     "octree.min_level",
     "octree.max_level",
@@ -476,6 +499,7 @@ impl Config {
                 return Err(ConfigError::new("domain.cube", format!("is invalid: {e}")));
             }
         }
+        self.check_box(level)?;
         if let Some(p) = self.leak.inside_point {
             if p.iter().any(|c| !c.is_finite()) {
                 return Err(ConfigError::new(
@@ -521,6 +545,59 @@ impl Config {
             }
         }
         Ok(())
+    }
+
+    /// A box excludes the other domain keys, divides into cubic root cells,
+    /// and leaves room below its trees for the levels asked for.
+    fn check_box(&self, level: u8) -> Result<(), ConfigError> {
+        let d = &self.domain;
+        let Some(b) = d.bbox else {
+            return match d.roots {
+                Some(_) => Err(ConfigError::new("domain.roots", "needs {domain.box}")),
+                None => Ok(()),
+            };
+        };
+        for (other, given) in [
+            ("{domain.fit}", d.fit.is_some()),
+            ("{domain.cube}", d.cube.is_some()),
+        ] {
+            if given {
+                return Err(ConfigError::new(
+                    "domain.box",
+                    format!("and {other} exclude each other: give one"),
+                ));
+            }
+        }
+        let roots = d.roots.unwrap_or([1, 1, 1]);
+        let brick = crate::brick::Brick::new(roots)
+            .map_err(|e| ConfigError::new("domain.roots", format!("is invalid: {e}")))?;
+        Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], roots)
+            .map_err(|e| ConfigError::new("domain.box", format!("is invalid: {e}")))?;
+        let o = &self.octree;
+        let deepest = [
+            ("octree.level", level),
+            ("octree.max_level", o.max_level.unwrap_or(0)),
+            ("octree.min_level", o.min_level),
+        ]
+        .into_iter()
+        .chain(o.distance.iter().map(|b| ("octree.distance", b.1)))
+        .chain(self.regions.iter().map(|r| ("regions", r.level())))
+        .max_by_key(|k| k.1);
+        let most = brick.max_user_level();
+        match deepest {
+            Some((key, l)) if l > most => Err(ConfigError::new(
+                key,
+                format!(
+                    "asks for level {l}: with {}x{}x{} root cells the trees are at level {} of \
+                     the lattice, so levels go up to {most}",
+                    roots[0],
+                    roots[1],
+                    roots[2],
+                    brick.level()
+                ),
+            )),
+            _ => Ok(()),
+        }
     }
 
     /// Sizes are positive, finite, each exclusive with its level, and the
@@ -621,7 +698,7 @@ impl Config {
     /// (`domain.fit` when no cube is given), as `--print-case` shows it.
     pub fn resolved(&self) -> Config {
         let mut c = self.clone();
-        if c.domain.cube.is_none() {
+        if !c.domain.is_explicit() {
             c.domain.fit = Some(c.domain.fit());
         }
         c

@@ -226,11 +226,11 @@ impl Session {
 
     fn next_domain(&self) -> Result<Domain> {
         let d = &self.config.domain;
-        match (&self.surface, d.cube) {
-            // An explicit cube does not depend on the surface's box.
-            (_, Some(_)) => d.resolve([0.0; 3], [0.0; 3]),
-            (Some(s), None) => d.resolve(s.bbox.min, s.bbox.max),
-            (None, None) => Domain::cube([0.0; 3], 1.0),
+        match (&self.surface, d.is_explicit()) {
+            // An explicit cube or box does not depend on the surface's box.
+            (_, true) => d.resolve([0.0; 3], [0.0; 3]),
+            (Some(s), false) => d.resolve(s.bbox.min, s.bbox.max),
+            (None, false) => Domain::cube([0.0; 3], 1.0),
         }
     }
 

@@ -89,10 +89,14 @@ impl Session {
     /// mesh.
     pub fn refine_surface(&mut self, level: u8) -> Result<()> {
         let checked = self.surface_or_state().and_then(|_| {
-            check_level(level)?;
-            self.next_domain()
+            let d = self.next_domain()?;
+            check_user_level(level, &d)?;
+            Ok(d)
         });
         let domain = agree(&*self.comm, checked)?;
+        // Levels count from the root cells; the lattice's are deeper in a
+        // brick.
+        let level = level + domain.brick.level();
         let comm = self.comm.clone();
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
@@ -119,7 +123,11 @@ impl Session {
             Some(top.tree().global_len()),
         );
         let shown = self.progress("refine", expected);
-        let tree = self.timer.time(&*comm, "refine", || top.refine(limit));
+        let tree = self.timer.time(&*comm, "refine", || {
+            let mut tree = top.refine(limit)?;
+            fill_brick(&mut tree, domain, limit)?;
+            Ok(tree)
+        });
         drop(shown);
         let tree = over_budget(tree, budget, limit, "refinement")?;
         report(&self.timer, &mut *self.observer, Some(tree.global_len()));
@@ -149,6 +157,7 @@ impl Session {
                 _ => {
                     let mut t = construct_for_callback(comm.clone(), max_level, &split)?;
                     t.refine(max_level, &split, limit)?;
+                    fill_brick(&mut t, domain, limit)?;
                     *tree = Some((t, domain));
                     Ok(())
                 }
@@ -183,7 +192,7 @@ impl Session {
             let (Some(tree), Some(s)) = (tree, surface) else {
                 return Ok(());
             };
-            let rule = CurvatureRule::new(&s.index, max, angle);
+            let rule = CurvatureRule::new(&s.index, max + domain.brick.level(), angle);
             let mut buf = Vec::new();
             tree.refine(rule.max_level(), |o| rule.splits(o, &mut buf), limit)
         });
@@ -334,7 +343,8 @@ impl Session {
         Ok(())
     }
 
-    pub(super) fn set_tree(&mut self, tree: LinearOctree, domain: Domain) {
+    pub(super) fn set_tree(&mut self, mut tree: LinearOctree, domain: Domain) {
+        tree.set_brick(domain.brick);
         self.tree = Some((tree, domain));
         self.classes = Classes::default();
         self.mesh = None;
@@ -442,4 +452,31 @@ pub(super) fn over_budget<T>(
         }
         (r, _) => r,
     }
+}
+
+/// Checks a level counted from the root cells of `domain`: at most
+/// [`crate::octant::MAX_LEVEL`] less the trees' level.
+pub(crate) fn check_user_level(level: u8, domain: &Domain) -> Result<()> {
+    let most = domain.brick.max_user_level();
+    if level > most && !domain.brick.is_cube() {
+        let r = domain.brick.roots();
+        return Err(Error::invalid(format!(
+            "level {level} is too deep for {}x{}x{} root cells: levels go up to {most}",
+            r[0], r[1], r[2]
+        )));
+    }
+    check_level(level)
+}
+
+/// Splits every octant of a brick's domain down to the trees' level, so each
+/// root cell is covered by its own leaves (the void stays as it is).
+/// Nothing to do in a cube. Collective.
+fn fill_brick(tree: &mut LinearOctree, domain: Domain, limit: u64) -> Result<()> {
+    let brick = domain.brick;
+    if brick.is_cube() {
+        return Ok(());
+    }
+    tree.set_brick(brick);
+    let k = brick.level();
+    tree.refine(k, |o| o.level() < k && !brick.is_void(o), limit)
 }
