@@ -43,6 +43,19 @@ impl LinearOctree {
         self.brick
     }
 
+    /// Leaves over all ranks outside the void of a brick: the forest's
+    /// leaves, as p4est counts them. Collective in a brick (a sum), the
+    /// same as [`LinearOctree::global_len`] in a cube.
+    pub fn forest_len(&self) -> u64 {
+        let b = self.brick;
+        if b.is_cube() {
+            return self.global_len();
+        }
+        let mut n = [self.leaves.iter().filter(|o| !b.is_void(**o)).count() as u64];
+        self.comm.sum_u64(&mut n);
+        n[0]
+    }
+
     /// Places the octree in a brick of root cells (see [`crate::brick`]).
     pub fn set_brick(&mut self, brick: Brick) {
         self.brick = brick;

@@ -130,9 +130,10 @@ impl Session {
         });
         drop(shown);
         let tree = over_budget(tree, budget, limit, "refinement")?;
-        report(&self.timer, &mut *self.observer, Some(tree.global_len()));
-        self.facts.octants_refined = tree.global_len();
-        self.facts.octants_balanced = tree.global_len();
+        let n = tree.forest_len();
+        report(&self.timer, &mut *self.observer, Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
         self.set_tree(tree, domain);
         Ok(())
     }
@@ -334,7 +335,7 @@ impl Session {
         during: &str,
     ) -> Result<()> {
         over_budget(r, budget, limit, during)?;
-        let n = self.tree().map_or(0, |t| t.global_len());
+        let n = self.tree().map_or(0, |t| t.forest_len());
         self.report_phase(Some(n));
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
@@ -370,7 +371,7 @@ impl Session {
                 Some(w) => tree.partition_weighted(w).map(|_| ()),
             }
         })?;
-        let count = self.tree().map(|t| t.global_len());
+        let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
         self.classes = Classes::default();
         self.mesh = None;
@@ -400,9 +401,9 @@ impl Session {
         });
         drop(shown);
         over_budget(balanced, budget, limit, "balance")?;
-        let count = self.tree().map(|t| t.global_len());
+        let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
-        self.facts.octants_balanced = self.tree().map_or(0, |t| t.global_len());
+        self.facts.octants_balanced = self.tree().map_or(0, |t| t.forest_len());
         self.classes = Classes::default();
         self.mesh = None;
         Ok(())

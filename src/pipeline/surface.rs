@@ -75,7 +75,9 @@ impl Session {
         self.resolve_sizes(state.index_domain.side)?;
         self.facts.rss_read = peak_rss_bytes();
         let level = self.config.octree.level;
-        let estimate = level.map(|l| estimate_leaves(&state.index, l));
+        // Levels count from the root cells.
+        let k = state.index_domain.brick.level();
+        let estimate = level.map(|l| estimate_leaves(&state.index, l + k));
         let inside = self.inside.map(|r| match r {
             InsideRule::Auto => {
                 let (rule, why) = InsideRule::auto_choice(state.report());
