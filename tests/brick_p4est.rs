@@ -94,7 +94,11 @@ fn compare(case: &Case, conn: &str, np: usize, dir: &Path) {
     }
     p4est_ref_ok(np, &args, &tag);
     let (brick, a) = brick_leaves(&ours);
-    assert_eq!(brick, format!("# brick {} {} {}", r[0], r[1], r[2]), "{tag}");
+    assert_eq!(
+        brick,
+        format!("# brick {} {} {}", r[0], r[1], r[2]),
+        "{tag}"
+    );
     let (_, b) = brick_leaves(&theirs);
     let (_, before) = brick_leaves(&refined);
     assert!(a.len() > before.len(), "{tag}: balance added nothing");

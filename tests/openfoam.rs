@@ -770,3 +770,82 @@ fn bad_openfoam_requests_fail_clearly() {
     ]);
     assert!(e.contains("/proc/octmesh-case"), "{e}");
 }
+
+/// A box domain of 6 x 2 x 1 root cells around the sphere with a wake box
+/// and two distance bands (a towing-tank layout), fluid kept, written for
+/// OpenFOAM on 1 and 3 ranks: checkMesh as for the other cases, and each
+/// side patch lies on its face of the box.
+#[test]
+fn checkmesh_accepts_a_box_domain() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("openfoam_box");
+    let (lo, hi) = ([-3.0, -2.0, -1.5], [9.0, 2.0, 0.5]);
+    let bbox = format!(
+        "{},{},{},{},{},{}",
+        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+    );
+    for np in [1, 3] {
+        let case = dir.join(format!("case{np}"));
+        let stats = dir.join(format!("case{np}.json"));
+        let s = octmesh(
+            np,
+            &[
+                "mesh",
+                "sphere",
+                "--box",
+                &bbox,
+                "--roots",
+                "6,2,1",
+                "--level",
+                "4",
+                "--region",
+                "box:0,-1,-1,6,1,0.5:3",
+                "--distance",
+                "0.2:4,0.6:3",
+                "--keep",
+                "outside",
+                "--openfoam",
+                case.to_str().unwrap(),
+            ],
+            &stats,
+        );
+        let tag = format!("sphere in a 6x2x1 box np {np}");
+        judge(&rc, &case, np, &s, &tag);
+        // The cut-off sphere (the box ends at z = 0.5) leaves the top open.
+        let box_volume: f64 = (0..3).map(|k| hi[k] - lo[k]).product();
+        let kept = s["kept_volume"].as_f64().unwrap();
+        assert!(
+            kept < box_volume && kept > 0.9 * box_volume,
+            "{tag}: {kept}"
+        );
+        let par = if np > 1 {
+            "mpirun --oversubscribe -np 3 checkMesh -parallel"
+        } else {
+            "checkMesh"
+        };
+        // -allGeometry prints each patch's bounding box.
+        let text = foam(&rc, &case, &format!("{par} -allTopology -allGeometry"));
+        for (p, name) in ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"]
+            .iter()
+            .enumerate()
+        {
+            let (axis, at) = (p / 2, if p % 2 == 0 { lo[p / 2] } else { hi[p / 2] });
+            let line = text
+                .lines()
+                .find(|l| l.split_whitespace().next() == Some(name))
+                .unwrap_or_else(|| panic!("{tag}: no patch {name}:\n{text}"));
+            // "... (x0 y0 z0) (x1 y1 z1)": the patch's bounding box.
+            let nums: Vec<f64> = line
+                .replace(['(', ')'], " ")
+                .split_whitespace()
+                .rev()
+                .take(6)
+                .map(|w| w.parse().unwrap())
+                .collect();
+            let (top, bottom) = (&nums[..3], &nums[3..]);
+            // Reversed: top is (z1, y1, x1), bottom (z0, y0, x0).
+            assert_eq!(top[2 - axis], at, "{tag}: {line}");
+            assert_eq!(bottom[2 - axis], at, "{tag}: {line}");
+        }
+    }
+}
