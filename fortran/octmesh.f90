@@ -99,7 +99,7 @@ module octmesh
   public :: octmesh_create_f, octmesh_destroy, octmesh_error, octmesh_status_name_f
   public :: octmesh_options_default
   public :: octmesh_surface_builtin_f, octmesh_surface_from_stl_f, octmesh_surface_from_triangles
-  public :: octmesh_domain_set, octmesh_domain_get
+  public :: octmesh_domain_set, octmesh_domain_set_box, octmesh_domain_get
   public :: octmesh_octree_refine_surface, octmesh_octree_refine_callback, octmesh_octree_balance, octmesh_octree_partition
   public :: octmesh_octree_get_num_leaves, octmesh_octree_get_leaves, octmesh_octree_check_leak
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
@@ -152,6 +152,16 @@ module octmesh
        real(c_double), value :: side
        integer(c_int) :: octmesh_domain_set
      end function octmesh_domain_set
+
+     !> A box domain lo(3)..hi(3) of roots(1) x roots(2) x roots(3) cubic
+     !> root cells (p4est brick order); levels count from the root cells.
+     function octmesh_domain_set_box(h, lo, hi, roots) bind(c, name="octmesh_domain_set_box")
+       import :: c_ptr, c_double, c_int
+       type(c_ptr), value :: h
+       real(c_double), intent(in) :: lo(3), hi(3)
+       integer(c_int), intent(in) :: roots(3)
+       integer(c_int) :: octmesh_domain_set_box
+     end function octmesh_domain_set_box
 
      !> OCTMESH_STATUS_LEAK when the region outside the surface reaches
      !> point(3), known to be inside the body; octmesh_error(h) then

@@ -183,6 +183,11 @@ typedef enum {
 } octmesh_foam_format;
 
 /**
+ * The brick of root cells of a domain, in lattice terms.
+ */
+typedef struct Brick Brick;
+
+/**
  * Opaque handle: a communicator, the pipeline's session (surface, octree,
  * mesh) and the last error. Created by `octmesh_create`, freed by
  * `octmesh_destroy`. A handle must not be used by two threads at once.
@@ -576,6 +581,37 @@ const char *octmesh_status_name(int32_t status);
  * \param[in] side    side, user units, > 0
  */
 octmesh_status_t octmesh_domain_set(octmesh_t *h, const double *origin, double side);
+
+/**
+ * Sets a box domain for the next octree instead of the cube: the box
+ * `lo..hi` split into `roots[0] x roots[1] x roots[2]` cubic root cells
+ * (the trees of a p4est brick, numbered in `p8est_connectivity_new_brick`
+ * order). The box's sides divided by the root counts must be equal (else
+ * OCTMESH_STATUS_INVALID_ARGUMENT naming boxes that divide). Levels then
+ * count from the root cells: level `l` has cells of side `2^-l` of a root
+ * cell, up to 18 less the log2 of the largest root count rounded up. The
+ * mesh's side patches (`xmin` ... `zmax`) lie on the box. Callbacks of
+ * `octmesh_octree_refine_callback` still see the lattice of the smallest
+ * power-of-two cube of root cells holding the box. Collective.
+ *
+ * ```text
+ *        +-----+-----+-----+  hi
+ *       /     /     /     /|
+ *      +-----+-----+-----+ |     roots = {3, 1, 1}
+ *      |  0  |  1  |  2  | +
+ *      |     |     |     |/
+ *  lo  +-----+-----+-----+
+ * ```
+ *
+ * \param[in] h      the handle
+ * \param[in] lo     lowest corner, 3 values, user units
+ * \param[in] hi     highest corner, 3 values, user units
+ * \param[in] roots  root cells along x, y, z, 3 values, each 1 to 512
+ */
+octmesh_status_t octmesh_domain_set_box(octmesh_t *h,
+                                        const double *lo,
+                                        const double *hi,
+                                        const int32_t *roots);
 
 /**
  * The cube of the current octree (or, without one, the cube the next

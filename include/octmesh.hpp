@@ -77,6 +77,9 @@ class Mesher {
   void set_domain(const double origin[3], double side) {
     detail::check(octmesh_domain_set(h_, origin, side), h_, "octmesh_domain_set");
   }
+  void set_domain_box(const double lo[3], const double hi[3], const int roots[3]) {
+    detail::check(octmesh_domain_set_box(h_, lo, hi, roots), h_, "octmesh_domain_set_box");
+  }
   void get_domain(double origin[3], double &side) const {
     detail::check(octmesh_domain_get(h_, origin, &side), h_, "octmesh_domain_get");
   }

@@ -265,6 +265,9 @@ type Controls = (
     &'static [&'static str],
 );
 
+/// A box domain in the settings' words: corners, then root cells.
+const BOX: &str = "box:-1.5,-0.5,-0.5,1.5,0.5,0.5:3,1,1";
+
 /// The C API and the command (through a case file from `--print-case`) on
 /// the same settings give the same global counts.
 #[test]
@@ -288,6 +291,12 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             ["sphere", "4", "all", "none", "parity", "corner", "0.9"],
             ["sphere", "4", "0", "2", "1", "3", "0.9"],
         ),
+        // A box of 3 x 1 x 1 root cells cutting the sphere: levels count
+        // from the root cells in both.
+        (
+            ["sphere", "3", "outside", "center", "auto", "corner", BOX],
+            ["sphere", "3", "2", "0", "0", "3", BOX],
+        ),
     ];
     // Refinement controls: (max level, feature angle, min level, bands,
     // regions) for the command and for `octmesh_octree_refine_curvature`
@@ -302,6 +311,7 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             &["box:-2,-2,-2,0,2,0:5", "sphere:1,0,0,0.5:6:outside"],
         )),
         Some(("4", "30", "2", "-", &["cylinder:-1,0,0,1,0,0,0.4:6"])),
+        Some(("5", "25", "1", "0.2:4", &["box:0,-0.5,-0.5,1.5,0.5,0.5:3"])),
     ];
     for (i, (words, values)) in cases.iter().enumerate() {
         let [surface, level, keep, cut, inside, balance, fit] = *words;
@@ -317,9 +327,11 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             inside,
             "--balance",
             balance,
-            "--fit",
-            fit,
         ];
+        match fit.strip_prefix("box:").and_then(|b| b.split_once(':')) {
+            Some((bbox, roots)) => args.extend(["--box", bbox, "--roots", roots]),
+            None => args.extend(["--fit", fit]),
+        }
         let mut values: Vec<&str> = values.to_vec();
         match controls[i] {
             None => args.extend(["--level", level]),
