@@ -61,30 +61,36 @@ impl Domain {
             .iter()
             .fold((f64::INFINITY, 0.0f64), |(a, b), &c| (a.min(c), b.max(c)));
         if large - small > 1e-9 * large {
-            let boxes: Vec<String> = (0..3)
-                .map(|a| {
-                    let s = cell[a];
-                    format!(
-                        "{} x {} x {} (cells of {s} as along {})",
-                        s * roots[0] as f64,
-                        s * roots[1] as f64,
-                        s * roots[2] as f64,
-                        ["x", "y", "z"][a]
-                    )
-                })
-                .collect();
+            let mut boxes: Vec<String> = Vec::new();
+            for a in 0..3 {
+                let s = cell[a];
+                let text = format!(
+                    "{} x {} x {} (cells of {} as along {})",
+                    short(s * roots[0] as f64),
+                    short(s * roots[1] as f64),
+                    short(s * roots[2] as f64),
+                    short(s),
+                    ["x", "y", "z"][a]
+                );
+                // Axes with the same cell size suggest the same box.
+                if !boxes.iter().any(|b| {
+                    b[..b.find(" as").unwrap_or(0)] == text[..text.find(" as").unwrap_or(0)]
+                }) {
+                    boxes.push(text);
+                }
+            }
             return Err(Error::invalid(format!(
                 "the box {} x {} x {} does not divide into {}x{}x{} cubic root cells (cells of \
                  {} x {} x {}); boxes that do: {}",
-                extent[0],
-                extent[1],
-                extent[2],
+                short(extent[0]),
+                short(extent[1]),
+                short(extent[2]),
                 roots[0],
                 roots[1],
                 roots[2],
-                cell[0],
-                cell[1],
-                cell[2],
+                short(cell[0]),
+                short(cell[1]),
+                short(cell[2]),
                 boxes.join(", or ")
             )));
         }
@@ -148,6 +154,14 @@ impl Domain {
         let s = self.root_side();
         self.brick.trees() as f64 * s * s * s
     }
+}
+
+/// A length for messages: at most 10 significant digits, no trailing
+/// zeros (3.6, not 3.5999999999999996).
+fn short(v: f64) -> String {
+    let t = format!("{v:.10e}");
+    let parsed: f64 = t.parse().unwrap_or(v);
+    format!("{parsed}")
 }
 
 #[cfg(test)]
