@@ -1069,8 +1069,8 @@ octmesh_status_t octmesh_mesh_get_hanging(const octmesh_t *h,
 octmesh_status_t octmesh_mesh_get_element_class(const octmesh_t *h, const int8_t **out);
 
 /**
- * Sets `*out` to the octree level of each local element. Needs a mesh.
- * Not collective.
+ * Sets `*out` to the level of each local element, counted from the root
+ * cells (in a cube, the octree level). Needs a mesh. Not collective.
  *
  * \param[in]  h    the handle
  * \param[out] out  local_elements levels, owned by the handle

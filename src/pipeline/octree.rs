@@ -248,7 +248,7 @@ impl Session {
     /// - surface level `L`: the estimate of the surface refinement
     ///   ([`estimate_leaves`]); curvature up to `MAX`: the same at `MAX` (what
     ///   refinement to `MAX` everywhere on the surface would give);
-    /// - minimum level `M`: `8^M`, exact;
+    /// - minimum level `M`: `8^M` per root cell, exact;
     /// - a region at level `l`: the level-`l` cells overlapping its
     ///   bounding box, or for an outside region all cells but those within
     ///   a box it contains (the 2:1 grading around it comes on top);
@@ -262,25 +262,32 @@ impl Session {
         let octree = self.config.octree.clone();
         let regions = self.config.regions.clone();
         let level = octree.level.unwrap_or(0);
+        // Levels count from the root cells; the lattice's are `k` deeper.
+        let (k, roots, trees) = (
+            domain.brick.level(),
+            domain.brick.roots(),
+            domain.brick.trees(),
+        );
         let (area, index) = {
             let s = self.surface.as_ref().expect("just loaded");
             (s.surface.area(), self.index_for(domain)?)
         };
         let mut rows = vec![(
             format!("surface level {level}"),
-            estimate_leaves(index, level).balanced,
+            estimate_leaves(index, level + k).balanced,
         )];
         if let Some(max) = octree.max_level.filter(|&m| m > level) {
-            let at_max = estimate_leaves(index, max).balanced;
+            let at_max = estimate_leaves(index, max + k).balanced;
             rows.push((format!("curvature up to level {max} (at most)"), at_max));
         }
         if octree.min_level > 0 {
             rows.push((
                 format!("min level {}", octree.min_level),
-                8u64.saturating_pow(octree.min_level as u32),
+                trees.saturating_mul(8u64.saturating_pow(octree.min_level as u32)),
             ));
         }
-        let cell = |l: u8| domain.side / (1u64 << l) as f64;
+        let cell = |l: u8| domain.root_side() / (1u64 << l) as f64;
+        let cells_on = |l: u8, a: usize| (roots[a] as u64 * (1u64 << l)) as f64;
         let cells_per_axis = |l: u8| (1u64 << l) as f64;
         for r in &regions {
             let l = r.level();
@@ -298,13 +305,13 @@ impl Session {
                         } else {
                             (x0.ceil(), x1.floor())
                         };
-                        (last.min(cells_per_axis(l)) - first.max(0.0)).max(0.0)
+                        (last.min(cells_on(l, a)) - first.max(0.0)).max(0.0)
                     })
                     .product()
             };
             let n = if r.outside() {
                 let inner = r.inner_box().map_or(0.0, |b| count(b, false));
-                cells_per_axis(l).powi(3) - inner
+                trees as f64 * cells_per_axis(l).powi(3) - inner
             } else {
                 count(r.bounding_box(), true)
             };
@@ -312,8 +319,8 @@ impl Session {
         }
         for &(d, l) in &octree.distance {
             let slab = 2.0 * d * area / cell(l).powi(3);
-            let n = estimate_leaves(index, l).balanced as f64 + slab;
-            let all = cells_per_axis(l).powi(3);
+            let n = estimate_leaves(index, l + k).balanced as f64 + slab;
+            let all = trees as f64 * cells_per_axis(l).powi(3);
             rows.push((
                 format!("distance {d} at level {l}"),
                 n.min(all).round() as u64,
