@@ -650,11 +650,12 @@ octmesh_status_t octmesh_surface_from_triangles(octmesh_t *h,
 
 /**
  * Sets a built-in surface: `"sphere"` (radius 1 at the origin, 20,480
- * triangles) or `"torus"` (radii 1 and 0.35, 9,216 triangles).
- * Collective.
+ * triangles), `"torus"` (radii 1 and 0.35, 9,216 triangles) or `"hull"`
+ * (a Wigley hull of length 1 along x, beam 0.1, draft 0.0625, freeboard
+ * 0.05, 7,870 triangles). Collective.
  *
  * \param[in] h     the handle
- * \param[in] name  `"sphere"` or `"torus"`, NUL-terminated
+ * \param[in] name  `"sphere"`, `"torus"` or `"hull"`, NUL-terminated
  */
 octmesh_status_t octmesh_surface_builtin(octmesh_t *h, const char *name);
 

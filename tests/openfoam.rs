@@ -849,3 +849,65 @@ fn checkmesh_accepts_a_box_domain() {
         }
     }
 }
+
+/// The towing tank: the built-in Wigley hull (length 1) in a box of
+/// 6 x 2 x 1 hull lengths (6 x 2 x 1 root cells), curvature refinement at
+/// the deck's edges, a wake box and two distance bands, fluid kept, written
+/// for OpenFOAM on 1 and 2 ranks: checkMesh as for the other cases, the
+/// hull's wall closed and singly connected, and the water displaced about
+/// the hull's volume.
+#[test]
+fn checkmesh_accepts_a_towing_tank_around_a_hull() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("openfoam_tank");
+    for np in [1, 2] {
+        let case = dir.join(format!("case{np}"));
+        let stats = dir.join(format!("case{np}.json"));
+        let s = octmesh(
+            np,
+            &[
+                "mesh",
+                "hull",
+                "--box",
+                "-1.5,-1,-0.6,4.5,1,0.4",
+                "--roots",
+                "6,2,1",
+                "--level",
+                "6:7",
+                "--region",
+                "box:0.5,-0.3,-0.3,3,0.3,0.2:3",
+                "--distance",
+                "0.05:5,0.15:4",
+                "--keep",
+                "outside",
+                "--openfoam",
+                case.to_str().unwrap(),
+            ],
+            &stats,
+        );
+        let tag = format!("towing tank np {np}");
+        judge(&rc, &case, np, &s, &tag);
+        let par = if np > 1 {
+            "mpirun --oversubscribe -np 2 checkMesh -parallel"
+        } else {
+            "checkMesh"
+        };
+        let text = foam(&rc, &case, &format!("{par} -allTopology"));
+        let wall = text
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some("hull"))
+            .unwrap_or_else(|| panic!("{tag}: no hull patch:\n{text}"));
+        // checkMesh -parallel does not judge a patch's topology.
+        assert!(
+            np > 1 || wall.contains("ok (closed singly connected)"),
+            "{tag}: {wall}"
+        );
+        // Box 6 x 2 x 1 = 12; the hull displaces 4 B L T / 9 + 2 B L D / 3.
+        let hull = 4.0 * 0.1 * 0.0625 / 9.0 + 2.0 * 0.1 * 0.05 / 3.0;
+        let displaced = 12.0 - s["kept_volume"].as_f64().unwrap();
+        assert!(
+            displaced > 0.5 * hull && displaced < 2.0 * hull,
+            "{tag}: the fluid leaves {displaced} for a hull of {hull}"
+        );
+    }
+}
