@@ -485,7 +485,7 @@ contains
     name = c_to_f_string(octmesh_status_name(int(status, c_int32_t)))
   end function octmesh_status_name_f
 
-  !> Built-in surface: "sphere" or "torus". Collective.
+  !> Built-in surface: "sphere", "torus" or "hull". Collective.
   function octmesh_surface_builtin_f(h, name) result(status)
     type(c_ptr), intent(in) :: h
     character(len=*), intent(in) :: name

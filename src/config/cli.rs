@@ -97,7 +97,7 @@ enum CliCommand {
 /// The options of `octree`, also taken by `mesh`.
 #[derive(Args, Debug)]
 struct OctreeArgs {
-    /// An STL file (ASCII or binary), the built-in `sphere` or `torus`, or
+    /// An STL file (ASCII or binary), the built-in `sphere`, `torus` or `hull`, or
     /// a case file (`.toml`) whose settings the options below override.
     input: String,
     /// Level of the leaves touching the surface (0 to 18); MIN:MAX refines
@@ -250,7 +250,7 @@ fn parse_rename(s: &str) -> std::result::Result<(String, String), String> {
 /// The options of `check`.
 #[derive(Args, Debug)]
 struct CheckArgs {
-    /// An STL file or the built-in `sphere` or `torus`.
+    /// An STL file or the built-in `sphere`, `torus` or `hull`.
     surface: String,
     /// Also write the diagnostics as JSON
     #[arg(long, value_name = "FILE")]

@@ -13,7 +13,7 @@
 //!
 //! ```toml
 //! [surface]
-//! file = "bunny.stl"        # an STL file, or the built-in "sphere" or "torus"
+//! file = "bunny.stl"        # an STL file, or the built-in "sphere", "torus" or "hull"
 //! drop_degenerate = false
 //! drop_duplicates = false
 //!
@@ -147,7 +147,7 @@ pub struct Config {
 #[serde(deny_unknown_fields, default)]
 pub struct SurfaceConfig {
     /// An STL file (ASCII or binary), or the built-in `sphere` (radius 1 at
-    /// the origin, 20,480 triangles) or `torus`.
+    /// the origin, 20,480 triangles), `torus` or `hull` (a Wigley hull).
     pub file: String,
     /// Remove zero-area facets right after loading.
     pub drop_degenerate: bool,
