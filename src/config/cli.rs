@@ -35,6 +35,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("octree.max_size", "--size"),
     ("octree.min_size", "--min-size"),
     ("octree.feature_angle", "--feature-angle"),
+    ("octree.surface_levels", "--surface-level"),
     ("octree.distance", "--distance"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
@@ -105,6 +106,10 @@ struct OctreeArgs {
     /// feature angle
     #[arg(long, value_name = "L[:MAX]", value_parser = parse_level_range)]
     level: Option<(u8, Option<u8>)>,
+    /// Levels of one part of the surface (a solid of an ASCII STL, by its
+    /// patch name), NAME=MIN[:MAX], repeatable; --level applies to the rest
+    #[arg(long, value_name = "NAME=MIN[:MAX]", value_parser = parse_part_levels)]
+    surface_level: Vec<(String, (u8, Option<u8>))>,
     /// Feature angle of curvature refinement, degrees [default: 30]
     #[arg(long, value_name = "DEG", value_parser = parse_finite)]
     feature_angle: Option<f64>,
@@ -355,6 +360,23 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
     if set("octree.min_size", o.min_size.is_some()) {
         config.octree.min_size = o.min_size;
     }
+    if set("octree.surface_levels", !o.surface_level.is_empty()) {
+        // The command line's part levels replace the case file's.
+        config.octree.surface_levels.clear();
+        for (name, (min, max)) in &o.surface_level {
+            let r = [*min, max.unwrap_or(*min)];
+            if config
+                .octree
+                .surface_levels
+                .insert(name.clone(), r)
+                .is_some()
+            {
+                return Err(Error::invalid(format!(
+                    "--surface-level gives '{name}' twice"
+                )));
+            }
+        }
+    }
     if set("octree.feature_angle", o.feature_angle.is_some()) {
         config.octree.feature_angle = o.feature_angle;
     }
@@ -568,6 +590,14 @@ fn parse_size_range(s: &str) -> std::result::Result<(f64, Option<f64>), String> 
     match s.split_once(':') {
         None => Ok((parse_finite(s)?, None)),
         Some((a, b)) => Ok((parse_finite(a)?, Some(parse_finite(b)?))),
+    }
+}
+
+/// `NAME=MIN[:MAX]`.
+fn parse_part_levels(s: &str) -> std::result::Result<(String, (u8, Option<u8>)), String> {
+    match s.split_once('=') {
+        Some((name, r)) if !name.is_empty() => Ok((name.to_string(), parse_level_range(r)?)),
+        _ => Err(format!("expects NAME=MIN[:MAX], got '{s}'")),
     }
 }
 

@@ -216,6 +216,12 @@ pub struct OctreeConfig {
     pub max_level: Option<u8>,
     /// The feature angle of curvature refinement, degrees (default 30).
     pub feature_angle: Option<f64>,
+    /// Levels per part of the surface, `{ name = [min, max] }` (`--surface-level
+    /// NAME=MIN[:MAX]`): leaves touching the part get `min`, and up to `max`
+    /// where it curves (as `level` and `max_level` do for the parts not
+    /// named). Names are the surface's patch names before renames: the
+    /// solids of an ASCII STL file, or the file stem.
+    pub surface_levels: BTreeMap<String, [u8; 2]>,
     /// Every leaf at least this level (default 0).
     pub min_level: u8,
     /// The surface level as a cell size in user units instead of
@@ -385,6 +391,7 @@ pub const KEYS: &[&str] = &[
     "octree.max_size",
     "octree.min_size",
     "octree.feature_angle",
+    "octree.surface_levels",
     "octree.distance",
     "octree.balance",
     "octree.max_octants",
@@ -438,6 +445,17 @@ impl Config {
                     "octree.max_level",
                     format!(
                         "is {max}: it must be between {{octree.level}} ({level}) and {MAX_LEVEL}"
+                    ),
+                ));
+            }
+        }
+        for (name, &[min, max]) in &self.octree.surface_levels {
+            if min > max || max > MAX_LEVEL {
+                return Err(ConfigError::new(
+                    "octree.surface_levels",
+                    format!(
+                        "gives '{name}' the levels {min} to {max}: the minimum must not be above \
+                         the maximum, nor the maximum above {MAX_LEVEL}"
                     ),
                 ));
             }
@@ -580,6 +598,11 @@ impl Config {
             ("octree.min_level", o.min_level),
         ]
         .into_iter()
+        .chain(
+            o.surface_levels
+                .values()
+                .map(|r| ("octree.surface_levels", r[1])),
+        )
         .chain(o.distance.iter().map(|b| ("octree.distance", b.1)))
         .chain(self.regions.iter().map(|r| ("regions", r.level())))
         .max_by_key(|k| k.1);
@@ -671,6 +694,42 @@ impl Config {
             o.min_level = level(s)?;
         }
         Ok(c)
+    }
+
+    /// The surface level the first refinement goes to: `octree.level`, or
+    /// the least minimum of `octree.surface_levels` when lower (the parts'
+    /// own levels then come from [`Config::surface_ranges`]).
+    pub fn first_surface_level(&self) -> Option<u8> {
+        let least = self.octree.surface_levels.values().map(|r| r[0]).min();
+        match (self.octree.level, least) {
+            (Some(l), Some(m)) => Some(l.min(m)),
+            (l, _) => l,
+        }
+    }
+
+    /// The `(min, max)` levels of each part of a surface called `surface`
+    /// with named `parts` (one range when it has fewer than two parts):
+    /// `octree.surface_levels` where it names the part, else `octree.level`
+    /// to `octree.max_level`. A name that is no part of the surface is an
+    /// error listing the names there are.
+    pub fn surface_ranges(&self, surface: &str, parts: &[String]) -> crate::Result<Vec<(u8, u8)>> {
+        let o = &self.octree;
+        let level = o.level.unwrap_or(0);
+        let default = (level, o.max_level.unwrap_or(level).max(level));
+        let names = PatchNames::with_parts(surface, parts);
+        let surface_names = &names.names()[crate::mesh::faces::SURFACE_PATCH as usize..];
+        let mut ranges = vec![default; surface_names.len()];
+        for (name, &[min, max]) in &o.surface_levels {
+            let Some(p) = surface_names.iter().position(|n| n == name) else {
+                return Err(crate::Error::invalid(format!(
+                    "octree.surface_levels names '{name}', which is no part of the surface (its \
+                     parts: {})",
+                    surface_names.join(", ")
+                )));
+            };
+            ranges[p] = (min, max);
+        }
+        Ok(ranges)
     }
 
     /// The patch names for a surface called `surface` (a file or a

@@ -294,17 +294,19 @@ impl Session {
         self.plan = command;
         self.load_surface()?;
         // Known now: sizes became levels once the domain was.
+        // Parts with their own levels start from the least of them.
         let level = agree(
             &*self.comm,
             self.config
-                .octree
-                .level
+                .first_surface_level()
                 .ok_or_else(|| Error::invalid("octree.level is required")),
         )?;
         if command == Command::Mesh {
             // Renames name the surface's parts: check them before the work.
             agree(&*self.comm, self.patch_names())?;
         }
+        let parts = self.config.surface_ranges(self.surface_name(), &self.parts);
+        agree(&*self.comm, parts)?;
         self.refine_surface(level)?;
         self.refine_curvature()?;
         self.refine_regions()?;

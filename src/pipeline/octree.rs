@@ -174,9 +174,14 @@ impl Session {
     /// maximum level above the surface level.
     pub fn refine_curvature(&mut self) -> Result<()> {
         let (level, max) = (self.config.octree.level, self.config.octree.max_level);
-        let Some(max) = max.filter(|&m| level.is_some_and(|l| m > l)) else {
+        let parts = !self.config.octree.surface_levels.is_empty();
+        if level.is_none() || !(parts || max.is_some_and(|m| level.is_some_and(|l| m > l))) {
             return Ok(());
-        };
+        }
+        let ranges = agree(
+            &*self.comm,
+            self.config.surface_ranges(self.surface_name(), &self.parts),
+        )?;
         let angle = self
             .config
             .octree
@@ -187,13 +192,17 @@ impl Session {
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
         let comm = self.comm.clone();
-        let shown = self.progress("curvature", None);
+        // Per-part levels are a phase of their own in the table.
+        let phase = if parts { "surface_levels" } else { "curvature" };
+        let shown = self.progress(phase, None);
         let (tree, surface) = (self.tree.as_mut().map(|t| &mut t.0), &self.surface);
-        let refined = self.timer.time(&*comm, "curvature", || -> Result<()> {
+        let refined = self.timer.time(&*comm, phase, || -> Result<()> {
             let (Some(tree), Some(s)) = (tree, surface) else {
                 return Ok(());
             };
-            let rule = CurvatureRule::new(&s.index, max + domain.brick.level(), angle);
+            let k = domain.brick.level();
+            let ranges = ranges.iter().map(|&(a, b)| (a + k, b + k)).collect();
+            let rule = CurvatureRule::with_ranges(&s.index, ranges, angle);
             let mut buf = Vec::new();
             tree.refine(rule.max_level(), |o| rule.splits(o, &mut buf), limit)
         });
