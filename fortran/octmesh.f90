@@ -109,6 +109,7 @@ module octmesh
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
   public :: octmesh_octree_refine_curvature, octmesh_octree_refine_regions_f
+  public :: octmesh_octree_refine_surface_part_f
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
@@ -364,6 +365,16 @@ module octmesh
        integer(c_int) :: octmesh_octree_refine_curvature
      end function octmesh_octree_refine_curvature
 
+     function c_octmesh_octree_refine_surface_part(h, name, min_level, max_level, &
+          feature_angle) bind(c, name="octmesh_octree_refine_surface_part")
+       import :: c_ptr, c_char, c_int, c_int32_t, c_double
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: name(*)
+       integer(c_int32_t), value :: min_level, max_level
+       real(c_double), value :: feature_angle
+       integer(c_int) :: c_octmesh_octree_refine_surface_part
+     end function c_octmesh_octree_refine_surface_part
+
      function c_octmesh_octree_refine_regions(h, min_level, nregions, regions, nbands, &
           distances, levels) bind(c, name="octmesh_octree_refine_regions")
        import :: c_ptr, c_int, c_int32_t, c_double
@@ -492,6 +503,19 @@ contains
     integer(c_int) :: status
     status = c_octmesh_surface_builtin(h, trim(name) // c_null_char)
   end function octmesh_surface_builtin_f
+
+  !> One part of the surface (a solid, by its patch name) refined to its own
+  !> levels min_level..max_level (curvature with feature_angle). Collective.
+  function octmesh_octree_refine_surface_part_f(h, name, min_level, max_level, feature_angle) &
+       result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: name
+    integer(c_int32_t), intent(in) :: min_level, max_level
+    real(c_double), intent(in) :: feature_angle
+    integer(c_int) :: status
+    status = c_octmesh_octree_refine_surface_part(h, trim(name) // c_null_char, min_level, &
+         max_level, feature_angle)
+  end function octmesh_octree_refine_surface_part_f
 
   !> Surface from an STL file (ASCII or binary). Collective.
   function octmesh_surface_from_stl_f(h, path) result(status)

@@ -697,6 +697,30 @@ octmesh_status_t octmesh_octree_refine_curvature(octmesh_t *h,
                                                  double feature_angle);
 
 /**
+ * Refinement of one part of the surface (a solid of an ASCII STL, named
+ * as its patch is before renames) to its own levels, like the command's
+ * `--surface-level NAME=MIN:MAX --feature-angle DEG`: a leaf touching the
+ * part is split while below `min_level`, and up to `max_level` while the
+ * unit normals of the part's triangles touching it differ by more than
+ * `feature_angle` degrees. Call it once per part after
+ * `octmesh_octree_refine_surface(h, L)` with `L` the least minimum; the
+ * order of the calls does not matter. Needs an octree and the surface.
+ * Drops the balance and the mesh. Collective.
+ *
+ * \param[in] h              the handle
+ * \param[in] name           the part's name, NUL-terminated
+ * \param[in] min_level      the part's level, 0 to 18
+ * \param[in] max_level      its finest level where it curves, min_level
+ *                           to 18
+ * \param[in] feature_angle  degrees, in (0, 180)
+ */
+octmesh_status_t octmesh_octree_refine_surface_part(octmesh_t *h,
+                                                    const char *name,
+                                                    int32_t min_level,
+                                                    int32_t max_level,
+                                                    double feature_angle);
+
+/**
  * Region refinement of the current octree, like the command's
  * `--min-level`, `--region` and `--distance`: every leaf is split until
  * it is at least `min_level`, at least each region's level where its box

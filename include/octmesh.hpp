@@ -109,6 +109,12 @@ class Mesher {
     detail::check(octmesh_octree_refine_callback(h_, max_level, tramp, (void *)&f), h_,
                   "octmesh_octree_refine_callback");
   }
+  void refine_surface_part(const std::string &name, int min_level, int max_level,
+                           double feature_angle = 30.0) {
+    detail::check(octmesh_octree_refine_surface_part(h_, name.c_str(), min_level, max_level,
+                                                     feature_angle),
+                  h_, "octmesh_octree_refine_surface_part");
+  }
   void refine_curvature(int min_level, int max_level, double feature_angle = 30.0) {
     detail::check(octmesh_octree_refine_curvature(h_, min_level, max_level, feature_angle), h_,
                   "octmesh_octree_refine_curvature");

@@ -278,6 +278,10 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
     let exe = compile("settings", &lib, &dir);
     // (surface, level, keep, cut rule, inside rule, balance, fit) as the
     // command's words and as the C constants' values.
+    // The sphere as two solids, `top` and `bottom`.
+    let halves = dir.join("halves.stl");
+    common::write_sphere_solids(&halves, &[("top", Some(true)), ("bottom", Some(false))]);
+    let halves = halves.to_str().unwrap();
     let cases: &[([&str; 7], [&str; 7])] = &[
         (
             ["sphere", "5", "inside", "center", "auto", "corner", "0.7"],
@@ -297,6 +301,11 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             ["sphere", "3", "outside", "center", "auto", "corner", BOX],
             ["sphere", "3", "2", "0", "0", "3", BOX],
         ),
+        // The top solid with its own levels (curvature up to 6).
+        (
+            [halves, "3", "inside", "center", "auto", "corner", "0.7"],
+            [halves, "3", "1", "0", "0", "3", "0.7"],
+        ),
     ];
     // Refinement controls: (max level, feature angle, min level, bands,
     // regions) for the command and for `octmesh_octree_refine_curvature`
@@ -312,6 +321,13 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
         )),
         Some(("4", "30", "2", "-", &["cylinder:-1,0,0,1,0,0,0.4:6"])),
         Some(("5", "25", "1", "0.2:4", &["box:0,-0.5,-0.5,1.5,0.5,0.5:3"])),
+        Some((
+            "3",
+            "10",
+            "0",
+            "-",
+            &["part:top=5:6", "sphere:0,0,-1,0.3:5"],
+        )),
     ];
     for (i, (words, values)) in cases.iter().enumerate() {
         let [surface, level, keep, cut, inside, balance, fit] = *words;
@@ -343,7 +359,10 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
                     args.extend(["--distance", bands]);
                 }
                 for r in regions {
-                    args.extend(["--region", r]);
+                    match r.strip_prefix("part:") {
+                        Some(p) => args.extend(["--surface-level", p]),
+                        None => args.extend(["--region", r]),
+                    }
                 }
                 values.extend([max, angle, min, bands]);
                 values.extend(regions.iter());

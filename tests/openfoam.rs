@@ -560,27 +560,6 @@ fn ascii_files_read_back_close_every_cell() {
     );
 }
 
-/// Writes the built-in sphere as ASCII STL: one solid, or two (`top`
-/// above z = 0, `bottom` below).
-fn write_sphere_solids(path: &Path, split: bool) {
-    let s = octmesh::geometry::shapes::default_sphere();
-    let mut blocks: Vec<(&str, String)> = vec![("top", String::new()), ("bottom", String::new())];
-    for t in s.triangles() {
-        let k = usize::from(split && t.centroid()[2] <= 0.0);
-        let b = &mut blocks[k].1;
-        b.push_str("facet normal 0 0 0\n outer loop\n");
-        for v in &t.v {
-            b.push_str(&format!("  vertex {:e} {:e} {:e}\n", v[0], v[1], v[2]));
-        }
-        b.push_str(" endloop\nendfacet\n");
-    }
-    let mut text = String::new();
-    for (name, body) in blocks.iter().filter(|b| !b.1.is_empty()) {
-        text.push_str(&format!("solid {name}\n{body}endsolid {name}\n"));
-    }
-    std::fs::write(path, text).unwrap();
-}
-
 /// `(nFaces, startFace)` of each patch of a `boundary` file.
 fn patches_of(boundary: &Path) -> Vec<(String, usize, usize)> {
     let text = std::fs::read_to_string(boundary).unwrap();
@@ -602,8 +581,8 @@ fn solids_of_an_ascii_stl_become_patches() {
     let dir = scratch("openfoam_solids");
     let two = dir.join("halves.stl");
     let one = dir.join("whole.stl");
-    write_sphere_solids(&two, true);
-    write_sphere_solids(&one, false);
+    common::write_sphere_solids(&two, &[("top", Some(true)), ("bottom", Some(false))]);
+    common::write_sphere_solids(&one, &[("top", None)]);
     let run = |stl: &Path, case: &Path, np: usize, extra: &[&str]| {
         let mut args = vec![
             "mesh",

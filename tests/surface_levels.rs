@@ -11,29 +11,6 @@ use common::*;
 use octmesh::octant::Octant;
 use std::path::{Path, PathBuf};
 
-/// Writes the built-in sphere's triangles above z = 0 (`top`), below it
-/// (`bottom`), or both as two solids.
-fn write_halves(path: &Path, which: &[&str]) {
-    let s = octmesh::geometry::shapes::default_sphere();
-    let mut text = String::new();
-    for name in which {
-        text.push_str(&format!("solid {name}\n"));
-        for t in s.triangles() {
-            let top = t.centroid()[2] > 0.0;
-            if top != (*name == "top") {
-                continue;
-            }
-            text.push_str("facet normal 0 0 0\n outer loop\n");
-            for v in &t.v {
-                text.push_str(&format!("  vertex {:e} {:e} {:e}\n", v[0], v[1], v[2]));
-            }
-            text.push_str(" endloop\nendfacet\n");
-        }
-        text.push_str(&format!("endsolid {name}\n"));
-    }
-    std::fs::write(path, text).unwrap();
-}
-
 /// The refined leaves of `octmesh octree SURFACE ARGS` in a fixed cube.
 fn refined(surface: &Path, args: &[&str], out: PathBuf, np: usize) -> Vec<Octant> {
     let mut all = vec![
@@ -78,9 +55,9 @@ fn each_solid_refines_to_its_own_levels() {
         dir.join("top.stl"),
         dir.join("bottom.stl"),
     );
-    write_halves(&two, &["top", "bottom"]);
-    write_halves(&top, &["top"]);
-    write_halves(&bottom, &["bottom"]);
+    write_sphere_solids(&two, &[("top", Some(true)), ("bottom", Some(false))]);
+    write_sphere_solids(&top, &[("top", Some(true))]);
+    write_sphere_solids(&bottom, &[("bottom", Some(false))]);
     // (the two-solid run's options, the top half's, the bottom half's)
     let cases: [(&[&str], &[&str], &[&str]); 2] = [
         (

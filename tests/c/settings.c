@@ -4,7 +4,9 @@
  * with KEEP, CUT_RULE, INSIDE_RULE and CONNECT as the C constants' values;
  * MAX_LEVEL and ANGLE for curvature refinement (MAX_LEVEL = LEVEL: none),
  * BANDS as "D1:L1,D2:L2" or "-", REGIONS in the command's form; FIT may be
- * "box:X0,Y0,Z0,X1,Y1,Z1:NX,NY,NZ" for a box domain instead.
+ * "box:X0,Y0,Z0,X1,Y1,Z1:NX,NY,NZ" for a box domain instead; a REGION
+ * "part:NAME=MIN:MAX" refines a part of the surface to its own levels
+ * (octmesh_octree_refine_surface_part, with ANGLE).
  * Prints "COUNTS elements independent face_hanging edge_hanging" on rank 0,
  * for comparison with the octmesh command on the same settings. */
 #include <stdlib.h>
@@ -53,9 +55,18 @@ int main(int argc, char **argv) {
       d[nb] = atof(t);
       l[nb++] = atoi(strchr(t, ':') + 1);
     }
-    OK(octmesh_octree_refine_regions(h, atoi(argv[10]), argc - 12, (const char *const *)argv + 12,
-                                     nb, d, l),
-       h);
+    /* Parts first, as the command does (surface levels, then regions). */
+    int nreg = 0;
+    const char *regions[16];
+    for (int a = 12; a < argc && nreg < 16; ++a) {
+      char name[64];
+      int lo, hi;
+      if (sscanf(argv[a], "part:%63[^=]=%d:%d", name, &lo, &hi) == 3)
+        OK(octmesh_octree_refine_surface_part(h, name, lo, hi, atof(argv[9])), h);
+      else
+        regions[nreg++] = argv[a];
+    }
+    OK(octmesh_octree_refine_regions(h, atoi(argv[10]), nreg, regions, nb, d, l), h);
   }
   OK(octmesh_octree_partition(h, NULL, NULL), h);
   OK(octmesh_octree_balance(h, atoi(argv[6])), h);
