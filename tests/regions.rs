@@ -473,6 +473,70 @@ fn sizes_round_to_the_level_whose_cell_is_not_larger() {
     for k in ["octants_balanced", "elements", "independent_nodes"] {
         assert_eq!(int(&by_size, k), int(&by_level, k), "{k}");
     }
+    // Regions and distance bands by size, and sizes counted from the root
+    // cells of a box.
+    let region_by_size = format!("sphere:0.5,0,0,0.4:size={}", cell5 / 4.0 * 1.001);
+    let band_by_size = format!("0.1:{}", cell5 / 2.0 * 0.999);
+    let by_size = stats(
+        &[
+            "octree",
+            "sphere",
+            "--level",
+            "5",
+            "--region",
+            &region_by_size,
+            "--distance-size",
+            &band_by_size,
+        ],
+        "region_size",
+    );
+    let by_level = stats(
+        &[
+            "octree",
+            "sphere",
+            "--level",
+            "5",
+            "--region",
+            "sphere:0.5,0,0,0.4:7",
+            "--distance",
+            "0.1:7",
+        ],
+        "region_level",
+    );
+    assert_eq!(
+        int(&by_size, "octants_balanced"),
+        int(&by_level, "octants_balanced")
+    );
+    let boxed = |size: &str, tag: &str| {
+        let mut a = vec!["octree", "sphere", "--box", "-1.5,-1.5,-1.5,3,1.5,1.5"];
+        a.extend(["--roots", "3,2,2", "--level", "0", "--min-size", size]);
+        stats(&a, tag)
+    };
+    // Root cells of 1.5: a size of 0.2 is level 3 (0.1875), 0.1875 too.
+    let by_size = boxed("0.2", "box_size");
+    let exact = boxed("0.1875", "box_exact");
+    assert_eq!(int(&by_size, "octants_balanced"), 12 * 8 * 8 * 8);
+    assert_eq!(int(&exact, "octants_balanced"), 12 * 8 * 8 * 8);
+    let e = octmesh_fails(&[
+        "octree",
+        "sphere",
+        "--level",
+        "4",
+        "--region",
+        "box:0,0,0,1,1,1:size=-1",
+    ]);
+    assert!(e.contains("positive size"), "{e}");
+    let e = octmesh_fails(&[
+        "octree",
+        "sphere",
+        "--level",
+        "4",
+        "--distance",
+        "0.1:5",
+        "--distance-size",
+        "0.1:0.01",
+    ]);
+    assert!(e.contains("--distance-size excludes --distance"), "{e}");
     let e = octmesh_fails(&["octree", "sphere", "--size", "0.1", "--level", "4"]);
     assert!(e.contains("--size excludes --level"), "{e}");
     let e = octmesh_fails(&["octree", "sphere", "--size=-1"]);

@@ -37,6 +37,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("octree.feature_angle", "--feature-angle"),
     ("octree.surface_levels", "--surface-level"),
     ("octree.distance", "--distance"),
+    ("octree.distance_size", "--distance-size"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
     ("octree.memory_budget", "--memory-budget"),
@@ -128,6 +129,11 @@ struct OctreeArgs {
     /// distances D (user units): leaves within D of the surface get level L
     #[arg(long, value_name = "D:L,...", value_parser = parse_bands)]
     distance: Option<Bands>,
+    /// Distance bands with cell sizes instead of levels, D1:S1,D2:S2,...
+    /// (user units): leaves within D of the surface get the coarsest level
+    /// whose cell is not larger than S
+    #[arg(long, value_name = "D:S,...", value_parser = parse_size_bands)]
+    distance_size: Option<SizeBands>,
     /// A refinement region, repeatable: box:X0,Y0,Z0,X1,Y1,Z1:LEVEL,
     /// sphere:CX,CY,CZ,R:LEVEL or cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (user
     /// units), then :outside to refine where the shape is not
@@ -383,6 +389,10 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
     if set("octree.min_level", o.min_level.is_some()) {
         config.octree.min_level = o.min_level.unwrap_or(0);
     }
+    if let Some(b) = &o.distance_size {
+        set("octree.distance_size", true);
+        config.octree.distance_size = b.0.clone();
+    }
     if let Some(b) = &o.distance {
         set("octree.distance", true);
         config.octree.distance = b.0.clone();
@@ -583,6 +593,24 @@ fn parse_bands(s: &str) -> std::result::Result<Bands, String> {
         })
         .collect::<std::result::Result<_, String>>()
         .map(Bands)
+}
+
+#[derive(Clone, Debug)]
+struct SizeBands(Vec<(f64, f64)>);
+
+/// `D1:S1,D2:S2,...`.
+fn parse_size_bands(s: &str) -> std::result::Result<SizeBands, String> {
+    let bad = || format!("expects D1:S1,D2:S2,... (distance:size pairs), got '{s}'");
+    s.split(',')
+        .map(|band| {
+            let (d, c) = band.split_once(':').ok_or_else(bad)?;
+            Ok((
+                parse_finite(d).map_err(|_| bad())?,
+                parse_finite(c).map_err(|_| bad())?,
+            ))
+        })
+        .collect::<std::result::Result<_, String>>()
+        .map(SizeBands)
 }
 
 /// `L` or `MIN:MAX`.

@@ -238,6 +238,10 @@ pub struct OctreeConfig {
     /// is below a band's and its box comes within the band's distance of
     /// the surface (exact distances).
     pub distance: Vec<(f64, u8)>,
+    /// `distance` with cell sizes in user units instead of levels,
+    /// `[[distance, size], ...]` (`--distance-size`): each size becomes the
+    /// coarsest level whose cell is not larger. Excludes `distance`.
+    pub distance_size: Vec<(f64, f64)>,
     /// 2:1 balance (default corner).
     pub balance: Balance,
     /// Stop with an error instead of building more leaves than this, over
@@ -393,6 +397,7 @@ pub const KEYS: &[&str] = &[
     "octree.feature_angle",
     "octree.surface_levels",
     "octree.distance",
+    "octree.distance_size",
     "octree.balance",
     "octree.max_octants",
     "octree.memory_budget",
@@ -623,6 +628,16 @@ impl Config {
         }
     }
 
+    /// Whether any level is given as a size.
+    pub fn has_sizes(&self) -> bool {
+        let o = &self.octree;
+        o.size.is_some()
+            || o.max_size.is_some()
+            || o.min_size.is_some()
+            || !o.distance_size.is_empty()
+            || self.regions.iter().any(|r| r.size().is_some())
+    }
+
     /// Sizes are positive, finite, each exclusive with its level, and the
     /// fine size not larger than the surface size.
     fn check_sizes(&self) -> Result<(), ConfigError> {
@@ -663,6 +678,26 @@ impl Config {
                 format!("excludes {other}: give one of them"),
             ));
         }
+        let bands = &o.distance_size;
+        if let Some((i, &(d, c))) = bands.iter().enumerate().find(|(i, &(d, c))| {
+            !(d.is_finite() && d >= 0.0 && c.is_finite() && c > 0.0)
+                || (*i > 0 && d <= bands[i - 1].0)
+        }) {
+            return Err(ConfigError::new(
+                "octree.distance_size",
+                format!(
+                    "band {} ({d}, size {c}) is invalid: distances must be finite, non-negative \
+                     and increasing, sizes positive",
+                    i + 1
+                ),
+            ));
+        }
+        if !bands.is_empty() && !o.distance.is_empty() {
+            return Err(ConfigError::new(
+                "octree.distance_size",
+                "excludes {octree.distance}: give one of them",
+            ));
+        }
         if o.max_size.is_some() && o.size.is_none() {
             return Err(ConfigError::new("octree.max_size", "needs {octree.size}"));
         }
@@ -677,9 +712,10 @@ impl Config {
         Ok(())
     }
 
-    /// The configuration with its sizes turned into levels for a domain of
-    /// side `side` (user units): each the coarsest level whose cell is not
-    /// larger than the size. Unchanged without sizes.
+    /// The configuration with its sizes turned into levels for root cells
+    /// of side `side` (user units; the cube's side for a cube): each the
+    /// coarsest level whose cell is not larger than the size. Unchanged
+    /// without sizes.
     pub fn with_sizes(&self, side: f64) -> crate::Result<Config> {
         let mut c = self.clone();
         let o = &mut c.octree;
@@ -692,6 +728,12 @@ impl Config {
         }
         if let Some(s) = o.min_size.take() {
             o.min_level = level(s)?;
+        }
+        for (d, s) in std::mem::take(&mut o.distance_size) {
+            o.distance.push((d, level(s)?));
+        }
+        for r in &mut c.regions {
+            *r = r.sized(side)?;
         }
         Ok(c)
     }
@@ -832,7 +874,12 @@ mod tests {
         c.regions = vec![
             Region::parse("box:0,0,0,1,1,1:5").unwrap(),
             Region::parse("cylinder:0,0,0,1,0,0,0.5:4:outside").unwrap(),
+            Region::parse("sphere:0,0,0,1:size=0.125").unwrap(),
         ];
+        c.octree.distance_size = vec![(0.1, 0.05), (0.3, 0.1)];
+        c.octree.surface_levels.insert("wing".into(), [6, 8]);
+        c.domain.bbox = Some([0.0, 0.0, 0.0, 3.0, 1.0, 1.0]);
+        c.domain.roots = Some([3, 1, 1]);
         let text = c.to_toml();
         let back: Config = toml::from_str(&text).unwrap();
         assert_eq!(back, c, "{text}");

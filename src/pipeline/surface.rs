@@ -72,7 +72,8 @@ impl Session {
             })
         });
         let state = agree(&*self.comm, loaded)?;
-        self.resolve_sizes(state.index_domain.side)?;
+        // Sizes count from the root cells, as levels do.
+        self.resolve_sizes(state.index_domain.root_side())?;
         self.facts.rss_read = peak_rss_bytes();
         let level = self.config.octree.level;
         // Levels count from the root cells.
@@ -111,8 +112,7 @@ impl Session {
     /// `min_size`) into levels for a domain of side `side`, and checks the
     /// levels they give. Nothing to do without sizes.
     fn resolve_sizes(&mut self, side: f64) -> Result<()> {
-        let o = &self.config.octree;
-        if o.size.is_none() && o.max_size.is_none() && o.min_size.is_none() {
+        if !self.config.has_sizes() {
             return Ok(());
         }
         let resolved = self.config.with_sizes(side).and_then(|c| {
