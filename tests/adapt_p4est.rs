@@ -104,6 +104,7 @@ fn main() {
                 String::from_utf8_lossy(&out.stdout),
                 String::from_utf8_lossy(&out.stderr)
             );
+            print!("{}", String::from_utf8_lossy(&out.stdout));
             let counts = read_counts(&ours);
             for step in 0..=STEPS {
                 let tag = format!("np {np}, levels {level}-{max_level}, {mode}, step {step}");
@@ -203,6 +204,9 @@ fn check_reference(rows: &[Vec<u64>], dir: &Path, np: usize, moved: &mut usize) 
 fn child(mode: &str, level: u8, max_level: u8, dir: &Path) {
     let universe = mpi::initialize().expect("MPI init");
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
+    if mode == "separate" {
+        split_families_stay(&comm);
+    }
     let mut t = LinearOctree::new_uniform(comm.clone(), level).unwrap();
     let mut lines = vec![line(&t, 0, 0, 0)];
     write_leaves(&t, &dir.join("step_0.bin"), "adapt").unwrap();
@@ -239,6 +243,48 @@ fn child(mode: &str, level: u8, max_level: u8, dir: &Path) {
     }
     if comm.rank() == 0 {
         std::fs::write(dir.join("counts.txt"), lines.concat()).unwrap();
+    }
+}
+
+/// A family whose leaves are on two ranks is not coarsened, whatever the
+/// callback says, until a partition for coarsening brings it together.
+fn split_families_stay(comm: &CommRef) {
+    let p = comm.size() as u64;
+    let mut t = LinearOctree::new_uniform(comm.clone(), 2).unwrap();
+    // The uniform split gives rank q the leaves from floor(64 q / p).
+    let rank_of = |i: u64| (0..p).rev().find(|&q| q * 64 / p <= i).unwrap();
+    let whole = (0..8)
+        .filter(|k| rank_of(8 * k) == rank_of(8 * k + 7))
+        .count() as u64;
+    let mut offered = 0u64;
+    let s = t
+        .coarsen(false, |_| {
+            offered += 1;
+            true
+        })
+        .unwrap();
+    let mut all = [offered];
+    comm.sum_u64(&mut all);
+    assert_eq!(
+        (s.coarsened, all[0]),
+        (whole, whole),
+        "split families offered"
+    );
+    assert_eq!(t.global_len(), 64 - 7 * whole);
+    if whole < 8 {
+        t.partition_for_coarsening().unwrap();
+        let s = t.coarsen(false, |_| true).unwrap();
+        assert_eq!(s.coarsened, 8 - whole, "the rest, once together");
+        assert_eq!(t.global_len(), 8);
+    }
+    t.partition_for_coarsening().unwrap();
+    t.coarsen(false, |_| true).unwrap();
+    assert_eq!(t.global_len(), 1);
+    if comm.rank() == 0 {
+        println!(
+            "{} of 8 families split on {p} ranks, coarsened after the partition",
+            8 - whole
+        );
     }
 }
 
