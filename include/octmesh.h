@@ -855,16 +855,24 @@ octmesh_status_t octmesh_octree_adapt(octmesh_t *h,
                                       octmesh_gloidx_t *coarsened);
 
 /**
- * Repartitions the leaves in Morton order with about equal counts per
- * rank, moving each boundary that would split a family of eight sibling
- * leaves to one end of the family, so that `octmesh_octree_coarsen` and
- * `octmesh_octree_adapt` can coarsen every family afterwards. The result
- * is identical to p4est's `p8est_partition_ext (p8est, 1, NULL)`. Drops
- * the leaf classes and the mesh. Needs an octree. Collective.
+ * Repartitions the leaves in Morton order like `octmesh_octree_partition`
+ * (equal counts when `weight` is NULL, else about equal sums of
+ * `weight(ctx, &leaf)`, called once per local leaf), then moves each
+ * boundary that would split a family of eight sibling leaves to one end of
+ * the family, so that `octmesh_octree_coarsen` and `octmesh_octree_adapt`
+ * can coarsen every family afterwards. The result is identical to p4est's
+ * `p8est_partition_ext (p8est, 1, weight_fn)`, whose shares of the weight
+ * round down where `octmesh_octree_partition` rounds up; when every weight
+ * is 0 nothing moves. Drops the leaf classes and the mesh. Needs an octree.
+ * Collective.
  *
- * \param[in] h  the handle
+ * \param[in] h       the handle
+ * \param[in] weight  the weight callback, or NULL for equal counts
+ * \param[in] ctx     passed to the callback unchanged
  */
-octmesh_status_t octmesh_octree_partition_for_coarsening(octmesh_t *h);
+octmesh_status_t octmesh_octree_partition_for_coarsening(octmesh_t *h,
+                                                         octmesh_weight_fn weight,
+                                                         void *ctx);
 
 /* ---- The mesh: building it, its arrays, output ---- */
 

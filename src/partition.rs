@@ -74,16 +74,67 @@ impl LinearOctree {
     /// `p8est_partition_ext (p8est, 1, NULL)`, see
     /// [`coarsening_cut`] for the rule. One rank: nothing to do. Collective.
     pub fn partition_for_coarsening(&mut self) -> Result<PartitionStats> {
-        let p = self.comm().size();
-        if p == 1 {
+        if self.comm().size() == 1 {
             return Ok(PartitionStats::default());
         }
-        let n = self.global_len();
+        let (n, p) = (self.global_len(), self.comm().size());
         // p4est's equal split: rank q from floor(q n / p). (`partition`
         // rounds up instead; both are even within one leaf.)
-        let cuts: Vec<u64> = (0..=p)
+        let cuts = (0..=p)
             .map(|q| (q as u128 * n as u128 / p as u128) as u64)
             .collect();
+        self.keep_families(cuts)
+    }
+
+    /// [`LinearOctree::partition_for_coarsening`] by weight: about the same
+    /// total weight per rank, `weight` called once per local leaf, then no
+    /// family split; identical to p4est's `p8est_partition_ext (p8est, 1,
+    /// weight_fn)`. Its split is p4est's, which rounds the ranks' shares of
+    /// the weight down where [`LinearOctree::partition_weighted`] rounds them
+    /// up: rank q starts at the first leaf whose exclusive prefix of weights
+    /// reaches `floor(q W / P)`, and the last rank ends at the last leaf. When
+    /// every weight is 0 nothing moves (as in p4est). The sum must fit in a
+    /// `u64`, as for [`LinearOctree::partition_weighted`]. Collective.
+    pub fn partition_for_coarsening_weighted(
+        &mut self,
+        weight: impl Fn(Octant) -> u64,
+    ) -> Result<PartitionStats> {
+        let w: Vec<u64> = self.leaves().iter().map(|&o| weight(o)).collect();
+        let (sums, total) = self.weight_sums(&w)?;
+        let p = self.comm().size();
+        if p == 1 || total == 0 {
+            return Ok(PartitionStats::default());
+        }
+        let me = self.comm().rank();
+        let first = self.global_offsets()[me];
+        let before: u64 = sums[..me].iter().sum();
+        // The rank whose weights reach a share finds where; the others
+        // contribute 0 to the maximum.
+        let mut cuts = vec![0u64; p + 1];
+        cuts[p] = self.global_len();
+        let mut acc = before;
+        let mut k = 0;
+        for (q, cut) in cuts.iter_mut().enumerate().take(p).skip(1) {
+            let share = (total as u128 * q as u128 / p as u128) as u64;
+            if share == 0 || !(before < share && share <= before + sums[me]) {
+                continue;
+            }
+            // The first local k >= 1 with before + w[..k] >= share.
+            while acc < share {
+                acc += w[k];
+                k += 1;
+            }
+            *cut = first + k as u64;
+        }
+        self.comm().max_u64(&mut cuts[1..p]);
+        self.keep_families(cuts)
+    }
+
+    /// Moves the leaves to the ranks of `cuts` (first global leaf of each
+    /// rank, the total appended), each cut inside a family first moved by
+    /// [`coarsening_cut`].
+    fn keep_families(&mut self, cuts: Vec<u64>) -> Result<PartitionStats> {
+        let (n, p) = (self.global_len(), self.comm().size());
         // Rank q decides its own cut from the leaves [c - 7, c + 7) around
         // it: the family of leaf c, if complete, lies inside.
         let me = self.comm().rank();
@@ -118,7 +169,7 @@ impl LinearOctree {
             coarsening_cut(&cuts, me, &near, lo)
         };
         let moved = self.comm().allgather_u64(mine);
-        // Ranks that the equal split leaves empty stay empty; a non-empty
+        // Ranks that the split leaves empty stay empty; a non-empty
         // rank ends where the next non-empty one starts.
         let mut start = vec![n; p + 1];
         for q in (0..p).rev() {
@@ -144,6 +195,21 @@ impl LinearOctree {
     /// Collective.
     pub fn partition_weighted(&mut self, weight: impl Fn(Octant) -> u64) -> Result<PartitionStats> {
         let w: Vec<u64> = self.leaves().iter().map(|&o| weight(o)).collect();
+        let (sums, total) = self.weight_sums(&w)?;
+        let r = self.comm().rank();
+        let mut prefix: Vec<u64> = Vec::with_capacity(w.len());
+        let mut acc: u64 = sums[..r].iter().sum();
+        for &x in &w {
+            prefix.push(acc);
+            acc += x;
+        }
+        let p = self.comm().size();
+        self.redistribute(|i| destination(prefix[i], total, p))
+    }
+
+    /// Each rank's sum of `w` (this rank's weights) and the total, or the
+    /// same error on every rank when the total does not fit. Collective.
+    fn weight_sums(&self, w: &[u64]) -> Result<(Vec<u64>, u64)> {
         // u64::MAX stands for a local sum that overflows; it makes the
         // total overflow too, on every rank alike.
         let local = w
@@ -151,7 +217,6 @@ impl LinearOctree {
             .try_fold(0u64, |a, &x| a.checked_add(x))
             .unwrap_or(u64::MAX);
         let sums = self.comm().allgather_u64(local);
-        let r = self.comm().rank();
         let total = sums
             .iter()
             .try_fold(0u64, |a, &x| a.checked_add(x))
@@ -162,14 +227,7 @@ impl LinearOctree {
                      use smaller weights",
                 )
             })?;
-        let mut prefix: Vec<u64> = Vec::with_capacity(w.len());
-        let mut acc: u64 = sums[..r].iter().sum();
-        for &x in &w {
-            prefix.push(acc);
-            acc += x;
-        }
-        let p = self.comm().size();
-        self.redistribute(|i| destination(prefix[i], total, p))
+        Ok((sums, total))
     }
 
     /// Sends local leaf `i` to rank `dest(i)` (non-decreasing in `i`).

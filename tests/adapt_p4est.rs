@@ -10,8 +10,9 @@
 //! inside the only family). Run by `cargo test`, this program runs the
 //! reference and itself under `mpirun` on 1 to 4 ranks, octmesh twice: with `refine_once` then
 //! `coarsen`, and with one `adapt` pass (the same rule: cut leaves refine,
-//! uncut ones ask to coarsen). After every step the leaves and every rank's
-//! count must equal p4est's.
+//! uncut ones ask to coarsen), and once more partitioning by weight (the
+//! leaf's level) for coarsening. After every step the leaves and every
+//! rank's count must equal p4est's.
 
 mod common;
 
@@ -75,61 +76,81 @@ fn main() {
             std::fs::create_dir_all(&d).unwrap();
             d
         };
-        let theirs = dir("p4est");
-        let args = [
-            "--steps",
-            &STEPS.to_string(),
-            "--level",
-            &level.to_string(),
-            "--max-level",
-            &max_level.to_string(),
-            "--out",
-            theirs.to_str().unwrap(),
-        ];
-        let out = common::mpirun(np, &reference, &args, limit);
-        assert!(
-            out.status.success(),
-            "p4est reference on {np} ranks failed:\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let reference_counts = read_counts(&theirs);
-        check_reference(&reference_counts, &theirs, np, &mut moved_cuts);
-        for mode in ["separate", "adapt"] {
-            let ours = dir(mode);
-            let env = format!("{mode}:{level}:{max_level}:{}", ours.display());
-            let out = common::mpirun_env(np, &me, &[], &[(CHILD, &env)], limit);
+        let mut equal_split = Vec::new();
+        for weighted in [false, true] {
+            let theirs = dir(if weighted { "p4est_weighted" } else { "p4est" });
+            let mut args = vec![
+                "--steps".to_string(),
+                STEPS.to_string(),
+                "--level".into(),
+                level.to_string(),
+                "--max-level".into(),
+                max_level.to_string(),
+                "--out".into(),
+                theirs.display().to_string(),
+            ];
+            if weighted {
+                args.push("--weighted".into());
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let out = common::mpirun(np, &reference, &args, limit);
             assert!(
                 out.status.success(),
-                "octmesh ({mode}) on {np} ranks failed:\n{}{}",
-                String::from_utf8_lossy(&out.stdout),
+                "p4est reference on {np} ranks failed:\n{}",
                 String::from_utf8_lossy(&out.stderr)
             );
-            print!("{}", String::from_utf8_lossy(&out.stdout));
-            let counts = read_counts(&ours);
-            for step in 0..=STEPS {
-                let tag = format!("np {np}, levels {level}-{max_level}, {mode}, step {step}");
-                let file = format!("step_{step}.bin");
-                let (a, b) = (
-                    common::leaves(&ours.join(&file)),
-                    common::leaves(&theirs.join(&file)),
+            let reference_counts = read_counts(&theirs);
+            let moved = (!weighted).then_some(&mut moved_cuts);
+            check_reference(&reference_counts, &theirs, np, moved);
+            if !weighted {
+                equal_split = reference_counts.clone();
+            } else if np == 3 {
+                // Weights by level move the boundaries (on 2 and 4 ranks the
+                // sphere's symmetry in y and z gives every rank equal weight).
+                assert_ne!(equal_split, reference_counts, "weights changed nothing");
+            }
+            let modes: &[&str] = if weighted {
+                &["weighted"]
+            } else {
+                &["separate", "adapt"]
+            };
+            for &mode in modes {
+                let ours = dir(mode);
+                let env = format!("{mode}:{level}:{max_level}:{}", ours.display());
+                let out = common::mpirun_env(np, &me, &[], &[(CHILD, &env)], limit);
+                assert!(
+                    out.status.success(),
+                    "octmesh ({mode}) on {np} ranks failed:\n{}{}",
+                    String::from_utf8_lossy(&out.stdout),
+                    String::from_utf8_lossy(&out.stderr)
                 );
-                assert_eq!(a.len(), b.len(), "{tag}: octmesh and p4est leaf counts");
-                if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
-                    panic!(
-                        "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
-                        a[i], b[i]
+                print!("{}", String::from_utf8_lossy(&out.stdout));
+                let counts = read_counts(&ours);
+                for step in 0..=STEPS {
+                    let tag = format!("np {np}, levels {level}-{max_level}, {mode}, step {step}");
+                    let file = format!("step_{step}.bin");
+                    let (a, b) = (
+                        common::leaves(&ours.join(&file)),
+                        common::leaves(&theirs.join(&file)),
+                    );
+                    assert_eq!(a.len(), b.len(), "{tag}: octmesh and p4est leaf counts");
+                    if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
+                        panic!(
+                            "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
+                            a[i], b[i]
+                        );
+                    }
+                    assert_eq!(
+                        counts[step as usize], reference_counts[step as usize],
+                        "{tag}: step, refined, coarsened, leaves, leaves per rank"
                     );
                 }
-                assert_eq!(
-                    counts[step as usize], reference_counts[step as usize],
-                    "{tag}: step, refined, coarsened, leaves, leaves per rank"
+                println!(
+                    "np {np}, levels {level}-{max_level}, {mode}: {} steps equal to p4est, \
+                     {} leaves at the end",
+                    STEPS, counts[STEPS as usize][3]
                 );
             }
-            println!(
-                "np {np}, levels {level}-{max_level}, {mode}: {} steps equal to p4est, \
-                 {} leaves at the end",
-                STEPS, counts[STEPS as usize][3]
-            );
         }
     }
     // The option must have been exercised: an equal split inside a family.
@@ -137,7 +158,7 @@ fn main() {
     println!(
         "adapt_p4est: {moved_cuts} cuts moved to keep families together; \
          {} passed, 0 failed",
-        4 * CASES.len()
+        4 * CASES.len() * 3
     );
 }
 
@@ -160,7 +181,7 @@ fn read_counts(dir: &Path) -> Vec<Vec<u64>> {
 /// Checks made on the reference alone, so that the comparison means
 /// something: the sequence refines and coarsens, every step's leaves are a
 /// complete balanced octree, and no rank boundary splits a family.
-fn check_reference(rows: &[Vec<u64>], dir: &Path, np: usize, moved: &mut usize) {
+fn check_reference(rows: &[Vec<u64>], dir: &Path, np: usize, mut moved: Option<&mut usize>) {
     let refined: u64 = rows.iter().map(|r| r[1]).sum();
     let coarsened: u64 = rows.iter().map(|r| r[2]).sum();
     assert!(
@@ -192,7 +213,9 @@ fn check_reference(rows: &[Vec<u64>], dir: &Path, np: usize, moved: &mut usize) 
                     });
                 assert!(!split, "step {step}: rank {r} starts inside a family");
                 let equal = (r as u128 * n as u128 / np as u128) as u64;
-                *moved += (equal != start) as usize;
+                if let Some(m) = moved.as_deref_mut() {
+                    *m += (equal != start) as usize;
+                }
             }
             start += c;
         }
@@ -212,7 +235,7 @@ fn child(mode: &str, level: u8, max_level: u8, dir: &Path) {
     write_leaves(&t, &dir.join("step_0.bin"), "adapt").unwrap();
     for step in 1..=STEPS {
         let (refined, coarsened) = match mode {
-            "separate" => {
+            "separate" | "weighted" => {
                 let r = t
                     .refine_once(max_level, |o| cut(o, step), NO_LIMIT)
                     .unwrap();
@@ -237,7 +260,12 @@ fn child(mode: &str, level: u8, max_level: u8, dir: &Path) {
             _ => panic!("unknown mode {mode}"),
         };
         t.balance(Connectivity::Corner).unwrap();
-        t.partition_for_coarsening().unwrap();
+        if mode == "weighted" {
+            t.partition_for_coarsening_weighted(|o| o.level() as u64)
+                .unwrap();
+        } else {
+            t.partition_for_coarsening().unwrap();
+        }
         write_leaves(&t, &dir.join(format!("step_{step}.bin")), "adapt").unwrap();
         lines.push(line(&t, step, refined, coarsened));
     }

@@ -5,7 +5,7 @@
 use std::ffi::c_void;
 
 use super::handle::octmesh_t;
-use super::octree::octmesh_refine_fn;
+use super::octree::{octmesh_refine_fn, octmesh_weight_fn};
 use super::{octmesh_gloidx_t, octmesh_octant_t, octmesh_status_t, with_mut, write_out};
 use crate::adapt::{Adapt, AdaptStats};
 use crate::error::{Error, Result};
@@ -156,15 +156,33 @@ pub extern "C" fn octmesh_octree_adapt(
     })
 }
 
-/// Repartitions the leaves in Morton order with about equal counts per
-/// rank, moving each boundary that would split a family of eight sibling
-/// leaves to one end of the family, so that `octmesh_octree_coarsen` and
-/// `octmesh_octree_adapt` can coarsen every family afterwards. The result
-/// is identical to p4est's `p8est_partition_ext (p8est, 1, NULL)`. Drops
-/// the leaf classes and the mesh. Needs an octree. Collective.
+/// Repartitions the leaves in Morton order like `octmesh_octree_partition`
+/// (equal counts when `weight` is NULL, else about equal sums of
+/// `weight(ctx, &leaf)`, called once per local leaf), then moves each
+/// boundary that would split a family of eight sibling leaves to one end of
+/// the family, so that `octmesh_octree_coarsen` and `octmesh_octree_adapt`
+/// can coarsen every family afterwards. The result is identical to p4est's
+/// `p8est_partition_ext (p8est, 1, weight_fn)`, whose shares of the weight
+/// round down where `octmesh_octree_partition` rounds up; when every weight
+/// is 0 nothing moves. Drops the leaf classes and the mesh. Needs an octree.
+/// Collective.
 ///
-/// \param[in] h  the handle
+/// \param[in] h       the handle
+/// \param[in] weight  the weight callback, or NULL for equal counts
+/// \param[in] ctx     passed to the callback unchanged
 #[no_mangle]
-pub extern "C" fn octmesh_octree_partition_for_coarsening(h: *mut octmesh_t) -> octmesh_status_t {
-    with_mut(h, |h| h.session.partition_for_coarsening())
+pub extern "C" fn octmesh_octree_partition_for_coarsening(
+    h: *mut octmesh_t,
+    weight: octmesh_weight_fn,
+    ctx: *mut c_void,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        h.session.partition_for_coarsening(weight.map(|f| {
+            move |o: Octant| {
+                let oc = octmesh_octant_t::of(o);
+                // SAFETY: a C function pointer given by the caller.
+                unsafe { f(ctx, &oc) }
+            }
+        }))
+    })
 }

@@ -56,14 +56,22 @@ impl Session {
         over_budget(r, budget, limit, "adaptation")
     }
 
-    /// Repartitions the leaves in Morton order, equal counts per rank except
+    /// Repartitions the leaves in Morton order, equal counts per rank
+    /// without `weight`, else about equal sums of `weight(leaf)`, except
     /// that no family of eight sibling leaves is split
-    /// ([`LinearOctree::partition_for_coarsening`]). Needs an octree. Drops
-    /// the leaf classes and the mesh. Phase `partition`.
-    pub fn partition_for_coarsening(&mut self) -> Result<()> {
+    /// ([`LinearOctree::partition_for_coarsening`],
+    /// [`LinearOctree::partition_for_coarsening_weighted`]). Needs an octree.
+    /// Drops the leaf classes and the mesh. Phase `partition`.
+    pub fn partition_for_coarsening(
+        &mut self,
+        weight: Option<impl Fn(Octant) -> u64>,
+    ) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        self.change("partition", |t| t.partition_for_coarsening())
-            .map(|_| ())
+        self.change("partition", |t| match weight {
+            None => t.partition_for_coarsening(),
+            Some(w) => t.partition_for_coarsening_weighted(w),
+        })
+        .map(|_| ())
     }
 
     /// Runs `f` on the octree as phase `phase`, then reports the new count

@@ -5,7 +5,8 @@
  * for coarsening. Rank 0 writes DIR/step_T.txt (the leaves) and
  * DIR/counts.txt in the reference's format, which tests/c_api.rs compares
  * with p4est's. Also: NULL callbacks, a bad level and calls before an octree
- * are refused; recursive coarsening goes further than one level.
+ * are refused; partitions by weight (all zero: nothing moves); recursive
+ * coarsening goes further than one level.
  * Usage: adapt DIR */
 #include <stdint.h>
 #include <stdlib.h>
@@ -58,6 +59,17 @@ static int32_t adapt_sphere(void *ctx, const octmesh_octant_t *o) {
   ++*(long *)ctx;
   if (cut(o)) return o->level < MAX_LEVEL ? 1 : 0;
   return -1;
+}
+
+static uint64_t zero(void *ctx, const octmesh_octant_t *o) {
+  (void)o;
+  ++*(long *)ctx;
+  return 0;
+}
+
+static uint64_t by_level(void *ctx, const octmesh_octant_t *o) {
+  ++*(long *)ctx;
+  return (uint64_t)o->level;
 }
 
 static int32_t always(void *ctx, const octmesh_octant_t *family) {
@@ -129,7 +141,7 @@ int main(int argc, char **argv) {
   CHECK_STATUS(octmesh_octree_adapt(h, adapt_sphere, &calls, NULL, NULL), OCTMESH_STATUS_STATE, h);
   CHECK_STATUS(octmesh_octree_coarsen(h, 0, coarsen_uncut, &calls, NULL), OCTMESH_STATUS_STATE, h);
   CHECK_STATUS(octmesh_octree_refine_once(h, 5, refine_cut, &calls, NULL), OCTMESH_STATUS_STATE, h);
-  CHECK_STATUS(octmesh_octree_partition_for_coarsening(h), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_octree_partition_for_coarsening(h, NULL, NULL), OCTMESH_STATUS_STATE, h);
   CHECK(calls == 0, h);
   /* The root alone. */
   OK(octmesh_octree_refine_callback(h, 0, never, NULL), h);
@@ -154,8 +166,23 @@ int main(int argc, char **argv) {
       OK(octmesh_octree_coarsen(h, 0, coarsen_uncut, &calls, &coarsened), h);
     }
     OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
-    OK(octmesh_octree_partition_for_coarsening(h), h);
+    OK(octmesh_octree_partition_for_coarsening(h, NULL, NULL), h);
     write_step(h, dir, counts, refined, coarsened);
+  }
+
+  /* By weight: called once per local leaf; all zero moves nothing. */
+  {
+    octmesh_locidx_t nl0, nl1;
+    octmesh_gloidx_t ng0, ng1;
+    OK(octmesh_octree_get_num_leaves(h, &nl0, &ng0), h);
+    calls = 0;
+    OK(octmesh_octree_partition_for_coarsening(h, zero, &calls), h);
+    OK(octmesh_octree_get_num_leaves(h, &nl1, &ng1), h);
+    CHECK(calls == nl0 && nl1 == nl0 && ng1 == ng0, h);
+    calls = 0;
+    OK(octmesh_octree_partition_for_coarsening(h, by_level, &calls), h);
+    OK(octmesh_octree_get_num_leaves(h, &nl1, &ng1), h);
+    CHECK(calls == nl0 && ng1 == ng0, h);
   }
 
   /* Recursive coarsening of everything: more than one level at once (the

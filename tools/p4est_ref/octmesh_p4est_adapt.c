@@ -8,7 +8,8 @@
  *     p8est_refine (non-recursive): leaves below MAX_LEVEL cut by S(t);
  *     p8est_coarsen (non-recursive): families none of whose leaves is cut;
  *     p8est_balance (corner);
- *     p8est_partition_ext (partition_for_coarsening = 1, no weights);
+ *     p8est_partition_ext (partition_for_coarsening = 1, no weights, or
+ *       with --weighted the leaf's level as its weight);
  *
  * "Cut" means the closed box meets the sphere's surface: the smallest
  * distance from the centre to the box is at most the radius and the largest
@@ -17,7 +18,7 @@
  * 131072, i.e. about (0.3 + 0.04 t, 0.5, 0.5) and 0.25 of the root.
  *
  * Usage: mpirun -np P octmesh_p4est_adapt --steps S --level L
- *          --max-level M --out DIR
+ *          --max-level M --out DIR [--weighted]
  *
  * Writes DIR/step_T.bin for T = 0 .. S (leaf files as in octmesh_p4est.c:
  * "OCTLEAF1", u64 LE count, count * 4 LE int32 x, y, z, level) and
@@ -57,7 +58,8 @@ usage_error (const char *msg)
 {
   if (g_rank == 0)
     fprintf (stderr, "octmesh_p4est_adapt: %s\nusage: octmesh_p4est_adapt"
-             " --steps S --level L --max-level M --out DIR\n", msg);
+             " --steps S --level L --max-level M --out DIR [--weighted]\n",
+             msg);
   finish (1);
 }
 
@@ -92,6 +94,15 @@ refine_fn (p8est_t * p8est, p4est_topidx_t which_tree, p8est_quadrant_t * q)
   (void) p8est;
   (void) which_tree;
   return q->level < g_max_level && is_cut (q);
+}
+
+static int
+level_weight (p8est_t * p8est, p4est_topidx_t which_tree,
+              p8est_quadrant_t * q)
+{
+  (void) p8est;
+  (void) which_tree;
+  return q->level;
 }
 
 static int
@@ -190,7 +201,7 @@ main (int argc, char **argv)
 {
   MPI_Comm            comm = MPI_COMM_WORLD;
   const char         *dir = NULL;
-  int                 steps = -1, level = -1, i, bad;
+  int                 steps = -1, level = -1, weighted = 0, i, bad;
   char                path[4096];
   FILE               *counts = NULL;
   p8est_connectivity_t *conn;
@@ -205,6 +216,10 @@ main (int argc, char **argv)
 
   for (i = 1; i < argc; ++i) {
     const char         *a = argv[i];
+    if (!strcmp (a, "--weighted")) {
+      weighted = 1;
+      continue;
+    }
     if (i + 1 >= argc)
       usage_error ("every option takes a value");
     if (!strcmp (a, "--steps"))
@@ -243,7 +258,7 @@ main (int argc, char **argv)
     p8est_coarsen (p8est, 0, coarsen_fn, NULL);
     n2 = p8est->global_num_quadrants;
     p8est_balance (p8est, P8EST_CONNECT_FULL, NULL);
-    p8est_partition_ext (p8est, 1, NULL);
+    p8est_partition_ext (p8est, 1, weighted ? level_weight : NULL);
     snprintf (path, sizeof path, "%s/step_%d.bin", dir, g_step);
     write_leaves (comm, p8est, path);
     write_counts (counts, p8est, g_step, (long long) (n1 - n0) / 7,
