@@ -10,8 +10,8 @@
 //! inside the only family). Run by `cargo test`, this program runs the
 //! reference and itself under `mpirun` on 1 to 4 ranks, octmesh twice: with `refine_once` then
 //! `coarsen`, and with one `adapt` pass (the same rule: cut leaves refine,
-//! uncut ones ask to coarsen), and once more partitioning by weight (the
-//! leaf's level) for coarsening. After every step the leaves and every
+//! uncut ones ask to coarsen), then partitioning by weight (the leaf's
+//! level) for coarsening, then coarsening recursively. After every step the leaves and every
 //! rank's count must equal p4est's.
 
 mod common;
@@ -77,8 +77,9 @@ fn main() {
             d
         };
         let mut equal_split = Vec::new();
-        for weighted in [false, true] {
-            let theirs = dir(if weighted { "p4est_weighted" } else { "p4est" });
+        for variant in ["", "--weighted", "--recursive"] {
+            let weighted = variant == "--weighted";
+            let theirs = dir(&format!("p4est{variant}"));
             let mut args = vec![
                 "--steps".to_string(),
                 STEPS.to_string(),
@@ -89,8 +90,8 @@ fn main() {
                 "--out".into(),
                 theirs.display().to_string(),
             ];
-            if weighted {
-                args.push("--weighted".into());
+            if !variant.is_empty() {
+                args.push(variant.into());
             }
             let args: Vec<&str> = args.iter().map(String::as_str).collect();
             let out = common::mpirun(np, &reference, &args, limit);
@@ -102,17 +103,19 @@ fn main() {
             let reference_counts = read_counts(&theirs);
             let moved = (!weighted).then_some(&mut moved_cuts);
             check_reference(&reference_counts, &theirs, np, moved);
-            if !weighted {
+            if variant.is_empty() {
                 equal_split = reference_counts.clone();
-            } else if np == 3 {
+            } else if weighted && np == 3 {
                 // Weights by level move the boundaries (on 2 and 4 ranks the
                 // sphere's symmetry in y and z gives every rank equal weight).
                 assert_ne!(equal_split, reference_counts, "weights changed nothing");
+            } else if variant == "--recursive" && level == 3 {
+                assert_ne!(equal_split, reference_counts, "recursion changed nothing");
             }
-            let modes: &[&str] = if weighted {
-                &["weighted"]
-            } else {
-                &["separate", "adapt"]
+            let modes: &[&str] = match variant {
+                "--weighted" => &["weighted"],
+                "--recursive" => &["recursive"],
+                _ => &["separate", "adapt"],
             };
             for &mode in modes {
                 let ours = dir(mode);
@@ -158,7 +161,7 @@ fn main() {
     println!(
         "adapt_p4est: {moved_cuts} cuts moved to keep families together; \
          {} passed, 0 failed",
-        4 * CASES.len() * 3
+        4 * CASES.len() * 4
     );
 }
 
@@ -235,12 +238,12 @@ fn child(mode: &str, level: u8, max_level: u8, dir: &Path) {
     write_leaves(&t, &dir.join("step_0.bin"), "adapt").unwrap();
     for step in 1..=STEPS {
         let (refined, coarsened) = match mode {
-            "separate" | "weighted" => {
+            "separate" | "weighted" | "recursive" => {
                 let r = t
                     .refine_once(max_level, |o| cut(o, step), NO_LIMIT)
                     .unwrap();
                 let c = t
-                    .coarsen(false, |f| f.iter().all(|&o| !cut(o, step)))
+                    .coarsen(mode == "recursive", |f| f.iter().all(|&o| !cut(o, step)))
                     .unwrap();
                 (r.refined, c.coarsened)
             }

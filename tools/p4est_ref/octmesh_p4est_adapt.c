@@ -6,7 +6,8 @@
  *   start: uniform forest at LEVEL (p8est_new_ext, equal split);
  *   for t = 1 .. STEPS:
  *     p8est_refine (non-recursive): leaves below MAX_LEVEL cut by S(t);
- *     p8est_coarsen (non-recursive): families none of whose leaves is cut;
+ *     p8est_coarsen (non-recursive, or recursive with --recursive):
+ *       families none of whose leaves is cut;
  *     p8est_balance (corner);
  *     p8est_partition_ext (partition_for_coarsening = 1, no weights, or
  *       with --weighted the leaf's level as its weight);
@@ -18,7 +19,7 @@
  * 131072, i.e. about (0.3 + 0.04 t, 0.5, 0.5) and 0.25 of the root.
  *
  * Usage: mpirun -np P octmesh_p4est_adapt --steps S --level L
- *          --max-level M --out DIR [--weighted]
+ *          --max-level M --out DIR [--weighted] [--recursive]
  *
  * Writes DIR/step_T.bin for T = 0 .. S (leaf files as in octmesh_p4est.c:
  * "OCTLEAF1", u64 LE count, count * 4 LE int32 x, y, z, level) and
@@ -58,7 +59,8 @@ usage_error (const char *msg)
 {
   if (g_rank == 0)
     fprintf (stderr, "octmesh_p4est_adapt: %s\nusage: octmesh_p4est_adapt"
-             " --steps S --level L --max-level M --out DIR [--weighted]\n",
+             " --steps S --level L --max-level M --out DIR [--weighted]"
+             " [--recursive]\n",
              msg);
   finish (1);
 }
@@ -201,7 +203,8 @@ main (int argc, char **argv)
 {
   MPI_Comm            comm = MPI_COMM_WORLD;
   const char         *dir = NULL;
-  int                 steps = -1, level = -1, weighted = 0, i, bad;
+  int                 steps = -1, level = -1, weighted = 0, recursive = 0;
+  int                 i, bad;
   char                path[4096];
   FILE               *counts = NULL;
   p8est_connectivity_t *conn;
@@ -218,6 +221,10 @@ main (int argc, char **argv)
     const char         *a = argv[i];
     if (!strcmp (a, "--weighted")) {
       weighted = 1;
+      continue;
+    }
+    if (!strcmp (a, "--recursive")) {
+      recursive = 1;
       continue;
     }
     if (i + 1 >= argc)
@@ -255,7 +262,7 @@ main (int argc, char **argv)
     p4est_gloidx_t      n0 = p8est->global_num_quadrants, n1, n2;
     p8est_refine (p8est, 0, refine_fn, NULL);
     n1 = p8est->global_num_quadrants;
-    p8est_coarsen (p8est, 0, coarsen_fn, NULL);
+    p8est_coarsen (p8est, recursive, coarsen_fn, NULL);
     n2 = p8est->global_num_quadrants;
     p8est_balance (p8est, P8EST_CONNECT_FULL, NULL);
     p8est_partition_ext (p8est, 1, weighted ? level_weight : NULL);
