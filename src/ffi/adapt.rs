@@ -5,11 +5,11 @@
 use std::ffi::c_void;
 
 use super::handle::octmesh_t;
-use super::octree::{octmesh_refine_fn, octmesh_weight_fn};
+use super::octree::{level_arg, octmesh_refine_fn, octmesh_weight_fn};
 use super::{octmesh_gloidx_t, octmesh_octant_t, octmesh_status_t, with_mut, write_out};
 use crate::adapt::{Adapt, AdaptStats};
 use crate::error::{Error, Result};
-use crate::{Octant, MAX_LEVEL};
+use crate::Octant;
 
 /// Coarsening callback: `family` points to the eight sibling leaves of a
 /// family in Morton order (child 0 first); returns non-zero to replace them
@@ -60,15 +60,8 @@ pub extern "C" fn octmesh_octree_refine_once(
     refined: *mut octmesh_gloidx_t,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
-        let checked = callback(refine, "refine").and_then(|f| {
-            if (0..=MAX_LEVEL as i32).contains(&max_level) {
-                Ok((f, max_level as u8))
-            } else {
-                Err(Error::invalid(format!(
-                    "max_level {max_level} is outside 0..={MAX_LEVEL}"
-                )))
-            }
-        });
+        let checked =
+            callback(refine, "refine").and_then(|f| Ok((f, level_arg(max_level, "max_level")?)));
         let (f, level) = h.agree(checked)?;
         let s = h.session.refine_once(level, |o: Octant| {
             let oc = octmesh_octant_t::of(o);
