@@ -17,9 +17,10 @@
 //!   For a callback that depends only on the family it is shown, the result
 //!   does not depend on the order families are visited in, so it equals
 //!   repeating the non-recursive call until nothing changes;
-//! - every operation is local except the final recount of the ranks'
-//!   ranges (one all-gather and one reduction), and clears the balance
-//!   flag: balance again afterwards.
+//! - no leaf moves between ranks: the only communication is a few
+//!   collectives of one or two numbers per rank (the octant limit, the
+//!   counts, the ranks' new ranges). Every operation clears the balance
+//!   flag: balance again afterwards, then partition.
 
 use crate::comm::agree;
 use crate::error::Result;
