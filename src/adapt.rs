@@ -344,6 +344,36 @@ mod tests {
     }
 
     #[test]
+    fn refine_then_coarsen_everything_is_the_identity() {
+        let base = towards([3, 400_000, 123_456], 7);
+        let mut t = LinearOctree::from_local_leaves(comm(), base.leaves().to_vec()).unwrap();
+        let r = t.refine_once(18, |_| true, NO_LIMIT).unwrap();
+        let c = t.coarsen(false, |_| true).unwrap();
+        assert_eq!(r.refined, base.global_len());
+        assert_eq!(c.coarsened, base.global_len());
+        assert_eq!(t.leaves(), base.leaves());
+    }
+
+    #[test]
+    fn adapt_keeps_a_leaf_at_the_maximum_level_that_asks_to_refine() {
+        let mut t = towards([5, 6, 7], MAX_LEVEL);
+        let before = t.global_len();
+        let s = t
+            .adapt(
+                |o| {
+                    if o.level() == MAX_LEVEL {
+                        Adapt::Refine
+                    } else {
+                        Adapt::Keep
+                    }
+                },
+                NO_LIMIT,
+            )
+            .unwrap();
+        assert_eq!((s, t.global_len()), (AdaptStats::default(), before));
+    }
+
+    #[test]
     fn adapt_keeps_a_family_that_is_not_complete_at_its_level() {
         // Refine one leaf of a family: the other seven asking to coarsen
         // must be kept, since the family is not eight leaves.
