@@ -102,6 +102,8 @@ module octmesh
   public :: octmesh_domain_set, octmesh_domain_set_box, octmesh_domain_get
   public :: octmesh_octree_refine_surface, octmesh_octree_refine_callback, octmesh_octree_balance, octmesh_octree_partition
   public :: octmesh_octree_get_num_leaves, octmesh_octree_get_leaves, octmesh_octree_check_leak
+  public :: octmesh_octree_refine_once, octmesh_octree_coarsen, octmesh_octree_adapt
+  public :: octmesh_octree_partition_for_coarsening
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
@@ -255,6 +257,51 @@ module octmesh
        type(c_ptr), value :: ctx
        integer(c_int) :: octmesh_octree_partition
      end function octmesh_octree_partition
+
+     !> Adaptation (src/ffi/adapt.rs). refine: as for refine_callback;
+     !> refined, coarsened: c_loc of an integer(c_int64_t), or c_null_ptr.
+     function octmesh_octree_refine_once(h, max_level, refine, ctx, refined) &
+          bind(c, name="octmesh_octree_refine_once")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: max_level
+       type(c_funptr), value :: refine
+       type(c_ptr), value :: ctx, refined
+       integer(c_int) :: octmesh_octree_refine_once
+     end function octmesh_octree_refine_once
+
+     !> coarsen: c_funloc of a bind(c) function (ctx, family) -> int32,
+     !> family the 8 sibling octants.
+     function octmesh_octree_coarsen(h, recursive, coarsen, ctx, coarsened) &
+          bind(c, name="octmesh_octree_coarsen")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: recursive
+       type(c_funptr), value :: coarsen
+       type(c_ptr), value :: ctx, coarsened
+       integer(c_int) :: octmesh_octree_coarsen
+     end function octmesh_octree_coarsen
+
+     !> adapt: c_funloc of a bind(c) function (ctx, octant) -> int32:
+     !> > 0 refine, 0 keep, < 0 coarsen.
+     function octmesh_octree_adapt(h, adapt, ctx, refined, coarsened) &
+          bind(c, name="octmesh_octree_adapt")
+       import :: c_ptr, c_funptr, c_int
+       type(c_ptr), value :: h
+       type(c_funptr), value :: adapt
+       type(c_ptr), value :: ctx, refined, coarsened
+       integer(c_int) :: octmesh_octree_adapt
+     end function octmesh_octree_adapt
+
+     !> weight: as for octmesh_octree_partition.
+     function octmesh_octree_partition_for_coarsening(h, weight, ctx) &
+          bind(c, name="octmesh_octree_partition_for_coarsening")
+       import :: c_ptr, c_funptr, c_int
+       type(c_ptr), value :: h
+       type(c_funptr), value :: weight
+       type(c_ptr), value :: ctx
+       integer(c_int) :: octmesh_octree_partition_for_coarsening
+     end function octmesh_octree_partition_for_coarsening
 
      function octmesh_octree_get_num_leaves(h, nlocal, nglobal) bind(c, name="octmesh_octree_get_num_leaves")
        import :: c_ptr, c_int32_t, c_int64_t, c_int

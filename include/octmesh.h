@@ -511,6 +511,20 @@ typedef int32_t octmesh_connect_t;
  */
 typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 
+/**
+ * Coarsening callback: `family` points to the eight sibling leaves of a
+ * family in Morton order (child 0 first); returns non-zero to replace them
+ * by their parent. Must not unwind or longjmp.
+ */
+typedef int32_t (*octmesh_coarsen_fn)(void *ctx, const octmesh_octant_t *family);
+
+/**
+ * Adaptation callback (t8code's convention): returns a positive value to
+ * refine the leaf, 0 to keep it, a negative value to coarsen it (its family
+ * is coarsened only if all eight ask for it). Must not unwind or longjmp.
+ */
+typedef int32_t (*octmesh_adapt_fn)(void *ctx, const octmesh_octant_t *o);
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -833,6 +847,93 @@ octmesh_status_t octmesh_octree_get_leaves(const octmesh_t *h,
  * \param[in] point  3 values, user units
  */
 octmesh_status_t octmesh_octree_check_leak(octmesh_t *h, const double *point);
+
+/**
+ * Splits each leaf below `max_level` for which `refine(ctx, &leaf)`
+ * returns non-zero into its eight children, once: the children are not
+ * offered to the callback (p4est's non-recursive `p8est_refine`; for
+ * recursive refinement use `octmesh_octree_refine_callback`). Fails with
+ * `OCTMESH_STATUS_LIMIT`, leaving the octree as it was, when the octree
+ * would exceed the octant limit or the memory budget. Drops the balance,
+ * the leaf classes and the mesh. Needs an octree. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  max_level  leaves at this level are not split, 0 to 18
+ * \param[in]  refine     the callback, called once per local leaf below
+ *                        max_level
+ * \param[in]  ctx        passed to the callback unchanged
+ * \param[out] refined    leaves split over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_refine_once(octmesh_t *h,
+                                            int32_t max_level,
+                                            octmesh_refine_fn refine,
+                                            void *ctx,
+                                            octmesh_gloidx_t *refined);
+
+/**
+ * Replaces each family of eight sibling leaves on this rank for which
+ * `coarsen(ctx, family)` returns non-zero by its parent. A family whose
+ * leaves are on different ranks is never offered nor coarsened (p4est's
+ * rule): partition with `octmesh_octree_partition_for_coarsening` first to
+ * keep families together. With `recursive` non-zero, a parent made by
+ * coarsening that completes a new family is offered in turn; with 0, only
+ * families of the leaves present before the call are (p4est's
+ * `p8est_coarsen`). Drops the balance, the leaf classes and the mesh.
+ * Needs an octree. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  recursive  non-zero to coarsen repeatedly
+ * \param[in]  coarsen    the callback
+ * \param[in]  ctx        passed to the callback unchanged
+ * \param[out] coarsened  families coarsened over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_coarsen(octmesh_t *h,
+                                        int32_t recursive,
+                                        octmesh_coarsen_fn coarsen,
+                                        void *ctx,
+                                        octmesh_gloidx_t *coarsened);
+
+/**
+ * Calls `adapt(ctx, &leaf)` once per local leaf, in Morton order, and
+ * then refines each leaf that asked for it once (a leaf at level 18 is
+ * kept) and coarsens each family of eight leaves on this rank that all
+ * asked for it; other leaves are kept (t8code's `t8_forest_adapt`, not
+ * recursive). Fails with `OCTMESH_STATUS_LIMIT`, leaving the octree as it
+ * was, when the octree would exceed the octant limit or the memory budget.
+ * Drops the balance, the leaf classes and the mesh. Needs an octree.
+ * Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  adapt      the callback: > 0 refine, 0 keep, < 0 coarsen
+ * \param[in]  ctx        passed to the callback unchanged
+ * \param[out] refined    leaves split over all ranks, or NULL
+ * \param[out] coarsened  families coarsened over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_adapt(octmesh_t *h,
+                                      octmesh_adapt_fn adapt,
+                                      void *ctx,
+                                      octmesh_gloidx_t *refined,
+                                      octmesh_gloidx_t *coarsened);
+
+/**
+ * Repartitions the leaves in Morton order like `octmesh_octree_partition`
+ * (equal counts when `weight` is NULL, else about equal sums of
+ * `weight(ctx, &leaf)`, called once per local leaf), then moves each
+ * boundary that would split a family of eight sibling leaves to one end of
+ * the family, so that `octmesh_octree_coarsen` and `octmesh_octree_adapt`
+ * can coarsen every family afterwards. The result is identical to p4est's
+ * `p8est_partition_ext (p8est, 1, weight_fn)`, whose shares of the weight
+ * round down where `octmesh_octree_partition` rounds up; when every weight
+ * is 0 nothing moves. Drops the leaf classes and the mesh. Needs an octree.
+ * Collective.
+ *
+ * \param[in] h       the handle
+ * \param[in] weight  the weight callback, or NULL for equal counts
+ * \param[in] ctx     passed to the callback unchanged
+ */
+octmesh_status_t octmesh_octree_partition_for_coarsening(octmesh_t *h,
+                                                         octmesh_weight_fn weight,
+                                                         void *ctx);
 
 /* ---- The mesh: building it, its arrays, output ---- */
 

@@ -406,3 +406,50 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
         }
     }
 }
+
+/// `tests/c/adapt.c`: the moving sphere of `tests/adapt_p4est.rs` (root to
+/// level 5) through `octmesh_octree_adapt`, `_refine_once`, `_coarsen` and
+/// `_partition_for_coarsening`: leaves and per-rank counts equal to p4est's
+/// after every step.
+#[test]
+fn adaptation_from_c_equals_p4est_on_1_to_3_ranks() {
+    let dir = scratch("c_api_adapt");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("adapt", &lib, &dir);
+    common::p4est_ref();
+    let reference = repo().join("tools/p4est_ref/octmesh_p4est_adapt");
+    let counts = |d: &Path| -> Vec<String> {
+        let text = std::fs::read_to_string(d.join("counts.txt")).expect("counts.txt");
+        text.lines().map(str::to_string).collect()
+    };
+    for np in [1, 2, 3] {
+        let (ours, theirs) = (dir.join(format!("c{np}")), dir.join(format!("p4est{np}")));
+        std::fs::create_dir_all(&ours).unwrap();
+        std::fs::create_dir_all(&theirs).unwrap();
+        let out = run_ok(np, &exe, &[ours.to_str().unwrap()]);
+        assert_eq!(out.matches("ADAPT OK").count(), np, "{out}");
+        let args = ["--steps", "10", "--level", "0", "--max-level", "5", "--out"];
+        let mut args = args.to_vec();
+        args.push(theirs.to_str().unwrap());
+        run_ok(np, &reference, &args);
+        let (a, b) = (counts(&ours), counts(&theirs));
+        // The reference also has the initial root (step 0).
+        assert_eq!(a.len(), 10);
+        assert_eq!(
+            a[..],
+            b[1..],
+            "np {np}: step, refined, coarsened, leaves, per rank"
+        );
+        for step in 1..=10 {
+            let x = common::leaves(&ours.join(format!("step_{step}.txt")));
+            let y = common::leaves(&theirs.join(format!("step_{step}.bin")));
+            assert!(x == y, "np {np}, step {step}: leaves differ from p4est's");
+        }
+        let coarsened: u64 = a
+            .iter()
+            .map(|l| l.split(' ').nth(2).unwrap().parse::<u64>().unwrap())
+            .sum();
+        assert!(coarsened > 0, "np {np}: nothing coarsened");
+    }
+}

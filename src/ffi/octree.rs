@@ -25,7 +25,7 @@ pub type octmesh_refine_fn =
 pub type octmesh_weight_fn =
     Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> u64>;
 
-fn level_arg(level: i32, name: &str) -> Result<u8> {
+pub(super) fn level_arg(level: i32, name: &str) -> Result<u8> {
     if (0..=MAX_LEVEL as i32).contains(&level) {
         Ok(level as u8)
     } else {

@@ -17,6 +17,7 @@
 //! and tells its [`Observer`] what it did. A failed stage leaves the session
 //! as it was before the call.
 
+mod adapt;
 mod classes;
 mod mesh;
 pub mod observer;
