@@ -11,19 +11,20 @@ use common::*;
 use octmesh::octant::Octant;
 use std::path::{Path, PathBuf};
 
-/// The refined leaves of `octmesh octree SURFACE ARGS` in a fixed cube.
+/// The refined leaves of `octmesh octree SURFACE ARGS`, in a fixed cube
+/// unless ARGS give one.
 fn refined(surface: &Path, args: &[&str], out: PathBuf, np: usize) -> Vec<Octant> {
-    let mut all = vec![
-        "octree",
-        surface.to_str().unwrap(),
-        "--domain",
-        "-1.5,-1.5,-1.5,3",
+    let mut all = vec!["octree", surface.to_str().unwrap()];
+    if !args.contains(&"--domain") {
+        all.extend(["--domain", "-1.5,-1.5,-1.5,3"]);
+    }
+    all.extend([
         "--balance",
         "none",
         "--quiet",
         "--write-refined",
         out.to_str().unwrap(),
-    ];
+    ]);
     all.extend(args);
     octmesh_ok(np, &all);
     leaves(&out)
@@ -135,6 +136,90 @@ fn each_solid_refines_to_its_own_levels() {
                 .count(),
             np,
             "{err}"
+        );
+    }
+}
+
+/// Two STL files meshed together (`--surface`): each file is a part, with
+/// its own levels and its own wall patch; the octree is the finer of the
+/// two files' octrees, as for the solids of one file.
+#[test]
+fn several_files_are_parts_with_their_own_levels() {
+    let dir = scratch("surface_files");
+    let sphere = octmesh::geometry::shapes::default_sphere();
+    let tris = |dx: f64| -> Vec<[[f32; 3]; 3]> {
+        sphere
+            .triangles()
+            .iter()
+            .map(|t| t.v.map(|v| [(v[0] + dx) as f32, v[1] as f32, v[2] as f32]))
+            .collect()
+    };
+    let (near, far) = (dir.join("near.stl"), dir.join("far.stl"));
+    write_stl(&near, &tris(0.0), b"near");
+    write_stl(&far, &tris(3.0), b"far");
+    let cube = ["--domain", "-2,-2,-2,6"];
+    let a = refined(
+        &near,
+        &[&cube[..], &["--level", "5"]].concat(),
+        dir.join("a.bin"),
+        1,
+    );
+    let b = refined(
+        &far,
+        &[&cube[..], &["--level", "4"]].concat(),
+        dir.join("b.bin"),
+        1,
+    );
+    let want = finer_of(&a, &b);
+    let far_arg = far.to_str().unwrap();
+    for np in [1, 2] {
+        let args = [
+            &cube[..],
+            &[
+                "--surface",
+                far_arg,
+                "--level",
+                "4",
+                "--surface-level",
+                "near=5",
+            ],
+        ]
+        .concat();
+        let got = refined(&near, &args, dir.join(format!("both{np}.bin")), np);
+        assert!(
+            got == want,
+            "np {np}: {} leaves, the files merged give {}",
+            got.len(),
+            want.len()
+        );
+    }
+    // Each file is a wall patch of the OpenFOAM case.
+    let case = dir.join("case");
+    octmesh_ok(
+        2,
+        &[
+            "mesh",
+            near.to_str().unwrap(),
+            "--surface",
+            far_arg,
+            "--level",
+            "4",
+            "--keep",
+            "outside",
+            "--quiet",
+            "--openfoam",
+            case.to_str().unwrap(),
+        ],
+    );
+    let boundary =
+        std::fs::read_to_string(case.join("processor0/constant/polyMesh/boundary")).unwrap();
+    for name in ["near", "far"] {
+        let at = boundary
+            .find(&format!("    {name}\n"))
+            .unwrap_or_else(|| panic!("no patch {name}:\n{boundary}"));
+        assert!(
+            boundary[at..].lines().take(4).any(|l| l.contains("wall")),
+            "{boundary}"
         );
     }
 }

@@ -22,6 +22,7 @@ use crate::regions::Region;
 /// The option that fills each key.
 pub const OPTIONS: &[(&str, &str)] = &[
     ("surface.file", "the surface argument"),
+    ("surface.others", "--surface"),
     ("surface.drop_degenerate", "--drop-degenerate"),
     ("surface.drop_duplicates", "--drop-duplicates"),
     ("domain.fit", "--fit"),
@@ -102,6 +103,11 @@ struct OctreeArgs {
     /// An STL file (ASCII or binary), the built-in `sphere`, `torus` or `hull`, or
     /// a case file (`.toml`) whose settings the options below override.
     input: String,
+    /// Another surface meshed with the first (an STL file or a built-in
+    /// name), repeatable: each file is a part with its own patch and, with
+    /// --surface-level, its own levels
+    #[arg(long = "surface", value_name = "FILE")]
+    others: Vec<String>,
     /// Level of the leaves touching the surface (0 to 18); MIN:MAX refines
     /// them further, up to MAX, where the surface curves by more than the
     /// feature angle
@@ -349,6 +355,10 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         set("surface.file", true);
     }
     let o = &octree;
+    if set("surface.others", !o.others.is_empty()) {
+        // The command line's extra surfaces replace the case file's.
+        config.surface.others = o.others.clone();
+    }
     if let Some((min, max)) = o.level {
         set("octree.level", true);
         config.octree.level = Some(min);

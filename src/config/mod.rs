@@ -149,6 +149,11 @@ pub struct SurfaceConfig {
     /// An STL file (ASCII or binary), or the built-in `sphere` (radius 1 at
     /// the origin, 20,480 triangles), `torus` or `hull` (a Wigley hull).
     pub file: String,
+    /// More surfaces meshed together with `file` (STL files or built-in
+    /// names, `--surface`): each file is a part of the surface (a patch of
+    /// its own, with its own levels through `octree.surface_levels`), named
+    /// after its stem, or its solids when it names them.
+    pub others: Vec<String>,
     /// Remove zero-area facets right after loading.
     pub drop_degenerate: bool,
     /// Remove facets with the same (welded) vertices as an earlier facet.
@@ -382,6 +387,7 @@ impl ConfigError {
 /// Every key of a configuration, `table.field`.
 pub const KEYS: &[&str] = &[
     "surface.file",
+    "surface.others",
     "surface.drop_degenerate",
     "surface.drop_duplicates",
     "domain.fit",
@@ -626,6 +632,13 @@ impl Config {
             )),
             _ => Ok(()),
         }
+    }
+
+    /// Every surface file: `surface.file`, then `surface.others`.
+    pub fn surface_files(&self) -> Vec<String> {
+        std::iter::once(self.surface.file.clone())
+            .chain(self.surface.others.iter().cloned())
+            .collect()
     }
 
     /// Whether any level is given as a size.

@@ -367,6 +367,36 @@ pub fn load_surface(spec: &str) -> Result<Surface> {
     }
 }
 
+/// Loads several surface specifications ([`load_surface`]) as one surface
+/// whose parts are the files' solids (ASCII files with named solids) or the
+/// files themselves, named after their stems (`sphere`, `bunny`). One
+/// specification is [`load_surface`] itself.
+pub fn load_surfaces(specs: &[String]) -> Result<Surface> {
+    if specs.len() == 1 {
+        return load_surface(&specs[0]);
+    }
+    let mut triangles = Vec::new();
+    let mut parts = Parts::default();
+    for spec in specs {
+        let s = load_surface(spec)?;
+        let own = s.parts();
+        let first = parts.names.len() as u16;
+        if own.names.is_empty() {
+            parts
+                .names
+                .push(crate::mesh::patches::surface_patch_name(spec));
+        } else {
+            parts.names.extend(own.names.iter().cloned());
+        }
+        // One part per file unless the file's own parts tell them apart.
+        parts
+            .of
+            .extend((0..s.len()).map(|t| first + own.of.get(t).copied().unwrap_or(0)));
+        triangles.extend_from_slice(s.triangles());
+    }
+    Surface::new(triangles)?.with_parts(parts)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,7 +7,7 @@ use crate::comm::agree;
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{clean, diagnose};
-use crate::geometry::{load_surface, Surface};
+use crate::geometry::{load_surfaces, Surface};
 use crate::refine::{estimate_leaves, SurfaceIndex};
 use crate::report::peak_rss_bytes;
 
@@ -15,13 +15,15 @@ use super::*;
 use crate::geometry::parts::PartLocator;
 
 impl Session {
-    /// Reads the configured surface (`surface.file`: an STL file, `sphere`
-    /// or `torus`), cleans it as configured, and indexes it for the cube
-    /// the next octree will use. Phase `read`. Collective: a failure on any
-    /// rank (a file missing on one node) fails on every rank.
+    /// Reads the configured surface (`surface.file`: an STL file, `sphere`,
+    /// `torus` or `hull`, and the `surface.others` meshed with it, each a
+    /// part), cleans it as configured, and indexes it for the cube the next
+    /// octree will use. Phase `read`. Collective: a failure on any rank (a
+    /// file missing on one node) fails on every rank.
     pub fn load_surface(&mut self) -> Result<()> {
-        let file = self.config.surface.file.clone();
-        self.install_surface(&file, || load_surface(&file))
+        let files = self.config.surface_files();
+        let name = files.join(" + ");
+        self.install_surface(&name, || load_surfaces(&files))
     }
 
     /// Installs `surface` (read by the caller on every rank) under `name`,
