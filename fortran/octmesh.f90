@@ -111,7 +111,7 @@ module octmesh
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
   public :: octmesh_octree_refine_curvature, octmesh_octree_refine_regions_f
-  public :: octmesh_octree_refine_surface_part_f
+  public :: octmesh_octree_refine_surface_part_f, octmesh_surface_from_files_f
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
@@ -204,6 +204,14 @@ module octmesh
        character(kind=c_char), intent(in) :: name(*)
        integer(c_int) :: c_octmesh_surface_builtin
      end function c_octmesh_surface_builtin
+
+     function c_octmesh_surface_from_files(h, n, specs) bind(c, name="octmesh_surface_from_files")
+       import :: c_ptr, c_int, c_int32_t
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: n
+       type(c_ptr), intent(in) :: specs(*)
+       integer(c_int) :: c_octmesh_surface_from_files
+     end function c_octmesh_surface_from_files
 
      function c_octmesh_surface_from_stl(h, path) bind(c, name="octmesh_surface_from_stl")
        import :: c_ptr, c_char, c_int
@@ -563,6 +571,24 @@ contains
     status = c_octmesh_octree_refine_surface_part(h, trim(name) // c_null_char, min_level, &
          max_level, feature_angle)
   end function octmesh_octree_refine_surface_part_f
+
+  !> Several surfaces (STL files or built-in names) as one, each a part with
+  !> its own wall patch. Collective.
+  function octmesh_surface_from_files_f(h, specs) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: specs(:)
+    integer(c_int) :: status
+    character(kind=c_char, len=len(specs) + 1), allocatable, target :: cspecs(:)
+    type(c_ptr), allocatable :: ps(:)
+    integer :: k
+    allocate(cspecs(size(specs)), ps(max(size(specs), 1)))
+    ps = c_null_ptr
+    do k = 1, size(specs)
+       cspecs(k) = trim(specs(k)) // c_null_char
+       ps(k) = c_loc(cspecs(k))
+    end do
+    status = c_octmesh_surface_from_files(h, int(size(specs), c_int32_t), ps)
+  end function octmesh_surface_from_files_f
 
   !> Surface from an STL file (ASCII or binary). Collective.
   function octmesh_surface_from_stl_f(h, path) result(status)

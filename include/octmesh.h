@@ -650,6 +650,20 @@ octmesh_status_t octmesh_domain_get(const octmesh_t *h, double *origin, double *
 octmesh_status_t octmesh_surface_from_stl(octmesh_t *h, const char *path);
 
 /**
+ * Reads several surfaces as one, each a part with its own wall patch and
+ * levels (`octmesh_octree_refine_surface_part`): STL files or built-in
+ * names, like the command's surface argument followed by `--surface` for
+ * each further one. A part is named after its file's stem, or its solids
+ * when an ASCII file names them. Collective: a failure on any rank fails
+ * on every rank.
+ *
+ * \param[in] h      the handle
+ * \param[in] n      number of surfaces, > 0
+ * \param[in] specs  n NUL-terminated paths or built-in names
+ */
+octmesh_status_t octmesh_surface_from_files(octmesh_t *h, int32_t n, const char *const *specs);
+
+/**
  * Sets the surface from the caller's triangles. The data is copied.
  * Collective; each rank passes the whole surface.
  *

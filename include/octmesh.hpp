@@ -86,6 +86,12 @@ class Mesher {
   void surface_builtin(const std::string &name) {
     detail::check(octmesh_surface_builtin(h_, name.c_str()), h_, "octmesh_surface_builtin");
   }
+  void surface_from_files(const std::vector<std::string> &specs) {
+    std::vector<const char *> p;
+    for (const auto &s : specs) p.push_back(s.c_str());
+    detail::check(octmesh_surface_from_files(h_, static_cast<int32_t>(p.size()), p.data()), h_,
+                  "octmesh_surface_from_files");
+  }
   void surface_from_stl(const std::string &path) {
     detail::check(octmesh_surface_from_stl(h_, path.c_str()), h_, "octmesh_surface_from_stl");
   }

@@ -282,6 +282,7 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
     let halves = dir.join("halves.stl");
     common::write_sphere_solids(&halves, &[("top", Some(true)), ("bottom", Some(false))]);
     let halves = halves.to_str().unwrap();
+    let with_hull = format!("{halves}+hull");
     let cases: &[([&str; 7], [&str; 7])] = &[
         (
             ["sphere", "5", "inside", "center", "auto", "corner", "0.7"],
@@ -306,6 +307,11 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             [halves, "3", "inside", "center", "auto", "corner", "0.7"],
             [halves, "3", "1", "0", "0", "3", "0.7"],
         ),
+        // The halves and the built-in hull as three parts, the hull finer.
+        (
+            [&with_hull, "3", "all", "center", "auto", "corner", "0.7"],
+            [&with_hull, "3", "0", "0", "0", "3", "0.7"],
+        ),
     ];
     // Refinement controls: (max level, feature angle, min level, bands,
     // regions) for the command and for `octmesh_octree_refine_curvature`
@@ -328,13 +334,16 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             "-",
             &["part:top=5:6", "sphere:0,0,-1,0.3:5"],
         )),
+        Some(("3", "30", "0", "-", &["part:hull=5:6"])),
     ];
     for (i, (words, values)) in cases.iter().enumerate() {
         let [surface, level, keep, cut, inside, balance, fit] = *words;
         let level_range;
+        // A+B: the first surface, then --surface for the others.
+        let mut files = surface.split('+');
         let mut args = vec![
             "mesh",
-            surface,
+            files.next().unwrap(),
             "--keep",
             keep,
             "--cut-rule",
@@ -344,6 +353,9 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             "--balance",
             balance,
         ];
+        for other in files {
+            args.extend(["--surface", other]);
+        }
         match fit.strip_prefix("box:").and_then(|b| b.split_once(':')) {
             Some((bbox, roots)) => args.extend(["--box", bbox, "--roots", roots]),
             None => args.extend(["--fit", fit]),

@@ -36,6 +36,39 @@ pub extern "C" fn octmesh_surface_from_stl(
     })
 }
 
+/// Reads several surfaces as one, each a part with its own wall patch and
+/// levels (`octmesh_octree_refine_surface_part`): STL files or built-in
+/// names, like the command's surface argument followed by `--surface` for
+/// each further one. A part is named after its file's stem, or its solids
+/// when an ASCII file names them. Collective: a failure on any rank fails
+/// on every rank.
+///
+/// \param[in] h      the handle
+/// \param[in] n      number of surfaces, > 0
+/// \param[in] specs  n NUL-terminated paths or built-in names
+#[no_mangle]
+pub extern "C" fn octmesh_surface_from_files(
+    h: *mut octmesh_t,
+    n: i32,
+    specs: *const *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let specs: Result<Vec<String>> = (|| {
+            if n < 1 {
+                return Err(Error::invalid(format!("n must be positive, got {n}")));
+            }
+            // SAFETY: NULL or n pointers (requirement of the C API).
+            let ptrs = unsafe { super::slice_arg(specs, n as usize, "specs") }?;
+            ptrs.iter()
+                .map(|&p| super::str_arg(p, "specs[i]").map(str::to_string))
+                .collect()
+        })();
+        let name = specs.as_ref().map_or(String::new(), |s| s.join(" + "));
+        let loaded = specs.and_then(|s| crate::geometry::load_surfaces(&s));
+        install(h, &name, loaded)
+    })
+}
+
 /// Sets the surface from the caller's triangles. The data is copied.
 /// Collective; each rank passes the whole surface.
 ///

@@ -6,7 +6,8 @@
  * BANDS as "D1:L1,D2:L2" or "-", REGIONS in the command's form; FIT may be
  * "box:X0,Y0,Z0,X1,Y1,Z1:NX,NY,NZ" for a box domain instead; a REGION
  * "part:NAME=MIN:MAX" refines a part of the surface to its own levels
- * (octmesh_octree_refine_surface_part, with ANGLE).
+ * (octmesh_octree_refine_surface_part, with ANGLE); SURFACE may be A+B+...
+ * for several surfaces (octmesh_surface_from_files).
  * Prints "COUNTS elements independent face_hanging edge_hanging" on rank 0,
  * for comparison with the octmesh command on the same settings. */
 #include <stdlib.h>
@@ -40,7 +41,14 @@ int main(int argc, char **argv) {
     CHECK(strstr(octmesh_last_error(h), "does not divide") != NULL, h);
     OK(octmesh_domain_set_box(h, lo, hi, roots), h);
   }
-  if (strcmp(argv[1], "sphere") == 0 || strcmp(argv[1], "torus") == 0)
+  if (strchr(argv[1], '+') != NULL) {
+    /* Several surfaces, A+B+...: each a part. */
+    const char *specs[8];
+    int n = 0;
+    for (char *t = strtok(argv[1], "+"); t && n < 8; t = strtok(NULL, "+"))
+      specs[n++] = t;
+    OK(octmesh_surface_from_files(h, n, specs), h);
+  } else if (strcmp(argv[1], "sphere") == 0 || strcmp(argv[1], "torus") == 0)
     OK(octmesh_surface_builtin(h, argv[1]), h);
   else
     OK(octmesh_surface_from_stl(h, argv[1]), h);
