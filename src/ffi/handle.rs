@@ -313,8 +313,11 @@ pub extern "C" fn octmesh_domain_set(
 /// count from the root cells: level `l` has cells of side `2^-l` of a root
 /// cell, up to 18 less the log2 of the largest root count rounded up. The
 /// mesh's side patches (`xmin` ... `zmax`) lie on the box. Callbacks of
-/// `octmesh_octree_refine_callback` still see the lattice of the smallest
-/// power-of-two cube of root cells holding the box. Collective.
+/// `octmesh_octree_refine_callback` and the adaptation calls, and
+/// `octmesh_octree_get_leaves`, still see the lattice of the smallest
+/// power-of-two cube of root cells holding the box (levels counted from that
+/// cube), the void octants around the box included; meshes, faces and files
+/// see the box only. Collective.
 ///
 /// ```text
 ///        +-----+-----+-----+  hi
