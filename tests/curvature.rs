@@ -143,3 +143,110 @@ fn the_sphere_refines_only_below_its_turn_per_leaf() {
     assert_eq!(run("30"), plain);
     assert!(run("2") > plain);
 }
+
+/// The fandisk's sharp edges get the finest level: every leaf holding the
+/// midpoint of an edge whose two facets turn by more than 45 degrees (well
+/// above the 30-degree feature angle) is at MAX. Sharp edges are found here
+/// from the facets alone: vertices welded by their coordinates, the
+/// dihedral turn from the facets' normals.
+#[test]
+fn the_fandisk_sharp_edges_reach_max() {
+    let Some(fandisk) = shared_model("fandisk.stl") else {
+        return;
+    };
+    let dir = scratch("curvature_fandisk");
+    let s = octmesh::geometry::load_surface(fandisk.to_str().unwrap()).unwrap();
+    type Key = [u64; 3];
+    let key = |p: [f64; 3]| p.map(f64::to_bits);
+    let normal = |t: &octmesh::geometry::Triangle| {
+        let n = t.normal();
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        n.map(|c| c / l)
+    };
+    let mut by_edge: std::collections::HashMap<(Key, Key), Vec<usize>> = Default::default();
+    for (i, t) in s.triangles().iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (key(t.v[k]), key(t.v[(k + 1) % 3]));
+            by_edge.entry((a.min(b), a.max(b))).or_default().push(i);
+        }
+    }
+    let cos45 = 45f64.to_radians().cos();
+    let mut midpoints = Vec::new();
+    for ((a, b), f) in &by_edge {
+        if let [i, j] = f[..] {
+            let (n, m) = (normal(&s.triangles()[i]), normal(&s.triangles()[j]));
+            if n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos45 {
+                let p = |k: &Key| k.map(f64::from_bits);
+                let (a, b) = (p(a), p(b));
+                midpoints.push(std::array::from_fn::<f64, 3, _>(|c| 0.5 * (a[c] + b[c])));
+            }
+        }
+    }
+    assert!(midpoints.len() > 50, "only {} sharp edges", midpoints.len());
+    let (min, max) = ("4", 7u8);
+    for np in [1, 2] {
+        let file = dir.join(format!("leaves{np}.bin"));
+        let stats = dir.join(format!("s{np}.json"));
+        octmesh_ok(
+            np,
+            &[
+                "octree",
+                fandisk.to_str().unwrap(),
+                "--level",
+                &format!("{min}:{max}"),
+                "--balance",
+                "none",
+                "--quiet",
+                "--write-leaves",
+                file.to_str().unwrap(),
+                "--stats",
+                stats.to_str().unwrap(),
+            ],
+        );
+        let leaves = leaves(&file);
+        let side = num(&json_file(&stats), "domain_side");
+        // The cube octmesh fitted: centred on the surface's box.
+        let b = s.bbox();
+        let origin: [f64; 3] = std::array::from_fn(|k| 0.5 * (b.min[k] + b.max[k]) - 0.5 * side);
+        let unit = side / (1u64 << 19) as f64;
+        let mut coarse = 0;
+        for p in &midpoints {
+            let q: [u32; 3] = std::array::from_fn(|k| ((p[k] - origin[k]) / unit) as u32);
+            let cell = octmesh::octant::morton_encode(q[0], q[1], q[2]);
+            let i = leaves.partition_point(|o| o.cell_begin() <= cell) - 1;
+            coarse += usize::from(leaves[i].level() < max);
+        }
+        assert_eq!(
+            coarse,
+            0,
+            "np {np}: {coarse} of {} sharp-edge midpoints lie in leaves below level {max}",
+            midpoints.len()
+        );
+        // Flat parts stay coarser: fewer leaves than the whole surface at MAX.
+        let everywhere = dir.join(format!("all{np}.json"));
+        octmesh_ok(
+            np,
+            &[
+                "octree",
+                fandisk.to_str().unwrap(),
+                "--level",
+                &max.to_string(),
+                "--balance",
+                "none",
+                "--quiet",
+                "--stats",
+                everywhere.to_str().unwrap(),
+            ],
+        );
+        let all = int(&json_file(&everywhere), "octants_refined") as usize;
+        assert!(
+            leaves.len() < all,
+            "np {np}: {} leaves, {all} at level {max} everywhere",
+            leaves.len()
+        );
+        println!(
+            "np {np}: {} sharp edges, all in level-{max} leaves",
+            midpoints.len()
+        );
+    }
+}
