@@ -419,23 +419,114 @@ impl<'a> RegionRules<'a> {
         if self.brick.is_void(o) {
             return false;
         }
-        if o.level() < self.min_level {
-            return true;
-        }
-        let (lo, hi) = o.bounds_f64();
         if let Some(s) = self.surface {
-            // The widest band that still refines this leaf decides: the
-            // narrower ones lie inside it.
-            let widest = self
-                .bands
-                .iter()
-                .filter(|b| o.level() < b.1)
-                .map(|b| b.0)
-                .fold(-1.0, f64::max);
+            let widest = self.widest(o.level());
+            let (lo, hi) = o.bounds_f64();
             if widest >= 0.0 && s.box_within(lo, hi, widest, buf) {
                 return true;
             }
         }
+        self.shapes_split(o)
+    }
+
+    /// The widest band that still refines a leaf at `level` (lattice
+    /// units), or -1 when none does: the narrower ones lie inside it, so it
+    /// alone decides. Never grows with the level.
+    fn widest(&self, level: u8) -> f64 {
+        self.bands
+            .iter()
+            .filter(|b| level < b.1)
+            .map(|b| b.0)
+            .fold(-1.0, f64::max)
+    }
+
+    /// Appends to `out` the leaves that replace leaf `o` under every rule:
+    /// [`RegionRules::splits`] applied recursively, but with the bands'
+    /// candidate triangles found once for `o` and passed down, each child
+    /// keeping those whose boxes come within its band's distance, rather
+    /// than one search of the bounding-box tree per octant (as surface
+    /// refinement passes its candidates down). `stack` is scratch space.
+    /// Fails (the octant limit's error) once `out` holds more than `limit`
+    /// leaves.
+    pub fn refine_leaf(
+        &self,
+        o: Octant,
+        out: &mut Vec<Octant>,
+        stack: &mut Vec<u32>,
+        limit: u64,
+    ) -> Result<()> {
+        let w = self.widest(o.level());
+        let (Some(s), true) = (self.surface, w >= 0.0 && !self.brick.is_void(o)) else {
+            let mut buf = std::mem::take(stack);
+            let max = self.max_level();
+            let r =
+                crate::refine::refine_rec(o, max, &mut |q| self.splits(q, &mut buf), out, limit);
+            *stack = buf;
+            return r;
+        };
+        stack.clear();
+        let (lo, hi) = o.bounds_f64();
+        s.bvh
+            .query_candidates(lo.map(|x| x - w), hi.map(|x| x + w), stack);
+        let n = stack.len();
+        self.walk(s, o, (0, n), out, stack, limit)
+    }
+
+    /// [`RegionRules::refine_leaf`] below `o`, whose candidates are
+    /// `stack[a..b]`.
+    fn walk(
+        &self,
+        s: &SurfaceIndex,
+        o: Octant,
+        (a, b): (usize, usize),
+        out: &mut Vec<Octant>,
+        stack: &mut Vec<u32>,
+        limit: u64,
+    ) -> Result<()> {
+        let level = o.level();
+        let max = self.max_level();
+        let split = level < max && {
+            let w = self.widest(level);
+            let (lo, hi) = o.bounds_f64();
+            let mut undecided = Vec::new();
+            let tris = stack[a..b].iter().map(|&t| &s.tris[t as usize]);
+            (w >= 0.0 && crate::geometry::distance::any_box_within(tris, lo, hi, w, &mut undecided))
+                || self.shapes_split(o)
+        };
+        if !split {
+            out.push(o);
+            if out.len() as u64 > limit {
+                return Err(crate::refine::limit_error(limit, "refining"));
+            }
+            return Ok(());
+        }
+        let w = self.widest(level + 1);
+        let boxes = s.boxes();
+        for c in o.children() {
+            // Children at the finest level are leaves: no candidates needed.
+            let start = stack.len();
+            if w >= 0.0 && level + 1 < max {
+                let (lo, hi) = c.bounds_f64();
+                for i in a..b {
+                    let t = stack[i];
+                    if box_gap2(&boxes[t as usize], lo, hi) <= w * w {
+                        stack.push(t);
+                    }
+                }
+            }
+            let end = stack.len();
+            self.walk(s, c, (start, end), out, stack, limit)?;
+            stack.truncate(start);
+        }
+        Ok(())
+    }
+
+    /// Whether the minimum level or a region asks to split `o` (not void).
+    fn shapes_split(&self, o: Octant) -> bool {
+        if o.level() < self.min_level {
+            return true;
+        }
+        let (lo, hi) = o.bounds_f64();
         self.rules.iter().any(|&(shape, level, outside)| {
             o.level() < level
                 && if outside {
@@ -445,6 +536,16 @@ impl<'a> RegionRules<'a> {
                 }
         })
     }
+}
+
+/// Squared distance between a triangle's box and the box `lo..hi`.
+fn box_gap2(b: &crate::geometry::Aabb, lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let g = (lo[k] - b.max[k]).max(0.0).max(b.min[k] - hi[k]);
+            g * g
+        })
+        .sum()
 }
 
 /// Squared distance from point `p` to the box `lo..hi`.

@@ -129,11 +129,41 @@ pub fn segment_segment2(p1: [f64; 3], q1: [f64; 3], p2: [f64; 3], q2: [f64; 3]) 
 /// Whether the closed box `lo..hi` comes within `d` of the triangle
 /// (distance at most `d`).
 pub fn box_within(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> bool {
+    box_within_quick(t, lo, hi, d).unwrap_or_else(|| box_within_rest(t, lo, hi, d))
+}
+
+/// Whether any triangle of `tris` comes within `d` of the closed box
+/// `lo..hi`: the cheap answers of all first, the exact distances of the
+/// undecided ones only when no cheap answer accepts (most boxes near a
+/// surface have some triangle clearly within `d`). `undecided` is scratch.
+pub fn any_box_within<'t>(
+    tris: impl Iterator<Item = &'t Triangle>,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    d: f64,
+    undecided: &mut Vec<&'t Triangle>,
+) -> bool {
+    undecided.clear();
+    for t in tris {
+        match box_within_quick(t, lo, hi, d) {
+            Some(true) => return true,
+            Some(false) => {}
+            None => undecided.push(t),
+        }
+    }
+    undecided.iter().any(|t| box_within_rest(t, lo, hi, d))
+}
+
+/// The cheap part of [`box_within`]: `Some` answer from the vertices, the
+/// boxes and two separating-axis tests (the box grown by `d / sqrt 3`,
+/// whose points are all within `d`, and by `d`, which holds every point
+/// within `d`), `None` when only the exact distances decide.
+fn box_within_quick(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> Option<bool> {
     let d2 = d * d;
     let [a, b, c] = t.v;
     // Quick accept and reject on the triangle's vertices and box.
     if [a, b, c].iter().any(|&v| point_box2(v, lo, hi) <= d2) {
-        return true;
+        return Some(true);
     }
     let tlo: [f64; 3] = std::array::from_fn(|k| a[k].min(b[k]).min(c[k]));
     let thi: [f64; 3] = std::array::from_fn(|k| a[k].max(b[k]).max(c[k]));
@@ -144,11 +174,31 @@ pub fn box_within(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> bool {
         })
         .sum();
     if gap2 > d2 {
-        return false;
+        return Some(false);
     }
     if triangle_box_overlap(t, lo, hi) {
-        return true;
+        return Some(true);
     }
+    // Rounding margins keep both tests on the safe side of `d`.
+    let margin = 1e-9 * (d + (hi[0] - lo[0]));
+    let inner = d / 3f64.sqrt() - margin;
+    if inner > 0.0 && triangle_box_overlap(t, lo.map(|x| x - inner), hi.map(|x| x + inner)) {
+        return Some(true);
+    }
+    let outer = d + margin;
+    if !triangle_box_overlap(t, lo.map(|x| x - outer), hi.map(|x| x + outer)) {
+        return Some(false);
+    }
+    None
+}
+
+/// The exact part of [`box_within`]: the box's corners against the
+/// triangle and its edges against the triangle's edges (the closest pair
+/// of a box and a triangle that neither overlap nor have a vertex within
+/// `d` of the other is one of these).
+fn box_within_rest(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> bool {
+    let d2 = d * d;
+    let [a, b, c] = t.v;
     let corner = |i: usize| -> [f64; 3] {
         std::array::from_fn(|k| if i >> k & 1 == 1 { hi[k] } else { lo[k] })
     };

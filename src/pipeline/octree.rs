@@ -241,8 +241,9 @@ impl Session {
         let tree = self.tree.as_mut().map(|t| &mut t.0);
         let refined = self.timer.time(&*comm, "regions", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
-            let mut buf = Vec::new();
-            tree.refine(rules.max_level(), |o| rules.splits(o, &mut buf), limit)
+            check_level(rules.max_level())?;
+            let mut stack = Vec::new();
+            tree.refine_with(|o, out| rules.refine_leaf(o, out, &mut stack, limit), limit)
         });
         drop(shown);
         self.refined(refined, budget, limit, "region refinement")

@@ -200,6 +200,30 @@ pub(crate) fn refine_rec(
 }
 
 impl LinearOctree {
+    /// Replaces each local leaf by the leaves `expand` appends for it (in
+    /// Morton order, covering exactly the leaf); `expand` fails as soon as
+    /// more than `limit` leaves are out ([`crate::refine::limit_error`]).
+    /// Collective.
+    pub fn refine_with(
+        &mut self,
+        mut expand: impl FnMut(Octant, &mut Vec<Octant>) -> Result<()>,
+        limit: u64,
+    ) -> Result<()> {
+        let mut out = Vec::with_capacity(self.local_len());
+        let mut result = Ok(());
+        for &o in self.leaves() {
+            if let Err(e) = expand(o, &mut out) {
+                result = Err(e);
+                break;
+            }
+        }
+        let comm = self.comm().clone();
+        let global = global_limit(&comm, out.len(), limit);
+        agree(&*comm, result.and(global))?;
+        self.set_leaves(out);
+        self.refresh()
+    }
+
     /// Refines the existing leaves recursively while `split` returns true
     /// and the level is below `max_level`. Collective.
     pub fn refine(
