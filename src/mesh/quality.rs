@@ -76,7 +76,7 @@ use crate::comm::Comm;
 use crate::error::Result;
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{Face, Faces, Other};
-use crate::mesh::{Mesh, VTK_TO_MORTON};
+use crate::mesh::Mesh;
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
 /// right-handed order on the undistorted element (see the module picture).
@@ -528,7 +528,7 @@ mod tests {
     use crate::comm::{CommRef, SerialComm};
     use crate::domain::{Domain, DEFAULT_FIT};
     use crate::geometry::load_surface;
-    use crate::mesh::MeshOptions;
+    use crate::mesh::{MeshOptions, VTK_TO_MORTON};
     use crate::octant::{Connectivity, Octant};
     use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
     use std::rc::Rc;
