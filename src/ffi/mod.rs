@@ -54,6 +54,7 @@ pub mod faces;
 pub mod handle;
 pub mod mesh;
 pub mod octree;
+pub mod quality;
 pub mod surface;
 
 use std::any::Any;
