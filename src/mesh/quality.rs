@@ -73,10 +73,10 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::comm::Comm;
-use crate::error::Result;
+use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
-use crate::mesh::faces::{Face, Faces, Other};
-use crate::mesh::Mesh;
+use crate::mesh::faces::{Face, FaceKind, Kept, Other};
+use crate::mesh::{Mesh, VTK_TO_MORTON};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
 /// right-handed order on the undistorted element (see the module picture).
@@ -249,13 +249,29 @@ fn cosine_words(c: f64) -> [u64; 2] {
 }
 
 impl Mesh {
-    /// The scaled Jacobian of each local element from the node coordinates
-    /// `coords` (one per local node, e.g. [`Mesh::coordinates`] or moved
-    /// ones).
-    pub fn scaled_jacobians(&self, coords: &[[f64; 3]]) -> Vec<f64> {
-        self.connectivity()
-            .iter()
-            .map(|c| scaled_jacobian(&c.map(|n| coords[n as usize])))
+    /// The corners of local element `i` in VTK order, user units: from
+    /// `coords` (one per local node, e.g. moved ones), or without it where
+    /// the octree puts them (computed from the element, no node array).
+    pub fn element_corners(&self, i: usize, coords: Option<&[[f64; 3]]>) -> [[f64; 3]; 8] {
+        match coords {
+            Some(x) => self.connectivity()[i].map(|n| x[n as usize]),
+            None => {
+                let e = self.elements()[i];
+                let (a, s) = (e.coords(), e.side());
+                std::array::from_fn(|v| {
+                    let m = VTK_TO_MORTON[v];
+                    let q = [0, 1, 2].map(|k| (a[k] + if m >> k & 1 == 1 { s } else { 0 }) as f64);
+                    self.domain().from_lattice(q)
+                })
+            }
+        }
+    }
+
+    /// The scaled Jacobian of each local element, its corners as in
+    /// [`Mesh::element_corners`].
+    pub fn scaled_jacobians(&self, coords: Option<&[[f64; 3]]>) -> Vec<f64> {
+        (0..self.elements().len())
+            .map(|i| scaled_jacobian(&self.element_corners(i, coords)))
             .collect()
     }
 
@@ -283,16 +299,21 @@ impl Mesh {
         (self.face_centre(f), s, corners)
     }
 
-    /// The quality of this mesh with node coordinates `coords` (for the
-    /// scaled Jacobian) and its `faces` ([`Mesh::faces`]; the face figures
-    /// use the octree geometry). Collective: the figures are reduced over
-    /// the ranks. Returns the figures and the local scaled Jacobians.
+    /// The quality of this mesh, the scaled Jacobians from the corners of
+    /// [`Mesh::element_corners`] with `coords`. The face figures are measured over the faces of
+    /// [`Mesh::faces`] with the octree geometry, as they are made, element
+    /// by element: nothing is stored per face. Collective: the figures are
+    /// reduced over the ranks. Returns the figures and the local scaled
+    /// Jacobians.
     pub fn quality(
         &self,
         comm: &dyn Comm,
-        coords: &[[f64; 3]],
-        faces: &Faces,
-    ) -> (Quality, Vec<f64>) {
+        coords: Option<&[[f64; 3]]>,
+    ) -> Result<(Quality, Vec<f64>)> {
+        let local = self.elements().len();
+        if local > u32::MAX as usize {
+            return Err(Error::new(ErrorKind::Limit, "too many local elements"));
+        }
         let jac = self.scaled_jacobians(coords);
         // Sums: elements, inverted, faces, the histogram, then the cosine
         // words.
@@ -308,37 +329,36 @@ impl Mesh {
             max[0] = max[0].max(-j);
         }
         let me = comm.rank() as u32;
-        let list = faces.faces();
-        let measured = (0..faces.num_internal()).chain(
-            faces
-                .halo_ranges()
-                .iter()
-                .filter(|(r, _)| me < *r)
-                .flat_map(|(_, range)| range.clone()),
-        );
-        for k in measured {
-            let f = &list[k];
-            let (Some(p), Some(n)) = (
-                self.centre_of(Other::Element(f.owner)),
-                self.centre_of(f.other),
-            ) else {
-                continue;
-            };
-            let (c, s, corners) = self.face_geometry(f);
-            let cos = face_orthogonality(p, n, s);
-            sums[2] += 1;
-            let w = cosine_words(cos);
-            sums[3 + HISTOGRAM_BINS] += w[0];
-            sums[4 + HISTOGRAM_BINS] += w[1];
-            max[1] = max[1].max(-cos);
-            max[2] = max[2].max(face_skewness(c, s, &corners, p, n));
-        }
-        for f in &list[faces.num_internal()..faces.halo_range().start] {
-            let Some(p) = self.centre_of(Other::Element(f.owner)) else {
-                continue;
-            };
-            let (c, s, corners) = self.face_geometry(f);
-            max[2] = max[2].max(boundary_face_skewness(c, s, &corners, p));
+        let kept = Kept {
+            local: self.elements(),
+            halo: self.halo(),
+        };
+        let centre = |o: Other| self.centre_of(o).unwrap_or_default();
+        for i in 0..local {
+            self.element_faces(&kept, i, |kind, f| {
+                let (c, s, corners) = self.face_geometry(&f);
+                let own = centre(Other::Element(f.owner));
+                // Seen from the element with the lower global number: the
+                // owner on one rank, and the same bits on any number.
+                let (p, n, s) = match (kind, f.other) {
+                    (FaceKind::Boundary, _) => {
+                        max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
+                        return;
+                    }
+                    (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
+                        return;
+                    }
+                    (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
+                    (_, other) => (own, centre(other), s),
+                };
+                let cos = face_orthogonality(p, n, s);
+                sums[2] += 1;
+                let w = cosine_words(cos);
+                sums[3 + HISTOGRAM_BINS] += w[0];
+                sums[4 + HISTOGRAM_BINS] += w[1];
+                max[1] = max[1].max(-cos);
+                max[2] = max[2].max(face_skewness(c, s, &corners, p, n));
+            });
         }
         comm.sum_u64(&mut sums);
         comm.max_f64(&mut max);
@@ -367,7 +387,7 @@ impl Mesh {
             non_orthogonality_average: nonorth_mean,
             skewness_max: max[2],
         };
-        (q, jac)
+        Ok((q, jac))
     }
 }
 
@@ -429,17 +449,17 @@ impl WorstElement {
 impl Mesh {
     /// The `n` elements with the smallest scaled Jacobians over all ranks
     /// (ties by global number), worst first, on rank 0; empty on the
-    /// others. `coords` are the node coordinates and `jac` the local
+    /// others. `coords` are as for [`Mesh::element_corners`] and `jac` the local
     /// scaled Jacobians ([`Mesh::quality`]). Collective.
     pub fn worst_elements(
         &self,
         comm: &dyn Comm,
-        coords: &[[f64; 3]],
+        coords: Option<&[[f64; 3]]>,
         jac: &[f64],
         n: usize,
     ) -> Vec<WorstElement> {
         let element = |i: usize| {
-            let corners = self.connectivity()[i].map(|k| coords[k as usize]);
+            let corners = self.element_corners(i, coords);
             WorstElement {
                 scaled_jacobian: jac[i],
                 global: self.global_element(i),
@@ -528,7 +548,7 @@ mod tests {
     use crate::comm::{CommRef, SerialComm};
     use crate::domain::{Domain, DEFAULT_FIT};
     use crate::geometry::load_surface;
-    use crate::mesh::{MeshOptions, VTK_TO_MORTON};
+    use crate::mesh::MeshOptions;
     use crate::octant::{Connectivity, Octant};
     use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
     use std::rc::Rc;
@@ -710,16 +730,6 @@ mod tests {
         Mesh::build(&t, &domain, Some(&classes), &opts).unwrap()
     }
 
-    /// The corners of an axis-aligned element in VTK order, user units.
-    fn element_corners(mesh: &Mesh, e: Octant) -> [[f64; 3]; 8] {
-        let (a, s) = (e.coords(), e.side());
-        std::array::from_fn(|v| {
-            let m = VTK_TO_MORTON[v];
-            let q = [0, 1, 2].map(|k| (a[k] + if m >> k & 1 == 1 { s } else { 0 }) as f64);
-            mesh.domain().from_lattice(q)
-        })
-    }
-
     #[test]
     fn openfoam_cell_centres_are_the_cube_centres() {
         // OpenFOAM's cell centre: the mean of the face centres as an
@@ -761,7 +771,7 @@ mod tests {
             }
             assert!((vol / 3.0 - mesh.element_volume(i)).abs() < 1e-12 * side.powi(3));
             // The corners the scaled Jacobian reads are the element's.
-            let j = scaled_jacobian(&element_corners(&mesh, mesh.elements()[i]));
+            let j = scaled_jacobian(&mesh.element_corners(i, None));
             assert!(close(j, 1.0), "{j}");
         }
         assert!(split > 0, "no 2:1 interface in the test mesh");
@@ -777,7 +787,12 @@ mod tests {
         let faces = mesh.faces().unwrap();
         let comm = SerialComm;
         let coords = mesh.coordinates();
-        let (q, jac) = mesh.quality(&comm, &coords, &faces);
+        let (q, jac) = mesh.quality(&comm, None).unwrap();
+        // The nodes' array gives the same corners, so the same figures.
+        assert_eq!(
+            mesh.quality(&comm, Some(&coords)).unwrap(),
+            (q.clone(), jac.clone())
+        );
         let level = |o: Other| match o {
             Other::Element(j) => mesh.elements()[j as usize].level(),
             _ => unreachable!(),
@@ -808,7 +823,7 @@ mod tests {
         assert!(jac.iter().all(|&j| close(j, 1.0)));
         // 1/3 on the 2:1 faces; at least that.
         assert!(q.skewness_max >= 1.0 / 3.0 - 1e-12);
-        let worst = mesh.worst_elements(&comm, &coords, &jac, 5);
+        let worst = mesh.worst_elements(&comm, None, &jac, 5);
         assert_eq!(worst.len(), 5);
         assert!(worst.windows(2).all(|w| w[0].order(&w[1]).is_lt()));
     }

@@ -10,24 +10,25 @@ use super::*;
 impl Session {
     /// Measures the current mesh's quality: the scaled Jacobian of each
     /// element from its nodes, and `checkMesh`'s non-orthogonality and
-    /// skewness over the faces (extracted first when not yet: phase
-    /// `faces`); with `output.quality_out` also writes the worst elements
+    /// skewness over the faces (measured as they are made, not stored);
+    /// with `output.quality_out` also writes the worst elements
     /// there (rank 0). Collective; the figures are the same on every rank.
     /// Phase `quality`.
     pub fn quality(&mut self) -> Result<Quality> {
-        self.faces()?;
+        self.mesh_or_state()?;
         let comm = self.comm.clone();
         let out = self.config.output.quality_out.clone();
         let worst = self.config.output.quality_worst() as usize;
-        let (mesh, faces) = (&self.mesh, &self.faces);
+        let mesh = &self.mesh;
         let measured = self.timer.time(&*comm, "quality", || {
-            let (Some(m), Some((_, f))) = (mesh, faces) else {
+            let Some(m) = mesh else {
                 return Ok(Quality::default());
             };
-            let coords = m.coordinates();
-            let (q, jac) = m.quality(&*comm, &coords, f);
+            // The nodes are where the octree put them: corners from the
+            // elements, no node array.
+            let (q, jac) = m.quality(&*comm, None)?;
             if let Some(path) = &out {
-                let list = m.worst_elements(&*comm, &coords, &jac, worst);
+                let list = m.worst_elements(&*comm, None, &jac, worst);
                 let wrote = if comm.rank() == 0 {
                     write_worst_vtu(path, &list)
                 } else {
