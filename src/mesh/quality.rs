@@ -299,12 +299,12 @@ impl Mesh {
         (self.face_centre(f), s, corners)
     }
 
-    /// The quality of this mesh, the scaled Jacobians from the corners of
-    /// [`Mesh::element_corners`] with `coords`. The face figures are measured over the faces of
-    /// [`Mesh::faces`] with the octree geometry, as they are made, element
-    /// by element: nothing is stored per face. Collective: the figures are
-    /// reduced over the ranks. Returns the figures and the local scaled
-    /// Jacobians.
+    /// The quality of this mesh: the scaled Jacobians from the corners of
+    /// [`Mesh::element_corners`] with `coords`, and the face figures over
+    /// the faces of [`Mesh::faces`] with the octree geometry, measured as
+    /// they are made, element by element (nothing is stored per face).
+    /// Collective: the figures are reduced over the ranks. Returns the
+    /// figures and the local scaled Jacobians.
     pub fn quality(
         &self,
         comm: &dyn Comm,
@@ -549,7 +549,7 @@ mod tests {
     use crate::domain::{Domain, DEFAULT_FIT};
     use crate::geometry::load_surface;
     use crate::mesh::MeshOptions;
-    use crate::octant::{Connectivity, Octant};
+    use crate::octant::Connectivity;
     use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
     use std::rc::Rc;
 

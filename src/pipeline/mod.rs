@@ -5,8 +5,9 @@
 //!  load_surface ─► refine_surface ─► partition ─► balance ─► partition
 //!   (read)         (construct,                  (balance)
 //!                   refine)
-//!      ─► classify ─► check_leak ─► build_mesh ─► write_vtu
-//!                                   (ghost, nodes, numbering, connectivity)
+//!      ─► classify ─► check_leak ─► build_mesh ─► write_vtu ─► quality
+//!                                   (ghost, nodes, numbering,   (when asked)
+//!                                    connectivity)
 //! ```
 //!
 //! The `octmesh` command runs the whole sequence a [`Config`] asks for
