@@ -75,7 +75,7 @@ use serde::Serialize;
 use crate::comm::Comm;
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
-use crate::mesh::faces::{Face, FaceKind, Kept, Other};
+use crate::mesh::faces::{FaceKind, Kept, Other};
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
@@ -244,7 +244,8 @@ const COSINE_ONE: f64 = (1u64 << 52) as f64;
 /// The cosine `c` in [-1, 1] as an integer in [0, 2^53], split into a high
 /// and a low word that each sum without overflow for 2^37 faces.
 fn cosine_words(c: f64) -> [u64; 2] {
-    let v = ((c.clamp(-1.0, 1.0) + 1.0) * COSINE_ONE).round() as u64;
+    // Rounded half up; `round` is a library call.
+    let v = ((c.clamp(-1.0, 1.0) + 1.0) * COSINE_ONE + 0.5) as u64;
     [v >> 26, v & ((1 << 26) - 1)]
 }
 
@@ -275,28 +276,15 @@ impl Mesh {
             .collect()
     }
 
-    /// The centre of the element on the other side of a face: local or
-    /// halo (user units).
-    fn centre_of(&self, o: Other) -> Option<[f64; 3]> {
+    /// The centre of a local or halo element, lattice units.
+    fn centre_of(&self, o: Other) -> [f64; 3] {
         let leaf = match o {
             Other::Element(j) => self.elements()[j as usize],
             Other::Halo(h) => self.halo().leaves[h as usize],
-            Other::Patch(_) => return None,
+            Other::Patch(_) => return [0.0; 3],
         };
         let (c, h) = (leaf.coords(), leaf.side() as f64 / 2.0);
-        Some(
-            self.domain()
-                .from_lattice([c[0] as f64 + h, c[1] as f64 + h, c[2] as f64 + h]),
-        )
-    }
-
-    /// A face's centre, area vector and corners, user units.
-    fn face_geometry(&self, f: &Face) -> ([f64; 3], [f64; 3], [[f64; 3]; 4]) {
-        let s = scale(f.unit_normal(), self.face_area(f));
-        let corners = f
-            .corners()
-            .map(|q| self.domain().from_lattice(q.map(|x| x as f64)));
-        (self.face_centre(f), s, corners)
+        [c[0] as f64 + h, c[1] as f64 + h, c[2] as f64 + h]
     }
 
     /// The quality of this mesh: the scaled Jacobians from the corners of
@@ -333,10 +321,15 @@ impl Mesh {
             local: self.elements(),
             halo: self.halo(),
         };
-        let centre = |o: Other| self.centre_of(o).unwrap_or_default();
+        // The figures are ratios and angles, unchanged by the map from the
+        // lattice to user units (a scaling and a shift): they are computed
+        // on the lattice, where the coordinates are exact.
+        let centre = |o: Other| self.centre_of(o);
         for i in 0..local {
             self.element_faces(&kept, i, |kind, f| {
-                let (c, s, corners) = self.face_geometry(&f);
+                let c = f.lattice_centre();
+                let s = scale(f.unit_normal(), f.lattice_area());
+                let corners = f.corners().map(|q| q.map(|x| x as f64));
                 let own = centre(Other::Element(f.owner));
                 // Seen from the element with the lower global number: the
                 // owner on one rank, and the same bits on any number.
