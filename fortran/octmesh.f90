@@ -109,9 +109,11 @@ module octmesh
   public :: octmesh_create_f, octmesh_destroy, octmesh_error, octmesh_status_name_f
   public :: octmesh_options_default
   public :: octmesh_surface_builtin_f, octmesh_surface_from_stl_f, octmesh_surface_from_triangles
-  public :: octmesh_domain_set, octmesh_domain_get
+  public :: octmesh_domain_set, octmesh_domain_set_box, octmesh_domain_get
   public :: octmesh_octree_refine_surface, octmesh_octree_refine_callback, octmesh_octree_balance, octmesh_octree_partition
   public :: octmesh_octree_get_num_leaves, octmesh_octree_get_leaves, octmesh_octree_check_leak
+  public :: octmesh_octree_refine_once, octmesh_octree_coarsen, octmesh_octree_adapt
+  public :: octmesh_octree_partition_for_coarsening
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
@@ -120,6 +122,7 @@ module octmesh
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
   public :: octmesh_octree_refine_curvature, octmesh_octree_refine_regions_f
+  public :: octmesh_octree_refine_surface_part_f
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
@@ -163,6 +166,16 @@ module octmesh
        real(c_double), value :: side
        integer(c_int) :: octmesh_domain_set
      end function octmesh_domain_set
+
+     !> A box domain lo(3)..hi(3) of roots(1) x roots(2) x roots(3) cubic
+     !> root cells (p4est brick order); levels count from the root cells.
+     function octmesh_domain_set_box(h, lo, hi, roots) bind(c, name="octmesh_domain_set_box")
+       import :: c_ptr, c_double, c_int
+       type(c_ptr), value :: h
+       real(c_double), intent(in) :: lo(3), hi(3)
+       integer(c_int), intent(in) :: roots(3)
+       integer(c_int) :: octmesh_domain_set_box
+     end function octmesh_domain_set_box
 
      !> OCTMESH_STATUS_LEAK when the region outside the surface reaches
      !> point(3), known to be inside the body; octmesh_error(h) then
@@ -255,6 +268,51 @@ module octmesh
        type(c_ptr), value :: ctx
        integer(c_int) :: octmesh_octree_partition
      end function octmesh_octree_partition
+
+     !> Adaptation (src/ffi/adapt.rs). refine: as for refine_callback;
+     !> refined, coarsened: c_loc of an integer(c_int64_t), or c_null_ptr.
+     function octmesh_octree_refine_once(h, max_level, refine, ctx, refined) &
+          bind(c, name="octmesh_octree_refine_once")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: max_level
+       type(c_funptr), value :: refine
+       type(c_ptr), value :: ctx, refined
+       integer(c_int) :: octmesh_octree_refine_once
+     end function octmesh_octree_refine_once
+
+     !> coarsen: c_funloc of a bind(c) function (ctx, family) -> int32,
+     !> family the 8 sibling octants.
+     function octmesh_octree_coarsen(h, recursive, coarsen, ctx, coarsened) &
+          bind(c, name="octmesh_octree_coarsen")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: recursive
+       type(c_funptr), value :: coarsen
+       type(c_ptr), value :: ctx, coarsened
+       integer(c_int) :: octmesh_octree_coarsen
+     end function octmesh_octree_coarsen
+
+     !> adapt: c_funloc of a bind(c) function (ctx, octant) -> int32:
+     !> > 0 refine, 0 keep, < 0 coarsen.
+     function octmesh_octree_adapt(h, adapt, ctx, refined, coarsened) &
+          bind(c, name="octmesh_octree_adapt")
+       import :: c_ptr, c_funptr, c_int
+       type(c_ptr), value :: h
+       type(c_funptr), value :: adapt
+       type(c_ptr), value :: ctx, refined, coarsened
+       integer(c_int) :: octmesh_octree_adapt
+     end function octmesh_octree_adapt
+
+     !> weight: as for octmesh_octree_partition.
+     function octmesh_octree_partition_for_coarsening(h, weight, ctx) &
+          bind(c, name="octmesh_octree_partition_for_coarsening")
+       import :: c_ptr, c_funptr, c_int
+       type(c_ptr), value :: h
+       type(c_funptr), value :: weight
+       type(c_ptr), value :: ctx
+       integer(c_int) :: octmesh_octree_partition_for_coarsening
+     end function octmesh_octree_partition_for_coarsening
 
      function octmesh_octree_get_num_leaves(h, nlocal, nglobal) bind(c, name="octmesh_octree_get_num_leaves")
        import :: c_ptr, c_int32_t, c_int64_t, c_int
@@ -373,6 +431,16 @@ module octmesh
        real(c_double), value :: feature_angle
        integer(c_int) :: octmesh_octree_refine_curvature
      end function octmesh_octree_refine_curvature
+
+     function c_octmesh_octree_refine_surface_part(h, name, min_level, max_level, &
+          feature_angle) bind(c, name="octmesh_octree_refine_surface_part")
+       import :: c_ptr, c_char, c_int, c_int32_t, c_double
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: name(*)
+       integer(c_int32_t), value :: min_level, max_level
+       real(c_double), value :: feature_angle
+       integer(c_int) :: c_octmesh_octree_refine_surface_part
+     end function c_octmesh_octree_refine_surface_part
 
      function c_octmesh_octree_refine_regions(h, min_level, nregions, regions, nbands, &
           distances, levels) bind(c, name="octmesh_octree_refine_regions")
@@ -495,13 +563,26 @@ contains
     name = c_to_f_string(octmesh_status_name(int(status, c_int32_t)))
   end function octmesh_status_name_f
 
-  !> Built-in surface: "sphere" or "torus". Collective.
+  !> Built-in surface: "sphere", "torus" or "hull". Collective.
   function octmesh_surface_builtin_f(h, name) result(status)
     type(c_ptr), intent(in) :: h
     character(len=*), intent(in) :: name
     integer(c_int) :: status
     status = c_octmesh_surface_builtin(h, trim(name) // c_null_char)
   end function octmesh_surface_builtin_f
+
+  !> One part of the surface (a solid, by its patch name) refined to its own
+  !> levels min_level..max_level (curvature with feature_angle). Collective.
+  function octmesh_octree_refine_surface_part_f(h, name, min_level, max_level, feature_angle) &
+       result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: name
+    integer(c_int32_t), intent(in) :: min_level, max_level
+    real(c_double), intent(in) :: feature_angle
+    integer(c_int) :: status
+    status = c_octmesh_octree_refine_surface_part(h, trim(name) // c_null_char, min_level, &
+         max_level, feature_angle)
+  end function octmesh_octree_refine_surface_part_f
 
   !> Surface from an STL file (ASCII or binary). Collective.
   function octmesh_surface_from_stl_f(h, path) result(status)

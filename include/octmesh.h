@@ -183,6 +183,11 @@ typedef enum {
 } octmesh_foam_format;
 
 /**
+ * The brick of root cells of a domain, in lattice terms.
+ */
+typedef struct Brick Brick;
+
+/**
  * Opaque handle: a communicator, the pipeline's session (surface, octree,
  * mesh) and the last error. Created by `octmesh_create`, freed by
  * `octmesh_destroy`. A handle must not be used by two threads at once.
@@ -507,6 +512,20 @@ typedef int32_t octmesh_connect_t;
 typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 
 /**
+ * Coarsening callback: `family` points to the eight sibling leaves of a
+ * family in Morton order (child 0 first); returns non-zero to replace them
+ * by their parent. Must not unwind or longjmp.
+ */
+typedef int32_t (*octmesh_coarsen_fn)(void *ctx, const octmesh_octant_t *family);
+
+/**
+ * Adaptation callback (t8code's convention): returns a positive value to
+ * refine the leaf, 0 to keep it, a negative value to coarsen it (its family
+ * is coarsened only if all eight ask for it). Must not unwind or longjmp.
+ */
+typedef int32_t (*octmesh_adapt_fn)(void *ctx, const octmesh_octant_t *o);
+
+/**
  * The quality figures of a mesh, the same on every rank (and on every
  * number of ranks).
  */
@@ -622,6 +641,37 @@ const char *octmesh_status_name(int32_t status);
 octmesh_status_t octmesh_domain_set(octmesh_t *h, const double *origin, double side);
 
 /**
+ * Sets a box domain for the next octree instead of the cube: the box
+ * `lo..hi` split into `roots[0] x roots[1] x roots[2]` cubic root cells
+ * (the trees of a p4est brick, numbered in `p8est_connectivity_new_brick`
+ * order). The box's sides divided by the root counts must be equal (else
+ * OCTMESH_STATUS_INVALID_ARGUMENT naming boxes that divide). Levels then
+ * count from the root cells: level `l` has cells of side `2^-l` of a root
+ * cell, up to 18 less the log2 of the largest root count rounded up. The
+ * mesh's side patches (`xmin` ... `zmax`) lie on the box. Callbacks of
+ * `octmesh_octree_refine_callback` still see the lattice of the smallest
+ * power-of-two cube of root cells holding the box. Collective.
+ *
+ * ```text
+ *        +-----+-----+-----+  hi
+ *       /     /     /     /|
+ *      +-----+-----+-----+ |     roots = {3, 1, 1}
+ *      |  0  |  1  |  2  | +
+ *      |     |     |     |/
+ *  lo  +-----+-----+-----+
+ * ```
+ *
+ * \param[in] h      the handle
+ * \param[in] lo     lowest corner, 3 values, user units
+ * \param[in] hi     highest corner, 3 values, user units
+ * \param[in] roots  root cells along x, y, z, 3 values, each 1 to 512
+ */
+octmesh_status_t octmesh_domain_set_box(octmesh_t *h,
+                                        const double *lo,
+                                        const double *hi,
+                                        const int32_t *roots);
+
+/**
  * The cube of the current octree (or, without one, the cube the next
  * construction would use). Not collective.
  *
@@ -658,11 +708,12 @@ octmesh_status_t octmesh_surface_from_triangles(octmesh_t *h,
 
 /**
  * Sets a built-in surface: `"sphere"` (radius 1 at the origin, 20,480
- * triangles) or `"torus"` (radii 1 and 0.35, 9,216 triangles).
- * Collective.
+ * triangles), `"torus"` (radii 1 and 0.35, 9,216 triangles) or `"hull"`
+ * (a Wigley hull of length 1 along x, beam 0.1, draft 0.0625, freeboard
+ * 0.05, 7,870 triangles). Collective.
  *
  * \param[in] h     the handle
- * \param[in] name  `"sphere"` or `"torus"`, NUL-terminated
+ * \param[in] name  `"sphere"`, `"torus"` or `"hull"`, NUL-terminated
  */
 octmesh_status_t octmesh_surface_builtin(octmesh_t *h, const char *name);
 
@@ -702,6 +753,30 @@ octmesh_status_t octmesh_octree_refine_curvature(octmesh_t *h,
                                                  int32_t min_level,
                                                  int32_t max_level,
                                                  double feature_angle);
+
+/**
+ * Refinement of one part of the surface (a solid of an ASCII STL, named
+ * as its patch is before renames) to its own levels, like the command's
+ * `--surface-level NAME=MIN:MAX --feature-angle DEG`: a leaf touching the
+ * part is split while below `min_level`, and up to `max_level` while the
+ * unit normals of the part's triangles touching it differ by more than
+ * `feature_angle` degrees. Call it once per part after
+ * `octmesh_octree_refine_surface(h, L)` with `L` the least minimum; the
+ * order of the calls does not matter. Needs an octree and the surface.
+ * Drops the balance and the mesh. Collective.
+ *
+ * \param[in] h              the handle
+ * \param[in] name           the part's name, NUL-terminated
+ * \param[in] min_level      the part's level, 0 to 18
+ * \param[in] max_level      its finest level where it curves, min_level
+ *                           to 18
+ * \param[in] feature_angle  degrees, in (0, 180)
+ */
+octmesh_status_t octmesh_octree_refine_surface_part(octmesh_t *h,
+                                                    const char *name,
+                                                    int32_t min_level,
+                                                    int32_t max_level,
+                                                    double feature_angle);
 
 /**
  * Region refinement of the current octree, like the command's
@@ -816,6 +891,93 @@ octmesh_status_t octmesh_octree_get_leaves(const octmesh_t *h,
  * \param[in] point  3 values, user units
  */
 octmesh_status_t octmesh_octree_check_leak(octmesh_t *h, const double *point);
+
+/**
+ * Splits each leaf below `max_level` for which `refine(ctx, &leaf)`
+ * returns non-zero into its eight children, once: the children are not
+ * offered to the callback (p4est's non-recursive `p8est_refine`; for
+ * recursive refinement use `octmesh_octree_refine_callback`). Fails with
+ * `OCTMESH_STATUS_LIMIT`, leaving the octree as it was, when the octree
+ * would exceed the octant limit or the memory budget. Drops the balance,
+ * the leaf classes and the mesh. Needs an octree. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  max_level  leaves at this level are not split, 0 to 18
+ * \param[in]  refine     the callback, called once per local leaf below
+ *                        max_level
+ * \param[in]  ctx        passed to the callback unchanged
+ * \param[out] refined    leaves split over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_refine_once(octmesh_t *h,
+                                            int32_t max_level,
+                                            octmesh_refine_fn refine,
+                                            void *ctx,
+                                            octmesh_gloidx_t *refined);
+
+/**
+ * Replaces each family of eight sibling leaves on this rank for which
+ * `coarsen(ctx, family)` returns non-zero by its parent. A family whose
+ * leaves are on different ranks is never offered nor coarsened (p4est's
+ * rule): partition with `octmesh_octree_partition_for_coarsening` first to
+ * keep families together. With `recursive` non-zero, a parent made by
+ * coarsening that completes a new family is offered in turn; with 0, only
+ * families of the leaves present before the call are (p4est's
+ * `p8est_coarsen`). Drops the balance, the leaf classes and the mesh.
+ * Needs an octree. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  recursive  non-zero to coarsen repeatedly
+ * \param[in]  coarsen    the callback
+ * \param[in]  ctx        passed to the callback unchanged
+ * \param[out] coarsened  families coarsened over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_coarsen(octmesh_t *h,
+                                        int32_t recursive,
+                                        octmesh_coarsen_fn coarsen,
+                                        void *ctx,
+                                        octmesh_gloidx_t *coarsened);
+
+/**
+ * Calls `adapt(ctx, &leaf)` once per local leaf, in Morton order, and
+ * then refines each leaf that asked for it once (a leaf at level 18 is
+ * kept) and coarsens each family of eight leaves on this rank that all
+ * asked for it; other leaves are kept (t8code's `t8_forest_adapt`, not
+ * recursive). Fails with `OCTMESH_STATUS_LIMIT`, leaving the octree as it
+ * was, when the octree would exceed the octant limit or the memory budget.
+ * Drops the balance, the leaf classes and the mesh. Needs an octree.
+ * Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  adapt      the callback: > 0 refine, 0 keep, < 0 coarsen
+ * \param[in]  ctx        passed to the callback unchanged
+ * \param[out] refined    leaves split over all ranks, or NULL
+ * \param[out] coarsened  families coarsened over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_adapt(octmesh_t *h,
+                                      octmesh_adapt_fn adapt,
+                                      void *ctx,
+                                      octmesh_gloidx_t *refined,
+                                      octmesh_gloidx_t *coarsened);
+
+/**
+ * Repartitions the leaves in Morton order like `octmesh_octree_partition`
+ * (equal counts when `weight` is NULL, else about equal sums of
+ * `weight(ctx, &leaf)`, called once per local leaf), then moves each
+ * boundary that would split a family of eight sibling leaves to one end of
+ * the family, so that `octmesh_octree_coarsen` and `octmesh_octree_adapt`
+ * can coarsen every family afterwards. The result is identical to p4est's
+ * `p8est_partition_ext (p8est, 1, weight_fn)`, whose shares of the weight
+ * round down where `octmesh_octree_partition` rounds up; when every weight
+ * is 0 nothing moves. Drops the leaf classes and the mesh. Needs an octree.
+ * Collective.
+ *
+ * \param[in] h       the handle
+ * \param[in] weight  the weight callback, or NULL for equal counts
+ * \param[in] ctx     passed to the callback unchanged
+ */
+octmesh_status_t octmesh_octree_partition_for_coarsening(octmesh_t *h,
+                                                         octmesh_weight_fn weight,
+                                                         void *ctx);
 
 /* ---- The mesh: building it, its arrays, output ---- */
 
@@ -1077,8 +1239,8 @@ octmesh_status_t octmesh_mesh_get_hanging(const octmesh_t *h,
 octmesh_status_t octmesh_mesh_get_element_class(const octmesh_t *h, const int8_t **out);
 
 /**
- * Sets `*out` to the octree level of each local element. Needs a mesh.
- * Not collective.
+ * Sets `*out` to the level of each local element, counted from the root
+ * cells (in a cube, the octree level). Needs a mesh. Not collective.
  *
  * \param[in]  h    the handle
  * \param[out] out  local_elements levels, owned by the handle

@@ -77,6 +77,9 @@ class Mesher {
   void set_domain(const double origin[3], double side) {
     detail::check(octmesh_domain_set(h_, origin, side), h_, "octmesh_domain_set");
   }
+  void set_domain_box(const double lo[3], const double hi[3], const int roots[3]) {
+    detail::check(octmesh_domain_set_box(h_, lo, hi, roots), h_, "octmesh_domain_set_box");
+  }
   void get_domain(double origin[3], double &side) const {
     detail::check(octmesh_domain_get(h_, origin, &side), h_, "octmesh_domain_get");
   }
@@ -105,6 +108,12 @@ class Mesher {
     };
     detail::check(octmesh_octree_refine_callback(h_, max_level, tramp, (void *)&f), h_,
                   "octmesh_octree_refine_callback");
+  }
+  void refine_surface_part(const std::string &name, int min_level, int max_level,
+                           double feature_angle = 30.0) {
+    detail::check(octmesh_octree_refine_surface_part(h_, name.c_str(), min_level, max_level,
+                                                     feature_angle),
+                  h_, "octmesh_octree_refine_surface_part");
   }
   void refine_curvature(int min_level, int max_level, double feature_angle = 30.0) {
     detail::check(octmesh_octree_refine_curvature(h_, min_level, max_level, feature_angle), h_,

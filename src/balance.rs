@@ -37,8 +37,9 @@
 //! one `alltoallv` of probes; rounds repeat until no rank sends anything, so
 //! a ripple may cross any number of ranks.
 
+use crate::brick::Brick;
 use crate::error::Result;
-use crate::octant::{morton_encode, Connectivity, Octant, MAX_LEVEL, ROOT_LEN};
+use crate::octant::{morton_encode, Connectivity, Octant, MAX_LEVEL};
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
 use crate::refine::{limit_error, NO_LIMIT};
 use crate::sort::radix_sort_bits;
@@ -144,6 +145,11 @@ const RECENT_BITS: u32 = 14;
 
 struct Balancer {
     offsets: &'static [[i32; 3]],
+    /// The domain's root cells: families in the void, and probes leaving
+    /// the brick, are skipped (p4est's brick has nothing there).
+    brick: Brick,
+    /// Upper lattice bounds of the brick.
+    hi: [i64; 3],
     skip: [u32; 8],
     begin: u64,
     end: u64,
@@ -179,9 +185,12 @@ impl Balancer {
         for &o in &leaves {
             queue_family(&mut pending, o);
         }
+        let brick = tree.brick();
         Balancer {
             made: Vec::new(),
             offsets: conn.offsets(),
+            brick,
+            hi: brick.hi().map(|v| v as i64),
             skip: sibling_masks(),
             begin,
             end,
@@ -200,7 +209,11 @@ impl Balancer {
         let mut splits: Vec<(usize, Octant)> = Vec::new();
         let mut probes: Vec<u64> = Vec::new();
         let mut tmp: Vec<u64> = Vec::new();
-        for l in (2..=MAX_LEVEL as usize).rev() {
+        // A family at level `l <= k + 1` (k: the trees' level) asks only
+        // that neighbours of level `l - 1 <= k` exist: every tree is split to
+        // its own level already.
+        let lowest = (self.brick.level() as usize + 2).max(2);
+        for l in (lowest..=MAX_LEVEL as usize).rev() {
             if self.over {
                 return;
             }
@@ -254,6 +267,9 @@ impl Balancer {
     /// as their first child; `q` straddling ranks are internal already.
     #[inline]
     fn probe_family(&mut self, p: Octant, probes: &mut Vec<u64>) {
+        if self.brick.is_void(p) {
+            return;
+        }
         let skip = self.skip[p.child_id() as usize];
         let c = p.coords();
         let len = p.side() as i64;
@@ -268,8 +284,8 @@ impl Balancer {
             let x = c[0] as i64 + d[0] as i64 * len;
             let y = c[1] as i64 + d[1] as i64 * len;
             let z = c[2] as i64 + d[2] as i64 * len;
-            let r = ROOT_LEN as i64;
-            if x < 0 || y < 0 || z < 0 || x >= r || y >= r || z >= r {
+            let r = self.hi;
+            if x < 0 || y < 0 || z < 0 || x >= r[0] || y >= r[1] || z >= r[2] {
                 continue;
             }
             let qb = morton_encode(x as u32 & qmask, y as u32 & qmask, z as u32 & qmask);

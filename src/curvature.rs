@@ -1,6 +1,9 @@
 //! Refinement where the surface curves: a leaf touching the surface is
 //! split, up to a maximum level, while the normals of the triangles touching
-//! it differ by more than a feature angle.
+//! it differ by more than a feature angle. Each part of the surface (the
+//! solids of an ASCII STL) may have its own range of levels: a leaf touching
+//! a part is split while below the part's minimum, and up to the part's
+//! maximum where the triangles of the parts it may still refine for turn.
 //!
 //! ```text
 //!   flat: all normals within the angle       curved or sharp: two normals
@@ -25,6 +28,8 @@ pub struct CurvatureRule<'a> {
     normals: Vec<[f64; 3]>,
     /// Cosine of the feature angle.
     cos: f64,
+    /// `(min, max)` levels of each part ([`SurfaceIndex::part_of`]).
+    ranges: Vec<(u8, u8)>,
     max_level: u8,
 }
 
@@ -32,6 +37,16 @@ impl<'a> CurvatureRule<'a> {
     /// The rule for `index`, splitting up to `max_level` where normals
     /// differ by more than `feature_angle` degrees.
     pub fn new(index: &'a SurfaceIndex, max_level: u8, feature_angle: f64) -> CurvatureRule<'a> {
+        CurvatureRule::with_ranges(index, vec![(0, max_level)], feature_angle)
+    }
+
+    /// The rule with a `(min, max)` range of levels per part of `index`
+    /// (one range for a surface of fewer than two parts).
+    pub fn with_ranges(
+        index: &'a SurfaceIndex,
+        ranges: Vec<(u8, u8)>,
+        feature_angle: f64,
+    ) -> CurvatureRule<'a> {
         let normals = index
             .triangles()
             .iter()
@@ -45,10 +60,12 @@ impl<'a> CurvatureRule<'a> {
                 }
             })
             .collect();
+        let max_level = ranges.iter().map(|r| r.0.max(r.1)).max().unwrap_or(0);
         CurvatureRule {
             index,
             normals,
             cos: feature_angle.to_radians().cos(),
+            ranges,
             max_level,
         }
     }
@@ -65,8 +82,21 @@ impl<'a> CurvatureRule<'a> {
         }
         buf.clear();
         self.index.touching(o, buf);
+        let l = o.level();
+        let range = |t: u32| {
+            let p = self.index.part_of(t);
+            self.ranges
+                .get(p)
+                .or(self.ranges.first())
+                .copied()
+                .unwrap_or((0, 0))
+        };
+        if buf.iter().any(|&t| l < range(t).0) {
+            return true;
+        }
         let n: Vec<[f64; 3]> = buf
             .iter()
+            .filter(|&&t| l < range(t).1)
             .map(|&t| self.normals[t as usize])
             .filter(|n| n != &[0.0; 3])
             .collect();

@@ -19,7 +19,9 @@
 //! Octants live on a lattice of 2^19 points per side (see [`octant`]); leaves
 //! are kept in Morton order, each rank holding a contiguous run.
 
+pub mod adapt;
 pub mod balance;
+pub mod brick;
 pub mod budget;
 pub mod classify;
 pub mod comm;

@@ -59,12 +59,30 @@ impl Observer for Table {
                     say!("  dropped {n} facet(s) (degenerate or duplicate)");
                 }
                 let (o, s) = (domain.origin, domain.side);
-                say!(
-                    "  cube: origin ({:.6}, {:.6}, {:.6}), side {s:.6}",
-                    o[0],
-                    o[1],
-                    o[2]
-                );
+                if domain.brick.is_cube() {
+                    say!(
+                        "  cube: origin ({:.6}, {:.6}, {:.6}), side {s:.6}",
+                        o[0],
+                        o[1],
+                        o[2]
+                    );
+                } else {
+                    let (u, r) = (domain.upper(), domain.brick.roots());
+                    say!(
+                        "  box: ({:.6}, {:.6}, {:.6}) to ({:.6}, {:.6}, {:.6}), {}x{}x{} root cells \
+                         of side {:.6}",
+                        o[0],
+                        o[1],
+                        o[2],
+                        u[0],
+                        u[1],
+                        u[2],
+                        r[0],
+                        r[1],
+                        r[2],
+                        domain.root_side()
+                    );
+                }
                 if let Some(e) = estimate {
                     say!(
                         "  estimated octants: {} refined, {} balanced",

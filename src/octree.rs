@@ -9,6 +9,7 @@
 
 use std::sync::Arc;
 
+use crate::brick::Brick;
 use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
 use crate::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
@@ -21,6 +22,8 @@ pub struct LinearOctree {
     first_cell: Vec<u64>,
     offsets: Vec<u64>,
     balanced: Option<Connectivity>,
+    /// The root cells of the domain (the cube unless set).
+    brick: Brick,
 }
 
 impl std::fmt::Debug for LinearOctree {
@@ -34,6 +37,30 @@ impl std::fmt::Debug for LinearOctree {
 }
 
 impl LinearOctree {
+    /// The root cells of the domain the octree lives in: balance skips the
+    /// void outside a brick.
+    pub fn brick(&self) -> Brick {
+        self.brick
+    }
+
+    /// Leaves over all ranks outside the void of a brick: the forest's
+    /// leaves, as p4est counts them. Collective in a brick (a sum), the
+    /// same as [`LinearOctree::global_len`] in a cube.
+    pub fn forest_len(&self) -> u64 {
+        let b = self.brick;
+        if b.is_cube() {
+            return self.global_len();
+        }
+        let mut n = [self.leaves.iter().filter(|o| !b.is_void(**o)).count() as u64];
+        self.comm.sum_u64(&mut n);
+        n[0]
+    }
+
+    /// Places the octree in a brick of root cells (see [`crate::brick`]).
+    pub fn set_brick(&mut self, brick: Brick) {
+        self.brick = brick;
+    }
+
     /// Wraps this rank's sorted leaves. Collective. The union over ranks
     /// must be a complete linear octree in rank order; that is checked
     /// cheaply here (local order and contiguity, and that the ranks' ranges
@@ -47,6 +74,7 @@ impl LinearOctree {
             first_cell: Vec::new(),
             offsets: Vec::new(),
             balanced: None,
+            brick: Brick::CUBE,
         };
         t.refresh()?;
         Ok(t)

@@ -25,6 +25,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::brick::Brick;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::octant::{Octant, MAX_LEVEL};
@@ -40,8 +41,14 @@ pub enum Region {
         min: [f64; 3],
         /// Highest corner.
         max: [f64; 3],
-        /// Leaves overlapping it are refined to this level.
+        /// Leaves overlapping it are refined to this level (counted from the
+        /// root cells).
+        #[serde(default)]
         level: u8,
+        /// The level as a cell size in user units instead: the coarsest
+        /// level whose cell is not larger (`size=S` on the command line).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        size: Option<f64>,
         /// Refine where the box is not, instead.
         #[serde(default)]
         outside: bool,
@@ -52,8 +59,14 @@ pub enum Region {
         center: [f64; 3],
         /// Radius (> 0).
         radius: f64,
-        /// Leaves overlapping it are refined to this level.
+        /// Leaves overlapping it are refined to this level (counted from the
+        /// root cells).
+        #[serde(default)]
         level: u8,
+        /// The level as a cell size in user units instead: the coarsest
+        /// level whose cell is not larger (`size=S` on the command line).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        size: Option<f64>,
         /// Refine where the ball is not, instead.
         #[serde(default)]
         outside: bool,
@@ -67,8 +80,14 @@ pub enum Region {
         end: [f64; 3],
         /// Radius (> 0).
         radius: f64,
-        /// Leaves overlapping it are refined to this level.
+        /// Leaves overlapping it are refined to this level (counted from the
+        /// root cells).
+        #[serde(default)]
         level: u8,
+        /// The level as a cell size in user units instead: the coarsest
+        /// level whose cell is not larger (`size=S` on the command line).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        size: Option<f64>,
         /// Refine where the cylinder is not, instead.
         #[serde(default)]
         outside: bool,
@@ -83,6 +102,33 @@ impl Region {
             | Region::Sphere { level, .. }
             | Region::Cylinder { level, .. } => *level,
         }
+    }
+
+    /// The region's level as a cell size, when given so (the level is
+    /// then found once the domain is known, [`Region::sized`]).
+    pub fn size(&self) -> Option<f64> {
+        match self {
+            Region::Box { size, .. }
+            | Region::Sphere { size, .. }
+            | Region::Cylinder { size, .. } => *size,
+        }
+    }
+
+    /// The region with its size turned into a level for root cells of side
+    /// `root_side` (unchanged without a size).
+    pub fn sized(&self, root_side: f64) -> Result<Region> {
+        let mut r = self.clone();
+        if let Some(s) = self.size() {
+            let l = level_for_size(root_side, s)?;
+            match &mut r {
+                Region::Box { level, size, .. }
+                | Region::Sphere { level, size, .. }
+                | Region::Cylinder { level, size, .. } => {
+                    (*level, *size) = (l, None);
+                }
+            }
+        }
+        Ok(r)
     }
 
     /// Whether it refines outside its shape.
@@ -113,6 +159,14 @@ impl Region {
                 "has level {}, above the maximum level {MAX_LEVEL}",
                 self.level()
             ));
+        }
+        if let Some(s) = self.size() {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(format!("needs a positive size, got {s}"));
+            }
+            if self.level() > 0 {
+                return Err("gives both a level and a size: give one".to_string());
+            }
         }
         match self {
             Region::Box { min, max, .. } => {
@@ -192,12 +246,17 @@ impl Region {
             } => list(&[&start[..], &end[..], &[radius]].concat()),
         };
         let outside = if self.outside() { ":outside" } else { "" };
-        format!("{}:{numbers}:{}{outside}", self.shape(), self.level())
+        let level = match self.size() {
+            Some(s) => format!("size={s}"),
+            None => self.level().to_string(),
+        };
+        format!("{}:{numbers}:{level}{outside}", self.shape())
     }
 
     /// Parses the command line's form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
     /// `sphere:CX,CY,CZ,R:LEVEL` or `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`,
-    /// each optionally followed by `:outside`.
+    /// each optionally followed by `:outside`; `LEVEL` may be `size=S`, a
+    /// cell size in user units.
     pub fn parse(s: &str) -> Result<Region> {
         let bad = |why: &str| {
             Error::invalid(format!(
@@ -216,21 +275,35 @@ impl Region {
             .map(|x| x.trim().parse::<f64>())
             .collect::<std::result::Result<_, _>>()
             .map_err(|_| bad("not a list of numbers"))?;
-        let level: u8 = level
-            .parse()
-            .map_err(|_| bad("the level is not an integer"))?;
+        let (level, size) = match level.strip_prefix("size=") {
+            Some(v) => (
+                0,
+                Some(
+                    v.parse::<f64>()
+                        .map_err(|_| bad("the size is not a number"))?,
+                ),
+            ),
+            None => (
+                level
+                    .parse()
+                    .map_err(|_| bad("the level is not an integer"))?,
+                None,
+            ),
+        };
         let p = |i: usize| [v[i], v[i + 1], v[i + 2]];
         let r = match (shape, v.len()) {
             ("box", 6) => Region::Box {
                 min: p(0),
                 max: p(3),
                 level,
+                size,
                 outside,
             },
             ("sphere", 4) => Region::Sphere {
                 center: p(0),
                 radius: v[3],
                 level,
+                size,
                 outside,
             },
             ("cylinder", 7) => Region::Cylinder {
@@ -238,6 +311,7 @@ impl Region {
                 end: p(3),
                 radius: v[6],
                 level,
+                size,
                 outside,
             },
             ("box" | "sphere" | "cylinder", n) => return Err(bad(&format!("{n} numbers"))),
@@ -251,6 +325,9 @@ impl Region {
 /// The regions mapped to the lattice of a domain, ready for octant tests.
 pub struct RegionRules<'a> {
     min_level: u8,
+    /// The domain's root cells: void octants never split, the others at
+    /// least to the trees' level.
+    brick: Brick,
     rules: Vec<(Lattice, u8, bool)>,
     /// Distance bands (lattice units, level), increasing distances, and the
     /// surface they measure from.
@@ -268,7 +345,9 @@ enum Lattice {
 
 impl<'a> RegionRules<'a> {
     /// The rules of `regions` and `min_level` in the lattice of `domain`.
+    /// Levels count from the domain's root cells.
     pub fn new(domain: &Domain, min_level: u8, regions: &[Region]) -> RegionRules<'a> {
+        let k = domain.brick.level();
         let s = domain.scale();
         let rules = regions
             .iter()
@@ -288,11 +367,12 @@ impl<'a> RegionRules<'a> {
                         radius * s,
                     ),
                 };
-                (shape, r.level(), r.outside())
+                (shape, r.level() + k, r.outside())
             })
             .collect();
         RegionRules {
-            min_level,
+            min_level: min_level + k,
+            brick: domain.brick,
             rules,
             bands: Vec::new(),
             surface: None,
@@ -311,7 +391,7 @@ impl<'a> RegionRules<'a> {
     ) -> RegionRules<'a> {
         self.bands = bands
             .iter()
-            .map(|&(d, l)| (d * domain.scale(), l))
+            .map(|&(d, l)| (d * domain.scale(), l + domain.brick.level()))
             .collect();
         self.surface = Some(surface);
         self
@@ -336,6 +416,9 @@ impl<'a> RegionRules<'a> {
 
     /// Whether leaf `o` must be split; `buf` is scratch space.
     pub fn splits(&self, o: Octant, buf: &mut Vec<u32>) -> bool {
+        if self.brick.is_void(o) {
+            return false;
+        }
         if o.level() < self.min_level {
             return true;
         }
@@ -492,9 +575,16 @@ mod tests {
                 min: [0.0; 3],
                 max: [1.0, 2.0, 3.0],
                 level: 7,
+                size: None,
                 outside: false
             }
         );
+        let r = Region::parse("box:0,0,0,1,2,3:size=0.1:outside").unwrap();
+        assert_eq!((r.size(), r.level(), r.outside()), (Some(0.1), 0, true));
+        assert_eq!(r.describe(), "box:0,0,0,1,2,3:size=0.1:outside");
+        // Root cells of 1: 0.1 is level 4 (0.0625).
+        assert_eq!(r.sized(1.0).unwrap().level(), 4);
+        assert!(Region::parse("box:0,0,0,1,2,3:size=x").is_err());
         let r = Region::parse("sphere:0,0,0,0.5:6:outside").unwrap();
         assert!(r.outside() && r.level() == 6 && r.shape() == "sphere");
         let r = Region::parse("cylinder:0,0,0,1,0,0,0.25:5").unwrap();

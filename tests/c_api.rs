@@ -265,6 +265,9 @@ type Controls = (
     &'static [&'static str],
 );
 
+/// A box domain in the settings' words: corners, then root cells.
+const BOX: &str = "box:-1.5,-0.5,-0.5,1.5,0.5,0.5:3,1,1";
+
 /// The C API and the command (through a case file from `--print-case`) on
 /// the same settings give the same global counts.
 #[test]
@@ -275,6 +278,10 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
     let exe = compile("settings", &lib, &dir);
     // (surface, level, keep, cut rule, inside rule, balance, fit) as the
     // command's words and as the C constants' values.
+    // The sphere as two solids, `top` and `bottom`.
+    let halves = dir.join("halves.stl");
+    common::write_sphere_solids(&halves, &[("top", Some(true)), ("bottom", Some(false))]);
+    let halves = halves.to_str().unwrap();
     let cases: &[([&str; 7], [&str; 7])] = &[
         (
             ["sphere", "5", "inside", "center", "auto", "corner", "0.7"],
@@ -287,6 +294,17 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
         (
             ["sphere", "4", "all", "none", "parity", "corner", "0.9"],
             ["sphere", "4", "0", "2", "1", "3", "0.9"],
+        ),
+        // A box of 3 x 1 x 1 root cells cutting the sphere: levels count
+        // from the root cells in both.
+        (
+            ["sphere", "3", "outside", "center", "auto", "corner", BOX],
+            ["sphere", "3", "2", "0", "0", "3", BOX],
+        ),
+        // The top solid with its own levels (curvature up to 6).
+        (
+            [halves, "3", "inside", "center", "auto", "corner", "0.7"],
+            [halves, "3", "1", "0", "0", "3", "0.7"],
         ),
     ];
     // Refinement controls: (max level, feature angle, min level, bands,
@@ -302,6 +320,14 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             &["box:-2,-2,-2,0,2,0:5", "sphere:1,0,0,0.5:6:outside"],
         )),
         Some(("4", "30", "2", "-", &["cylinder:-1,0,0,1,0,0,0.4:6"])),
+        Some(("5", "25", "1", "0.2:4", &["box:0,-0.5,-0.5,1.5,0.5,0.5:3"])),
+        Some((
+            "3",
+            "10",
+            "0",
+            "-",
+            &["part:top=5:6", "sphere:0,0,-1,0.3:5"],
+        )),
     ];
     for (i, (words, values)) in cases.iter().enumerate() {
         let [surface, level, keep, cut, inside, balance, fit] = *words;
@@ -317,9 +343,11 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
             inside,
             "--balance",
             balance,
-            "--fit",
-            fit,
         ];
+        match fit.strip_prefix("box:").and_then(|b| b.split_once(':')) {
+            Some((bbox, roots)) => args.extend(["--box", bbox, "--roots", roots]),
+            None => args.extend(["--fit", fit]),
+        }
         let mut values: Vec<&str> = values.to_vec();
         match controls[i] {
             None => args.extend(["--level", level]),
@@ -331,7 +359,10 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
                     args.extend(["--distance", bands]);
                 }
                 for r in regions {
-                    args.extend(["--region", r]);
+                    match r.strip_prefix("part:") {
+                        Some(p) => args.extend(["--surface-level", p]),
+                        None => args.extend(["--region", r]),
+                    }
                 }
                 values.extend([max, angle, min, bands]);
                 values.extend(regions.iter());
@@ -446,5 +477,52 @@ fn quality_from_c_equals_the_command() {
             );
         }
         assert_eq!(field("histogram"), histogram.join(","), "np {np}");
+    }
+}
+
+/// `tests/c/adapt.c`: the moving sphere of `tests/adapt_p4est.rs` (root to
+/// level 5) through `octmesh_octree_adapt`, `_refine_once`, `_coarsen` and
+/// `_partition_for_coarsening`: leaves and per-rank counts equal to p4est's
+/// after every step.
+#[test]
+fn adaptation_from_c_equals_p4est_on_1_to_3_ranks() {
+    let dir = scratch("c_api_adapt");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("adapt", &lib, &dir);
+    common::p4est_ref();
+    let reference = repo().join("tools/p4est_ref/octmesh_p4est_adapt");
+    let counts = |d: &Path| -> Vec<String> {
+        let text = std::fs::read_to_string(d.join("counts.txt")).expect("counts.txt");
+        text.lines().map(str::to_string).collect()
+    };
+    for np in [1, 2, 3] {
+        let (ours, theirs) = (dir.join(format!("c{np}")), dir.join(format!("p4est{np}")));
+        std::fs::create_dir_all(&ours).unwrap();
+        std::fs::create_dir_all(&theirs).unwrap();
+        let out = run_ok(np, &exe, &[ours.to_str().unwrap()]);
+        assert_eq!(out.matches("ADAPT OK").count(), np, "{out}");
+        let args = ["--steps", "10", "--level", "0", "--max-level", "5", "--out"];
+        let mut args = args.to_vec();
+        args.push(theirs.to_str().unwrap());
+        run_ok(np, &reference, &args);
+        let (a, b) = (counts(&ours), counts(&theirs));
+        // The reference also has the initial root (step 0).
+        assert_eq!(a.len(), 10);
+        assert_eq!(
+            a[..],
+            b[1..],
+            "np {np}: step, refined, coarsened, leaves, per rank"
+        );
+        for step in 1..=10 {
+            let x = common::leaves(&ours.join(format!("step_{step}.txt")));
+            let y = common::leaves(&theirs.join(format!("step_{step}.bin")));
+            assert!(x == y, "np {np}, step {step}: leaves differ from p4est's");
+        }
+        let coarsened: u64 = a
+            .iter()
+            .map(|l| l.split(' ').nth(2).unwrap().parse::<u64>().unwrap())
+            .sum();
+        assert!(coarsened > 0, "np {np}: nothing coarsened");
     }
 }

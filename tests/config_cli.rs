@@ -122,6 +122,24 @@ fn print_case_then_run_gives_the_same_results() {
             "--inside",
             "auto",
         ],
+        &[
+            "mesh",
+            "sphere",
+            "--box",
+            "-3,-1,-1,3,1,1",
+            "--roots",
+            "3,1,1",
+            "--level",
+            "3:4",
+            "--min-level",
+            "1",
+            "--distance",
+            "0.3:3",
+            "--region",
+            "box:0,-1,-1,3,1,1:2",
+            "--keep",
+            "outside",
+        ],
     ];
     for (i, args) in cases.iter().enumerate() {
         let case = dir.join(format!("case{i}.toml"));
@@ -225,6 +243,22 @@ fn bad_configurations_fail_on_every_rank() {
         "both.toml",
         &format!("{head}[octree]\nlevel = 3\n[domain]\nfit = 0.5\ncube = [0.0, 0.0, 0.0, 1.0]\n"),
     );
+    let box_head = format!("{head}[octree]\nlevel = 3\n[domain]\n");
+    let uneven = write(
+        "uneven.toml",
+        &format!("{box_head}box = [0.0, 0.0, 0.0, 3.0, 1.0, 1.2]\nroots = [3, 1, 1]\n"),
+    );
+    let inverted = write(
+        "inverted.toml",
+        &format!("{box_head}box = [0.0, 0.0, 0.0, -3.0, 1.0, 1.0]\nroots = [3, 1, 1]\n"),
+    );
+    let no_box = write("nobox.toml", &format!("{box_head}roots = [3, 1, 1]\n"));
+    let deep = write(
+        "deep.toml",
+        &format!(
+            "{head}[octree]\nlevel = 17\n[domain]\nbox = [0.0, 0.0, 0.0, 3.0, 1.0, 1.0]\nroots = [3, 1, 1]\n"
+        ),
+    );
     let bad_enum = write(
         "enum.toml",
         &format!("{head}[octree]\nlevel = 3\n[mesh]\nkeep = \"solid\"\n"),
@@ -254,6 +288,76 @@ fn bad_configurations_fail_on_every_rank() {
             np,
             &["mesh", &both, "--quiet"],
             &["domain.fit", "domain.cube", "exclude"],
+        );
+        expect_config_error(
+            np,
+            &["mesh", &uneven, "--quiet"],
+            &[
+                "uneven.toml line 6: domain.box",
+                "does not divide into 3x1x1 cubic root cells",
+                "3 x 1 x 1 (cells of 1 as along x)",
+                "3.6 x 1.2 x 1.2 (cells of 1.2 as along z)",
+            ],
+        );
+        expect_config_error(
+            np,
+            &["mesh", &inverted, "--quiet"],
+            &[
+                "inverted.toml line 6: domain.box",
+                "lowest below the highest",
+            ],
+        );
+        expect_config_error(
+            np,
+            &["mesh", &no_box, "--quiet"],
+            &["nobox.toml line 6: domain.roots needs", "domain.box"],
+        );
+        expect_config_error(
+            np,
+            &["mesh", &deep, "--quiet"],
+            &["deep.toml line 4: octree.level", "levels go up to 16"],
+        );
+        expect_config_error(
+            np,
+            &[
+                "octree",
+                "sphere",
+                "--level",
+                "3",
+                "--box",
+                "0,0,0,1,1,1",
+                "--fit",
+                "0.5",
+            ],
+            &["--fit and --box exclude each other"],
+        );
+        expect_config_error(
+            np,
+            &[
+                "octree",
+                "sphere",
+                "--level",
+                "3",
+                "--box",
+                "0,0,0,2,1,1",
+                "--roots",
+                "2,0,1",
+            ],
+            &["--roots", "positive integers"],
+        );
+        expect_config_error(
+            np,
+            &[
+                "octree",
+                "sphere",
+                "--level",
+                "3",
+                "--box",
+                "0,0,0,2,1,1",
+                "--roots",
+                "3,1,1",
+            ],
+            &["--box is invalid", "does not divide"],
         );
         expect_config_error(
             np,

@@ -560,27 +560,6 @@ fn ascii_files_read_back_close_every_cell() {
     );
 }
 
-/// Writes the built-in sphere as ASCII STL: one solid, or two (`top`
-/// above z = 0, `bottom` below).
-fn write_sphere_solids(path: &Path, split: bool) {
-    let s = octmesh::geometry::shapes::default_sphere();
-    let mut blocks: Vec<(&str, String)> = vec![("top", String::new()), ("bottom", String::new())];
-    for t in s.triangles() {
-        let k = usize::from(split && t.centroid()[2] <= 0.0);
-        let b = &mut blocks[k].1;
-        b.push_str("facet normal 0 0 0\n outer loop\n");
-        for v in &t.v {
-            b.push_str(&format!("  vertex {:e} {:e} {:e}\n", v[0], v[1], v[2]));
-        }
-        b.push_str(" endloop\nendfacet\n");
-    }
-    let mut text = String::new();
-    for (name, body) in blocks.iter().filter(|b| !b.1.is_empty()) {
-        text.push_str(&format!("solid {name}\n{body}endsolid {name}\n"));
-    }
-    std::fs::write(path, text).unwrap();
-}
-
 /// `(nFaces, startFace)` of each patch of a `boundary` file.
 fn patches_of(boundary: &Path) -> Vec<(String, usize, usize)> {
     let text = std::fs::read_to_string(boundary).unwrap();
@@ -602,8 +581,8 @@ fn solids_of_an_ascii_stl_become_patches() {
     let dir = scratch("openfoam_solids");
     let two = dir.join("halves.stl");
     let one = dir.join("whole.stl");
-    write_sphere_solids(&two, true);
-    write_sphere_solids(&one, false);
+    common::write_sphere_solids(&two, &[("top", Some(true)), ("bottom", Some(false))]);
+    common::write_sphere_solids(&one, &[("top", None)]);
     let run = |stl: &Path, case: &Path, np: usize, extra: &[&str]| {
         let mut args = vec![
             "mesh",
@@ -769,4 +748,145 @@ fn bad_openfoam_requests_fail_clearly() {
         "/proc/octmesh-case",
     ]);
     assert!(e.contains("/proc/octmesh-case"), "{e}");
+}
+
+/// A box domain of 6 x 2 x 1 root cells around the sphere with a wake box
+/// and two distance bands (a towing-tank layout), fluid kept, written for
+/// OpenFOAM on 1 and 3 ranks: checkMesh as for the other cases, and each
+/// side patch lies on its face of the box.
+#[test]
+fn checkmesh_accepts_a_box_domain() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("openfoam_box");
+    let (lo, hi) = ([-3.0, -2.0, -1.5], [9.0, 2.0, 0.5]);
+    let bbox = format!(
+        "{},{},{},{},{},{}",
+        lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+    );
+    for np in [1, 3] {
+        let case = dir.join(format!("case{np}"));
+        let stats = dir.join(format!("case{np}.json"));
+        let s = octmesh(
+            np,
+            &[
+                "mesh",
+                "sphere",
+                "--box",
+                &bbox,
+                "--roots",
+                "6,2,1",
+                "--level",
+                "4",
+                "--region",
+                "box:0,-1,-1,6,1,0.5:3",
+                "--distance",
+                "0.2:4,0.6:3",
+                "--keep",
+                "outside",
+                "--openfoam",
+                case.to_str().unwrap(),
+            ],
+            &stats,
+        );
+        let tag = format!("sphere in a 6x2x1 box np {np}");
+        judge(&rc, &case, np, &s, &tag);
+        // The cut-off sphere (the box ends at z = 0.5) leaves the top open.
+        let box_volume: f64 = (0..3).map(|k| hi[k] - lo[k]).product();
+        let kept = s["kept_volume"].as_f64().unwrap();
+        assert!(
+            kept < box_volume && kept > 0.9 * box_volume,
+            "{tag}: {kept}"
+        );
+        let par = if np > 1 {
+            "mpirun --oversubscribe -np 3 checkMesh -parallel"
+        } else {
+            "checkMesh"
+        };
+        // -allGeometry prints each patch's bounding box.
+        let text = foam(&rc, &case, &format!("{par} -allTopology -allGeometry"));
+        for (p, name) in ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"]
+            .iter()
+            .enumerate()
+        {
+            let (axis, at) = (p / 2, if p % 2 == 0 { lo[p / 2] } else { hi[p / 2] });
+            let line = text
+                .lines()
+                .find(|l| l.split_whitespace().next() == Some(name))
+                .unwrap_or_else(|| panic!("{tag}: no patch {name}:\n{text}"));
+            // "... (x0 y0 z0) (x1 y1 z1)": the patch's bounding box.
+            let nums: Vec<f64> = line
+                .replace(['(', ')'], " ")
+                .split_whitespace()
+                .rev()
+                .take(6)
+                .map(|w| w.parse().unwrap())
+                .collect();
+            let (top, bottom) = (&nums[..3], &nums[3..]);
+            // Reversed: top is (z1, y1, x1), bottom (z0, y0, x0).
+            assert_eq!(top[2 - axis], at, "{tag}: {line}");
+            assert_eq!(bottom[2 - axis], at, "{tag}: {line}");
+        }
+    }
+}
+
+/// The towing tank: the built-in Wigley hull (length 1) in a box of
+/// 6 x 2 x 1 hull lengths (6 x 2 x 1 root cells), curvature refinement at
+/// the deck's edges, a wake box and two distance bands, fluid kept, written
+/// for OpenFOAM on 1 and 2 ranks: checkMesh as for the other cases, the
+/// hull's wall closed and singly connected, and the water displaced about
+/// the hull's volume.
+#[test]
+fn checkmesh_accepts_a_towing_tank_around_a_hull() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("openfoam_tank");
+    for np in [1, 2] {
+        let case = dir.join(format!("case{np}"));
+        let stats = dir.join(format!("case{np}.json"));
+        let s = octmesh(
+            np,
+            &[
+                "mesh",
+                "hull",
+                "--box",
+                "-1.5,-1,-0.6,4.5,1,0.4",
+                "--roots",
+                "6,2,1",
+                "--level",
+                "6:7",
+                "--region",
+                "box:0.5,-0.3,-0.3,3,0.3,0.2:3",
+                "--distance",
+                "0.05:5,0.15:4",
+                "--keep",
+                "outside",
+                "--openfoam",
+                case.to_str().unwrap(),
+            ],
+            &stats,
+        );
+        let tag = format!("towing tank np {np}");
+        judge(&rc, &case, np, &s, &tag);
+        let par = if np > 1 {
+            "mpirun --oversubscribe -np 2 checkMesh -parallel"
+        } else {
+            "checkMesh"
+        };
+        let text = foam(&rc, &case, &format!("{par} -allTopology"));
+        let wall = text
+            .lines()
+            .find(|l| l.split_whitespace().next() == Some("hull"))
+            .unwrap_or_else(|| panic!("{tag}: no hull patch:\n{text}"));
+        // checkMesh -parallel does not judge a patch's topology.
+        assert!(
+            np > 1 || wall.contains("ok (closed singly connected)"),
+            "{tag}: {wall}"
+        );
+        // Box 6 x 2 x 1 = 12; the hull displaces 4 B L T / 9 + 2 B L D / 3.
+        let hull = 4.0 * 0.1 * 0.0625 / 9.0 + 2.0 * 0.1 * 0.05 / 3.0;
+        let displaced = 12.0 - s["kept_volume"].as_f64().unwrap();
+        assert!(
+            displaced > 0.5 * hull && displaced < 2.0 * hull,
+            "{tag}: the fluid leaves {displaced} for a hull of {hull}"
+        );
+    }
 }

@@ -54,15 +54,28 @@ fn wants(
 /// The leaves (x, y, z, level in lattice units) of the coarsest octree of
 /// the unit cube in which no rule wants a split.
 fn brute_force(rules: &[(Shape, u32, bool)], min_level: u32) -> Vec<(u32, u32, u32, u32)> {
+    brute_force_in(rules, min_level, [0.0; 3])
+}
+
+/// [`brute_force`] in the unit cube at `origin` (one root cell of a box).
+fn brute_force_in(
+    rules: &[(Shape, u32, bool)],
+    min_level: u32,
+    origin: [f64; 3],
+) -> Vec<(u32, u32, u32, u32)> {
     let mut out = Vec::new();
     let mut stack = vec![(0u32, 0u32, 0u32, 0u32)];
     while let Some((x, y, z, l)) = stack.pop() {
         let len = 1u32 << (19 - l);
-        let lo = [x as f64 / N, y as f64 / N, z as f64 / N];
+        let lo = [
+            origin[0] + x as f64 / N,
+            origin[1] + y as f64 / N,
+            origin[2] + z as f64 / N,
+        ];
         let hi = [
-            (x + len) as f64 / N,
-            (y + len) as f64 / N,
-            (z + len) as f64 / N,
+            origin[0] + (x + len) as f64 / N,
+            origin[1] + (y + len) as f64 / N,
+            origin[2] + (z + len) as f64 / N,
         ];
         let split = l < min_level || rules.iter().any(|(s, rl, o)| wants(s, *rl, *o, l, lo, hi));
         if split && l < 18 {
@@ -146,6 +159,76 @@ fn region_leaves_equal_a_brute_force_construction() {
         ],
     );
     assert_eq!(leaves(&file).len(), expected.len());
+}
+
+/// In a box of 3 x 2 x 1 unit root cells, levels count from the root cells
+/// and regions reach across them: the leaves of each tree (p4est's brick
+/// order) are the brute-force octree of that root cell.
+#[test]
+fn region_leaves_in_a_box_equal_a_brute_force_construction() {
+    let dir = scratch("regions_brick");
+    let rules = vec![
+        (Shape::Box([0.6, 0.2, 0.3], [2.4, 1.5, 0.6]), 5, false),
+        (Shape::Ball([2.7, 1.7, 0.7], 0.4), 4, false),
+        (Shape::Ball([1.5, 1.0, 0.5], 1.2), 3, true),
+    ];
+    // p4est's brick order: the Morton order of the root cells' positions.
+    let mut trees: Vec<[u32; 3]> = (0..2)
+        .flat_map(|y| (0..3).map(move |x| [x, y, 0]))
+        .collect();
+    trees.sort_by_key(|t| octmesh::octant::morton_encode(t[0], t[1], t[2]));
+    let mut expected: Vec<(u32, u32, u32, u32, u32)> = Vec::new();
+    for (i, t) in trees.iter().enumerate() {
+        let origin = t.map(f64::from);
+        for (x, y, z, l) in brute_force_in(&rules, 1, origin) {
+            expected.push((i as u32, x, y, z, l));
+        }
+    }
+    expected.sort_unstable();
+    for np in [1, 3] {
+        let file = dir.join(format!("leaves{np}.txt"));
+        octmesh_ok(
+            np,
+            &[
+                "octree",
+                "sphere",
+                "--box",
+                "0,0,0,3,2,1",
+                "--roots",
+                "3,2,1",
+                "--level",
+                "0",
+                "--balance",
+                "none",
+                "--min-level",
+                "1",
+                "--region",
+                "box:0.6,0.2,0.3,2.4,1.5,0.6:5",
+                "--region",
+                "sphere:2.7,1.7,0.7,0.4:4",
+                "--region",
+                "sphere:1.5,1.0,0.5,1.2:3:outside",
+                "--quiet",
+                "--write-leaves",
+                file.to_str().unwrap(),
+            ],
+        );
+        let text = std::fs::read_to_string(&file).unwrap();
+        let mut got: Vec<(u32, u32, u32, u32, u32)> = text
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(|l| {
+                let v: Vec<u32> = l.split_whitespace().map(|w| w.parse().unwrap()).collect();
+                (v[0], v[1], v[2], v[3], v[4])
+            })
+            .collect();
+        got.sort_unstable();
+        assert_eq!(got.len(), expected.len(), "np {np}");
+        assert!(
+            got == expected,
+            "np {np}: the leaves differ from the brute-force octrees"
+        );
+    }
 }
 
 #[test]
@@ -390,6 +473,70 @@ fn sizes_round_to_the_level_whose_cell_is_not_larger() {
     for k in ["octants_balanced", "elements", "independent_nodes"] {
         assert_eq!(int(&by_size, k), int(&by_level, k), "{k}");
     }
+    // Regions and distance bands by size, and sizes counted from the root
+    // cells of a box.
+    let region_by_size = format!("sphere:0.5,0,0,0.4:size={}", cell5 / 4.0 * 1.001);
+    let band_by_size = format!("0.1:{}", cell5 / 2.0 * 0.999);
+    let by_size = stats(
+        &[
+            "octree",
+            "sphere",
+            "--level",
+            "5",
+            "--region",
+            &region_by_size,
+            "--distance-size",
+            &band_by_size,
+        ],
+        "region_size",
+    );
+    let by_level = stats(
+        &[
+            "octree",
+            "sphere",
+            "--level",
+            "5",
+            "--region",
+            "sphere:0.5,0,0,0.4:7",
+            "--distance",
+            "0.1:7",
+        ],
+        "region_level",
+    );
+    assert_eq!(
+        int(&by_size, "octants_balanced"),
+        int(&by_level, "octants_balanced")
+    );
+    let boxed = |size: &str, tag: &str| {
+        let mut a = vec!["octree", "sphere", "--box", "-1.5,-1.5,-1.5,3,1.5,1.5"];
+        a.extend(["--roots", "3,2,2", "--level", "0", "--min-size", size]);
+        stats(&a, tag)
+    };
+    // Root cells of 1.5: a size of 0.2 is level 3 (0.1875), 0.1875 too.
+    let by_size = boxed("0.2", "box_size");
+    let exact = boxed("0.1875", "box_exact");
+    assert_eq!(int(&by_size, "octants_balanced"), 12 * 8 * 8 * 8);
+    assert_eq!(int(&exact, "octants_balanced"), 12 * 8 * 8 * 8);
+    let e = octmesh_fails(&[
+        "octree",
+        "sphere",
+        "--level",
+        "4",
+        "--region",
+        "box:0,0,0,1,1,1:size=-1",
+    ]);
+    assert!(e.contains("positive size"), "{e}");
+    let e = octmesh_fails(&[
+        "octree",
+        "sphere",
+        "--level",
+        "4",
+        "--distance",
+        "0.1:5",
+        "--distance-size",
+        "0.1:0.01",
+    ]);
+    assert!(e.contains("--distance-size excludes --distance"), "{e}");
     let e = octmesh_fails(&["octree", "sphere", "--size", "0.1", "--level", "4"]);
     assert!(e.contains("--size excludes --level"), "{e}");
     let e = octmesh_fails(&["octree", "sphere", "--size=-1"]);

@@ -152,7 +152,9 @@ mod walk;
 #[cfg(test)]
 mod tests;
 
-pub use rules::{keeps, CutRule, InsideRule, Keep, LeafClass, WindingSummary, CENTER_INSIDE, CUT};
+pub use rules::{
+    keeps, CutRule, InsideRule, Keep, LeafClass, WindingSummary, CENTER_INSIDE, CUT, VOID,
+};
 
 use walk::Classifier;
 

@@ -8,6 +8,9 @@ use crate::geometry::diagnostics::SurfaceReport;
 pub const CENTER_INSIDE: u8 = 1;
 /// Bit set when the leaf's closed box touches the surface.
 pub const CUT: u8 = 2;
+/// Bit set for a leaf outside a box domain (the void of [`crate::brick`]):
+/// never kept, never part of the leak search.
+pub const VOID: u8 = 4;
 
 /// The class of a leaf, from its class byte.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -153,6 +156,9 @@ pub struct WindingSummary {
 /// and [`Keep::Outside`] those whose centre is outside; cut leaves follow
 /// `rule` (with [`CutRule::Center`], the side of their centre).
 pub fn keeps(keep: Keep, rule: CutRule, bits: u8) -> bool {
+    if bits & VOID != 0 {
+        return false;
+    }
     let inside = bits & CENTER_INSIDE != 0;
     let want_inside = match keep {
         Keep::All => return true,

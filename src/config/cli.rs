@@ -26,6 +26,8 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("surface.drop_duplicates", "--drop-duplicates"),
     ("domain.fit", "--fit"),
     ("domain.cube", "--domain"),
+    ("domain.box", "--box"),
+    ("domain.roots", "--roots"),
     ("octree.level", "--level"),
     ("octree.min_level", "--min-level"),
     ("octree.max_level", "--level"),
@@ -33,7 +35,9 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("octree.max_size", "--size"),
     ("octree.min_size", "--min-size"),
     ("octree.feature_angle", "--feature-angle"),
+    ("octree.surface_levels", "--surface-level"),
     ("octree.distance", "--distance"),
+    ("octree.distance_size", "--distance-size"),
     ("octree.balance", "--balance"),
     ("octree.max_octants", "--max-octants"),
     ("octree.memory_budget", "--memory-budget"),
@@ -97,7 +101,7 @@ enum CliCommand {
 /// The options of `octree`, also taken by `mesh`.
 #[derive(Args, Debug)]
 struct OctreeArgs {
-    /// An STL file (ASCII or binary), the built-in `sphere` or `torus`, or
+    /// An STL file (ASCII or binary), the built-in `sphere`, `torus` or `hull`, or
     /// a case file (`.toml`) whose settings the options below override.
     input: String,
     /// Level of the leaves touching the surface (0 to 18); MIN:MAX refines
@@ -105,6 +109,10 @@ struct OctreeArgs {
     /// feature angle
     #[arg(long, value_name = "L[:MAX]", value_parser = parse_level_range)]
     level: Option<(u8, Option<u8>)>,
+    /// Levels of one part of the surface (a solid of an ASCII STL, by its
+    /// patch name), NAME=MIN[:MAX], repeatable; --level applies to the rest
+    #[arg(long, value_name = "NAME=MIN[:MAX]", value_parser = parse_part_levels)]
+    surface_level: Vec<(String, (u8, Option<u8>))>,
     /// Feature angle of curvature refinement, degrees [default: 30]
     #[arg(long, value_name = "DEG", value_parser = parse_finite)]
     feature_angle: Option<f64>,
@@ -123,6 +131,11 @@ struct OctreeArgs {
     /// distances D (user units): leaves within D of the surface get level L
     #[arg(long, value_name = "D:L,...", value_parser = parse_bands)]
     distance: Option<Bands>,
+    /// Distance bands with cell sizes instead of levels, D1:S1,D2:S2,...
+    /// (user units): leaves within D of the surface get the coarsest level
+    /// whose cell is not larger than S
+    #[arg(long, value_name = "D:S,...", value_parser = parse_size_bands)]
+    distance_size: Option<SizeBands>,
     /// A refinement region, repeatable: box:X0,Y0,Z0,X1,Y1,Z1:LEVEL,
     /// sphere:CX,CY,CZ,R:LEVEL or cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (user
     /// units), then :outside to refine where the shape is not
@@ -139,6 +152,14 @@ struct OctreeArgs {
     /// units
     #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z,S", value_parser = parse_numbers::<4>)]
     domain: Option<[f64; 4]>,
+    /// A box domain instead of the cube: lowest corner X0,Y0,Z0 and highest
+    /// X1,Y1,Z1, user units, split into the --roots cubic root cells
+    #[arg(long = "box", allow_hyphen_values = true, value_name = "X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_numbers::<6>)]
+    bbox: Option<[f64; 6]>,
+    /// Root cells of --box along x, y, z (trees of the forest; levels count
+    /// from them) [default: 1,1,1]
+    #[arg(long, value_name = "NX,NY,NZ", value_parser = parse_roots)]
+    roots: Option<[u32; 3]>,
     /// Stop with an error instead of building more than N leaves (refinement
     /// and balance); refused before refining when the estimate is above 2N
     #[arg(long, value_name = "N", value_parser = parse_count)]
@@ -250,7 +271,7 @@ fn parse_rename(s: &str) -> std::result::Result<(String, String), String> {
 /// The options of `check`.
 #[derive(Args, Debug)]
 struct CheckArgs {
-    /// An STL file or the built-in `sphere` or `torus`.
+    /// An STL file or the built-in `sphere`, `torus` or `hull`.
     surface: String,
     /// Also write the diagnostics as JSON
     #[arg(long, value_name = "FILE")]
@@ -357,11 +378,32 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
     if set("octree.min_size", o.min_size.is_some()) {
         config.octree.min_size = o.min_size;
     }
+    if set("octree.surface_levels", !o.surface_level.is_empty()) {
+        // The command line's part levels replace the case file's.
+        config.octree.surface_levels.clear();
+        for (name, (min, max)) in &o.surface_level {
+            let r = [*min, max.unwrap_or(*min)];
+            if config
+                .octree
+                .surface_levels
+                .insert(name.clone(), r)
+                .is_some()
+            {
+                return Err(Error::invalid(format!(
+                    "--surface-level gives '{name}' twice"
+                )));
+            }
+        }
+    }
     if set("octree.feature_angle", o.feature_angle.is_some()) {
         config.octree.feature_angle = o.feature_angle;
     }
     if set("octree.min_level", o.min_level.is_some()) {
         config.octree.min_level = o.min_level.unwrap_or(0);
+    }
+    if let Some(b) = &o.distance_size {
+        set("octree.distance_size", true);
+        config.octree.distance_size = b.0.clone();
     }
     if let Some(b) = &o.distance {
         set("octree.distance", true);
@@ -375,23 +417,40 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         set("octree.balance", true);
         config.octree.balance = b;
     }
-    if o.fit.is_some() && o.domain.is_some() {
-        return Err(Error::invalid(
-            "--fit and --domain exclude each other: give one",
-        ));
+    let domains = [
+        ("--fit", o.fit.is_some()),
+        ("--domain", o.domain.is_some()),
+        ("--box", o.bbox.is_some()),
+    ];
+    let named: Vec<&str> = domains.iter().filter(|g| g.1).map(|g| g.0).collect();
+    if named.len() > 1 {
+        return Err(Error::invalid(format!(
+            "{} exclude each other: give one",
+            named.join(" and ")
+        )));
     }
     if set("domain.fit", o.fit.is_some()) {
-        // The command line's cube choice replaces the case file's.
+        // The command line's domain choice replaces the case file's.
         config.domain = super::DomainConfig {
             fit: o.fit,
-            cube: None,
+            ..Default::default()
         };
     }
     if set("domain.cube", o.domain.is_some()) {
         config.domain = super::DomainConfig {
-            fit: None,
             cube: o.domain,
+            ..Default::default()
         };
+    }
+    if set("domain.box", o.bbox.is_some()) {
+        config.domain = super::DomainConfig {
+            bbox: o.bbox,
+            roots: config.domain.roots,
+            ..Default::default()
+        };
+    }
+    if set("domain.roots", o.roots.is_some()) {
+        config.domain.roots = o.roots;
     }
     if set("octree.max_octants", o.max_octants.is_some()) {
         config.octree.max_octants = o.max_octants;
@@ -555,11 +614,37 @@ fn parse_bands(s: &str) -> std::result::Result<Bands, String> {
         .map(Bands)
 }
 
+#[derive(Clone, Debug)]
+struct SizeBands(Vec<(f64, f64)>);
+
+/// `D1:S1,D2:S2,...`.
+fn parse_size_bands(s: &str) -> std::result::Result<SizeBands, String> {
+    let bad = || format!("expects D1:S1,D2:S2,... (distance:size pairs), got '{s}'");
+    s.split(',')
+        .map(|band| {
+            let (d, c) = band.split_once(':').ok_or_else(bad)?;
+            Ok((
+                parse_finite(d).map_err(|_| bad())?,
+                parse_finite(c).map_err(|_| bad())?,
+            ))
+        })
+        .collect::<std::result::Result<_, String>>()
+        .map(SizeBands)
+}
+
 /// `L` or `MIN:MAX`.
 fn parse_size_range(s: &str) -> std::result::Result<(f64, Option<f64>), String> {
     match s.split_once(':') {
         None => Ok((parse_finite(s)?, None)),
         Some((a, b)) => Ok((parse_finite(a)?, Some(parse_finite(b)?))),
+    }
+}
+
+/// `NAME=MIN[:MAX]`.
+fn parse_part_levels(s: &str) -> std::result::Result<(String, (u8, Option<u8>)), String> {
+    match s.split_once('=') {
+        Some((name, r)) if !name.is_empty() => Ok((name.to_string(), parse_level_range(r)?)),
+        _ => Err(format!("expects NAME=MIN[:MAX], got '{s}'")),
     }
 }
 
@@ -573,6 +658,17 @@ fn parse_level_range(s: &str) -> std::result::Result<(u8, Option<u8>), String> {
 fn parse_count(s: &str) -> std::result::Result<u64, String> {
     s.parse()
         .map_err(|_| format!("expects a non-negative integer, got '{s}'"))
+}
+
+/// `NX,NY,NZ`: three positive counts.
+fn parse_roots(s: &str) -> std::result::Result<[u32; 3], String> {
+    let bad = || format!("expects three comma-separated positive integers NX,NY,NZ, got '{s}'");
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|t| t.trim().parse::<u32>().ok().filter(|&n| n > 0))
+        .collect::<Option<_>>()
+        .ok_or_else(bad)?;
+    v.try_into().map_err(|_| bad())
 }
 
 fn parse_finite(s: &str) -> std::result::Result<f64, String> {

@@ -13,12 +13,14 @@
 //!
 //! ```toml
 //! [surface]
-//! file = "bunny.stl"        # an STL file, or the built-in "sphere" or "torus"
+//! file = "bunny.stl"        # an STL file, or the built-in "sphere", "torus" or "hull"
 //! drop_degenerate = false
 //! drop_duplicates = false
 //!
 //! [domain]
 //! fit = 0.7                 # or: cube = [x, y, z, side] (user units)
+//! # box = [x0, y0, z0, x1, y1, z1]   # or a box of cubic root cells:
+//! # roots = [6, 2, 1]                # NX x NY x NZ trees (levels count from them)
 //!
 //! [octree]
 //! level = 9
@@ -147,7 +149,7 @@ pub struct Config {
 #[serde(deny_unknown_fields, default)]
 pub struct SurfaceConfig {
     /// An STL file (ASCII or binary), or the built-in `sphere` (radius 1 at
-    /// the origin, 20,480 triangles) or `torus`.
+    /// the origin, 20,480 triangles), `torus` or `hull` (a Wigley hull).
     pub file: String,
     /// Remove zero-area facets right after loading.
     pub drop_degenerate: bool,
@@ -155,7 +157,8 @@ pub struct SurfaceConfig {
     pub drop_duplicates: bool,
 }
 
-/// `[domain]`: the root cube, fitted around the surface or given.
+/// `[domain]`: the root cube, fitted around the surface or given, or a box
+/// of cubic root cells.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DomainConfig {
@@ -166,6 +169,14 @@ pub struct DomainConfig {
     /// An explicit cube `[x, y, z, side]`: lowest corner and side, user
     /// units. Excludes `fit`.
     pub cube: Option<[f64; 4]>,
+    /// A box `[x0, y0, z0, x1, y1, z1]` (lowest and highest corner, user
+    /// units) split into `roots` cubic root cells, each a tree of the
+    /// forest (like a blockMesh background). Excludes `fit` and `cube`.
+    #[serde(rename = "box")]
+    pub bbox: Option<[f64; 6]>,
+    /// Root cells of `box` along x, y and z (unset: 1 x 1 x 1). Levels
+    /// count from them: a leaf at level `l` has side `2^-l` of a root cell.
+    pub roots: Option<[u32; 3]>,
 }
 
 impl DomainConfig {
@@ -176,10 +187,20 @@ impl DomainConfig {
 
     /// The root cube for a surface with bounding box `min..max`.
     pub fn resolve(&self, min: [f64; 3], max: [f64; 3]) -> crate::Result<Domain> {
+        if let Some(b) = self.bbox {
+            let roots = self.roots.unwrap_or([1, 1, 1]);
+            return Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], roots);
+        }
         match self.cube {
             Some([x, y, z, s]) => Domain::cube([x, y, z], s),
             None => Domain::around(min, max, self.fit()),
         }
+    }
+
+    /// Whether the domain does not depend on the surface (a cube or a box
+    /// is given).
+    pub fn is_explicit(&self) -> bool {
+        self.cube.is_some() || self.bbox.is_some()
     }
 }
 
@@ -197,6 +218,12 @@ pub struct OctreeConfig {
     pub max_level: Option<u8>,
     /// The feature angle of curvature refinement, degrees (default 30).
     pub feature_angle: Option<f64>,
+    /// Levels per part of the surface, `{ name = [min, max] }` (`--surface-level
+    /// NAME=MIN[:MAX]`): leaves touching the part get `min`, and up to `max`
+    /// where it curves (as `level` and `max_level` do for the parts not
+    /// named). Names are the surface's patch names before renames: the
+    /// solids of an ASCII STL file, or the file stem.
+    pub surface_levels: BTreeMap<String, [u8; 2]>,
     /// Every leaf at least this level (default 0).
     pub min_level: u8,
     /// The surface level as a cell size in user units instead of
@@ -213,6 +240,10 @@ pub struct OctreeConfig {
     /// is below a band's and its box comes within the band's distance of
     /// the surface (exact distances).
     pub distance: Vec<(f64, u8)>,
+    /// `distance` with cell sizes in user units instead of levels,
+    /// `[[distance, size], ...]` (`--distance-size`): each size becomes the
+    /// coarsest level whose cell is not larger. Excludes `distance`.
+    pub distance_size: Vec<(f64, f64)>,
     /// 2:1 balance (default corner).
     pub balance: Balance,
     /// Stop with an error instead of building more leaves than this, over
@@ -380,6 +411,8 @@ pub const KEYS: &[&str] = &[
     "surface.drop_duplicates",
     "domain.fit",
     "domain.cube",
+    "domain.box",
+    "domain.roots",
     "octree.level",
     "octree.min_level",
     "octree.max_level",
@@ -387,7 +420,9 @@ pub const KEYS: &[&str] = &[
     "octree.max_size",
     "octree.min_size",
     "octree.feature_angle",
+    "octree.surface_levels",
     "octree.distance",
+    "octree.distance_size",
     "octree.balance",
     "octree.max_octants",
     "octree.memory_budget",
@@ -442,6 +477,17 @@ impl Config {
                     "octree.max_level",
                     format!(
                         "is {max}: it must be between {{octree.level}} ({level}) and {MAX_LEVEL}"
+                    ),
+                ));
+            }
+        }
+        for (name, &[min, max]) in &self.octree.surface_levels {
+            if min > max || max > MAX_LEVEL {
+                return Err(ConfigError::new(
+                    "octree.surface_levels",
+                    format!(
+                        "gives '{name}' the levels {min} to {max}: the minimum must not be above \
+                         the maximum, nor the maximum above {MAX_LEVEL}"
                     ),
                 ));
             }
@@ -503,6 +549,7 @@ impl Config {
                 return Err(ConfigError::new("domain.cube", format!("is invalid: {e}")));
             }
         }
+        self.check_box(level)?;
         if let Some(p) = self.leak.inside_point {
             if p.iter().any(|c| !c.is_finite()) {
                 return Err(ConfigError::new(
@@ -573,6 +620,74 @@ impl Config {
         Ok(())
     }
 
+    /// A box excludes the other domain keys, divides into cubic root cells,
+    /// and leaves room below its trees for the levels asked for.
+    fn check_box(&self, level: u8) -> Result<(), ConfigError> {
+        let d = &self.domain;
+        let Some(b) = d.bbox else {
+            return match d.roots {
+                Some(_) => Err(ConfigError::new("domain.roots", "needs {domain.box}")),
+                None => Ok(()),
+            };
+        };
+        for (other, given) in [
+            ("{domain.fit}", d.fit.is_some()),
+            ("{domain.cube}", d.cube.is_some()),
+        ] {
+            if given {
+                return Err(ConfigError::new(
+                    "domain.box",
+                    format!("and {other} exclude each other: give one"),
+                ));
+            }
+        }
+        let roots = d.roots.unwrap_or([1, 1, 1]);
+        let brick = crate::brick::Brick::new(roots)
+            .map_err(|e| ConfigError::new("domain.roots", format!("is invalid: {e}")))?;
+        Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], roots)
+            .map_err(|e| ConfigError::new("domain.box", format!("is invalid: {e}")))?;
+        let o = &self.octree;
+        let deepest = [
+            ("octree.level", level),
+            ("octree.max_level", o.max_level.unwrap_or(0)),
+            ("octree.min_level", o.min_level),
+        ]
+        .into_iter()
+        .chain(
+            o.surface_levels
+                .values()
+                .map(|r| ("octree.surface_levels", r[1])),
+        )
+        .chain(o.distance.iter().map(|b| ("octree.distance", b.1)))
+        .chain(self.regions.iter().map(|r| ("regions", r.level())))
+        .max_by_key(|k| k.1);
+        let most = brick.max_user_level();
+        match deepest {
+            Some((key, l)) if l > most => Err(ConfigError::new(
+                key,
+                format!(
+                    "asks for level {l}: with {}x{}x{} root cells the trees are at level {} of \
+                     the lattice, so levels go up to {most}",
+                    roots[0],
+                    roots[1],
+                    roots[2],
+                    brick.level()
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether any level is given as a size.
+    pub fn has_sizes(&self) -> bool {
+        let o = &self.octree;
+        o.size.is_some()
+            || o.max_size.is_some()
+            || o.min_size.is_some()
+            || !o.distance_size.is_empty()
+            || self.regions.iter().any(|r| r.size().is_some())
+    }
+
     /// Sizes are positive, finite, each exclusive with its level, and the
     /// fine size not larger than the surface size.
     fn check_sizes(&self) -> Result<(), ConfigError> {
@@ -613,6 +728,26 @@ impl Config {
                 format!("excludes {other}: give one of them"),
             ));
         }
+        let bands = &o.distance_size;
+        if let Some((i, &(d, c))) = bands.iter().enumerate().find(|(i, &(d, c))| {
+            !(d.is_finite() && d >= 0.0 && c.is_finite() && c > 0.0)
+                || (*i > 0 && d <= bands[i - 1].0)
+        }) {
+            return Err(ConfigError::new(
+                "octree.distance_size",
+                format!(
+                    "band {} ({d}, size {c}) is invalid: distances must be finite, non-negative \
+                     and increasing, sizes positive",
+                    i + 1
+                ),
+            ));
+        }
+        if !bands.is_empty() && !o.distance.is_empty() {
+            return Err(ConfigError::new(
+                "octree.distance_size",
+                "excludes {octree.distance}: give one of them",
+            ));
+        }
         if o.max_size.is_some() && o.size.is_none() {
             return Err(ConfigError::new("octree.max_size", "needs {octree.size}"));
         }
@@ -627,9 +762,10 @@ impl Config {
         Ok(())
     }
 
-    /// The configuration with its sizes turned into levels for a domain of
-    /// side `side` (user units): each the coarsest level whose cell is not
-    /// larger than the size. Unchanged without sizes.
+    /// The configuration with its sizes turned into levels for root cells
+    /// of side `side` (user units; the cube's side for a cube): each the
+    /// coarsest level whose cell is not larger than the size. Unchanged
+    /// without sizes.
     pub fn with_sizes(&self, side: f64) -> crate::Result<Config> {
         let mut c = self.clone();
         let o = &mut c.octree;
@@ -643,7 +779,49 @@ impl Config {
         if let Some(s) = o.min_size.take() {
             o.min_level = level(s)?;
         }
+        for (d, s) in std::mem::take(&mut o.distance_size) {
+            o.distance.push((d, level(s)?));
+        }
+        for r in &mut c.regions {
+            *r = r.sized(side)?;
+        }
         Ok(c)
+    }
+
+    /// The surface level the first refinement goes to: `octree.level`, or
+    /// the least minimum of `octree.surface_levels` when lower (the parts'
+    /// own levels then come from [`Config::surface_ranges`]).
+    pub fn first_surface_level(&self) -> Option<u8> {
+        let least = self.octree.surface_levels.values().map(|r| r[0]).min();
+        match (self.octree.level, least) {
+            (Some(l), Some(m)) => Some(l.min(m)),
+            (l, _) => l,
+        }
+    }
+
+    /// The `(min, max)` levels of each part of a surface called `surface`
+    /// with named `parts` (one range when it has fewer than two parts):
+    /// `octree.surface_levels` where it names the part, else `octree.level`
+    /// to `octree.max_level`. A name that is no part of the surface is an
+    /// error listing the names there are.
+    pub fn surface_ranges(&self, surface: &str, parts: &[String]) -> crate::Result<Vec<(u8, u8)>> {
+        let o = &self.octree;
+        let level = o.level.unwrap_or(0);
+        let default = (level, o.max_level.unwrap_or(level).max(level));
+        let names = PatchNames::with_parts(surface, parts);
+        let surface_names = &names.names()[crate::mesh::faces::SURFACE_PATCH as usize..];
+        let mut ranges = vec![default; surface_names.len()];
+        for (name, &[min, max]) in &o.surface_levels {
+            let Some(p) = surface_names.iter().position(|n| n == name) else {
+                return Err(crate::Error::invalid(format!(
+                    "octree.surface_levels names '{name}', which is no part of the surface (its \
+                     parts: {})",
+                    surface_names.join(", ")
+                )));
+            };
+            ranges[p] = (min, max);
+        }
+        Ok(ranges)
     }
 
     /// The patch names for a surface called `surface` (a file or a
@@ -671,7 +849,7 @@ impl Config {
     /// (`domain.fit` when no cube is given), as `--print-case` shows it.
     pub fn resolved(&self) -> Config {
         let mut c = self.clone();
-        if c.domain.cube.is_none() {
+        if !c.domain.is_explicit() {
             c.domain.fit = Some(c.domain.fit());
         }
         c
@@ -746,7 +924,12 @@ mod tests {
         c.regions = vec![
             Region::parse("box:0,0,0,1,1,1:5").unwrap(),
             Region::parse("cylinder:0,0,0,1,0,0,0.5:4:outside").unwrap(),
+            Region::parse("sphere:0,0,0,1:size=0.125").unwrap(),
         ];
+        c.octree.distance_size = vec![(0.1, 0.05), (0.3, 0.1)];
+        c.octree.surface_levels.insert("wing".into(), [6, 8]);
+        c.domain.bbox = Some([0.0, 0.0, 0.0, 3.0, 1.0, 1.0]);
+        c.domain.roots = Some([3, 1, 1]);
         let text = c.to_toml();
         let back: Config = toml::from_str(&text).unwrap();
         assert_eq!(back, c, "{text}");

@@ -297,8 +297,72 @@ pub extern "C" fn octmesh_domain_set(
             .and_then(|o| crate::domain::Domain::cube([o[0], o[1], o[2]], side));
         let d = h.agree(d)?;
         let c = h.session.config_mut();
-        c.domain.cube = Some([d.origin[0], d.origin[1], d.origin[2], d.side]);
-        c.domain.fit = None;
+        c.domain = crate::config::DomainConfig {
+            cube: Some([d.origin[0], d.origin[1], d.origin[2], d.side]),
+            ..Default::default()
+        };
+        Ok(())
+    })
+}
+
+/// Sets a box domain for the next octree instead of the cube: the box
+/// `lo..hi` split into `roots[0] x roots[1] x roots[2]` cubic root cells
+/// (the trees of a p4est brick, numbered in `p8est_connectivity_new_brick`
+/// order). The box's sides divided by the root counts must be equal (else
+/// OCTMESH_STATUS_INVALID_ARGUMENT naming boxes that divide). Levels then
+/// count from the root cells: level `l` has cells of side `2^-l` of a root
+/// cell, up to 18 less the log2 of the largest root count rounded up. The
+/// mesh's side patches (`xmin` ... `zmax`) lie on the box. Callbacks of
+/// `octmesh_octree_refine_callback` still see the lattice of the smallest
+/// power-of-two cube of root cells holding the box. Collective.
+///
+/// ```text
+///        +-----+-----+-----+  hi
+///       /     /     /     /|
+///      +-----+-----+-----+ |     roots = {3, 1, 1}
+///      |  0  |  1  |  2  | +
+///      |     |     |     |/
+///  lo  +-----+-----+-----+
+/// ```
+///
+/// \param[in] h      the handle
+/// \param[in] lo     lowest corner, 3 values, user units
+/// \param[in] hi     highest corner, 3 values, user units
+/// \param[in] roots  root cells along x, y, z, 3 values, each 1 to 512
+#[no_mangle]
+pub extern "C" fn octmesh_domain_set_box(
+    h: *mut octmesh_t,
+    lo: *const f64,
+    hi: *const f64,
+    roots: *const i32,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        // SAFETY: NULL or 3 values each (requirement of the C API).
+        let args = unsafe {
+            (
+                slice_arg(lo, 3, "lo"),
+                slice_arg(hi, 3, "hi"),
+                slice_arg(roots, 3, "roots"),
+            )
+        };
+        let d = (|| {
+            let (lo, hi, roots) = (args.0?, args.1?, args.2?);
+            if roots.iter().any(|&n| n < 1) {
+                return Err(crate::error::Error::invalid(format!(
+                    "roots must be positive, got {roots:?}"
+                )));
+            }
+            let r = [roots[0] as u32, roots[1] as u32, roots[2] as u32];
+            let b = [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]];
+            crate::domain::Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], r)?;
+            Ok((b, r))
+        })();
+        let (b, r) = h.agree(d)?;
+        h.session.config_mut().domain = crate::config::DomainConfig {
+            bbox: Some(b),
+            roots: Some(r),
+            ..Default::default()
+        };
         Ok(())
     })
 }

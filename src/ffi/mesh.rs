@@ -417,8 +417,8 @@ pub extern "C" fn octmesh_mesh_get_element_class(
     get_ptr(h, out, |m, _| m.element_class().as_ptr().cast::<i8>())
 }
 
-/// Sets `*out` to the octree level of each local element. Needs a mesh.
-/// Not collective.
+/// Sets `*out` to the level of each local element, counted from the root
+/// cells (in a cube, the octree level). Needs a mesh. Not collective.
 ///
 /// \param[in]  h    the handle
 /// \param[out] out  local_elements levels, owned by the handle
@@ -428,8 +428,9 @@ pub extern "C" fn octmesh_mesh_get_element_level(
     out: *mut *const i8,
 ) -> octmesh_status_t {
     get_ptr(h, out, |m, a| {
+        let k = m.domain().brick.level();
         a.levels
-            .get_or_init(|| m.elements().iter().map(|e| e.level() as i8).collect())
+            .get_or_init(|| m.elements().iter().map(|e| (e.level() - k) as i8).collect())
             .as_ptr()
     })
 }

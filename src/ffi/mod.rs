@@ -54,6 +54,8 @@ pub mod faces;
 pub mod handle;
 pub mod mesh;
 pub mod octree;
+// After `octree`: cbindgen keeps declaration order, and these are octree functions.
+pub mod adapt;
 pub mod quality;
 pub mod surface;
 

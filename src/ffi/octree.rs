@@ -25,7 +25,7 @@ pub type octmesh_refine_fn =
 pub type octmesh_weight_fn =
     Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> u64>;
 
-fn level_arg(level: i32, name: &str) -> Result<u8> {
+pub(super) fn level_arg(level: i32, name: &str) -> Result<u8> {
     if (0..=MAX_LEVEL as i32).contains(&level) {
         Ok(level as u8)
     } else {
@@ -75,20 +75,7 @@ pub extern "C" fn octmesh_octree_refine_curvature(
     feature_angle: f64,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
-        let checked = level_arg(min_level, "min_level").and_then(|lo| {
-            let hi = level_arg(max_level, "max_level")?;
-            if hi < lo {
-                return Err(Error::invalid(format!(
-                    "max_level {hi} is below min_level {lo}"
-                )));
-            }
-            if !(feature_angle > 0.0 && feature_angle < 180.0) {
-                return Err(Error::invalid(format!(
-                    "feature_angle {feature_angle} is not in (0, 180) degrees"
-                )));
-            }
-            Ok((lo, hi))
-        });
+        let checked = curvature_args(min_level, max_level, feature_angle);
         let (lo, hi) = h.agree(checked)?;
         let octree = &mut h.session.config_mut().octree;
         let before = (octree.level, octree.max_level, octree.feature_angle);
@@ -99,6 +86,66 @@ pub extern "C" fn octmesh_octree_refine_curvature(
             let octree = &mut h.session.config_mut().octree;
             (octree.level, octree.max_level, octree.feature_angle) = before;
         }
+        done
+    })
+}
+
+/// Checks a `(min_level, max_level)` range and a feature angle.
+fn curvature_args(min_level: i32, max_level: i32, feature_angle: f64) -> Result<(u8, u8)> {
+    let lo = level_arg(min_level, "min_level")?;
+    let hi = level_arg(max_level, "max_level")?;
+    if hi < lo {
+        return Err(Error::invalid(format!(
+            "max_level {hi} is below min_level {lo}"
+        )));
+    }
+    if !(feature_angle > 0.0 && feature_angle < 180.0) {
+        return Err(Error::invalid(format!(
+            "feature_angle {feature_angle} is not in (0, 180) degrees"
+        )));
+    }
+    Ok((lo, hi))
+}
+
+/// Refinement of one part of the surface (a solid of an ASCII STL, named
+/// as its patch is before renames) to its own levels, like the command's
+/// `--surface-level NAME=MIN:MAX --feature-angle DEG`: a leaf touching the
+/// part is split while below `min_level`, and up to `max_level` while the
+/// unit normals of the part's triangles touching it differ by more than
+/// `feature_angle` degrees. Call it once per part after
+/// `octmesh_octree_refine_surface(h, L)` with `L` the least minimum; the
+/// order of the calls does not matter. Needs an octree and the surface.
+/// Drops the balance and the mesh. Collective.
+///
+/// \param[in] h              the handle
+/// \param[in] name           the part's name, NUL-terminated
+/// \param[in] min_level      the part's level, 0 to 18
+/// \param[in] max_level      its finest level where it curves, min_level
+///                           to 18
+/// \param[in] feature_angle  degrees, in (0, 180)
+#[no_mangle]
+pub extern "C" fn octmesh_octree_refine_surface_part(
+    h: *mut octmesh_t,
+    name: *const c_char,
+    min_level: i32,
+    max_level: i32,
+    feature_angle: f64,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let checked = str_arg(name, "name").and_then(|n| {
+            let (lo, hi) = curvature_args(min_level, max_level, feature_angle)?;
+            Ok((n.to_string(), lo, hi))
+        });
+        let (n, lo, hi) = h.agree(checked)?;
+        // This part alone, as an action: the configuration is restored.
+        let octree = &mut h.session.config_mut().octree;
+        let saved = octree.clone();
+        octree.level = Some(0);
+        octree.max_level = None;
+        octree.feature_angle = Some(feature_angle);
+        octree.surface_levels = [(n, [lo, hi])].into_iter().collect();
+        let done = h.session.refine_curvature();
+        h.session.config_mut().octree = saved;
         done
     })
 }

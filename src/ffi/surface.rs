@@ -67,11 +67,12 @@ pub extern "C" fn octmesh_surface_from_triangles(
 }
 
 /// Sets a built-in surface: `"sphere"` (radius 1 at the origin, 20,480
-/// triangles) or `"torus"` (radii 1 and 0.35, 9,216 triangles).
-/// Collective.
+/// triangles), `"torus"` (radii 1 and 0.35, 9,216 triangles) or `"hull"`
+/// (a Wigley hull of length 1 along x, beam 0.1, draft 0.0625, freeboard
+/// 0.05, 7,870 triangles). Collective.
 ///
 /// \param[in] h     the handle
-/// \param[in] name  `"sphere"` or `"torus"`, NUL-terminated
+/// \param[in] name  `"sphere"`, `"torus"` or `"hull"`, NUL-terminated
 #[no_mangle]
 pub extern "C" fn octmesh_surface_builtin(
     h: *mut octmesh_t,
@@ -80,14 +81,14 @@ pub extern "C" fn octmesh_surface_builtin(
     with_mut(h, |h| {
         let loaded = non_null(name, "name").and_then(|_| {
             // SAFETY: non-NULL, NUL-terminated (requirement of the C API).
-            match unsafe { CStr::from_ptr(name) }.to_bytes() {
-                b"sphere" => Ok(shapes::default_sphere()),
-                b"torus" => Ok(shapes::default_torus()),
-                other => Err(Error::invalid(format!(
-                    "unknown built-in surface '{}' (expected sphere or torus)",
-                    String::from_utf8_lossy(other)
-                ))),
-            }
+            let name = unsafe { CStr::from_ptr(name) }.to_bytes();
+            let name = String::from_utf8_lossy(name);
+            shapes::builtin(&name).ok_or_else(|| {
+                Error::invalid(format!(
+                    "unknown built-in surface '{name}' (expected {})",
+                    shapes::BUILTIN_NAMES.join(", ")
+                ))
+            })
         });
         let n = if name.is_null() {
             String::new()

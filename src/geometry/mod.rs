@@ -355,15 +355,15 @@ fn bbox_of(triangles: &[Triangle]) -> Aabb {
     Aabb::from_points(triangles.iter().flat_map(|t| t.v))
 }
 
-/// Loads a surface from a specification: `"sphere"` and `"torus"` name the
-/// built-in shapes ([`shapes::default_sphere`], [`shapes::default_torus`]);
+/// Loads a surface from a specification: `"sphere"`, `"torus"` and `"hull"`
+/// name the built-in shapes ([`shapes::default_sphere`],
+/// [`shapes::default_torus`], [`shapes::default_hull`]);
 /// anything else is a path to an STL file (so a file literally called
 /// `sphere` must be given as `./sphere`).
 pub fn load_surface(spec: &str) -> Result<Surface> {
-    match spec {
-        "sphere" => Ok(shapes::default_sphere()),
-        "torus" => Ok(shapes::default_torus()),
-        path => stl::read_stl_file(Path::new(path)),
+    match shapes::builtin(spec) {
+        Some(s) => Ok(s),
+        None => stl::read_stl_file(Path::new(spec)),
     }
 }
 

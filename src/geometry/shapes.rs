@@ -46,6 +46,163 @@ pub fn default_torus() -> Surface {
     torus([0.0; 3], 1.0, 0.35, 96, 48)
 }
 
+/// The hull used by the `hull` surface specification: a Wigley hull
+/// ([`wigley_hull`]) of length 1 along x (from -0.5 to 0.5), beam 0.1,
+/// draft 0.0625 below the waterline z = 0 and freeboard 0.05 above it, 96
+/// stations and 20 waterlines per side (7,870 triangles).
+pub fn default_hull() -> Surface {
+    wigley_hull(1.0, 0.1, 0.0625, 0.05, 96, 16, 4)
+}
+
+/// The built-in surface called `name` (`sphere`, `torus`, `hull`).
+pub fn builtin(name: &str) -> Option<Surface> {
+    match name {
+        "sphere" => Some(default_sphere()),
+        "torus" => Some(default_torus()),
+        "hull" => Some(default_hull()),
+        _ => None,
+    }
+}
+
+/// The names [`builtin`] knows.
+pub const BUILTIN_NAMES: [&str; 3] = ["sphere", "torus", "hull"];
+
+/// A closed Wigley hull, the classic test hull of ship hydrodynamics: the
+/// half-breadth below the waterline is
+/// `y = B/2 (1 - (2x/L)^2) (1 - (z/T)^2)` for `x` in `[-L/2, L/2]` and `z`
+/// in `[-T, 0]`; above it the sides are vertical (`y = B/2 (1 - (2x/L)^2)`)
+/// up to a flat deck at `z = D`. The two sides meet at the keel (`z = -T`)
+/// and at the stem and stern (`x = ±L/2`), where the half-breadth is 0.
+///
+/// ```text
+///   side view            section at x = 0
+///   ______________ D        ____          deck
+///  |              |        |    |
+///  ~~~~~~~~~~~~~~~~ 0      \    /         waterline
+///   \____________/ -T       \__/          keel
+/// ```
+///
+/// `nx` stations along the length, `nz_below` and `nz_above` waterlines
+/// below and above z = 0. Outward-facing triangles.
+///
+/// # Panics
+/// If a size is not finite and positive or a count is zero.
+pub fn wigley_hull(
+    length: f64,
+    beam: f64,
+    draft: f64,
+    freeboard: f64,
+    nx: u32,
+    nz_below: u32,
+    nz_above: u32,
+) -> Surface {
+    assert!(
+        [length, beam, draft, freeboard]
+            .iter()
+            .all(|v| v.is_finite() && *v > 0.0),
+        "hull sizes must be finite and positive"
+    );
+    assert!(
+        nx > 0 && nz_below > 0 && nz_above > 0,
+        "hull counts must be positive"
+    );
+    let (ni, nj) = (nx as usize + 1, (nz_below + nz_above) as usize + 1);
+    let x = |i: usize| -0.5 * length + length * i as f64 / nx as f64;
+    let z = |j: usize| {
+        if j <= nz_below as usize {
+            -draft + draft * j as f64 / nz_below as f64
+        } else {
+            freeboard * (j - nz_below as usize) as f64 / nz_above as f64
+        }
+    };
+    let half = |i: usize, j: usize| {
+        // Exact zeros at the stem, stern and keel, so both sides share them.
+        if i == 0 || i == nx as usize || j == 0 {
+            return 0.0;
+        }
+        let xi = 2.0 * x(i) / length;
+        let zeta = (z(j) / draft).min(0.0);
+        0.5 * beam * (1.0 - xi * xi) * (1.0 - zeta * zeta)
+    };
+    let mut points = Vec::with_capacity(2 * ni * nj);
+    // Starboard (y >= 0) first; port points on the centre plane reuse them.
+    let mut star = vec![0u32; ni * nj];
+    let mut port = vec![0u32; ni * nj];
+    for j in 0..nj {
+        for i in 0..ni {
+            star[j * ni + i] = points.len() as u32;
+            points.push([x(i), half(i, j), z(j)]);
+        }
+    }
+    for j in 0..nj {
+        for i in 0..ni {
+            let h = half(i, j);
+            port[j * ni + i] = if h == 0.0 {
+                star[j * ni + i]
+            } else {
+                points.push([x(i), -h, z(j)]);
+                points.len() as u32 - 1
+            };
+        }
+    }
+    let mut faces = Vec::new();
+    for j in 0..nj - 1 {
+        for i in 0..ni - 1 {
+            let at = |g: &[u32], di: usize, dj: usize| g[(j + dj) * ni + i + di];
+            // (i, j), (i+1, j), (i+1, j+1), (i, j+1): x then z, whose
+            // cross product points to -y. The diagonal avoids a triangle
+            // with all three corners on the centre plane (shared by both
+            // sides, it would be a flap of no area).
+            let shared = |di: usize, dj: usize| at(&port, di, dj) == at(&star, di, dj);
+            let across = (shared(0, 0) && shared(1, 1)) && (shared(1, 0) || shared(0, 1));
+            let (a, b, c, d) = (
+                at(&port, 0, 0),
+                at(&port, 1, 0),
+                at(&port, 1, 1),
+                at(&port, 0, 1),
+            );
+            if across {
+                faces.push([a, b, d]);
+                faces.push([b, c, d]);
+            } else {
+                faces.push([a, b, c]);
+                faces.push([a, c, d]);
+            }
+            let (a, b, c, d) = (
+                at(&star, 0, 0),
+                at(&star, 1, 0),
+                at(&star, 1, 1),
+                at(&star, 0, 1),
+            );
+            if across {
+                faces.push([a, d, b]);
+                faces.push([b, d, c]);
+            } else {
+                faces.push([a, c, b]);
+                faces.push([a, d, c]);
+            }
+        }
+    }
+    // The deck, strip by strip from port to starboard (normal +z); the
+    // strips at the stem and stern are triangles.
+    let top = (nj - 1) * ni;
+    for i in 0..ni - 1 {
+        let (p0, p1, s0, s1) = (
+            port[top + i],
+            port[top + i + 1],
+            star[top + i],
+            star[top + i + 1],
+        );
+        if p1 != s1 {
+            faces.push([p0, p1, s1]);
+        }
+        if p0 != s0 {
+            faces.push([p0, s1, s0]);
+        }
+    }
+    build(&points, &faces)
+}
+
 /// An icosphere: a regular icosahedron whose faces are split into four
 /// `subdivisions` times, with every vertex projected onto the sphere.
 /// It has `20 * 4^subdivisions` triangles.
@@ -251,6 +408,23 @@ mod tests {
 
     fn rel(a: f64, b: f64) -> f64 {
         (a - b).abs() / b.abs()
+    }
+
+    #[test]
+    fn default_hull_is_closed_and_accurate() {
+        let s = default_hull();
+        assert_eq!(s.len(), 2 * 2 * 96 * 20 + 2 * 96 - 2);
+        assert_closed(&s);
+        // Below the waterline 4 B L T / 9; above it B (2 L / 3) D.
+        let (l, b, t, d) = (1.0, 0.1, 0.0625, 0.05);
+        let exact = 4.0 * b * l * t / 9.0 + b * 2.0 * l / 3.0 * d;
+        let v = s.signed_volume();
+        assert!(v > 0.0, "the hull faces inwards: {v}");
+        assert!(rel(v, exact) < 2e-3, "{v} against {exact}");
+        let bbox = s.bbox();
+        assert_eq!(bbox.min, [-0.5, -0.05, -0.0625]);
+        assert_eq!(bbox.max, [0.5, 0.05, 0.05]);
+        assert!(builtin("hull").is_some() && builtin("cube").is_none());
     }
 
     #[test]

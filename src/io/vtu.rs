@@ -571,7 +571,9 @@ pub fn write_mesh(
     fields: &[(&str, &[f64])],
 ) -> Result<PathBuf> {
     let points = mesh.coordinates();
-    let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level()).collect();
+    // Levels count from the root cells of a box domain.
+    let k = mesh.domain().brick.level();
+    let levels: Vec<u8> = mesh.elements().iter().map(|e| e.level() - k).collect();
     let ni = mesh.num_independent();
     let global: Vec<i64> = (0..mesh.num_nodes())
         .map(|i| if i < ni { mesh.global_id(i) as i64 } else { -1 })

@@ -92,6 +92,19 @@ pub fn find_leak(
     };
     let cell = agree(comm, local)?;
     let me = comm.rank();
+    // Outside a box domain nothing is open: the void counts as cut.
+    let brick = domain.brick;
+    let marked: Vec<u8>;
+    let classes = if brick.is_cube() {
+        classes
+    } else {
+        marked = classes
+            .iter()
+            .zip(tree.leaves())
+            .map(|(&c, &o)| if brick.is_void(o) { c | CUT } else { c })
+            .collect();
+        &marked
+    };
     let ghost = build_ghost_layer(tree, |i| classes[i] as u64);
     let ghost_class: Vec<u8> = ghost.data.iter().map(|&c| c as u8).collect();
     let leaves = tree.leaves();
@@ -114,7 +127,7 @@ pub fn find_leak(
     };
     let mut seeds: Vec<(u32, u32)> = Vec::new();
     for (i, o) in leaves.iter().enumerate() {
-        if classes[i] & CUT == 0 && o.touches_domain_boundary() {
+        if classes[i] & CUT == 0 && brick.touches_boundary(*o) {
             s.dist[i] = 0;
             seeds.push((0, i as u32));
         }

@@ -7,7 +7,7 @@ use crate::classify::CUT;
 use crate::comm::Comm;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::octant::{morton_encode, Octant, ROOT_LEN};
+use crate::octant::{morton_encode, Octant};
 use crate::octree::LeafIndex;
 
 /// Distance of a leaf the search has not reached.
@@ -220,20 +220,28 @@ impl Search<'_> {
 /// is outside the cube.
 pub(crate) fn point_cell(domain: &Domain, point: [f64; 3]) -> Result<u64> {
     let q = domain.to_lattice(point);
-    let len = ROOT_LEN as f64;
-    if !q.iter().all(|&v| (0.0..=len).contains(&v)) {
+    let hi = domain.brick.hi();
+    if !(0..3).all(|k| (0.0..=hi[k] as f64).contains(&q[k])) {
+        let top = domain.upper();
+        let what = if domain.brick.is_cube() {
+            "cube"
+        } else {
+            "box"
+        };
         return Err(Error::invalid(format!(
-            "the inside point ({}, {}, {}) is not in the cube (origin ({}, {}, {}), side {})",
+            "the inside point ({}, {}, {}) is not in the {what} (from ({}, {}, {}) to ({}, {}, {}))",
             point[0],
             point[1],
             point[2],
             domain.origin[0],
             domain.origin[1],
             domain.origin[2],
-            domain.side
+            top[0],
+            top[1],
+            top[2]
         )));
     }
-    let i = q.map(|v| (v.floor() as u32).min(ROOT_LEN - 1));
+    let i: [u32; 3] = std::array::from_fn(|k| (q[k].floor() as u32).min(hi[k] - 1));
     Ok(morton_encode(i[0], i[1], i[2]))
 }
 

@@ -45,7 +45,6 @@
 
 use crate::comm::Comm;
 use crate::error::Result;
-use crate::octant::ROOT_LEN;
 
 use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
 use super::points::{face_polygon, point_key, PointIndex};
@@ -155,6 +154,7 @@ impl Mesh {
             halo: &self.halo,
         };
         let lattice = self.node_lattice();
+        let hi = self.domain.brick.hi();
         // A local element at each node, as the look-ups' starting point.
         let mut near = vec![0u32; lattice.len()];
         for (e, c) in self.connectivity.iter().enumerate() {
@@ -165,7 +165,7 @@ impl Mesh {
         let mut masks: Vec<u64> = lattice
             .iter()
             .zip(&near)
-            .map(|(&p, &e)| node_patch_mask(&kept, p, e as usize))
+            .map(|(&p, &e)| node_patch_mask(&kept, p, e as usize, hi))
             .collect();
         // Nodes no local element has as a corner: the halo may not reach
         // around them, so they take what the sharing ranks found.
@@ -244,7 +244,8 @@ impl Mesh {
 
 /// The patches (bit `p` for patch `p`) of the boundary faces holding
 /// lattice point `p`.
-fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize) -> u64 {
+/// `hi`: the upper lattice bounds of the domain (the cube's or a brick's).
+fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3]) -> u64 {
     // Cell `b` (bit `a` of `b` set: on the positive side of axis `a`),
     // kept or not; `outside[b]` when it leaves the domain.
     let mut inside = [false; 8];
@@ -254,7 +255,7 @@ fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize) -> u64 {
         for a in 0..3 {
             let plus = b >> a & 1 == 1;
             if plus {
-                outside[b] |= p[a] >= ROOT_LEN;
+                outside[b] |= p[a] >= hi[a];
                 q[a] = p[a];
             } else {
                 outside[b] |= p[a] == 0;

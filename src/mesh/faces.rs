@@ -591,7 +591,8 @@ impl Mesh {
         let e = self.elements[i];
         let i = i as u32;
         let (c, s) = (e.coords(), e.side());
-        for (f, n) in e.face_neighbors().into_iter().enumerate() {
+        // Outside the cube or a brick's box: a side patch.
+        for (f, n) in self.domain.brick.face_neighbors(e).into_iter().enumerate() {
             let (axis, plus) = (f / 2, f % 2 == 1);
             let mut origin = c;
             if plus {

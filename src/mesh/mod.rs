@@ -60,7 +60,7 @@ pub mod patches;
 pub mod points;
 pub mod quality;
 
-use crate::classify::{keeps, CutRule, Keep, LeafClass};
+use crate::classify::{keeps, CutRule, Keep, LeafClass, VOID};
 use crate::comm::{Comm, Traffic};
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
@@ -203,6 +203,19 @@ impl Mesh {
                 unclassified = vec![LeafClass::Outside as u8; tree.local_len()];
                 &unclassified
             }
+        };
+        // Leaves outside a box domain are never elements.
+        let brick = domain.brick;
+        let with_void: Vec<u8>;
+        let local_class: &[u8] = if brick.is_cube() {
+            local_class
+        } else {
+            with_void = local_class
+                .iter()
+                .zip(tree.leaves())
+                .map(|(&c, &o)| if brick.is_void(o) { c | VOID } else { c })
+                .collect();
+            &with_void
         };
         let keep =
             |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);

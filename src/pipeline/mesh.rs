@@ -245,7 +245,7 @@ impl Session {
 
     /// The name the surface patch is made from: the surface's file or
     /// built-in name.
-    fn surface_name(&self) -> &str {
+    pub(super) fn surface_name(&self) -> &str {
         match (&self.surface, &self.released) {
             (Some(s), _) => s.name.as_str(),
             (None, Some((_, _, n))) => n.as_str(),

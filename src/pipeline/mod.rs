@@ -18,6 +18,7 @@
 //! and tells its [`Observer`] what it did. A failed stage leaves the session
 //! as it was before the call.
 
+mod adapt;
 mod classes;
 mod mesh;
 pub mod observer;
@@ -231,11 +232,11 @@ impl Session {
 
     fn next_domain(&self) -> Result<Domain> {
         let d = &self.config.domain;
-        match (&self.surface, d.cube) {
-            // An explicit cube does not depend on the surface's box.
-            (_, Some(_)) => d.resolve([0.0; 3], [0.0; 3]),
-            (Some(s), None) => d.resolve(s.bbox.min, s.bbox.max),
-            (None, None) => Domain::cube([0.0; 3], 1.0),
+        match (&self.surface, d.is_explicit()) {
+            // An explicit cube or box does not depend on the surface's box.
+            (_, true) => d.resolve([0.0; 3], [0.0; 3]),
+            (Some(s), false) => d.resolve(s.bbox.min, s.bbox.max),
+            (None, false) => Domain::cube([0.0; 3], 1.0),
         }
     }
 
@@ -299,17 +300,19 @@ impl Session {
         self.plan = command;
         self.load_surface()?;
         // Known now: sizes became levels once the domain was.
+        // Parts with their own levels start from the least of them.
         let level = agree(
             &*self.comm,
             self.config
-                .octree
-                .level
+                .first_surface_level()
                 .ok_or_else(|| Error::invalid("octree.level is required")),
         )?;
         if command == Command::Mesh {
             // Renames name the surface's parts: check them before the work.
             agree(&*self.comm, self.patch_names())?;
         }
+        let parts = self.config.surface_ranges(self.surface_name(), &self.parts);
+        agree(&*self.comm, parts)?;
         self.refine_surface(level)?;
         self.refine_curvature()?;
         self.refine_regions()?;

@@ -33,7 +33,7 @@ pub enum Event<'a> {
     /// has one, the global count of what it made.
     Phase {
         /// `read`, `construct`, `refine`, `partition`, `balance`,
-        /// `classify`, `leak_check`, `ghost`, `nodes`, `numbering`,
+        /// `coarsen`, `adapt`, `classify`, `leak_check`, `ghost`, `nodes`, `numbering`,
         /// `connectivity` or `write`.
         name: &'a str,
         /// Seconds, maximum over ranks.

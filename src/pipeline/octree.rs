@@ -89,10 +89,14 @@ impl Session {
     /// mesh.
     pub fn refine_surface(&mut self, level: u8) -> Result<()> {
         let checked = self.surface_or_state().and_then(|_| {
-            check_level(level)?;
-            self.next_domain()
+            let d = self.next_domain()?;
+            check_user_level(level, &d)?;
+            Ok(d)
         });
         let domain = agree(&*self.comm, checked)?;
+        // Levels count from the root cells; the lattice's are deeper in a
+        // brick.
+        let level = level + domain.brick.level();
         let comm = self.comm.clone();
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
@@ -119,12 +123,17 @@ impl Session {
             Some(top.tree().global_len()),
         );
         let shown = self.progress("refine", expected);
-        let tree = self.timer.time(&*comm, "refine", || top.refine(limit));
+        let tree = self.timer.time(&*comm, "refine", || {
+            let mut tree = top.refine(limit)?;
+            fill_brick(&mut tree, domain, limit)?;
+            Ok(tree)
+        });
         drop(shown);
         let tree = over_budget(tree, budget, limit, "refinement")?;
-        report(&self.timer, &mut *self.observer, Some(tree.global_len()));
-        self.facts.octants_refined = tree.global_len();
-        self.facts.octants_balanced = tree.global_len();
+        let n = tree.forest_len();
+        report(&self.timer, &mut *self.observer, Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
         self.set_tree(tree, domain);
         Ok(())
     }
@@ -149,6 +158,7 @@ impl Session {
                 _ => {
                     let mut t = construct_for_callback(comm.clone(), max_level, &split)?;
                     t.refine(max_level, &split, limit)?;
+                    fill_brick(&mut t, domain, limit)?;
                     *tree = Some((t, domain));
                     Ok(())
                 }
@@ -164,9 +174,14 @@ impl Session {
     /// maximum level above the surface level.
     pub fn refine_curvature(&mut self) -> Result<()> {
         let (level, max) = (self.config.octree.level, self.config.octree.max_level);
-        let Some(max) = max.filter(|&m| level.is_some_and(|l| m > l)) else {
+        let parts = !self.config.octree.surface_levels.is_empty();
+        if level.is_none() || !(parts || max.is_some_and(|m| level.is_some_and(|l| m > l))) {
             return Ok(());
-        };
+        }
+        let ranges = agree(
+            &*self.comm,
+            self.config.surface_ranges(self.surface_name(), &self.parts),
+        )?;
         let angle = self
             .config
             .octree
@@ -177,13 +192,17 @@ impl Session {
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
         let comm = self.comm.clone();
-        let shown = self.progress("curvature", None);
+        // Per-part levels are a phase of their own in the table.
+        let phase = if parts { "surface_levels" } else { "curvature" };
+        let shown = self.progress(phase, None);
         let (tree, surface) = (self.tree.as_mut().map(|t| &mut t.0), &self.surface);
-        let refined = self.timer.time(&*comm, "curvature", || -> Result<()> {
+        let refined = self.timer.time(&*comm, phase, || -> Result<()> {
             let (Some(tree), Some(s)) = (tree, surface) else {
                 return Ok(());
             };
-            let rule = CurvatureRule::new(&s.index, max, angle);
+            let k = domain.brick.level();
+            let ranges = ranges.iter().map(|&(a, b)| (a + k, b + k)).collect();
+            let rule = CurvatureRule::with_ranges(&s.index, ranges, angle);
             let mut buf = Vec::new();
             tree.refine(rule.max_level(), |o| rule.splits(o, &mut buf), limit)
         });
@@ -238,7 +257,7 @@ impl Session {
     /// - surface level `L`: the estimate of the surface refinement
     ///   ([`estimate_leaves`]); curvature up to `MAX`: the same at `MAX` (what
     ///   refinement to `MAX` everywhere on the surface would give);
-    /// - minimum level `M`: `8^M`, exact;
+    /// - minimum level `M`: `8^M` per root cell, exact;
     /// - a region at level `l`: the level-`l` cells overlapping its
     ///   bounding box, or for an outside region all cells but those within
     ///   a box it contains (the 2:1 grading around it comes on top);
@@ -252,25 +271,32 @@ impl Session {
         let octree = self.config.octree.clone();
         let regions = self.config.regions.clone();
         let level = octree.level.unwrap_or(0);
+        // Levels count from the root cells; the lattice's are `k` deeper.
+        let (k, roots, trees) = (
+            domain.brick.level(),
+            domain.brick.roots(),
+            domain.brick.trees(),
+        );
         let (area, index) = {
             let s = self.surface.as_ref().expect("just loaded");
             (s.surface.area(), self.index_for(domain)?)
         };
         let mut rows = vec![(
             format!("surface level {level}"),
-            estimate_leaves(index, level).balanced,
+            estimate_leaves(index, level + k).balanced,
         )];
         if let Some(max) = octree.max_level.filter(|&m| m > level) {
-            let at_max = estimate_leaves(index, max).balanced;
+            let at_max = estimate_leaves(index, max + k).balanced;
             rows.push((format!("curvature up to level {max} (at most)"), at_max));
         }
         if octree.min_level > 0 {
             rows.push((
                 format!("min level {}", octree.min_level),
-                8u64.saturating_pow(octree.min_level as u32),
+                trees.saturating_mul(8u64.saturating_pow(octree.min_level as u32)),
             ));
         }
-        let cell = |l: u8| domain.side / (1u64 << l) as f64;
+        let cell = |l: u8| domain.root_side() / (1u64 << l) as f64;
+        let cells_on = |l: u8, a: usize| (roots[a] as u64 * (1u64 << l)) as f64;
         let cells_per_axis = |l: u8| (1u64 << l) as f64;
         for r in &regions {
             let l = r.level();
@@ -288,13 +314,13 @@ impl Session {
                         } else {
                             (x0.ceil(), x1.floor())
                         };
-                        (last.min(cells_per_axis(l)) - first.max(0.0)).max(0.0)
+                        (last.min(cells_on(l, a)) - first.max(0.0)).max(0.0)
                     })
                     .product()
             };
             let n = if r.outside() {
                 let inner = r.inner_box().map_or(0.0, |b| count(b, false));
-                cells_per_axis(l).powi(3) - inner
+                trees as f64 * cells_per_axis(l).powi(3) - inner
             } else {
                 count(r.bounding_box(), true)
             };
@@ -302,8 +328,8 @@ impl Session {
         }
         for &(d, l) in &octree.distance {
             let slab = 2.0 * d * area / cell(l).powi(3);
-            let n = estimate_leaves(index, l).balanced as f64 + slab;
-            let all = cells_per_axis(l).powi(3);
+            let n = estimate_leaves(index, l + k).balanced as f64 + slab;
+            let all = trees as f64 * cells_per_axis(l).powi(3);
             rows.push((
                 format!("distance {d} at level {l}"),
                 n.min(all).round() as u64,
@@ -325,7 +351,7 @@ impl Session {
         during: &str,
     ) -> Result<()> {
         over_budget(r, budget, limit, during)?;
-        let n = self.tree().map_or(0, |t| t.global_len());
+        let n = self.tree().map_or(0, |t| t.forest_len());
         self.report_phase(Some(n));
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
@@ -334,7 +360,8 @@ impl Session {
         Ok(())
     }
 
-    pub(super) fn set_tree(&mut self, tree: LinearOctree, domain: Domain) {
+    pub(super) fn set_tree(&mut self, mut tree: LinearOctree, domain: Domain) {
+        tree.set_brick(domain.brick);
         self.tree = Some((tree, domain));
         self.classes = Classes::default();
         self.mesh = None;
@@ -360,7 +387,7 @@ impl Session {
                 Some(w) => tree.partition_weighted(w).map(|_| ()),
             }
         })?;
-        let count = self.tree().map(|t| t.global_len());
+        let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
         self.classes = Classes::default();
         self.mesh = None;
@@ -390,9 +417,9 @@ impl Session {
         });
         drop(shown);
         over_budget(balanced, budget, limit, "balance")?;
-        let count = self.tree().map(|t| t.global_len());
+        let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
-        self.facts.octants_balanced = self.tree().map_or(0, |t| t.global_len());
+        self.facts.octants_balanced = self.tree().map_or(0, |t| t.forest_len());
         self.classes = Classes::default();
         self.mesh = None;
         Ok(())
@@ -442,4 +469,31 @@ pub(super) fn over_budget<T>(
         }
         (r, _) => r,
     }
+}
+
+/// Checks a level counted from the root cells of `domain`: at most
+/// [`crate::octant::MAX_LEVEL`] less the trees' level.
+pub(crate) fn check_user_level(level: u8, domain: &Domain) -> Result<()> {
+    let most = domain.brick.max_user_level();
+    if level > most && !domain.brick.is_cube() {
+        let r = domain.brick.roots();
+        return Err(Error::invalid(format!(
+            "level {level} is too deep for {}x{}x{} root cells: levels go up to {most}",
+            r[0], r[1], r[2]
+        )));
+    }
+    check_level(level)
+}
+
+/// Splits every octant of a brick's domain down to the trees' level, so each
+/// root cell is covered by its own leaves (the void stays as it is).
+/// Nothing to do in a cube. Collective.
+fn fill_brick(tree: &mut LinearOctree, domain: Domain, limit: u64) -> Result<()> {
+    let brick = domain.brick;
+    if brick.is_cube() {
+        return Ok(());
+    }
+    tree.set_brick(brick);
+    let k = brick.level();
+    tree.refine(k, |o| o.level() < k && !brick.is_void(o), limit)
 }

@@ -72,10 +72,13 @@ impl Session {
             })
         });
         let state = agree(&*self.comm, loaded)?;
-        self.resolve_sizes(state.index_domain.side)?;
+        // Sizes count from the root cells, as levels do.
+        self.resolve_sizes(state.index_domain.root_side())?;
         self.facts.rss_read = peak_rss_bytes();
         let level = self.config.octree.level;
-        let estimate = level.map(|l| estimate_leaves(&state.index, l));
+        // Levels count from the root cells.
+        let k = state.index_domain.brick.level();
+        let estimate = level.map(|l| estimate_leaves(&state.index, l + k));
         let inside = self.inside.map(|r| match r {
             InsideRule::Auto => {
                 let (rule, why) = InsideRule::auto_choice(state.report());
@@ -109,8 +112,7 @@ impl Session {
     /// `min_size`) into levels for a domain of side `side`, and checks the
     /// levels they give. Nothing to do without sizes.
     fn resolve_sizes(&mut self, side: f64) -> Result<()> {
-        let o = &self.config.octree;
-        if o.size.is_none() && o.max_size.is_none() && o.min_size.is_none() {
+        if !self.config.has_sizes() {
             return Ok(());
         }
         let resolved = self.config.with_sizes(side).and_then(|c| {

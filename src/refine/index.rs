@@ -10,6 +10,9 @@ use crate::octant::Octant;
 /// A surface in lattice units, ready for octant queries.
 pub struct SurfaceIndex {
     pub(crate) tris: Vec<Triangle>,
+    /// The part (STL solid) of each triangle, in the same order; empty
+    /// when the surface has fewer than two parts.
+    pub(crate) part: Vec<u16>,
     pub(crate) bvh: Bvh,
     pub(crate) projected_area: f64,
 }
@@ -33,10 +36,18 @@ impl SurfaceIndex {
         // together in memory, which the walks down the octree feel: input
         // files often list facets in no spatial order at all.
         let mut bvh = Bvh::new(&tris);
-        let tris: Vec<Triangle> = bvh.renumber().iter().map(|&i| tris[i as usize]).collect();
+        let order = bvh.renumber();
+        let tris: Vec<Triangle> = order.iter().map(|&i| tris[i as usize]).collect();
+        let of = &surface.parts().of;
+        let part = if of.is_empty() {
+            Vec::new()
+        } else {
+            order.iter().map(|&i| of[i as usize]).collect()
+        };
         let projected_area = projected_area(&tris);
         SurfaceIndex {
             tris,
+            part,
             bvh,
             projected_area,
         }
@@ -48,6 +59,12 @@ impl SurfaceIndex {
     /// this measure `P` meets about `P / h^2` cubes of a grid of side `h`.
     pub fn projected_area(&self) -> f64 {
         self.projected_area
+    }
+
+    /// The part (STL solid) of triangle `t` of [`SurfaceIndex::triangles`]
+    /// (0 for surfaces of fewer than two parts).
+    pub fn part_of(&self, t: u32) -> usize {
+        self.part.get(t as usize).map_or(0, |&p| p as usize)
     }
 
     /// Triangles in lattice units.

@@ -3,7 +3,10 @@
  *            [MAX_LEVEL ANGLE MIN_LEVEL BANDS [REGION ...]]
  * with KEEP, CUT_RULE, INSIDE_RULE and CONNECT as the C constants' values;
  * MAX_LEVEL and ANGLE for curvature refinement (MAX_LEVEL = LEVEL: none),
- * BANDS as "D1:L1,D2:L2" or "-", REGIONS in the command's form.
+ * BANDS as "D1:L1,D2:L2" or "-", REGIONS in the command's form; FIT may be
+ * "box:X0,Y0,Z0,X1,Y1,Z1:NX,NY,NZ" for a box domain instead; a REGION
+ * "part:NAME=MIN:MAX" refines a part of the surface to its own levels
+ * (octmesh_octree_refine_surface_part, with ANGLE).
  * Prints "COUNTS elements independent face_hanging edge_hanging" on rank 0,
  * for comparison with the octmesh command on the same settings. */
 #include <stdlib.h>
@@ -18,9 +21,25 @@ int main(int argc, char **argv) {
   }
   octmesh_options_t opts;
   OK(octmesh_options_default(&opts), NULL);
-  opts.fit = atof(argv[7]);
+  int box = strncmp(argv[7], "box:", 4) == 0;
+  if (!box)
+    opts.fit = atof(argv[7]);
   octmesh_t *h = NULL;
   OK(octmesh_create(MPI_COMM_WORLD, &opts, &h), NULL);
+  if (box) {
+    double lo[3], hi[3];
+    int roots[3];
+    if (sscanf(argv[7] + 4, "%lf,%lf,%lf,%lf,%lf,%lf:%d,%d,%d", &lo[0], &lo[1], &lo[2], &hi[0], &hi[1],
+               &hi[2], &roots[0], &roots[1], &roots[2]) != 9) {
+      fprintf(stderr, "settings: bad box '%s'\n", argv[7]);
+      MPI_Abort(MPI_COMM_WORLD, 2);
+    }
+    /* A box whose cells are not cubes is refused, and the handle stays usable. */
+    double tall[3] = {hi[0], hi[1], hi[2] + 0.5 * (hi[2] - lo[2])};
+    CHECK_STATUS(octmesh_domain_set_box(h, lo, tall, roots), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+    CHECK(strstr(octmesh_last_error(h), "does not divide") != NULL, h);
+    OK(octmesh_domain_set_box(h, lo, hi, roots), h);
+  }
   if (strcmp(argv[1], "sphere") == 0 || strcmp(argv[1], "torus") == 0)
     OK(octmesh_surface_builtin(h, argv[1]), h);
   else
@@ -36,9 +55,18 @@ int main(int argc, char **argv) {
       d[nb] = atof(t);
       l[nb++] = atoi(strchr(t, ':') + 1);
     }
-    OK(octmesh_octree_refine_regions(h, atoi(argv[10]), argc - 12, (const char *const *)argv + 12,
-                                     nb, d, l),
-       h);
+    /* Parts first, as the command does (surface levels, then regions). */
+    int nreg = 0;
+    const char *regions[16];
+    for (int a = 12; a < argc && nreg < 16; ++a) {
+      char name[64];
+      int lo, hi;
+      if (sscanf(argv[a], "part:%63[^=]=%d:%d", name, &lo, &hi) == 3)
+        OK(octmesh_octree_refine_surface_part(h, name, lo, hi, atof(argv[9])), h);
+      else
+        regions[nreg++] = argv[a];
+    }
+    OK(octmesh_octree_refine_regions(h, atoi(argv[10]), nreg, regions, nb, d, l), h);
   }
   OK(octmesh_octree_partition(h, NULL, NULL), h);
   OK(octmesh_octree_balance(h, atoi(argv[6])), h);

@@ -399,3 +399,26 @@ pub fn gather(comm: &octmesh::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
     }
     out
 }
+
+/// Writes the built-in sphere as ASCII STL, one `solid` block per entry of
+/// `parts`: its name and the triangles it holds, by the centroid's z
+/// (`Some(true)`: above 0, `Some(false)`: at or below, `None`: all).
+pub fn write_sphere_solids(path: &Path, parts: &[(&str, Option<bool>)]) {
+    let s = octmesh::geometry::shapes::default_sphere();
+    let mut text = String::new();
+    for (name, upper) in parts {
+        text.push_str(&format!("solid {name}\n"));
+        for t in s.triangles() {
+            if upper.is_some_and(|u| u != (t.centroid()[2] > 0.0)) {
+                continue;
+            }
+            text.push_str("facet normal 0 0 0\n outer loop\n");
+            for v in &t.v {
+                text.push_str(&format!("  vertex {:e} {:e} {:e}\n", v[0], v[1], v[2]));
+            }
+            text.push_str(" endloop\nendfacet\n");
+        }
+        text.push_str(&format!("endsolid {name}\n"));
+    }
+    std::fs::write(path, text).unwrap();
+}

@@ -17,6 +17,11 @@
  * Leaf files: text "x y z level" lines ('#' comments) or binary (.bin):
  * "OCTLEAF1", u64 LE count, count * 4 LE int32 (x, y, z, level).
  * Coordinates are in units where the root has side P8EST_ROOT_LEN = 2^19.
+ *
+ * Forests of a brick (text only): a "# brick NX NY NZ" line, then
+ * "tree x y z level" lines, tree-relative coordinates.  The forest is then
+ * built on p8est_connectivity_new_brick (NX, NY, NZ, 0, 0, 0) and written
+ * back in the same form.
  */
 
 #include <errno.h>
@@ -42,6 +47,7 @@
 typedef struct
 {
   int32_t             x, y, z, level;
+  int32_t             tree;
 }
 leaf_t;
 
@@ -61,6 +67,7 @@ static const char *phase_names[PH_NUM] = {
 };
 
 static int          g_rank, g_size;
+static int          g_brick[3] = { 0, 0, 0 };   /* 0: the unit cube */
 static const leaf_t *g_leaves;  /* sorted input leaves, used by refine_fn */
 static size_t       g_nleaves;
 
@@ -196,6 +203,7 @@ read_binary (FILE * f, const char *path, leaf_vec_t * v, char *err,
       l->y = (int32_t) get_le32 (p + 4);
       l->z = (int32_t) get_le32 (p + 8);
       l->level = (int32_t) get_le32 (p + 12);
+      l->tree = 0;
     }
     done += m;
   }
@@ -213,8 +221,8 @@ read_text (FILE * f, const char *path, leaf_vec_t * v, char *err,
 
   while (fgets (line, sizeof line, f) != NULL) {
     char               *p = line, *end;
-    long                val[4];
-    int                 k;
+    long                val[5];
+    int                 k, nf, o;
     leaf_t              l;
 
     ++lineno;
@@ -230,13 +238,23 @@ read_text (FILE * f, const char *path, leaf_vec_t * v, char *err,
       while ((c = fgetc (f)) != EOF && c != '\n');
       continue;
     }
+    if (!strncmp (p, "# brick ", 8)) {
+      if (sscanf (p + 8, "%d %d %d", &g_brick[0], &g_brick[1], &g_brick[2])
+          != 3 || g_brick[0] < 1 || g_brick[1] < 1 || g_brick[2] < 1) {
+        snprintf (err, errlen, "%s:%lld: bad brick line", path, lineno);
+        return -1;
+      }
+      continue;
+    }
     if (*p == '\0' || *p == '#')
       continue;
-    for (k = 0; k < 4; ++k) {
+    nf = g_brick[0] ? 5 : 4;
+    for (k = 0; k < nf; ++k) {
       errno = 0;
       val[k] = strtol (p, &end, 10);
       if (end == p || errno != 0 || val[k] < INT32_MIN || val[k] > INT32_MAX) {
-        snprintf (err, errlen, "%s:%lld: expected 4 integers", path, lineno);
+        snprintf (err, errlen, "%s:%lld: expected %d integers", path, lineno,
+                  nf);
         return -1;
       }
       p = end;
@@ -247,10 +265,12 @@ read_text (FILE * f, const char *path, leaf_vec_t * v, char *err,
       snprintf (err, errlen, "%s:%lld: trailing characters", path, lineno);
       return -1;
     }
-    l.x = (int32_t) val[0];
-    l.y = (int32_t) val[1];
-    l.z = (int32_t) val[2];
-    l.level = (int32_t) val[3];
+    o = nf - 4;
+    l.tree = o ? (int32_t) val[0] : 0;
+    l.x = (int32_t) val[o];
+    l.y = (int32_t) val[o + 1];
+    l.z = (int32_t) val[o + 2];
+    l.level = (int32_t) val[o + 3];
     if (vec_push (v, &l) != 0) {
       snprintf (err, errlen, "%s: out of memory", path);
       return -1;
@@ -292,6 +312,8 @@ validate_leaves (const leaf_vec_t * v, int *minlevel, char *err,
 {
   size_t              i;
   uint64_t            volume = 0;
+  long long           ntrees = g_brick[0] ? (long long) g_brick[0] * g_brick[1]
+    * g_brick[2] : 1;
   p8est_quadrant_t    prev, cur;
 
   memset (&prev, 0, sizeof prev);
@@ -322,8 +344,17 @@ validate_leaves (const leaf_vec_t * v, int *minlevel, char *err,
                 i, l->x, l->y, l->z, l->level);
       return -1;
     }
+    if (l->tree < 0 || l->tree >= ntrees) {
+      snprintf (err, errlen, "leaf %zu: tree %d outside [0, %lld)", i, l->tree,
+                ntrees);
+      return -1;
+    }
     leaf_to_quad (l, &cur);
-    if (i > 0) {
+    if (i > 0 && l->tree < v->a[i - 1].tree) {
+      snprintf (err, errlen, "leaf %zu: trees not in increasing order", i);
+      return -1;
+    }
+    if (i > 0 && l->tree == v->a[i - 1].tree) {
       if (p8est_quadrant_compare (&prev, &cur) >= 0) {
         snprintf (err, errlen, "leaf %zu: not strictly increasing in Morton"
                   " order", i);
@@ -340,8 +371,8 @@ validate_leaves (const leaf_vec_t * v, int *minlevel, char *err,
     volume += (uint64_t) 1 << (3 * (P8EST_MAXLEVEL - l->level));
     prev = cur;
   }
-  if (volume != (uint64_t) 1 << (3 * P8EST_MAXLEVEL)) {
-    snprintf (err, errlen, "leaves do not cover the root cube");
+  if (volume != (uint64_t) ntrees << (3 * P8EST_MAXLEVEL)) {
+    snprintf (err, errlen, "leaves do not cover the root cube or brick");
     return -1;
   }
   return 0;
@@ -356,17 +387,19 @@ refine_fn (p8est_t * p8est, p4est_topidx_t which_tree, p8est_quadrant_t * q)
   p8est_quadrant_t    t;
 
   (void) p8est;
-  (void) which_tree;
   memset (&t, 0, sizeof t);
   while (lo < hi) {
     size_t              mid = lo + (hi - lo) / 2;
     leaf_to_quad (&g_leaves[mid], &t);
-    if (p8est_quadrant_compare (&t, q) < 0)
+    if (g_leaves[mid].tree < which_tree || (g_leaves[mid].tree == which_tree
+                                            && p8est_quadrant_compare (&t,
+                                                                       q) <
+                                            0))
       lo = mid + 1;
     else
       hi = mid;
   }
-  if (lo == g_nleaves)
+  if (lo == g_nleaves || g_leaves[lo].tree != which_tree)
     return 0;
   leaf_to_quad (&g_leaves[lo], &t);
   return p8est_quadrant_is_ancestor (q, &t);
@@ -427,35 +460,39 @@ cmp_xyz (const void *a, const void *b)
 {
   const int32_t      *p = a, *q = b;
   int                 i;
-  for (i = 0; i < 3; ++i)
+  for (i = 0; i < 4; ++i)
     if (p[i] != q[i])
       return (p[i] > q[i]) - (p[i] < q[i]);
   return 0;
 }
 
 /* Hanging nodes are stored per process and repeat across process
- * boundaries, so count unique coordinates on rank 0. */
+ * boundaries, so count unique (tree, coordinates) on rank 0.  The tree
+ * matters in a brick, where coordinates are tree-relative; p4est stores a
+ * node on a tree boundary in one canonical tree. */
 static long long
 count_unique_nodes (MPI_Comm comm, sc_array_t * arr)
 {
   int                 nloc = (int) arr->elem_count, i;
-  int32_t            *loc = malloc ((3 * (size_t) nloc + 1) * sizeof (int32_t));
+  int32_t            *loc = malloc ((4 * (size_t) nloc + 1) * sizeof (int32_t));
   int                *counts = NULL, *displs = NULL;
   int32_t            *all = NULL;
   long long           total = 0, uniq = 0;
 
   for (i = 0; i < nloc; ++i) {
-    /* p8est_hang4_t and p8est_hang2_t both begin with x, y, z. */
-    const p4est_qcoord_t *c = (const p4est_qcoord_t *) sc_array_index (arr, i);
-    loc[3 * i] = c[0];
-    loc[3 * i + 1] = c[1];
-    loc[3 * i + 2] = c[2];
+    /* p8est_hang4_t and p8est_hang2_t both begin with x, y, z, level and
+     * then the tree. */
+    const p8est_hang4_t *h = (const p8est_hang4_t *) sc_array_index (arr, i);
+    loc[4 * i] = h->p.which_tree;
+    loc[4 * i + 1] = h->x;
+    loc[4 * i + 2] = h->y;
+    loc[4 * i + 3] = h->z;
   }
   if (g_rank == 0) {
     counts = malloc (g_size * sizeof (int));
     displs = malloc (g_size * sizeof (int));
   }
-  nloc *= 3;
+  nloc *= 4;
   MPI_Gather (&nloc, 1, MPI_INT, counts, 1, MPI_INT, 0, comm);
   if (g_rank == 0) {
     for (i = 0; i < g_size; ++i) {
@@ -467,10 +504,10 @@ count_unique_nodes (MPI_Comm comm, sc_array_t * arr)
   MPI_Gatherv (loc, nloc, MPI_INT32_T, all, counts, displs, MPI_INT32_T, 0,
                comm);
   if (g_rank == 0) {
-    long long           m = total / 3, j;
-    qsort (all, (size_t) m, 3 * sizeof (int32_t), cmp_xyz);
+    long long           m = total / 4, j;
+    qsort (all, (size_t) m, 4 * sizeof (int32_t), cmp_xyz);
     for (j = 0; j < m; ++j)
-      if (j == 0 || cmp_xyz (all + 3 * j, all + 3 * (j - 1)) != 0)
+      if (j == 0 || cmp_xyz (all + 4 * j, all + 4 * (j - 1)) != 0)
         ++uniq;
   }
   free (loc);
@@ -502,14 +539,16 @@ fmt_int (char *p, long v)
 static int
 write_local (FILE * f, p8est_t * p8est, int binary)
 {
-  p8est_tree_t       *tree = p8est_tree_array_index (p8est->trees, 0);
-  sc_array_t         *qs = &tree->quadrants;
   size_t              i, used = 0;
   const size_t        bufsize = 1 << 20;
   char               *buf = malloc (bufsize);
+  p4est_topidx_t      tt;
 
   if (buf == NULL)
     return -1;
+  for (tt = p8est->first_local_tree; tt <= p8est->last_local_tree; ++tt) {
+  p8est_tree_t       *tree = p8est_tree_array_index (p8est->trees, tt);
+  sc_array_t         *qs = &tree->quadrants;
   for (i = 0; i < qs->elem_count; ++i) {
     const p8est_quadrant_t *q = p8est_quadrant_array_index (qs, i);
     if (used + 64 > bufsize) {
@@ -529,6 +568,10 @@ write_local (FILE * f, p8est_t * p8est, int binary)
     }
     else {
       char               *p = buf + used;
+      if (g_brick[0]) {
+        p = fmt_int (p, (long) tt);
+        *p++ = ' ';
+      }
       p = fmt_int (p, q->x);
       *p++ = ' ';
       p = fmt_int (p, q->y);
@@ -539,6 +582,7 @@ write_local (FILE * f, p8est_t * p8est, int binary)
       *p++ = '\n';
       used = (size_t) (p - buf);
     }
+  }
   }
   if (used > 0 && fwrite (buf, 1, used, f) != used) {
     free (buf);
@@ -569,9 +613,13 @@ write_leaves (MPI_Comm comm, p8est_t * p8est, const char *path)
             put_le64 (hdr + 8, (uint64_t) n);
             bad |= fwrite (hdr, 1, 16, f) != 16;
           }
-          else
+          else {
             bad |= fprintf (f, "# octmesh_p4est balanced leaves\n"
                             "# count %lld\n", n) < 0;
+            if (g_brick[0])
+              bad |= fprintf (f, "# brick %d %d %d\n", g_brick[0],
+                              g_brick[1], g_brick[2]) < 0;
+          }
         }
         bad |= write_local (f, p8est, binary) != 0;
         bad |= fclose (f) != 0;
@@ -692,7 +740,11 @@ main (int argc, char **argv)
   have_time[PH_NODES] = do_nodes;
   have_time[PH_LNODES] = do_lnodes;
 
-  conn = p8est_connectivity_new_unitcube ();
+  if (g_brick[0] && ends_with (out ? out : "", ".bin"))
+    usage_error ("brick forests are written as text only");
+  conn = g_brick[0] ? p8est_connectivity_new_brick (g_brick[0], g_brick[1],
+                                                    g_brick[2], 0, 0, 0)
+    : p8est_connectivity_new_unitcube ();
   for (rep = 0; rep < repeat; ++rep) {
     int                 last = rep == repeat - 1;
     double              t0;

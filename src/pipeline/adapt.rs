@@ -1,0 +1,95 @@
+//! Stages for adaptive simulations: the session's octree refined once,
+//! coarsened or adapted by callbacks (see [`crate::adapt`]), and
+//! partitioned so that families stay together.
+
+use super::octree::over_budget;
+use super::{Classes, Session};
+use crate::adapt::{Adapt, AdaptStats};
+use crate::comm::agree;
+use crate::error::Result;
+use crate::octree::LinearOctree;
+use crate::refine::check_level;
+use crate::Octant;
+
+impl Session {
+    /// Splits each leaf once where `split` says so, below `max_level`
+    /// ([`LinearOctree::refine_once`]), within the octant limit and the
+    /// memory budget (on failure the octree is as it was). Needs an octree.
+    /// Drops the leaf classes and the mesh. Phase `refine`.
+    pub fn refine_once(
+        &mut self,
+        max_level: u8,
+        split: impl FnMut(Octant) -> bool,
+    ) -> Result<AdaptStats> {
+        agree(
+            &*self.comm,
+            check_level(max_level).and(self.tree_or_state().map(|_| ())),
+        )?;
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let r = self.change("refine", |t| t.refine_once(max_level, split, limit));
+        over_budget(r, budget, limit, "refinement")
+    }
+
+    /// Replaces families of eight local sibling leaves by their parent where
+    /// `coarsen` says so ([`LinearOctree::coarsen`]; a family split across
+    /// ranks is never coarsened). Needs an octree. Drops the leaf classes
+    /// and the mesh. Phase `coarsen`.
+    pub fn coarsen(
+        &mut self,
+        recursive: bool,
+        coarsen: impl FnMut(&[Octant; 8]) -> bool,
+    ) -> Result<AdaptStats> {
+        agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
+        self.change("coarsen", |t| t.coarsen(recursive, coarsen))
+    }
+
+    /// Refines, keeps or coarsens each leaf as `decide` asks
+    /// ([`LinearOctree::adapt`]), within the octant limit and the memory
+    /// budget (on failure the octree is as it was). Needs an octree. Drops
+    /// the leaf classes and the mesh. Phase `adapt`.
+    pub fn adapt(&mut self, decide: impl FnMut(Octant) -> Adapt) -> Result<AdaptStats> {
+        agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
+        let budget = self.memory_budget();
+        let limit = self.octant_limit(budget);
+        let r = self.change("adapt", |t| t.adapt(decide, limit));
+        over_budget(r, budget, limit, "adaptation")
+    }
+
+    /// Repartitions the leaves in Morton order, equal counts per rank
+    /// without `weight`, else about equal sums of `weight(leaf)`, except
+    /// that no family of eight sibling leaves is split
+    /// ([`LinearOctree::partition_for_coarsening`],
+    /// [`LinearOctree::partition_for_coarsening_weighted`]). Needs an octree.
+    /// Drops the leaf classes and the mesh. Phase `partition`.
+    pub fn partition_for_coarsening(
+        &mut self,
+        weight: Option<impl Fn(Octant) -> u64>,
+    ) -> Result<()> {
+        agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
+        self.change("partition", |t| match weight {
+            None => t.partition_for_coarsening(),
+            Some(w) => t.partition_for_coarsening_weighted(w),
+        })
+        .map(|_| ())
+    }
+
+    /// Runs `f` on the octree as phase `phase`, then reports the new count
+    /// and drops what the old leaves determined.
+    fn change<T>(
+        &mut self,
+        phase: &str,
+        f: impl FnOnce(&mut LinearOctree) -> Result<T>,
+    ) -> Result<T> {
+        let comm = self.comm.clone();
+        let tree = &mut self.tree.as_mut().expect("checked by the caller").0;
+        let r = self.timer.time(&*comm, phase, || f(tree))?;
+        let n = self.tree().map_or(0, |t| t.global_len());
+        self.report_phase(Some(n));
+        self.facts.octants_refined = n;
+        self.facts.octants_balanced = n;
+        self.classes = Classes::default();
+        self.mesh = None;
+        Ok(r)
+    }
+}

@@ -1,0 +1,140 @@
+//! Levels per part of the surface (`--surface-level NAME=MIN[:MAX]`): the
+//! sphere as two solids of one ASCII STL, each with its own range, refines
+//! exactly as the two halves refined alone, merged (each leaf the finer of
+//! the two runs'): the rule is "split while some part asks for more", so the
+//! coarsest octree satisfying both parts is the finer of the two coarsest
+//! octrees satisfying each.
+
+mod common;
+
+use common::*;
+use octmesh::octant::Octant;
+use std::path::{Path, PathBuf};
+
+/// The refined leaves of `octmesh octree SURFACE ARGS` in a fixed cube.
+fn refined(surface: &Path, args: &[&str], out: PathBuf, np: usize) -> Vec<Octant> {
+    let mut all = vec![
+        "octree",
+        surface.to_str().unwrap(),
+        "--domain",
+        "-1.5,-1.5,-1.5,3",
+        "--balance",
+        "none",
+        "--quiet",
+        "--write-refined",
+        out.to_str().unwrap(),
+    ];
+    all.extend(args);
+    octmesh_ok(np, &all);
+    leaves(&out)
+}
+
+/// The finer of two complete linear octrees at every place: the leaves of
+/// each that no leaf of the other lies strictly inside.
+fn finer_of(a: &[Octant], b: &[Octant]) -> Vec<Octant> {
+    let keep = |x: &Octant, other: &[Octant]| {
+        // The first leaf of `other` not before `x` in Morton order is
+        // inside `x` when any is.
+        let i = other.partition_point(|o| o < x);
+        !other
+            .get(i)
+            .is_some_and(|o| *o != *x && x.is_ancestor_of(*o))
+    };
+    let mut out: Vec<Octant> = a.iter().filter(|x| keep(x, b)).copied().collect();
+    out.extend(b.iter().filter(|x| keep(x, a)));
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+#[test]
+fn each_solid_refines_to_its_own_levels() {
+    let dir = scratch("surface_levels");
+    let (two, top, bottom) = (
+        dir.join("two.stl"),
+        dir.join("top.stl"),
+        dir.join("bottom.stl"),
+    );
+    write_sphere_solids(&two, &[("top", Some(true)), ("bottom", Some(false))]);
+    write_sphere_solids(&top, &[("top", Some(true))]);
+    write_sphere_solids(&bottom, &[("bottom", Some(false))]);
+    // (the two-solid run's options, the top half's, the bottom half's)
+    let cases: [(&[&str], &[&str], &[&str]); 2] = [
+        (
+            &[
+                "--level",
+                "3",
+                "--surface-level",
+                "top=6",
+                "--surface-level",
+                "bottom=4",
+            ],
+            &["--level", "6"],
+            &["--level", "4"],
+        ),
+        (
+            &[
+                "--level",
+                "2",
+                "--surface-level",
+                "top=4:6",
+                "--surface-level",
+                "bottom=3",
+                "--feature-angle",
+                "8",
+            ],
+            &["--level", "4:6", "--feature-angle", "8"],
+            &["--level", "3"],
+        ),
+    ];
+    for (k, (both, up, down)) in cases.iter().enumerate() {
+        let a = refined(&top, up, dir.join(format!("top{k}.bin")), 1);
+        let b = refined(&bottom, down, dir.join(format!("bottom{k}.bin")), 1);
+        let want = finer_of(&a, &b);
+        assert_complete_linear(&want);
+        let deepest = |l: &[Octant]| l.iter().map(|o| o.level()).max().unwrap();
+        assert!(
+            deepest(&a) > deepest(&b),
+            "case {k}: the halves' levels do not differ"
+        );
+        for np in [1, 3] {
+            let got = refined(&two, both, dir.join(format!("two{k}_{np}.bin")), np);
+            assert_eq!(
+                got.len(),
+                want.len(),
+                "case {k} np {np}: {} leaves, the halves merged give {}",
+                got.len(),
+                want.len()
+            );
+            assert!(got == want, "case {k} np {np}: the leaves differ");
+            println!(
+                "case {k} np {np}: {} leaves, as the halves refined alone",
+                got.len()
+            );
+        }
+    }
+    // A name that is no part of the surface fails on every rank.
+    for np in [1, 2] {
+        let out = mpirun(
+            np,
+            &octmesh_bin(),
+            &[
+                "octree",
+                two.to_str().unwrap(),
+                "--level",
+                "3",
+                "--surface-level",
+                "middle=5",
+            ],
+            std::time::Duration::from_secs(60),
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert_eq!(
+            err.matches("'middle', which is no part of the surface (its parts: top, bottom)")
+                .count(),
+            np,
+            "{err}"
+        );
+    }
+}
