@@ -2,7 +2,8 @@
 //!
 //! - OpenFOAM v1912's `checkMesh -allGeometry` as the judge: on the cases
 //!   octmesh writes (sphere level 6 and the bunny level 7, fluid; sphere
-//!   level 5, the whole cube) on 1 and 2 ranks (`-parallel` on the processor directories), octmesh's largest
+//!   level 5, the whole cube; sphere level 4 in a box of 2 x 1 x 1 root
+//!   cells, fluid) on 1 and 2 ranks (`-parallel` on the processor directories), octmesh's largest
 //!   and average non-orthogonality and largest skewness equal what
 //!   checkMesh prints, to the digits it prints.
 //! - The scaled-Jacobian histogram in the statistics sums to the element
@@ -96,28 +97,31 @@ fn octmesh_stats(np: usize, args: &[&str], stats: &Path) -> serde_json::Value {
 
 fn compare_with_checkmesh(
     rc: &Path,
-    (surface, level, keep): (&str, &str, &str),
+    (surface, level, keep, extra): (&str, &str, &str, &[&str]),
     np: usize,
     dir: &Path,
 ) {
-    let name = Path::new(surface).file_stem().unwrap().to_string_lossy();
+    let stem = Path::new(surface).file_stem().unwrap().to_string_lossy();
+    let name = if extra.is_empty() {
+        stem.into_owned()
+    } else {
+        format!("{stem}_box")
+    };
     let tag = format!("{name} level {level} keep {keep} np {np}");
     let case = dir.join(format!("{name}_{level}_{keep}_{np}"));
     let stats = dir.join(format!("{name}_{level}_{keep}_{np}.json"));
-    let s = octmesh_stats(
-        np,
-        &[
-            "mesh",
-            surface,
-            "--level",
-            level,
-            "--keep",
-            keep,
-            "--openfoam",
-            case.to_str().unwrap(),
-        ],
-        &stats,
-    );
+    let mut args = vec![
+        "mesh",
+        surface,
+        "--level",
+        level,
+        "--keep",
+        keep,
+        "--openfoam",
+        case.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    let s = octmesh_stats(np, &args, &stats);
     let q = &s["quality"];
     let run = if np > 1 {
         format!("mpirun --oversubscribe -np {np} checkMesh -parallel -allGeometry")
@@ -163,17 +167,20 @@ fn face_figures_equal_checkmesh() {
     // Fluid meshes, whose surface patch has faces partly covered by finer
     // elements (skewness 1 there), and a whole cube, whose largest
     // skewness is that of the 2:1 faces inside.
+    // A box of 2 x 1 x 1 root cells around the sphere, too.
+    let box_args: &[&str] = &["--box", "-1.5,-1.5,-1.5,4.5,1.5,1.5", "--roots", "2,1,1"];
     let mut cases = vec![
-        ("sphere".to_string(), "6", "outside"),
-        ("sphere".to_string(), "5", "all"),
+        ("sphere".to_string(), "6", "outside", &[][..]),
+        ("sphere".to_string(), "5", "all", &[][..]),
+        ("sphere".to_string(), "4", "outside", box_args),
     ];
     match shared_model("bunny.stl") {
-        Some(p) => cases.push((p.to_string_lossy().into_owned(), "7", "outside")),
+        Some(p) => cases.push((p.to_string_lossy().into_owned(), "7", "outside", &[][..])),
         None => println!("SKIP: the bunny case (no ../shared/data/bunny.stl)"),
     }
-    for (surface, level, keep) in &cases {
+    for (surface, level, keep, extra) in &cases {
         for np in [1, 2] {
-            compare_with_checkmesh(&rc, (surface, level, keep), np, &dir);
+            compare_with_checkmesh(&rc, (surface, level, keep, extra), np, &dir);
         }
     }
 }
