@@ -96,6 +96,16 @@ module octmesh
           global_edge_hanging
   end type octmesh_mesh_counts_t
 
+  !> octmesh_mesh_quality_t (octmesh_mesh_get_quality)
+  type, bind(c), public :: octmesh_mesh_quality_t
+     integer(c_int64_t) :: elements
+     real(c_double) :: scaled_jacobian_min
+     integer(c_int64_t) :: inverted_elements
+     integer(c_int64_t) :: scaled_jacobian_histogram(20)
+     integer(c_int64_t) :: internal_faces
+     real(c_double) :: non_orthogonality_max, non_orthogonality_average, skewness_max
+  end type octmesh_mesh_quality_t
+
   public :: octmesh_create_f, octmesh_destroy, octmesh_error, octmesh_status_name_f
   public :: octmesh_options_default
   public :: octmesh_surface_builtin_f, octmesh_surface_from_stl_f, octmesh_surface_from_triangles
@@ -105,6 +115,7 @@ module octmesh
   public :: octmesh_octree_refine_once, octmesh_octree_coarsen, octmesh_octree_adapt
   public :: octmesh_octree_partition_for_coarsening
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
+  public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
@@ -340,6 +351,15 @@ module octmesh
        type(octmesh_mesh_counts_t), intent(out) :: out
        integer(c_int) :: octmesh_mesh_get_counts
      end function octmesh_mesh_get_counts
+
+     !> Collective: the mesh's quality (scaled Jacobian, checkMesh's
+     !> non-orthogonality and skewness).
+     function octmesh_mesh_get_quality(h, out) bind(c, name="octmesh_mesh_get_quality")
+       import :: c_ptr, c_int, octmesh_mesh_quality_t
+       type(c_ptr), value :: h
+       type(octmesh_mesh_quality_t), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_quality
+     end function octmesh_mesh_get_quality
 
      !> The arrays stay owned by the handle: convert with c_f_pointer
      !> (sizes from octmesh_mesh_get_counts).

@@ -525,6 +525,50 @@ typedef int32_t (*octmesh_coarsen_fn)(void *ctx, const octmesh_octant_t *family)
  */
 typedef int32_t (*octmesh_adapt_fn)(void *ctx, const octmesh_octant_t *o);
 
+/**
+ * The quality figures of a mesh, the same on every rank (and on every
+ * number of ranks).
+ */
+typedef struct {
+  /**
+   * Elements over all ranks.
+   */
+  octmesh_gloidx_t elements;
+  /**
+   * The smallest scaled Jacobian (Knupp's: at each corner of an element
+   * the determinant of its three unit edge vectors, the element's value
+   * the minimum over its 8 corners; 1 for a cube, at most 0 when
+   * inverted).
+   */
+  double scaled_jacobian_min;
+  /**
+   * Elements whose scaled Jacobian is at most 0.
+   */
+  octmesh_gloidx_t inverted_elements;
+  /**
+   * Elements per bin of width 0.1 over [-1, 1]: bin `k` holds
+   * `-1 + k/10 <= J < -1 + (k+1)/10`, the last bin also 1.
+   */
+  octmesh_gloidx_t scaled_jacobian_histogram[20];
+  /**
+   * Internal faces, faces between ranks counted once.
+   */
+  octmesh_gloidx_t internal_faces;
+  /**
+   * The largest non-orthogonality, degrees (`checkMesh`'s "Max").
+   */
+  double non_orthogonality_max;
+  /**
+   * The angle of the mean cosine over the internal faces, degrees
+   * (`checkMesh`'s "average").
+   */
+  double non_orthogonality_average;
+  /**
+   * The largest skewness over all faces (`checkMesh`'s "Max skewness").
+   */
+  double skewness_max;
+} octmesh_mesh_quality_t;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -1257,6 +1301,18 @@ octmesh_status_t octmesh_mesh_write_vtu_fields(octmesh_t *h,
                                                int32_t nfields,
                                                const char *const *names,
                                                const double *const *values);
+
+/**
+ * Measures the current mesh's quality and writes it to `*out`: the scaled
+ * Jacobian of each element from its node coordinates, and `checkMesh`'s
+ * non-orthogonality and skewness over the finite-volume faces (those of
+ * `octmesh_mesh_build_faces`, measured without storing them). Needs a
+ * mesh. Collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  the figures, the same on every rank
+ */
+octmesh_status_t octmesh_mesh_get_quality(octmesh_t *h, octmesh_mesh_quality_t *out);
 
 #ifdef __cplusplus
 }  // extern "C"

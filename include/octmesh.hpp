@@ -191,6 +191,13 @@ class Mesher {
     detail::check(octmesh_mesh_get_counts(h_, &c), h_, "octmesh_mesh_get_counts");
     return c;
   }
+  /// Measures the mesh's quality (collective): scaled Jacobian, checkMesh's
+  /// non-orthogonality and skewness.
+  octmesh_mesh_quality_t quality() {
+    octmesh_mesh_quality_t q;
+    detail::check(octmesh_mesh_get_quality(h_, &q), h_, "octmesh_mesh_get_quality");
+    return q;
+  }
   /// 8 local node numbers per element (VTK hexahedron order); owned by the handle.
   const int32_t *connectivity() const {
     const int32_t *p = nullptr;

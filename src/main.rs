@@ -146,6 +146,28 @@ impl Observer for Table {
                 let rel = (v - s) / s;
                 say!("  kept volume {v:.6e} | surface volume {s:.6e} | relative difference {rel:+.3e}");
             }
+            Event::Quality(q) => {
+                say!(
+                    "  quality: scaled Jacobian min {:.4} ({} inverted) | non-orthogonality max {:.4} \
+                     average {:.4} deg | skewness max {:.4}",
+                    q.scaled_jacobian_min,
+                    q.inverted_elements,
+                    q.non_orthogonality_max,
+                    q.non_orthogonality_average,
+                    q.skewness_max
+                );
+                let h = &q.scaled_jacobian_histogram;
+                let bins: Vec<String> = (0..h.counts.len())
+                    .filter(|&k| h.counts[k] > 0)
+                    .map(|k| {
+                        // The last bin holds 1.
+                        let close = if k + 1 == h.counts.len() { ']' } else { ')' };
+                        let (a, b) = (h.edges[k], h.edges[k + 1]);
+                        format!("[{a:.1}, {b:.1}{close} {}", h.counts[k])
+                    })
+                    .collect();
+                say!("  scaled Jacobian histogram: {}", bins.join(" | "));
+            }
             Event::Wrote(p) => say!("  wrote {}", p.display()),
             Event::Finished {
                 seconds,

@@ -419,6 +419,79 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
     }
 }
 
+/// The mesh's quality through `octmesh_mesh_get_quality` (`tests/c/quality.c`)
+/// on 1 and 2 ranks: every figure equal to the command's statistics on the
+/// same settings.
+#[test]
+fn quality_from_c_equals_the_command() {
+    let dir = scratch("c_api_quality");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("quality", &lib, &dir);
+    let stats = dir.join("stats.json");
+    common::octmesh_ok(
+        1,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "5",
+            "--keep",
+            "outside",
+            "--quiet",
+            "--stats",
+            stats.to_str().unwrap(),
+        ],
+    );
+    let q = common::json_file(&stats)["quality"].clone();
+    let histogram: Vec<String> = q["scaled_jacobian_histogram"]["counts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    for np in [1, 2] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("QUALITY OK").count(), np, "{out}");
+        let line = line_starting(&out, "QUALITY elements");
+        let field = |key: &str| -> &str {
+            line.split_whitespace()
+                .find_map(|w| w.strip_prefix(&format!("{key}=")))
+                .unwrap_or_else(|| panic!("no {key} in {line}"))
+        };
+        for (key, json) in [
+            ("elements", "elements"),
+            ("inverted", "inverted_elements"),
+            ("internal_faces", "internal_faces"),
+        ] {
+            assert_eq!(
+                field(key).parse::<u64>().ok(),
+                q[json].as_u64(),
+                "np {np}: {key}"
+            );
+        }
+        for (key, json) in [
+            ("sj_min", "scaled_jacobian_min"),
+            ("nonorth_max", "non_orthogonality_max"),
+            ("nonorth_average", "non_orthogonality_average"),
+            ("skewness_max", "skewness_max"),
+        ] {
+            // serde_json's default float parsing may be one unit in the
+            // last place off (no float_roundtrip feature); C printed 17
+            // digits, which read back exactly.
+            let (c, j) = (
+                field(key).parse::<f64>().unwrap(),
+                q[json].as_f64().unwrap(),
+            );
+            assert!(
+                (c - j).abs() <= 2.0 * f64::EPSILON * j.abs(),
+                "np {np}: {key}: C {c}, command {j}"
+            );
+        }
+        assert_eq!(field("histogram"), histogram.join(","), "np {np}");
+    }
+}
+
 /// `tests/c/adapt.c`: the moving sphere of `tests/adapt_p4est.rs` (root to
 /// level 5) through `octmesh_octree_adapt`, `_refine_once`, `_coarsen` and
 /// `_partition_for_coarsening`: leaves and per-rank counts equal to p4est's

@@ -57,6 +57,8 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("output.openfoam", "--openfoam"),
     ("output.openfoam_format", "--openfoam-format"),
     ("output.overwrite", "--overwrite"),
+    ("output.quality_out", "--quality-out"),
+    ("output.quality_worst", "--quality-worst"),
     ("regions", "--region"),
 ];
 
@@ -255,6 +257,14 @@ struct MeshArgs {
     /// walls are manifold [default: true with --openfoam, else false]
     #[arg(long, value_name = "BOOL")]
     clean_walls: Option<bool>,
+    /// Measure the mesh's quality (scaled Jacobian, checkMesh's
+    /// non-orthogonality and skewness; also done with --stats) and write
+    /// the worst elements by scaled Jacobian to a VTU file
+    #[arg(long, value_name = "FILE.vtu")]
+    quality_out: Option<PathBuf>,
+    /// How many elements --quality-out writes [default: 100]
+    #[arg(long, value_name = "N")]
+    quality_worst: Option<u64>,
 }
 
 fn parse_rename(s: &str) -> std::result::Result<(String, String), String> {
@@ -313,6 +323,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         Ok(c) => c,
         Err(e) => return clap_error(e),
     };
+    let mut quality = (None, None);
     let (command, octree, mesh) = match cli.command {
         CliCommand::Check(c) => {
             return Ok(Invocation::Check {
@@ -330,6 +341,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
                 m.patch,
                 m.clean_walls,
             );
+            quality = (m.quality_out, m.quality_worst);
             (
                 Command::Mesh,
                 m.octree,
@@ -524,6 +536,13 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         }
         if set("output.vtu", out.is_some()) {
             config.output.vtu = out;
+        }
+        let (quality_out, worst) = quality;
+        if set("output.quality_out", quality_out.is_some()) {
+            config.output.quality_out = quality_out;
+        }
+        if set("output.quality_worst", worst.is_some()) {
+            config.output.quality_worst = worst;
         }
     }
     let label = |key: &str| match &case {

@@ -56,6 +56,8 @@
 //! # leaves = "leaves.bin"
 //! # refined_leaves = "refined.bin"
 //! # vtu = "mesh.pvtu"
+//! # quality_out = "worst.vtu"  # the worst elements by scaled Jacobian (mesh)
+//! # quality_worst = 100
 //! ```
 //!
 //! [`Config::validate`] checks a filled configuration for a command and
@@ -347,6 +349,29 @@ pub struct OutputConfig {
     pub openfoam_format: FoamFormat,
     /// Replace an existing OpenFOAM mesh.
     pub overwrite: bool,
+    /// Measure the mesh's quality ([`crate::mesh::quality`]; also done for
+    /// `stats`) and write the `quality_worst` elements with the smallest
+    /// scaled Jacobians to this VTU file (a name ending in `.vtu`).
+    pub quality_out: Option<PathBuf>,
+    /// How many elements `quality_out` holds, at least 1 (unset: 100).
+    pub quality_worst: Option<u64>,
+}
+
+/// The elements `output.quality_out` holds when `output.quality_worst` is
+/// unset.
+pub const DEFAULT_QUALITY_WORST: u64 = 100;
+
+impl OutputConfig {
+    /// The elements written to `quality_out`.
+    pub fn quality_worst(&self) -> u64 {
+        self.quality_worst.unwrap_or(DEFAULT_QUALITY_WORST)
+    }
+
+    /// Whether a run measures the mesh's quality: for the statistics or
+    /// the worst elements' file.
+    pub fn wants_quality(&self) -> bool {
+        self.stats.is_some() || self.quality_out.is_some()
+    }
 }
 
 /// A problem with one key of a configuration. `message` follows the key's
@@ -422,6 +447,8 @@ pub const KEYS: &[&str] = &[
     "output.openfoam",
     "output.openfoam_format",
     "output.overwrite",
+    "output.quality_out",
+    "output.quality_worst",
     "regions",
 ];
 
@@ -557,6 +584,29 @@ impl Config {
                         format!("expects a file name ending in .pvtu, got '{}'", v.display()),
                     ));
                 }
+            }
+            if let Some(q) = &self.output.quality_out {
+                if q.extension().is_none_or(|e| e != "vtu") {
+                    return Err(ConfigError::new(
+                        "output.quality_out",
+                        format!("expects a file name ending in .vtu, got '{}'", q.display()),
+                    ));
+                }
+            }
+            match self.output.quality_worst {
+                Some(0) => {
+                    return Err(ConfigError::new(
+                        "output.quality_worst",
+                        "must be at least 1, got 0",
+                    ))
+                }
+                Some(_) if self.output.quality_out.is_none() => {
+                    return Err(ConfigError::new(
+                        "output.quality_worst",
+                        "needs {output.quality_out}",
+                    ))
+                }
+                _ => {}
             }
             // The patches renamed must exist, which only the surface's
             // parts tell (checked once it is read); the new names are

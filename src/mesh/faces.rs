@@ -355,6 +355,17 @@ impl Faces {
     }
 }
 
+/// Which list a face emitted by [`Mesh::element_faces`] belongs to.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(super) enum FaceKind {
+    /// Between two local elements.
+    Internal,
+    /// On a patch.
+    Boundary,
+    /// Between a local element and another rank's.
+    Halo,
+}
+
 /// Where a kept element is: local index or halo index.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(super) enum At {
@@ -507,79 +518,12 @@ impl Mesh {
         let mut internal: Vec<Face> = Vec::with_capacity(3 * elements.len());
         let mut boundary: Vec<Face> = Vec::new();
         let mut halo: Vec<Face> = Vec::new();
-        for (i, &e) in elements.iter().enumerate() {
-            let i = i as u32;
-            let (c, s) = (e.coords(), e.side());
-            // Outside the cube or a brick's box: a side patch.
-            for (f, n) in self.domain.brick.face_neighbors(e).into_iter().enumerate() {
-                let (axis, plus) = (f / 2, f % 2 == 1);
-                let mut origin = c;
-                if plus {
-                    origin[axis] += s;
-                }
-                let face = |shape: [(u8, u8); 4], half: u32, origin: [u32; 3], other| Face {
-                    owner: i,
-                    other,
-                    origin,
-                    half,
-                    normal: axis as u8 | if plus { 0 } else { 4 },
-                    shape: pack(shape),
-                };
-                let Some(n) = n else {
-                    boundary.push(face(WHOLE, s / 2, origin, Other::Patch(f as u16)));
-                    continue;
-                };
-                if let Some((at, l)) = kept.containing(n, i as usize) {
-                    if l.level() < e.level() || matches!(at, At::Halo(_)) {
-                        // Coarser (this fine side emits) or another rank's.
-                        let list = if matches!(at, At::Halo(_)) {
-                            &mut halo
-                        } else {
-                            &mut internal
-                        };
-                        list.push(face(WHOLE, s / 2, origin, other_of(at)));
-                    } else if let At::Local(j) = at {
-                        if i < j {
-                            internal.push(face(WHOLE, s / 2, origin, Other::Element(j)));
-                        }
-                    }
-                    continue;
-                }
-                // Finer neighbours or none: the four children of `n` facing
-                // this element.
-                let mut mask = 0u8;
-                let (u, v) = plane_axes(axis);
-                for q in 0..4u8 {
-                    let mut child = 0u32;
-                    if !plus {
-                        child |= 1 << axis;
-                    }
-                    child |= ((q & 1) as u32) << u;
-                    child |= ((q >> 1) as u32) << v;
-                    let fine = n.child(child);
-                    if let Some(at) = kept.exact(fine, i as usize) {
-                        mask |= 1 << q;
-                        if let At::Halo(_) = at {
-                            // The fine side is remote: this side lists the
-                            // quarter.
-                            let shape = [
-                                (q & 1, q >> 1),
-                                ((q & 1) + 1, q >> 1),
-                                ((q & 1) + 1, (q >> 1) + 1),
-                                (q & 1, (q >> 1) + 1),
-                            ];
-                            halo.push(face(shape, s / 2, origin, other_of(at)));
-                        }
-                    }
-                }
-                if mask == 0 {
-                    boundary.push(face(WHOLE, s / 2, origin, Other::Patch(SURFACE_PATCH)));
-                } else {
-                    for shape in dropped_pieces(mask) {
-                        boundary.push(face(shape, s / 2, origin, Other::Patch(SURFACE_PATCH)));
-                    }
-                }
-            }
+        for i in 0..elements.len() {
+            self.element_faces(&kept, i, |kind, face| match kind {
+                FaceKind::Internal => internal.push(face),
+                FaceKind::Boundary => boundary.push(face),
+                FaceKind::Halo => halo.push(face),
+            });
         }
         // Internal faces: the owner is the lower element.
         for face in internal.iter_mut() {
@@ -637,6 +581,98 @@ impl Mesh {
             patch_start,
             halo_ranges,
         })
+    }
+
+    /// Emits the faces of local element `i` that this element lists (see
+    /// [`Mesh::faces`]: each internal face once, by the finer side or the
+    /// lower element; internal faces not yet oriented from the lower
+    /// element), with their kind, to `put`.
+    pub(super) fn element_faces(&self, kept: &Kept, i: usize, mut put: impl FnMut(FaceKind, Face)) {
+        let e = self.elements[i];
+        let i = i as u32;
+        let (c, s) = (e.coords(), e.side());
+        // Outside the cube or a brick's box: a side patch.
+        for (f, n) in self.domain.brick.face_neighbors(e).into_iter().enumerate() {
+            let (axis, plus) = (f / 2, f % 2 == 1);
+            let mut origin = c;
+            if plus {
+                origin[axis] += s;
+            }
+            let face = |shape: [(u8, u8); 4], half: u32, origin: [u32; 3], other| Face {
+                owner: i,
+                other,
+                origin,
+                half,
+                normal: axis as u8 | if plus { 0 } else { 4 },
+                shape: pack(shape),
+            };
+            let Some(n) = n else {
+                put(
+                    FaceKind::Boundary,
+                    face(WHOLE, s / 2, origin, Other::Patch(f as u16)),
+                );
+                continue;
+            };
+            if let Some((at, l)) = kept.containing(n, i as usize) {
+                if l.level() < e.level() || matches!(at, At::Halo(_)) {
+                    // Coarser (this fine side emits) or another rank's.
+                    let kind = if matches!(at, At::Halo(_)) {
+                        FaceKind::Halo
+                    } else {
+                        FaceKind::Internal
+                    };
+                    put(kind, face(WHOLE, s / 2, origin, other_of(at)));
+                } else if let At::Local(j) = at {
+                    if i < j {
+                        put(
+                            FaceKind::Internal,
+                            face(WHOLE, s / 2, origin, Other::Element(j)),
+                        );
+                    }
+                }
+                continue;
+            }
+            // Finer neighbours or none: the four children of `n` facing
+            // this element.
+            let mut mask = 0u8;
+            let (u, v) = plane_axes(axis);
+            for q in 0..4u8 {
+                let mut child = 0u32;
+                if !plus {
+                    child |= 1 << axis;
+                }
+                child |= ((q & 1) as u32) << u;
+                child |= ((q >> 1) as u32) << v;
+                let fine = n.child(child);
+                if let Some(at) = kept.exact(fine, i as usize) {
+                    mask |= 1 << q;
+                    if let At::Halo(_) = at {
+                        // The fine side is remote: this side lists the
+                        // quarter.
+                        let shape = [
+                            (q & 1, q >> 1),
+                            ((q & 1) + 1, q >> 1),
+                            ((q & 1) + 1, (q >> 1) + 1),
+                            (q & 1, (q >> 1) + 1),
+                        ];
+                        put(FaceKind::Halo, face(shape, s / 2, origin, other_of(at)));
+                    }
+                }
+            }
+            if mask == 0 {
+                put(
+                    FaceKind::Boundary,
+                    face(WHOLE, s / 2, origin, Other::Patch(SURFACE_PATCH)),
+                );
+            } else {
+                for shape in dropped_pieces(mask) {
+                    put(
+                        FaceKind::Boundary,
+                        face(shape, s / 2, origin, Other::Patch(SURFACE_PATCH)),
+                    );
+                }
+            }
+        }
     }
 
     /// The send and receive lists of a cell-centred halo exchange, from

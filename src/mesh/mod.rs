@@ -58,6 +58,7 @@ pub mod manifold;
 pub(crate) mod numbering;
 pub mod patches;
 pub mod points;
+pub mod quality;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass, VOID};
 use crate::comm::{Comm, Traffic};

@@ -100,7 +100,7 @@ impl Session {
     }
 
     /// The mesh, or a state error on every rank.
-    fn mesh_or_state(&self) -> Result<()> {
+    pub(super) fn mesh_or_state(&self) -> Result<()> {
         let local = self
             .mesh
             .as_ref()

@@ -5,8 +5,9 @@
 //!  load_surface ─► refine_surface ─► partition ─► balance ─► partition
 //!   (read)         (construct,                  (balance)
 //!                   refine)
-//!      ─► classify ─► check_leak ─► build_mesh ─► write_vtu
-//!                                   (ghost, nodes, numbering, connectivity)
+//!      ─► classify ─► check_leak ─► build_mesh ─► write_vtu ─► quality
+//!                                   (ghost, nodes, numbering,   (when asked)
+//!                                    connectivity)
 //! ```
 //!
 //! The `octmesh` command runs the whole sequence a [`Config`] asks for
@@ -22,6 +23,7 @@ mod classes;
 mod mesh;
 pub mod observer;
 mod octree;
+mod quality;
 pub mod stats;
 mod surface;
 
@@ -132,6 +134,8 @@ pub struct Session {
     faces: Option<(u64, Faces)>,
     /// The finite-element boundary of the mesh of a generation.
     boundary: Option<(u64, Boundary)>,
+    /// The quality of the mesh of a generation, when measured.
+    quality: Option<(u64, crate::mesh::quality::Quality)>,
     /// The named parts of the surface (patches), kept when it is released.
     parts: Vec<String>,
     /// Which part is nearest a point, for surfaces of several parts.
@@ -159,6 +163,7 @@ impl Session {
             mesh: None,
             faces: None,
             boundary: None,
+            quality: None,
             parts: Vec::new(),
             locator: None,
             facts: Facts {
@@ -348,6 +353,9 @@ impl Session {
             }
             if let Some(dir) = self.config.output.openfoam.clone() {
                 self.write_openfoam(&dir)?;
+            }
+            if self.config.output.wants_quality() {
+                self.quality()?;
             }
         }
         let stats = self.stats(command);

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use crate::classify::{InsideRule, WindingSummary};
 use crate::domain::Domain;
+use crate::mesh::quality::Quality;
 use crate::mesh::MeshCounts;
 use crate::refine::LeafEstimate;
 
@@ -64,6 +65,8 @@ pub enum Event<'a> {
         /// Volume enclosed by the surface, user units (0 without one).
         surface_volume: f64,
     },
+    /// The mesh's quality was measured.
+    Quality(&'a Quality),
     /// A file was written.
     Wrote(&'a Path),
     /// The run ended.

@@ -13,6 +13,7 @@ use crate::classify::{CutRule, InsideRule, Keep};
 use crate::comm::Traffic;
 use crate::config::{Balance, Command};
 use crate::geometry::diagnostics::SurfaceReport;
+use crate::mesh::quality::Quality;
 use crate::mesh::MeshCounts;
 use crate::report::peak_rss_bytes;
 
@@ -153,6 +154,9 @@ pub struct Stats {
     /// The mesh, for meshes.
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub mesh: Option<MeshStats>,
+    /// The mesh's quality, when measured (see [`crate::mesh::quality`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub quality: Option<Quality>,
     /// Volume enclosed by the surface, user units.
     pub surface_volume: f64,
     /// Facets the clean-up dropped.
@@ -210,7 +214,11 @@ impl Session {
         if meshed.is_some() {
             keys.extend(["clean"].into_iter().filter(|k| ran(k)));
             keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
-            keys.extend(["faces", "openfoam"].into_iter().filter(|k| ran(k)));
+            keys.extend(
+                ["faces", "openfoam", "quality"]
+                    .into_iter()
+                    .filter(|k| ran(k)),
+            );
         }
         let keys_total: Vec<&str> = keys.iter().copied().chain(["total"]).collect();
         let t = &self.timer;
@@ -297,6 +305,7 @@ impl Session {
                 path_octants: f.leak_checked.then_some(f.leak_path.unwrap_or(0) as u64),
             },
             mesh,
+            quality: self.current_quality().cloned(),
             surface_volume: self.surface_volume(),
             dropped_facets: f.dropped.unwrap_or(0) as u64,
             timings: named(keys.iter().map(|k| (k.to_string(), t.get(k))).collect()),

@@ -1,0 +1,823 @@
+//! Mesh quality: Knupp's scaled Jacobian of each element, and the
+//! non-orthogonality and skewness of the finite-volume faces as OpenFOAM's
+//! `checkMesh` defines them.
+//!
+//! # Scaled Jacobian
+//!
+//! At each corner of a trilinear hexahedron the three edges leaving it,
+//! each divided by its length, form a matrix whose determinant is the
+//! corner's scaled Jacobian (Knupp 2000): 1 for a right angle between every
+//! pair, 0 when the edges are coplanar, negative when the corner is
+//! inverted. The element's value is the minimum over its 8 corners. It is
+//! computed from the corners' coordinates alone ([`scaled_jacobian`]), so it
+//! measures moved nodes as well; an edge of length zero makes its corner's
+//! value 0 (degenerate). The edges are taken in an order that is
+//! right-handed on the undistorted element ([`CORNER_EDGES`]):
+//!
+//! ```text
+//!         7 ---------- 6          corner: its neighbours (first, second, third)
+//!        /|           /|           0: 1 3 4    4: 7 5 0
+//!       / |          / |           1: 2 0 5    5: 4 6 1
+//!      4 ---------- 5  |           2: 3 1 6    6: 5 7 2
+//!      |  |         |  |           3: 0 2 7    7: 6 4 3
+//!      |  3 --------|- 2
+//!      | /          | /          z
+//!      |/           |/           |  y
+//!      0 ---------- 1            | /
+//!                                |/___ x        (VTK hexahedron order)
+//! ```
+//!
+//! The histogram has [`HISTOGRAM_BINS`] bins of width 0.1 over [-1, 1]: bin
+//! `k` counts the elements with `-1 + k/10 <= J < -1 + (k+1)/10`, the last
+//! bin includes 1 (and values a rounding error above it), the first the
+//! values below -1. Elements with `J <= 0` are counted as inverted.
+//!
+//! # Face figures (`checkMesh`)
+//!
+//! For a face with area vector `S` (from its owner out), centre `f`, owner
+//! centre `P` and neighbour centre `N`, `d = N - P`:
+//!
+//! - **non-orthogonality**: the angle between `d` and `S`. `checkMesh`
+//!   prints the largest angle over the internal faces and the angle whose
+//!   cosine is the mean cosine over the internal faces ("average"); faces
+//!   between ranks (processor faces) count once, boundary faces not at all.
+//! - **skewness**: the distance from the face centre to the point where the
+//!   line from `P` to `N` crosses the face's plane, divided by the larger
+//!   of `0.2 |d|` and the extent of the face from its centre in that
+//!   direction (the largest projection of a face point). On a boundary face
+//!   the line is the normal through `P` and the floor is `0.4` times the
+//!   distance from `P` to the plane. `checkMesh` prints the maximum over
+//!   all faces.
+//!
+//! Faces are the planar, convex polygons of [`crate::mesh::faces`]: their
+//! centroid and area are exact, the extent is reached at one of the four
+//! corners (a hanging midpoint on an edge lies between two of them), and
+//! cell centres are the elements' centres. OpenFOAM computes a cell centre
+//! from the faces (pyramids from the mean of the face centres to each face,
+//! weighted by volume): for a closed polyhedron with planar faces that is
+//! the exact centroid, so the coarse cell of a 2:1 interface, a polyhedron
+//! of up to 24 faces there, has the centre of its cube (checked in this
+//! module's tests).
+//!
+//! # Rank counts
+//!
+//! Every face is measured once, by the rank holding the element with the
+//! lower global number (the owner in the single-rank case), oriented from
+//! that element, with centres computed the same way on every rank; the
+//! cosines are summed as fixed-point integers, which is exact and so
+//! independent of the order of the sum. The figures are therefore the same
+//! bits on any number of ranks.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::comm::Comm;
+use crate::error::{Error, ErrorKind, Result};
+use crate::io::vtu::{write_vtu, VtuPiece};
+use crate::mesh::faces::{FaceKind, Kept, Other};
+use crate::mesh::{Mesh, VTK_TO_MORTON};
+
+/// For each corner (VTK order), its three neighbours along the edges, in a
+/// right-handed order on the undistorted element (see the module picture).
+pub const CORNER_EDGES: [[usize; 3]; 8] = [
+    [1, 3, 4],
+    [2, 0, 5],
+    [3, 1, 6],
+    [0, 2, 7],
+    [7, 5, 0],
+    [4, 6, 1],
+    [5, 7, 2],
+    [6, 4, 3],
+];
+
+/// Bins of the scaled-Jacobian histogram (width 0.1 over [-1, 1]).
+pub const HISTOGRAM_BINS: usize = 20;
+
+/// Keeps a division by a zero projection finite, as OpenFOAM's `ROOTVSMALL`
+/// does.
+const TINY: f64 = 1e-150;
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+fn det(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
+}
+
+/// The scaled Jacobian at each corner of a hexahedron whose corners `p` are
+/// in VTK order (see the module documentation).
+pub fn corner_scaled_jacobians(p: &[[f64; 3]; 8]) -> [f64; 8] {
+    std::array::from_fn(|k| {
+        let e = CORNER_EDGES[k].map(|j| sub(p[j], p[k]));
+        let product = norm(e[0]) * norm(e[1]) * norm(e[2]);
+        if product == 0.0 {
+            0.0
+        } else {
+            det(e[0], e[1], e[2]) / product
+        }
+    })
+}
+
+/// The scaled Jacobian of a hexahedron with corners `p` in VTK order: the
+/// minimum over its corners, in [-1, 1].
+pub fn scaled_jacobian(p: &[[f64; 3]; 8]) -> f64 {
+    corner_scaled_jacobians(p)
+        .into_iter()
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The histogram bin of a scaled Jacobian (see the module documentation).
+pub fn histogram_bin(j: f64) -> usize {
+    let k = ((j + 1.0) * 10.0).floor();
+    if k.is_nan() || k < 0.0 {
+        0
+    } else {
+        (k as usize).min(HISTOGRAM_BINS - 1)
+    }
+}
+
+/// The cosine of the angle between `d = neighbour - owner` and the area
+/// vector `s` (1 when orthogonal, as OpenFOAM's `faceOrthogonality`).
+pub fn face_orthogonality(owner: [f64; 3], neighbour: [f64; 3], s: [f64; 3]) -> f64 {
+    let d = sub(neighbour, owner);
+    dot(d, s) / (norm(d) * norm(s) + TINY)
+}
+
+/// The skewness of a face between two cells (see the module
+/// documentation): `centre` and area vector `s` of the face, its `points`,
+/// the owner's and neighbour's centres.
+pub fn face_skewness(
+    centre: [f64; 3],
+    s: [f64; 3],
+    points: &[[f64; 3]],
+    owner: [f64; 3],
+    neighbour: [f64; 3],
+) -> f64 {
+    let to_face = sub(centre, owner);
+    let d = sub(neighbour, owner);
+    // Where the line owner -> neighbour meets the face's plane, as a
+    // fraction of d.
+    let t = dot(s, to_face) / (dot(s, d) + TINY);
+    let miss = sub(to_face, scale(d, t));
+    skew_ratio(miss, centre, points, 0.2 * norm(d))
+}
+
+/// The skewness of a boundary face: the owner's centre seen along the
+/// face's normal (see the module documentation).
+pub fn boundary_face_skewness(
+    centre: [f64; 3],
+    s: [f64; 3],
+    points: &[[f64; 3]],
+    owner: [f64; 3],
+) -> f64 {
+    let to_face = sub(centre, owner);
+    let n = scale(s, 1.0 / (norm(s) + TINY));
+    let along = dot(n, to_face);
+    let miss = sub(to_face, scale(n, along));
+    skew_ratio(miss, centre, points, 0.4 * along.abs())
+}
+
+/// `|miss|` over the larger of `floor` and the face's extent from its
+/// centre along `miss`.
+fn skew_ratio(miss: [f64; 3], centre: [f64; 3], points: &[[f64; 3]], floor: f64) -> f64 {
+    let m = norm(miss);
+    let dir = scale(miss, 1.0 / (m + TINY));
+    let extent = points
+        .iter()
+        .map(|&p| dot(dir, sub(p, centre)).abs())
+        .fold(floor + TINY, f64::max);
+    m / extent
+}
+
+/// The scaled-Jacobian histogram: bin edges and counts (see the module
+/// documentation).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Histogram {
+    /// `HISTOGRAM_BINS + 1` edges, -1 to 1.
+    pub edges: Vec<f64>,
+    /// Elements per bin, over all ranks.
+    pub counts: Vec<u64>,
+}
+
+/// The quality figures of a mesh, the same on every rank and every rank
+/// count.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Quality {
+    /// Elements measured, over all ranks.
+    pub elements: u64,
+    /// Smallest scaled Jacobian (1 without elements).
+    pub scaled_jacobian_min: f64,
+    /// Elements whose scaled Jacobian is at most 0.
+    pub inverted_elements: u64,
+    /// The scaled Jacobians' histogram.
+    pub scaled_jacobian_histogram: Histogram,
+    /// Internal faces, processor faces once (what `checkMesh` averages
+    /// non-orthogonality over).
+    pub internal_faces: u64,
+    /// Largest non-orthogonality, degrees (`checkMesh`'s "Max").
+    pub non_orthogonality_max: f64,
+    /// `checkMesh`'s "average": the angle of the mean cosine, degrees.
+    pub non_orthogonality_average: f64,
+    /// Largest skewness over all faces (`checkMesh`'s "Max skewness").
+    pub skewness_max: f64,
+}
+
+/// Fixed-point scale of the summed cosines: exact integer sums do not
+/// depend on the order of the sum, so neither on the rank count.
+const COSINE_ONE: f64 = (1u64 << 52) as f64;
+
+/// The cosine `c` in [-1, 1] as an integer in [0, 2^53], split into a high
+/// and a low word that each sum without overflow for 2^37 faces.
+fn cosine_words(c: f64) -> [u64; 2] {
+    // Rounded half up; `round` is a library call.
+    let v = ((c.clamp(-1.0, 1.0) + 1.0) * COSINE_ONE + 0.5) as u64;
+    [v >> 26, v & ((1 << 26) - 1)]
+}
+
+impl Mesh {
+    /// The corners of local element `i` in VTK order, user units: from
+    /// `coords` (one per local node, e.g. moved ones), or without it where
+    /// the octree puts them (computed from the element, no node array).
+    pub fn element_corners(&self, i: usize, coords: Option<&[[f64; 3]]>) -> [[f64; 3]; 8] {
+        match coords {
+            Some(x) => self.connectivity()[i].map(|n| x[n as usize]),
+            None => {
+                let e = self.elements()[i];
+                let (a, s) = (e.coords(), e.side());
+                std::array::from_fn(|v| {
+                    let m = VTK_TO_MORTON[v];
+                    let q = [0, 1, 2].map(|k| (a[k] + if m >> k & 1 == 1 { s } else { 0 }) as f64);
+                    self.domain().from_lattice(q)
+                })
+            }
+        }
+    }
+
+    /// The scaled Jacobian of each local element, its corners as in
+    /// [`Mesh::element_corners`].
+    pub fn scaled_jacobians(&self, coords: Option<&[[f64; 3]]>) -> Vec<f64> {
+        (0..self.elements().len())
+            .map(|i| scaled_jacobian(&self.element_corners(i, coords)))
+            .collect()
+    }
+
+    /// The centre of a local or halo element, lattice units.
+    fn centre_of(&self, o: Other) -> [f64; 3] {
+        let leaf = match o {
+            Other::Element(j) => self.elements()[j as usize],
+            Other::Halo(h) => self.halo().leaves[h as usize],
+            Other::Patch(_) => return [0.0; 3],
+        };
+        let (c, h) = (leaf.coords(), leaf.side() as f64 / 2.0);
+        [c[0] as f64 + h, c[1] as f64 + h, c[2] as f64 + h]
+    }
+
+    /// The quality of this mesh: the scaled Jacobians from the corners of
+    /// [`Mesh::element_corners`] with `coords`, and the face figures over
+    /// the faces of [`Mesh::faces`] with the octree geometry, measured as
+    /// they are made, element by element (nothing is stored per face).
+    /// Collective: the figures are reduced over the ranks. Returns the
+    /// figures and the local scaled Jacobians.
+    pub fn quality(
+        &self,
+        comm: &dyn Comm,
+        coords: Option<&[[f64; 3]]>,
+    ) -> Result<(Quality, Vec<f64>)> {
+        let local = self.elements().len();
+        if local > u32::MAX as usize {
+            return Err(Error::new(ErrorKind::Limit, "too many local elements"));
+        }
+        let jac = self.scaled_jacobians(coords);
+        // Sums: elements, inverted, faces, the histogram, then the cosine
+        // words.
+        let mut sums = vec![0u64; 3 + HISTOGRAM_BINS + 2];
+        sums[0] = jac.len() as u64;
+        for &j in &jac {
+            sums[1] += (j <= 0.0) as u64;
+            sums[3 + histogram_bin(j)] += 1;
+        }
+        // Maxima: -min J, -min cosine, max skewness.
+        let mut max = [-1.0f64, -1.0, 0.0];
+        for &j in &jac {
+            max[0] = max[0].max(-j);
+        }
+        let me = comm.rank() as u32;
+        let kept = Kept {
+            local: self.elements(),
+            halo: self.halo(),
+        };
+        // The figures are ratios and angles, unchanged by the map from the
+        // lattice to user units (a scaling and a shift): they are computed
+        // on the lattice, where the coordinates are exact.
+        let centre = |o: Other| self.centre_of(o);
+        for i in 0..local {
+            self.element_faces(&kept, i, |kind, f| {
+                let c = f.lattice_centre();
+                let s = scale(f.unit_normal(), f.lattice_area());
+                let corners = f.corners().map(|q| q.map(|x| x as f64));
+                let own = centre(Other::Element(f.owner));
+                // Seen from the element with the lower global number: the
+                // owner on one rank, and the same bits on any number.
+                let (p, n, s) = match (kind, f.other) {
+                    (FaceKind::Boundary, _) => {
+                        max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
+                        return;
+                    }
+                    (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
+                        return;
+                    }
+                    (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
+                    (_, other) => (own, centre(other), s),
+                };
+                let cos = face_orthogonality(p, n, s);
+                sums[2] += 1;
+                let w = cosine_words(cos);
+                sums[3 + HISTOGRAM_BINS] += w[0];
+                sums[4 + HISTOGRAM_BINS] += w[1];
+                max[1] = max[1].max(-cos);
+                max[2] = max[2].max(face_skewness(c, s, &corners, p, n));
+            });
+        }
+        comm.sum_u64(&mut sums);
+        comm.max_f64(&mut max);
+        let nfaces = sums[2];
+        let degrees = |c: f64| c.clamp(-1.0, 1.0).acos().to_degrees();
+        let (nonorth_max, nonorth_mean) = if nfaces == 0 {
+            (0.0, 0.0)
+        } else {
+            let total =
+                ((sums[3 + HISTOGRAM_BINS] as u128) << 26) + sums[4 + HISTOGRAM_BINS] as u128;
+            let mean = total as f64 / COSINE_ONE / nfaces as f64 - 1.0;
+            (degrees(-max[1]), degrees(mean))
+        };
+        let q = Quality {
+            elements: sums[0],
+            scaled_jacobian_min: if sums[0] == 0 { 1.0 } else { -max[0] },
+            inverted_elements: sums[1],
+            scaled_jacobian_histogram: Histogram {
+                edges: (0..=HISTOGRAM_BINS)
+                    .map(|k| (k as f64 - 10.0) / 10.0)
+                    .collect(),
+                counts: sums[3..3 + HISTOGRAM_BINS].to_vec(),
+            },
+            internal_faces: nfaces,
+            non_orthogonality_max: nonorth_max,
+            non_orthogonality_average: nonorth_mean,
+            skewness_max: max[2],
+        };
+        Ok((q, jac))
+    }
+}
+
+/// One of the elements with the smallest scaled Jacobians, as gathered on
+/// rank 0 by [`Mesh::worst_elements`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct WorstElement {
+    /// Its scaled Jacobian.
+    pub scaled_jacobian: f64,
+    /// Its global element number.
+    pub global: u64,
+    /// The rank holding it.
+    pub rank: u32,
+    /// Its octree level.
+    pub level: u8,
+    /// Its class ([`crate::classify::LeafClass`] as a byte).
+    pub class: u8,
+    /// Its corners, VTK order, user units.
+    pub corners: [[f64; 3]; 8],
+    /// The scaled Jacobian at each corner.
+    pub corner_values: [f64; 8],
+}
+
+/// Words per element sent to rank 0: value, number, rank/level/class, 24
+/// coordinates, 8 corner values.
+const WORST_WORDS: usize = 35;
+
+impl WorstElement {
+    /// Worst first; ties by global number, so the choice does not depend on
+    /// the rank count.
+    fn order(&self, o: &WorstElement) -> std::cmp::Ordering {
+        self.scaled_jacobian
+            .total_cmp(&o.scaled_jacobian)
+            .then(self.global.cmp(&o.global))
+    }
+
+    fn encode(&self, out: &mut Vec<u64>) {
+        out.push(self.scaled_jacobian.to_bits());
+        out.push(self.global);
+        out.push(self.rank as u64 | (self.level as u64) << 32 | (self.class as u64) << 40);
+        out.extend(self.corners.iter().flatten().map(|x| x.to_bits()));
+        out.extend(self.corner_values.iter().map(|x| x.to_bits()));
+    }
+
+    fn decode(w: &[u64]) -> WorstElement {
+        let f = |k: usize| f64::from_bits(w[k]);
+        WorstElement {
+            scaled_jacobian: f(0),
+            global: w[1],
+            rank: w[2] as u32,
+            level: (w[2] >> 32) as u8,
+            class: (w[2] >> 40) as u8,
+            corners: std::array::from_fn(|v| std::array::from_fn(|k| f(3 + 3 * v + k))),
+            corner_values: std::array::from_fn(|v| f(27 + v)),
+        }
+    }
+}
+
+impl Mesh {
+    /// The `n` elements with the smallest scaled Jacobians over all ranks
+    /// (ties by global number), worst first, on rank 0; empty on the
+    /// others. `coords` are as for [`Mesh::element_corners`] and `jac` the local
+    /// scaled Jacobians ([`Mesh::quality`]). Collective.
+    pub fn worst_elements(
+        &self,
+        comm: &dyn Comm,
+        coords: Option<&[[f64; 3]]>,
+        jac: &[f64],
+        n: usize,
+    ) -> Vec<WorstElement> {
+        let element = |i: usize| {
+            let corners = self.element_corners(i, coords);
+            WorstElement {
+                scaled_jacobian: jac[i],
+                global: self.global_element(i),
+                rank: comm.rank() as u32,
+                level: self.elements()[i].level(),
+                class: self.element_class()[i],
+                corners,
+                corner_values: corner_scaled_jacobians(&corners),
+            }
+        };
+        // The local n worst by value; the global number breaks ties the
+        // same way as the local index, since local numbers are contiguous.
+        let mut local: Vec<usize> = (0..jac.len()).collect();
+        let key = |&i: &usize| (jac[i], i);
+        let cmp = |a: &usize, b: &usize| {
+            let (x, y) = (key(a), key(b));
+            x.0.total_cmp(&y.0).then(x.1.cmp(&y.1))
+        };
+        if local.len() > n {
+            local.select_nth_unstable_by(n, cmp);
+            local.truncate(n);
+        }
+        let mut send = Vec::with_capacity(local.len() * WORST_WORDS);
+        for &i in &local {
+            element(i).encode(&mut send);
+        }
+        let mut counts = vec![0; comm.size()];
+        counts[0] = send.len();
+        let (got, _) = comm.alltoallv_u64(&send, &counts);
+        let mut all: Vec<WorstElement> = got
+            .chunks_exact(WORST_WORDS)
+            .map(WorstElement::decode)
+            .collect();
+        all.sort_by(|a, b| a.order(b));
+        all.truncate(n);
+        all
+    }
+}
+
+/// Writes `worst` ([`Mesh::worst_elements`]) as one VTU file for ParaView:
+/// each element with its own 8 points (none shared), cell data `level`,
+/// `class` (and `rank`, 0: the writer's), point data `scaled_jacobian`
+/// (the element's), `corner_scaled_jacobian` (the corner's), `element`
+/// (global number) and `owner_rank`; `global_id` is -1. Not collective.
+pub fn write_worst_vtu(path: &Path, worst: &[WorstElement]) -> Result<()> {
+    let points: Vec<[f64; 3]> = worst.iter().flat_map(|w| w.corners).collect();
+    let cells: Vec<[u32; 8]> = (0..worst.len() as u32)
+        .map(|k| std::array::from_fn(|v| 8 * k + v as u32))
+        .collect();
+    let level: Vec<u8> = worst.iter().map(|w| w.level).collect();
+    let class: Vec<u8> = worst.iter().map(|w| w.class).collect();
+    let per_point = |f: &dyn Fn(&WorstElement) -> f64| -> Vec<f64> {
+        worst.iter().flat_map(|w| [f(w); 8]).collect()
+    };
+    let value = per_point(&|w| w.scaled_jacobian);
+    let element = per_point(&|w| w.global as f64);
+    let owner = per_point(&|w| w.rank as f64);
+    let corner: Vec<f64> = worst.iter().flat_map(|w| w.corner_values).collect();
+    let none = vec![-1i64; points.len()];
+    let independent = vec![0u8; points.len()];
+    let fields: [(&str, &[f64]); 4] = [
+        ("scaled_jacobian", &value),
+        ("corner_scaled_jacobian", &corner),
+        ("element", &element),
+        ("owner_rank", &owner),
+    ];
+    write_vtu(
+        path,
+        &VtuPiece {
+            points: &points,
+            cells: &cells,
+            cell_level: &level,
+            cell_class: &class,
+            rank: 0,
+            point_global_id: &none,
+            point_hanging: &independent,
+            point_fields: &fields,
+        },
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::{classify_leaves, CutRule, Keep};
+    use crate::comm::{CommRef, SerialComm};
+    use crate::domain::{Domain, DEFAULT_FIT};
+    use crate::geometry::load_surface;
+    use crate::mesh::MeshOptions;
+    use crate::octant::Connectivity;
+    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+    use std::rc::Rc;
+
+    /// The unit cube's corners in VTK order, mapped by `f`.
+    fn cube(f: impl Fn([f64; 3]) -> [f64; 3]) -> [[f64; 3]; 8] {
+        const UNIT: [[f64; 3]; 8] = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ];
+        UNIT.map(f)
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-14
+    }
+
+    #[test]
+    fn the_corner_table_follows_the_edges_right_handed() {
+        let c = cube(|p| p);
+        for (k, e) in CORNER_EDGES.iter().enumerate() {
+            // Each neighbour differs from the corner in exactly one
+            // coordinate, each along a different axis.
+            let mut axes = [false; 3];
+            for &j in e {
+                let d = sub(c[j], c[k]);
+                let along: Vec<usize> = (0..3).filter(|&a| d[a] != 0.0).collect();
+                assert_eq!(along.len(), 1, "corner {k} -> {j}");
+                axes[along[0]] = true;
+            }
+            assert_eq!(axes, [true; 3], "corner {k}");
+        }
+        assert_eq!(corner_scaled_jacobians(&c), [1.0; 8]);
+    }
+
+    #[test]
+    fn distorted_hexahedra_have_their_closed_form_values() {
+        // A box with sides 2, 3, 0.5: right angles everywhere.
+        let b = cube(|p| [2.0 * p[0] + 1.0, 3.0 * p[1], 0.5 * p[2] - 4.0]);
+        assert!(close(scaled_jacobian(&b), 1.0));
+        // Sheared, x += s z: the edges x, y, (s, 0, 1) at every corner;
+        // det 1 over lengths 1, 1, sqrt(1 + s^2).
+        for s in [0.5, 1.0, 3.0] {
+            let h = cube(|p| [p[0] + s * p[2], p[1], p[2]]);
+            let want = 1.0 / (1.0f64 + s * s).sqrt();
+            for j in corner_scaled_jacobians(&h) {
+                assert!(close(j, want), "shear {s}: {j} vs {want}");
+            }
+        }
+        // An affine parallelepiped on a = (1, 0, 0), b = (1, 1, 0),
+        // c = (0, 1, 1): det 1, lengths 1, sqrt 2, sqrt 2, so 1/2 at every
+        // corner.
+        let (a, bb, c) = ([1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]);
+        let h = cube(|p| [0, 1, 2].map(|k| p[0] * a[k] + p[1] * bb[k] + p[2] * c[k]));
+        for j in corner_scaled_jacobians(&h) {
+            assert!(close(j, 0.5), "{j}");
+        }
+        // Mirrored (z -> -z): every corner inverted, -1.
+        let m = cube(|p| [p[0], p[1], -p[2]]);
+        assert_eq!(corner_scaled_jacobians(&m), [-1.0; 8]);
+        // Flattened (top on the bottom): coplanar edges, 0 everywhere.
+        let f = cube(|p| [p[0], p[1], 0.0]);
+        assert_eq!(corner_scaled_jacobians(&f), [0.0; 8]);
+        // The top face collapsed to the point (0.5, 0.5, 1) (a pyramid):
+        // the top corners' edges along the top have length zero, so 0 there;
+        // a bottom corner, e.g. 0, has edges x, y, (0.5, 0.5, 1): det 1 over
+        // 1 * 1 * sqrt(1.5).
+        let py = cube(|p| if p[2] == 1.0 { [0.5, 0.5, 1.0] } else { p });
+        let j = corner_scaled_jacobians(&py);
+        assert_eq!(&j[4..], &[0.0; 4]);
+        for v in &j[..4] {
+            assert!(close(*v, 1.0 / 1.5f64.sqrt()), "{v}");
+        }
+        assert_eq!(scaled_jacobian(&py), 0.0);
+        // Corner 6 pulled from (1, 1, 1) to (2, 2, 2). At 6 the edges to 5,
+        // 7, 2 are (-1, -2, -1), (-2, -1, -1), (-1, -1, -2): det 4, lengths
+        // sqrt 6 each, so 4 / (6 sqrt 6). At 5 (and by symmetry 2 and 7):
+        // edges to 4, 6, 1 are (-1, 0, 0), (1, 2, 1), (0, 0, -1): det 2 over
+        // sqrt 6. The rest keep their right angles.
+        let mut pulled = cube(|p| p);
+        pulled[6] = [2.0, 2.0, 2.0];
+        let j = corner_scaled_jacobians(&pulled);
+        let at6 = 4.0 / (6.0 * 6f64.sqrt());
+        let at5 = 2.0 / 6f64.sqrt();
+        let want = [1.0, 1.0, at5, 1.0, 1.0, at5, at6, at5];
+        for k in 0..8 {
+            assert!(close(j[k], want[k]), "corner {k}: {} vs {}", j[k], want[k]);
+        }
+        assert!(close(scaled_jacobian(&pulled), at6));
+        // Corner 0 pushed through the element to (1.5, 0.5, 0.5): its
+        // edges (-0.5, -0.5, -0.5), (-1.5, 0.5, -0.5), (-1.5, -0.5, 0.5) to
+        // 1, 3, 4 give det -1.5 over (sqrt 0.75 * sqrt 2.75 * sqrt 2.75).
+        let mut through = cube(|p| p);
+        through[0] = [1.5, 0.5, 0.5];
+        let j0 = corner_scaled_jacobians(&through)[0];
+        let want = -1.5 / (0.75f64.sqrt() * 2.75);
+        assert!(close(j0, want), "{j0} vs {want}");
+        assert!(scaled_jacobian(&through) < 0.0);
+    }
+
+    #[test]
+    fn histogram_bins_are_tenths() {
+        assert_eq!(histogram_bin(-1.0), 0);
+        assert_eq!(histogram_bin(-1.5), 0);
+        assert_eq!(histogram_bin(-0.95), 0);
+        assert_eq!(histogram_bin(0.0), 10);
+        assert_eq!(histogram_bin(0.05), 10);
+        assert_eq!(histogram_bin(0.75), 17);
+        assert_eq!(histogram_bin(0.99), 19);
+        assert_eq!(histogram_bin(1.0), 19);
+        assert_eq!(histogram_bin(1.0 + 1e-15), 19);
+        assert_eq!(histogram_bin(f64::NAN), 0);
+    }
+
+    #[test]
+    fn a_fine_face_on_a_coarse_cell() {
+        // Coarse cell [-1, 1]^3 (centre 0, h = 1); fine cell [0, 1]^2 x
+        // [1, 2], centre (0.5, 0.5, 1.5); their face [0, 1]^2 at z = 1.
+        let (p, n) = ([0.0; 3], [0.5, 0.5, 1.5]);
+        let (c, s) = ([0.5, 0.5, 1.0], [0.0, 0.0, 1.0]);
+        let pts = [
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ];
+        // cos = 1.5 / sqrt(0.5 + 2.25).
+        assert!(close(face_orthogonality(p, n, s), 1.5 / 2.75f64.sqrt()));
+        // The line P -> N meets z = 1 at (1/3, 1/3): sv = (1/6, 1/6), the
+        // face reaches sqrt(2)/2 from its centre that way; 0.2 |d| is less.
+        assert!(close(face_skewness(c, s, &pts, p, n), 1.0 / 3.0));
+        // The same face seen from the fine side.
+        let back = face_skewness(c, [0.0, 0.0, -1.0], &pts, n, p);
+        assert!(close(back, 1.0 / 3.0));
+        // Boundary: half of the coarse cell's top face, x in [0, 1]: the
+        // centre (0.5, 0, 1) is 0.5 off the normal through P; the face
+        // reaches 0.5 that way, 0.4 * 1 is less: skewness 1.
+        let half = [
+            [0.0, -1.0, 1.0],
+            [1.0, -1.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        ];
+        let b = boundary_face_skewness([0.5, 0.0, 1.0], [0.0, 0.0, 2.0], &half, p);
+        assert!(close(b, 1.0));
+        // A whole face straight ahead: 0.
+        let whole = [
+            [-1.0, -1.0, 1.0],
+            [1.0, -1.0, 1.0],
+            [1.0, 1.0, 1.0],
+            [-1.0, 1.0, 1.0],
+        ];
+        assert_eq!(
+            boundary_face_skewness([0.0, 0.0, 1.0], [0.0, 0.0, 4.0], &whole, p),
+            0.0
+        );
+    }
+
+    fn sphere_mesh(level: u8) -> Mesh {
+        let comm: CommRef = Rc::new(SerialComm);
+        let s = load_surface("sphere").unwrap();
+        let b = s.bbox();
+        let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+        let index = SurfaceIndex::new(&s, &domain);
+        let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
+        t.balance(Connectivity::Corner).unwrap();
+        let classes = classify_leaves(t.leaves(), &index);
+        let opts = MeshOptions {
+            keep: Keep::Outside,
+            cut_rule: CutRule::Center,
+            clean_walls: true,
+        };
+        Mesh::build(&t, &domain, Some(&classes), &opts).unwrap()
+    }
+
+    #[test]
+    fn openfoam_cell_centres_are_the_cube_centres() {
+        // OpenFOAM's cell centre: the mean of the face centres as an
+        // estimate, then the pyramids from it to each face, weighted by
+        // volume. Applied here to every element's faces, split 2:1 faces
+        // included, it must give the element's centre and volume.
+        let mesh = sphere_mesh(4);
+        let faces = mesh.faces().unwrap();
+        let n = mesh.elements().len();
+        let mut sides: Vec<Vec<([f64; 3], [f64; 3])>> = vec![Vec::new(); n];
+        for f in faces.faces() {
+            let c = mesh.face_centre(f);
+            let s = scale(f.unit_normal(), mesh.face_area(f));
+            sides[f.owner as usize].push((c, s));
+            if let Other::Element(j) = f.other {
+                sides[j as usize].push((c, scale(s, -1.0)));
+            }
+        }
+        let mut split = 0;
+        for (i, list) in sides.iter().enumerate() {
+            split += (list.len() > 6) as usize;
+            let k = list.len() as f64;
+            let est = list
+                .iter()
+                .fold([0.0; 3], |a, (c, _)| [0, 1, 2].map(|x| a[x] + c[x] / k));
+            let (mut vol, mut mom) = (0.0, [0.0; 3]);
+            for (c, s) in list {
+                let v = dot(*s, sub(*c, est));
+                vol += v;
+                for x in 0..3 {
+                    mom[x] += v * (0.75 * c[x] + 0.25 * est[x]);
+                }
+            }
+            let centre = mom.map(|m| m / vol);
+            let want = mesh.element_centre(i);
+            let side = mesh.element_volume(i).cbrt();
+            for x in 0..3 {
+                assert!((centre[x] - want[x]).abs() < 1e-12 * side, "element {i}");
+            }
+            assert!((vol / 3.0 - mesh.element_volume(i)).abs() < 1e-12 * side.powi(3));
+            // The corners the scaled Jacobian reads are the element's.
+            let j = scaled_jacobian(&mesh.element_corners(i, None));
+            assert!(close(j, 1.0), "{j}");
+        }
+        assert!(split > 0, "no 2:1 interface in the test mesh");
+    }
+
+    #[test]
+    fn octree_meshes_have_the_2_to_1_angle() {
+        // Every face joins equal elements (cosine 1) or a fine element to a
+        // coarse one, whose centres are 1.5 h apart along the normal and
+        // h / sqrt 2 across it (h the fine side): the figures follow from
+        // the count of each kind.
+        let mesh = sphere_mesh(5);
+        let faces = mesh.faces().unwrap();
+        let comm = SerialComm;
+        let coords = mesh.coordinates();
+        let (q, jac) = mesh.quality(&comm, None).unwrap();
+        // The nodes' array gives the same corners, so the same figures.
+        assert_eq!(
+            mesh.quality(&comm, Some(&coords)).unwrap(),
+            (q.clone(), jac.clone())
+        );
+        let level = |o: Other| match o {
+            Other::Element(j) => mesh.elements()[j as usize].level(),
+            _ => unreachable!(),
+        };
+        let internal = &faces.faces()[..faces.num_internal()];
+        let fine_coarse = internal
+            .iter()
+            .filter(|f| level(Other::Element(f.owner)) != level(f.other))
+            .count();
+        assert!(fine_coarse > 0);
+        let cos = 1.5 / 2.75f64.sqrt();
+        let angle = cos.acos().to_degrees();
+        assert!((q.non_orthogonality_max - angle).abs() < 1e-9, "{q:?}");
+        let n = internal.len() as f64;
+        let mean = ((n - fine_coarse as f64) + fine_coarse as f64 * cos) / n;
+        assert!((q.non_orthogonality_average - mean.acos().to_degrees()).abs() < 1e-9);
+        assert_eq!(q.internal_faces, internal.len() as u64);
+        assert_eq!(q.elements, mesh.elements().len() as u64);
+        assert_eq!(
+            q.scaled_jacobian_histogram.counts.iter().sum::<u64>(),
+            q.elements
+        );
+        assert_eq!(
+            q.scaled_jacobian_histogram.counts[HISTOGRAM_BINS - 1],
+            q.elements
+        );
+        assert_eq!(q.inverted_elements, 0);
+        assert!(jac.iter().all(|&j| close(j, 1.0)));
+        // 1/3 on the 2:1 faces; at least that.
+        assert!(q.skewness_max >= 1.0 / 3.0 - 1e-12);
+        let worst = mesh.worst_elements(&comm, None, &jac, 5);
+        assert_eq!(worst.len(), 5);
+        assert!(worst.windows(2).all(|w| w[0].order(&w[1]).is_lt()));
+    }
+}

@@ -1,0 +1,59 @@
+//! Stage: the mesh's quality ([`crate::mesh::quality`]), measured only when
+//! a run asks for it (`--stats`, `--quality-out`).
+
+use crate::comm::agree;
+use crate::error::Result;
+use crate::mesh::quality::{write_worst_vtu, Quality};
+
+use super::*;
+
+impl Session {
+    /// Measures the current mesh's quality: the scaled Jacobian of each
+    /// element from its nodes, and `checkMesh`'s non-orthogonality and
+    /// skewness over the faces (measured as they are made, not stored);
+    /// with `output.quality_out` also writes the worst elements
+    /// there (rank 0). Collective; the figures are the same on every rank.
+    /// Phase `quality`.
+    pub fn quality(&mut self) -> Result<Quality> {
+        self.mesh_or_state()?;
+        let comm = self.comm.clone();
+        let out = self.config.output.quality_out.clone();
+        let worst = self.config.output.quality_worst() as usize;
+        let mesh = &self.mesh;
+        let measured = self.timer.time(&*comm, "quality", || {
+            let Some(m) = mesh else {
+                return Ok(Quality::default());
+            };
+            // The nodes are where the octree put them: corners from the
+            // elements, no node array.
+            let (q, jac) = m.quality(&*comm, None)?;
+            if let Some(path) = &out {
+                let list = m.worst_elements(&*comm, None, &jac, worst);
+                let wrote = if comm.rank() == 0 {
+                    write_worst_vtu(path, &list)
+                } else {
+                    Ok(())
+                };
+                agree(&*comm, wrote)?;
+            }
+            Ok(q)
+        });
+        let q = agree(&*comm, measured)?;
+        self.report_phase(Some(q.elements));
+        self.observer.event(&Event::Quality(&q));
+        if let Some(path) = &out {
+            self.observer.event(&Event::Wrote(path));
+        }
+        self.quality = Some((self.mesh_generation, q.clone()));
+        Ok(q)
+    }
+
+    /// The current mesh's quality if [`Session::quality`] measured it (not
+    /// collective).
+    pub fn current_quality(&self) -> Option<&Quality> {
+        self.quality
+            .as_ref()
+            .filter(|q| q.0 == self.mesh_generation)
+            .map(|q| &q.1)
+    }
+}
