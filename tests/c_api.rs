@@ -439,6 +439,7 @@ fn quality_from_c_equals_the_command() {
             "--keep",
             "outside",
             "--quiet",
+            "--quality",
             "--stats",
             stats.to_str().unwrap(),
         ],

@@ -89,7 +89,7 @@ fn time_inside_collectives_fits_in_the_phases() {
     for k in ["ghost", "numbering"] {
         assert!(j["comm_seconds_max"][k].as_f64().unwrap() > 0.0, "{k}");
     }
-    // The total also covers the phases --stats adds (faces, quality).
+    // The total also covers every phase the run had.
     let extra: f64 = j["comm_seconds_max"]
         .as_object()
         .unwrap()
@@ -152,7 +152,7 @@ fn sent_equals_received_on_2_and_3_ranks() {
         let per_rank = j["comm_bytes"]["total"].as_u64().unwrap();
         assert!(per_rank <= sent + received, "np {np}");
         assert!(per_rank * np as u64 >= sent + received, "np {np}");
-        // Every phase the run had (with --stats also faces and quality).
+        // Every phase the run had.
         let phase_sum: u64 = j["comm_bytes"]
             .as_object()
             .unwrap()

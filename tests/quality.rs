@@ -87,10 +87,11 @@ fn matches_printed(value: f64, printed: &str, digits: usize) -> bool {
     (value - p).abs() <= half_ulp * (1.0 + 1e-9) + 1e-12
 }
 
-/// Runs octmesh on `np` ranks with `--stats` and returns the statistics.
+/// Runs octmesh on `np` ranks with `--stats --quality` and returns the
+/// statistics.
 fn octmesh_stats(np: usize, args: &[&str], stats: &Path) -> serde_json::Value {
     let mut all = args.to_vec();
-    all.extend(["--stats", stats.to_str().unwrap(), "--quiet"]);
+    all.extend(["--stats", stats.to_str().unwrap(), "--quiet", "--quality"]);
     octmesh_ok(np, &all);
     json_file(stats)
 }

@@ -57,6 +57,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("output.openfoam", "--openfoam"),
     ("output.openfoam_format", "--openfoam-format"),
     ("output.overwrite", "--overwrite"),
+    ("output.quality", "--quality"),
     ("output.quality_out", "--quality-out"),
     ("output.quality_worst", "--quality-worst"),
     ("regions", "--region"),
@@ -257,9 +258,12 @@ struct MeshArgs {
     /// walls are manifold [default: true with --openfoam, else false]
     #[arg(long, value_name = "BOOL")]
     clean_walls: Option<bool>,
-    /// Measure the mesh's quality (scaled Jacobian, checkMesh's
-    /// non-orthogonality and skewness; also done with --stats) and write
-    /// the worst elements by scaled Jacobian to a VTU file
+    /// Measure the mesh's quality: scaled Jacobian histogram, checkMesh's
+    /// non-orthogonality and skewness, in the table and --stats
+    #[arg(long)]
+    quality: bool,
+    /// Measure the quality and write the worst elements by scaled Jacobian
+    /// to a VTU file
     #[arg(long, value_name = "FILE.vtu")]
     quality_out: Option<PathBuf>,
     /// How many elements --quality-out writes [default: 100]
@@ -323,7 +327,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         Ok(c) => c,
         Err(e) => return clap_error(e),
     };
-    let mut quality = (None, None);
+    let mut quality = (false, None, None);
     let (command, octree, mesh) = match cli.command {
         CliCommand::Check(c) => {
             return Ok(Invocation::Check {
@@ -341,7 +345,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
                 m.patch,
                 m.clean_walls,
             );
-            quality = (m.quality_out, m.quality_worst);
+            quality = (m.quality, m.quality_out, m.quality_worst);
             (
                 Command::Mesh,
                 m.octree,
@@ -537,7 +541,10 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         if set("output.vtu", out.is_some()) {
             config.output.vtu = out;
         }
-        let (quality_out, worst) = quality;
+        let (measure, quality_out, worst) = quality;
+        if set("output.quality", measure) {
+            config.output.quality = true;
+        }
         if set("output.quality_out", quality_out.is_some()) {
             config.output.quality_out = quality_out;
         }

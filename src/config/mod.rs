@@ -56,6 +56,7 @@
 //! # leaves = "leaves.bin"
 //! # refined_leaves = "refined.bin"
 //! # vtu = "mesh.pvtu"
+//! quality = false           # scaled Jacobian, non-orthogonality, skewness (mesh)
 //! # quality_out = "worst.vtu"  # the worst elements by scaled Jacobian (mesh)
 //! # quality_worst = 100
 //! ```
@@ -349,9 +350,13 @@ pub struct OutputConfig {
     pub openfoam_format: FoamFormat,
     /// Replace an existing OpenFOAM mesh.
     pub overwrite: bool,
-    /// Measure the mesh's quality ([`crate::mesh::quality`]; also done for
-    /// `stats`) and write the `quality_worst` elements with the smallest
-    /// scaled Jacobians to this VTU file (a name ending in `.vtu`).
+    /// Measure the mesh's quality ([`crate::mesh::quality`]): the figures
+    /// in the run's table and `stats` (`--quality`). Off by default: it
+    /// costs about two node extractions.
+    pub quality: bool,
+    /// Measure the mesh's quality and write the `quality_worst` elements
+    /// with the smallest scaled Jacobians to this VTU file (a name ending in
+    /// `.vtu`).
     pub quality_out: Option<PathBuf>,
     /// How many elements `quality_out` holds, at least 1 (unset: 100).
     pub quality_worst: Option<u64>,
@@ -367,10 +372,10 @@ impl OutputConfig {
         self.quality_worst.unwrap_or(DEFAULT_QUALITY_WORST)
     }
 
-    /// Whether a run measures the mesh's quality: for the statistics or
-    /// the worst elements' file.
+    /// Whether a run measures the mesh's quality: asked for, or for the
+    /// worst elements' file.
     pub fn wants_quality(&self) -> bool {
-        self.stats.is_some() || self.quality_out.is_some()
+        self.quality || self.quality_out.is_some()
     }
 }
 
@@ -447,6 +452,7 @@ pub const KEYS: &[&str] = &[
     "output.openfoam",
     "output.openfoam_format",
     "output.overwrite",
+    "output.quality",
     "output.quality_out",
     "output.quality_worst",
     "regions",
