@@ -160,7 +160,8 @@ fn route(
     let leaves = tree.leaves();
     let (begin, end) = tree.local_cells();
     // An index pays for itself only for many points per leaf.
-    let index = (recv.len() * 8 >= leaves.len()).then(|| LeafIndex::new(leaves, begin, end));
+    let index = (!recv.is_empty() && recv.len() * 8 >= leaves.len())
+        .then(|| LeafIndex::new(leaves, begin, end));
     let mut answers = Vec::with_capacity(ANSWER * recv.len());
     for &c in &recv {
         let i = match &index {

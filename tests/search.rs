@@ -55,7 +55,10 @@ fn main() {
         let read = |np: usize| std::fs::read(dir.join(format!("{case}_np{np}.txt"))).unwrap();
         let one = read(1);
         for np in 2..=4 {
-            assert!(read(np) == one, "{case}: the answers on {np} ranks differ from 1 rank's");
+            assert!(
+                read(np) == one,
+                "{case}: the answers on {np} ranks differ from 1 rank's"
+            );
         }
     }
     println!("search: 4 rank counts agree");
@@ -63,7 +66,11 @@ fn main() {
         for np in [1, 2] {
             let arg = format!("bench:{}", dir.display());
             let out = common::mpirun_env(np, &me, &[], &[(CHILD, &arg)], limit);
-            assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
             print!("{}", String::from_utf8_lossy(&out.stdout));
         }
     }
@@ -249,7 +256,11 @@ fn check(comm: &CommRef, case: &str, bbox: Option<([f64; 6], [u32; 3])>, dir: &P
     if rank != 0 {
         return;
     }
-    let leaves: Vec<Octant> = all_leaves.concat().into_iter().map(Octant::from_key).collect();
+    let leaves: Vec<Octant> = all_leaves
+        .concat()
+        .into_iter()
+        .map(Octant::from_key)
+        .collect();
     let elements: Vec<u64> = all_elements.concat();
     let mut answers = vec![[NONE; 3]; all.len()];
     let mut seen = vec![false; all.len()];
@@ -270,16 +281,27 @@ fn check(comm: &CommRef, case: &str, bbox: Option<([f64; 6], [u32; 3])>, dir: &P
                 assert_eq!((leaf, element), (NONE, NONE), "{case} point {i} {pt:?}");
             }
             Some(w) => {
-                assert_eq!((leaf, key), (w as u64, leaves[w].key()), "{case} point {i} {pt:?}");
+                assert_eq!(
+                    (leaf, key),
+                    (w as u64, leaves[w].key()),
+                    "{case} point {i} {pt:?}"
+                );
                 let e = elements.binary_search(&key).ok();
                 if e.is_none() {
                     inside_body += 1;
                 }
-                assert_eq!(element, e.map_or(NONE - 1, |e| e as u64), "{case} point {i}");
+                assert_eq!(
+                    element,
+                    e.map_or(NONE - 1, |e| e as u64),
+                    "{case} point {i}"
+                );
             }
         }
     }
-    assert!(outside > POINTS / 10, "{case}: only {outside} points outside");
+    assert!(
+        outside > POINTS / 10,
+        "{case}: only {outside} points outside"
+    );
     assert!(inside_body > 0, "{case}: no point in the body");
     let text: String = answers
         .iter()
@@ -312,7 +334,9 @@ fn bench(comm: &CommRef) {
     let mut rng = Rng(1 + rank as u64);
     let up = domain.upper();
     let pts: Vec<[f64; 3]> = (0..n)
-        .map(|_| std::array::from_fn(|k| domain.origin[k] + rng.unit() * (up[k] - domain.origin[k])))
+        .map(|_| {
+            std::array::from_fn(|k| domain.origin[k] + rng.unit() * (up[k] - domain.origin[k]))
+        })
         .collect();
     let time = |f: &dyn Fn() -> usize| {
         let mut best = f64::INFINITY;

@@ -6,6 +6,9 @@ use super::{octmesh_gloidx_t, octmesh_locidx_t, octmesh_status_t, with_ref};
 use crate::error::{Error, ErrorKind, Result};
 use crate::search::{locate, locate_elements, Location};
 
+/// The points of a call and its two output arrays.
+type Arrays<'a> = (Vec<[f64; 3]>, &'a mut [i32], &'a mut [octmesh_gloidx_t]);
+
 /// The caller's points and output arrays; `n == 0` allows NULL pointers, so
 /// a rank without points passes nothing.
 ///
@@ -17,7 +20,7 @@ unsafe fn arrays<'a>(
     rank_out: *mut i32,
     index_out: *mut octmesh_gloidx_t,
     index_name: &str,
-) -> Result<(Vec<[f64; 3]>, &'a mut [i32], &'a mut [octmesh_gloidx_t])> {
+) -> Result<Arrays<'a>> {
     if n < 0 {
         return Err(Error::invalid(format!("argument 'n' is negative ({n})")));
     }
