@@ -74,34 +74,54 @@ impl Location {
 /// for NaN coordinates.
 #[inline]
 pub fn point_cell(domain: &Domain, p: [f64; 3]) -> Option<u64> {
-    let q = domain.to_lattice(p);
-    let hi = domain.brick.hi();
-    // `contains` is false for NaN.
-    if !(0..3).all(|k| (0.0..=hi[k] as f64).contains(&q[k])) {
-        return None;
+    Lattice::new(domain).cell(p)
+}
+
+/// [`point_cell`] with the domain's constants computed once.
+struct Lattice {
+    origin: [f64; 3],
+    scale: f64,
+    hi: [u32; 3],
+}
+
+impl Lattice {
+    fn new(domain: &Domain) -> Lattice {
+        Lattice {
+            origin: domain.origin,
+            scale: domain.scale(),
+            hi: domain.brick.hi(),
+        }
     }
-    // The highest faces belong to the last cell.
-    let i: [u32; 3] = std::array::from_fn(|k| (q[k] as u32).min(hi[k] - 1));
-    Some(morton_encode(i[0], i[1], i[2]))
+
+    #[inline]
+    fn cell(&self, p: [f64; 3]) -> Option<u64> {
+        // The same arithmetic as `Domain::to_lattice`.
+        let q: [f64; 3] = std::array::from_fn(|k| (p[k] - self.origin[k]) * self.scale);
+        // `contains` is false for NaN.
+        if !(0..3).all(|k| (0.0..=self.hi[k] as f64).contains(&q[k])) {
+            return None;
+        }
+        // The highest faces belong to the last cell.
+        let i: [u32; 3] = std::array::from_fn(|k| (q[k] as u32).min(self.hi[k] - 1));
+        Some(morton_encode(i[0], i[1], i[2]))
+    }
 }
 
 /// The rank owning each point (holding the leaf that contains it), `None`
 /// outside the domain. Local: no communication.
 pub fn owner_ranks(tree: &LinearOctree, domain: &Domain, points: &[[f64; 3]]) -> Vec<Option<u32>> {
     let first = tree.first_cells();
+    let lattice = Lattice::new(domain);
     points
         .iter()
-        .map(|&p| point_cell(domain, p).map(|c| owner_of_cell(first, c) as u32))
+        .map(|&p| lattice.cell(p).map(|c| owner_of_cell(first, c) as u32))
         .collect()
 }
 
 /// The leaf containing each point, in `points`' order. Collective: every
 /// rank calls it with its own points (any number, none included).
 pub fn locate(tree: &LinearOctree, domain: &Domain, points: &[[f64; 3]]) -> Vec<Location> {
-    let base = tree.global_offsets()[tree.comm().rank()];
-    route(tree, domain, points, |i, leaf| {
-        Some((i as u64, base + i as u64, leaf))
-    })
+    route(tree, domain, points, tree.global_offsets(), |i, _| Some(i))
 }
 
 /// The mesh element containing each point, in `points`' order:
@@ -109,82 +129,94 @@ pub fn locate(tree: &LinearOctree, domain: &Domain, points: &[[f64; 3]]) -> Vec<
 /// `mesh` must be built from `tree` as it is (same leaves and partition).
 /// Collective: every rank calls it with its own points.
 pub fn locate_elements(tree: &LinearOctree, mesh: &Mesh, points: &[[f64; 3]]) -> Vec<Location> {
+    let firsts = tree.comm().allgather_u64(mesh.first_element());
     let elements = mesh.elements();
-    route(tree, mesh.domain(), points, |_, leaf| {
-        // Elements are a sorted subset of the leaves.
-        let e = elements.binary_search(&leaf).ok()?;
-        Some((e as u64, mesh.global_element(e), leaf))
+    // Elements are a sorted subset of the leaves.
+    route(tree, mesh.domain(), points, &firsts, |_, leaf| {
+        elements.binary_search(&leaf).ok()
     })
 }
 
-/// Words per answer: local index (`u64::MAX`: no element), global index,
-/// leaf key.
-const ANSWER: usize = 3;
+/// No cell: the point is outside.
+const OUTSIDE: u64 = u64::MAX;
 
-/// Sends each point's cell to its owner, which looks up its leaf and
-/// answers with `lookup(local leaf index, leaf)`; returns the answers in
-/// the caller's order. Collective.
+/// Sends each point's cell to its owner, which finds the leaf holding it
+/// and answers with `lookup(local leaf index, leaf)`, the local index of
+/// the leaf or element (`None`: no element); `bases[r]` is the global
+/// index of rank `r`'s first. Returns the answers in the caller's order.
+/// Collective.
 fn route(
     tree: &LinearOctree,
     domain: &Domain,
     points: &[[f64; 3]],
-    lookup: impl Fn(usize, Octant) -> Option<(u64, u64, Octant)>,
+    bases: &[u64],
+    lookup: impl Fn(usize, Octant) -> Option<usize>,
 ) -> Vec<Location> {
     let comm = tree.comm();
     let p = comm.size();
     let first = tree.first_cells();
-    let cells: Vec<Option<u64>> = points.iter().map(|&x| point_cell(domain, x)).collect();
-    let owner: Vec<usize> = cells
+    let lattice = Lattice::new(domain);
+    let cells: Vec<u64> = points
         .iter()
-        .map(|c| c.map_or(p, |c| owner_of_cell(first, c)))
+        .map(|&x| lattice.cell(x).unwrap_or(OUTSIDE))
+        .collect();
+    let owner: Vec<u32> = cells
+        .iter()
+        .map(|&c| match c {
+            OUTSIDE => p as u32,
+            c => owner_of_cell(first, c) as u32,
+        })
         .collect();
     // Counting sort of the points by owner (outside points last, unsent).
     let mut counts = vec![0usize; p + 1];
     for &r in &owner {
-        counts[r] += 1;
+        counts[r as usize] += 1;
     }
     let starts = offsets(&counts);
     let mut at = starts.clone();
     let mut order = vec![0u32; points.len()];
-    let mut send = vec![0u64; points.len() - counts[p]];
+    let mut send = vec![0u64; starts[p]];
     for (i, &r) in owner.iter().enumerate() {
-        order[at[r]] = i as u32;
-        if let Some(c) = cells[i] {
-            send[at[r]] = c;
+        let slot = &mut at[r as usize];
+        order[*slot] = i as u32;
+        if (r as usize) < p {
+            send[*slot] = cells[i];
         }
-        at[r] += 1;
+        *slot += 1;
     }
+    drop((cells, owner));
     let (recv, recv_counts) = comm.alltoallv_u64(&send, &counts[..p]);
+    drop(send);
 
     // The owner's side: every received cell lies in this rank's range.
+    // Answers: the local index (`u64::MAX`: no element) and the leaf.
     let leaves = tree.leaves();
     let (begin, end) = tree.local_cells();
     // An index pays for itself only for many points per leaf.
     let index = (!recv.is_empty() && recv.len() * 8 >= leaves.len())
         .then(|| LeafIndex::new(leaves, begin, end));
-    let mut answers = Vec::with_capacity(ANSWER * recv.len());
+    let mut answers = Vec::with_capacity(2 * recv.len());
     for &c in &recv {
         let i = match &index {
             Some(ix) => ix.find(leaves, c),
             None => leaves.partition_point(|x| x.cell_begin() <= c) - 1,
         };
-        let leaf = leaves[i];
-        match lookup(i, leaf) {
-            Some((local, global, o)) => answers.extend([local, global, o.key()]),
-            None => answers.extend([u64::MAX, 0, leaf.key()]),
-        }
+        let local = lookup(i, leaves[i]).map_or(u64::MAX, |e| e as u64);
+        answers.extend([local, leaves[i].key()]);
     }
-    let back_counts: Vec<usize> = recv_counts.iter().map(|n| ANSWER * n).collect();
+    drop(recv);
+    let back_counts: Vec<usize> = recv_counts.iter().map(|n| 2 * n).collect();
     let (back, _) = comm.alltoallv_u64(&answers, &back_counts);
+    drop(answers);
 
     let mut out = vec![Location::Outside; points.len()];
     let mut r = 0;
-    for (k, w) in back.chunks_exact(ANSWER).enumerate() {
+    for (k, w) in back.chunks_exact(2).enumerate() {
         // Answers come back grouped by rank in the order sent.
         while k >= starts[r + 1] {
             r += 1;
         }
-        let leaf = Octant::from_key(w[2]);
+        let leaf = Octant::from_key(w[1]);
         out[order[k] as usize] = if w[0] == u64::MAX {
             Location::NoElement {
                 rank: r as u32,
@@ -194,7 +226,7 @@ fn route(
             Location::Found {
                 rank: r as u32,
                 local: w[0] as u32,
-                global: w[1],
+                global: bases[r] + w[0],
                 leaf,
             }
         };
