@@ -114,6 +114,7 @@ module octmesh
   public :: octmesh_octree_get_num_leaves, octmesh_octree_get_leaves, octmesh_octree_check_leak
   public :: octmesh_octree_refine_once, octmesh_octree_coarsen, octmesh_octree_adapt
   public :: octmesh_octree_partition_for_coarsening
+  public :: octmesh_octree_locate_points, octmesh_mesh_locate_points
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
@@ -337,6 +338,33 @@ module octmesh
        integer(c_int32_t), value :: capacity
        integer(c_int) :: octmesh_octree_get_leaves
      end function octmesh_octree_get_leaves
+
+     !> Collective: rank_out(i) and global_out(i) (0-based global leaf
+     !> index) of the point xyz(:, i), -1 outside the domain.
+     function octmesh_octree_locate_points(h, n, xyz, rank_out, global_out) &
+          bind(c, name="octmesh_octree_locate_points")
+       import :: c_ptr, c_int, c_int32_t, c_int64_t, c_double
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: n
+       real(c_double), intent(in) :: xyz(3, *)
+       integer(c_int32_t), intent(out) :: rank_out(*)
+       integer(c_int64_t), intent(out) :: global_out(*)
+       integer(c_int) :: octmesh_octree_locate_points
+     end function octmesh_octree_locate_points
+
+     !> Collective: rank_out(i) and element_out(i) (0-based global element
+     !> number) of the point xyz(:, i); element -1 in a leaf that is no
+     !> element, both -1 outside the domain.
+     function octmesh_mesh_locate_points(h, n, xyz, rank_out, element_out) &
+          bind(c, name="octmesh_mesh_locate_points")
+       import :: c_ptr, c_int, c_int32_t, c_int64_t, c_double
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: n
+       real(c_double), intent(in) :: xyz(3, *)
+       integer(c_int32_t), intent(out) :: rank_out(*)
+       integer(c_int64_t), intent(out) :: element_out(*)
+       integer(c_int) :: octmesh_mesh_locate_points
+     end function octmesh_mesh_locate_points
 
      function octmesh_mesh_build(h, keep, rule) bind(c, name="octmesh_mesh_build")
        import :: c_ptr, c_int32_t, c_int

@@ -996,6 +996,30 @@ octmesh_status_t octmesh_octree_partition_for_coarsening(octmesh_t *h,
                                                          octmesh_weight_fn weight,
                                                          void *ctx);
 
+/**
+ * Finds the leaf containing each of this rank's points: its rank and its
+ * global index (leaves numbered in Morton order over all ranks, as
+ * `octmesh_octree_get_leaves` lists them rank after rank). A point on a
+ * face, edge or corner shared by several leaves belongs to the leaf whose
+ * half-open box `[lo, hi)` holds it; points on the domain's highest faces
+ * belong to the last leaves. Points outside the cube (or outside the box
+ * of a box domain) and NaN points get -1 in both outputs. The answers do
+ * not depend on the number of ranks. Needs an octree. Collective: every
+ * rank calls it, with its own points (`n` may differ, and be 0).
+ *
+ * \param[in]  h           the handle
+ * \param[in]  n           number of points on this rank, 0 or more
+ * \param[in]  xyz         3 n coordinates (x, y, z per point), user units;
+ *                         may be NULL when n is 0
+ * \param[out] rank_out    n ranks holding the points' leaves, -1 outside
+ * \param[out] global_out  n global leaf indices, -1 outside
+ */
+octmesh_status_t octmesh_octree_locate_points(const octmesh_t *h,
+                                              octmesh_locidx_t n,
+                                              const double *xyz,
+                                              int32_t *rank_out,
+                                              octmesh_gloidx_t *global_out);
+
 /* ---- The mesh: building it, its arrays, output ---- */
 
 /**
@@ -1313,6 +1337,30 @@ octmesh_status_t octmesh_mesh_write_vtu_fields(octmesh_t *h,
  * \param[out] out  the figures, the same on every rank
  */
 octmesh_status_t octmesh_mesh_get_quality(octmesh_t *h, octmesh_mesh_quality_t *out);
+
+/**
+ * Finds the mesh element containing each of this rank's points: the rank
+ * holding it and its global element number (elements numbered
+ * contiguously per rank, in rank order). Same tie rule as
+ * `octmesh_octree_locate_points`. A point outside the domain gets -1 in
+ * both outputs; a point inside the domain but in a leaf the mesh did not
+ * keep (inside the body of a fluid mesh, outside it for a solid mesh)
+ * gets the rank holding that leaf and element -1. Needs a mesh.
+ * Collective: every rank calls it, with its own points.
+ *
+ * \param[in]  h            the handle
+ * \param[in]  n            number of points on this rank, 0 or more
+ * \param[in]  xyz          3 n coordinates (x, y, z per point), user
+ *                          units; may be NULL when n is 0
+ * \param[out] rank_out     n ranks holding the points' leaves, -1 outside
+ * \param[out] element_out  n global element numbers, -1 outside the
+ *                          domain or outside the mesh
+ */
+octmesh_status_t octmesh_mesh_locate_points(const octmesh_t *h,
+                                            octmesh_locidx_t n,
+                                            const double *xyz,
+                                            int32_t *rank_out,
+                                            octmesh_gloidx_t *element_out);
 
 #ifdef __cplusplus
 }  // extern "C"

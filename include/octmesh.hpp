@@ -172,6 +172,28 @@ class Mesher {
   void check_leak(const double point[3]) {
     detail::check(octmesh_octree_check_leak(h_, point), h_, "octmesh_octree_check_leak");
   }
+  /// Collective: the rank and global leaf index holding each of this
+  /// rank's points (x, y, z per point, user units); -1 outside the domain.
+  std::pair<std::vector<int32_t>, std::vector<octmesh_gloidx_t>> locate_points(
+      const std::vector<double> &xyz) const {
+    octmesh_locidx_t n = (octmesh_locidx_t)(xyz.size() / 3);
+    std::vector<int32_t> r((size_t)n);
+    std::vector<octmesh_gloidx_t> g((size_t)n);
+    detail::check(octmesh_octree_locate_points(h_, n, xyz.data(), r.data(), g.data()), h_,
+                  "octmesh_octree_locate_points");
+    return {r, g};
+  }
+  /// Collective: the rank and global element number holding each point;
+  /// element -1 in a leaf the mesh did not keep, both -1 outside.
+  std::pair<std::vector<int32_t>, std::vector<octmesh_gloidx_t>> locate_elements(
+      const std::vector<double> &xyz) const {
+    octmesh_locidx_t n = (octmesh_locidx_t)(xyz.size() / 3);
+    std::vector<int32_t> r((size_t)n);
+    std::vector<octmesh_gloidx_t> e((size_t)n);
+    detail::check(octmesh_mesh_locate_points(h_, n, xyz.data(), r.data(), e.data()), h_,
+                  "octmesh_mesh_locate_points");
+    return {r, e};
+  }
   void mesh(octmesh_keep_t keep = OCTMESH_KEEP_ALL,
             octmesh_cut_rule_t rule = OCTMESH_CUT_RULE_CENTER) {
     detail::check(octmesh_mesh_build(h_, keep, rule), h_, "octmesh_mesh_build");

@@ -44,6 +44,7 @@ pub mod progress;
 pub mod refine;
 pub mod regions;
 pub mod report;
+pub mod search;
 pub mod sort;
 
 pub use error::{Error, ErrorKind, Result};

@@ -255,6 +255,23 @@ fn leak_check_from_c_on_1_and_2_ranks() {
     }
 }
 
+/// Point location from C: own leaves found on their rank, the same grid
+/// answers on 1 and 2 ranks.
+#[test]
+fn point_location_from_c_on_1_and_2_ranks() {
+    let dir = scratch("c_api_search");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("search", &lib, &dir);
+    let mut sums = Vec::new();
+    for np in [1, 2] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("SEARCH OK").count(), np, "{out}");
+        sums.push(line_starting(&out, "SEARCH sum=").to_string());
+    }
+    assert_eq!(sums[0], sums[1], "np 1 and 2 differ");
+}
+
 /// Refinement controls of one case: max level, feature angle, min level,
 /// distance bands (`D:L,...` or `-`), regions.
 type Controls = (

@@ -57,6 +57,7 @@ pub mod octree;
 // After `octree`: cbindgen keeps declaration order, and these are octree functions.
 pub mod adapt;
 pub mod quality;
+pub mod search;
 pub mod surface;
 
 use std::any::Any;
