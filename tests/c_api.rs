@@ -453,3 +453,20 @@ fn adaptation_from_c_equals_p4est_on_1_to_3_ranks() {
         assert!(coarsened > 0, "np {np}: nothing coarsened");
     }
 }
+
+/// `tests/c/leaf_data.c`: 16 bytes of user data per leaf through the
+/// `_ext` adaptation and balance calls and both partitions, each leaf's
+/// data its own octant after every call; size rules; a replace callback
+/// failing on one rank fails every rank with the leaves and data as before.
+#[test]
+fn leaf_data_from_c_on_1_to_3_ranks() {
+    let dir = scratch("c_api_leaf_data");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("leaf_data", &lib, &dir);
+    for np in [1, 2, 3] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("LEAF DATA OK").count(), np, "{out}");
+        println!("np {np}: {}", line_starting(&out, "LEAF DATA refines"));
+    }
+}
