@@ -81,7 +81,7 @@ fn replace(mut r: Replace<'_>) -> Result<()> {
         .collect();
     assert_eq!(stored, r.outgoing, "outgoing data belongs to other leaves");
     match (r.outgoing.len(), r.incoming.len()) {
-        (n, 1) if n == 8 => {
+        (8, 1) => {
             let mean = (0..8).map(|i| value(r.outgoing_datum(i))).sum::<f64>() / 8.0;
             let parent = stored[0].parent();
             assert_eq!(parent, r.incoming[0]);
@@ -90,8 +90,8 @@ fn replace(mut r: Replace<'_>) -> Result<()> {
         (1, n) => {
             let v = value(r.outgoing_datum(0));
             let children = stored[0].children();
-            for i in 0..n {
-                let o = r.incoming[i];
+            let incoming = r.incoming;
+            for (i, &o) in incoming.iter().enumerate() {
                 // Refinement: the stored parent's children; balance (n may
                 // be more than 8): a descendant of it.
                 let k = if n == 8 {
@@ -136,7 +136,11 @@ fn child() {
     let mut t = LinearOctree::new_uniform(comm.clone(), LEVEL).unwrap();
     let mut d = LeafData::from_fn(&t, 16, |o, b| {
         let c = o.coords().map(|x| x as f64 / 524_288.0);
-        put(b, o.key(), 1.0 + c[0] + 2.0 * c[1] * c[1] + (3.0 * c[2]).sin() / 3.0);
+        put(
+            b,
+            o.key(),
+            1.0 + c[0] + 2.0 * c[1] * c[1] + (3.0 * c[2]).sin() / 3.0,
+        );
     });
     t.partition_for_coarsening_with_data(&mut d).unwrap();
     let (start, _) = integral(&t, &d);
