@@ -5,12 +5,13 @@
 //! replace callback, new leaves' data is zero without one; on failure the
 //! octree and the data are as they were.
 
+use super::data::{changing, moving};
 use super::octree::over_budget;
 use super::{Classes, Session};
 use crate::adapt::{Adapt, AdaptStats};
 use crate::comm::agree;
 use crate::error::Result;
-use crate::leaf_data::ReplaceFn;
+use crate::leaf_data::{LeafData, ReplaceFn};
 use crate::octree::LinearOctree;
 use crate::refine::check_level;
 use crate::Octant;
@@ -32,8 +33,8 @@ impl Session {
         )?;
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
-        let r = self.change("refine", replace, |t| {
-            t.refine_once(max_level, split, limit)
+        let r = self.change("refine", |t, d| {
+            changing(t, d, replace, |t| t.refine_once(max_level, split, limit))
         });
         over_budget(r, budget, limit, "refinement")
     }
@@ -49,7 +50,9 @@ impl Session {
         replace: Option<ReplaceFn>,
     ) -> Result<AdaptStats> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        self.change("coarsen", replace, |t| t.coarsen(recursive, coarsen))
+        self.change("coarsen", |t, d| {
+            changing(t, d, replace, |t| t.coarsen(recursive, coarsen))
+        })
     }
 
     /// Refines, keeps or coarsens each leaf as `decide` asks
@@ -64,7 +67,9 @@ impl Session {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
-        let r = self.change("adapt", replace, |t| t.adapt(decide, limit));
+        let r = self.change("adapt", |t, d| {
+            changing(t, d, replace, |t| t.adapt(decide, limit))
+        });
         over_budget(r, budget, limit, "adaptation")
     }
 
@@ -79,33 +84,26 @@ impl Session {
         weight: Option<impl Fn(Octant) -> u64>,
     ) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        self.change("partition", None, |t| match weight {
-            None => t.partition_for_coarsening(),
-            Some(w) => t.partition_for_coarsening_weighted(w),
+        self.change("partition", |t, d| {
+            moving(t, d, |t| match weight {
+                None => t.partition_for_coarsening(),
+                Some(w) => t.partition_for_coarsening_weighted(w),
+            })
         })
         .map(|_| ())
     }
 
-    /// Runs `f` on the octree as phase `phase` (keeping the leaf data: a
-    /// partition moves it, other changes go through `replace`), then
+    /// Runs `f` on the octree and the leaf data as phase `phase`, then
     /// reports the new count and drops what the old leaves determined.
     fn change<T>(
         &mut self,
         phase: &str,
-        replace: Option<ReplaceFn>,
-        f: impl FnOnce(&mut LinearOctree) -> Result<T>,
+        f: impl FnOnce(&mut LinearOctree, &mut Option<LeafData>) -> Result<T>,
     ) -> Result<T> {
         let comm = self.comm.clone();
         let tree = &mut self.tree.as_mut().expect("checked by the caller").0;
         let data = &mut self.data;
-        let r = if phase == "partition" {
-            self.timer
-                .time(&*comm, phase, || super::data::moving(tree, data, f))?
-        } else {
-            self.timer.time(&*comm, phase, || {
-                super::data::changing(tree, data, replace, f)
-            })?
-        };
+        let r = self.timer.time(&*comm, phase, || f(tree, data))?;
         let n = self.tree().map_or(0, |t| t.global_len());
         self.report_phase(Some(n));
         self.facts.octants_refined = n;
