@@ -4,8 +4,9 @@
 //! does not cut (odd steps with `adapt_with_data`, even steps with
 //! `refine_once_with_data` then `coarsen_with_data`, recursive every tenth
 //! step), balances (corner) and partitions for coarsening; every seventh
-//! step also partitions by weight first. Each leaf carries 16 bytes: its
-//! own key and a value. The replace callbacks compute the children's keys
+//! step also partitions by weight first, every fifth by weight keeping
+//! families. Each leaf carries 16 bytes: its own key and a value. The
+//! replace callbacks compute the children's keys
 //! from the parent's stored key (and the parent's from the first child's),
 //! prolong the value by copy and restrict it by the mean. Checked after
 //! every step, on 1 to 4 ranks:
@@ -175,6 +176,11 @@ fn child() {
             .unwrap();
         if step % 7 == 0 {
             t.partition_weighted_with_data(&mut d, |o| 1 + o.level() as u64)
+                .unwrap();
+            integral(&t, &d);
+        }
+        if step % 5 == 0 {
+            t.partition_for_coarsening_weighted_with_data(&mut d, |o| 1 + o.level() as u64)
                 .unwrap();
             integral(&t, &d);
         }
