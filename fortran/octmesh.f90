@@ -115,6 +115,9 @@ module octmesh
   public :: octmesh_octree_refine_once, octmesh_octree_coarsen, octmesh_octree_adapt
   public :: octmesh_octree_partition_for_coarsening
   public :: octmesh_octree_locate_points, octmesh_mesh_locate_points
+  public :: octmesh_octree_data_set_size, octmesh_octree_data_get_size, octmesh_octree_data_get
+  public :: octmesh_octree_refine_once_ext, octmesh_octree_coarsen_ext, octmesh_octree_adapt_ext
+  public :: octmesh_octree_balance_ext
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
@@ -322,6 +325,74 @@ module octmesh
        type(c_ptr), value :: ctx
        integer(c_int) :: octmesh_octree_partition_for_coarsening
      end function octmesh_octree_partition_for_coarsening
+
+     !> Per-leaf user data (src/ffi/data.rs): bytes per leaf, 0 detaches.
+     function octmesh_octree_data_set_size(h, bytes) bind(c, name="octmesh_octree_data_set_size")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: bytes
+       integer(c_int) :: octmesh_octree_data_set_size
+     end function octmesh_octree_data_set_size
+
+     function octmesh_octree_data_get_size(h, bytes) bind(c, name="octmesh_octree_data_get_size")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), intent(out) :: bytes
+       integer(c_int) :: octmesh_octree_data_get_size
+     end function octmesh_octree_data_get_size
+
+     !> data: the local array (c_f_pointer it to the caller's type, shape
+     !> (num_leaves)), valid until the leaves change.
+     function octmesh_octree_data_get(h, data, num_leaves) bind(c, name="octmesh_octree_data_get")
+       import :: c_ptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       type(c_ptr), intent(out) :: data
+       integer(c_int32_t), intent(out) :: num_leaves
+       integer(c_int) :: octmesh_octree_data_get
+     end function octmesh_octree_data_get
+
+     !> The _ext forms keep the user data: replace is c_funloc of a bind(c)
+     !> function (ctx, num_outgoing, outgoing, outgoing_data, num_incoming,
+     !> incoming, incoming_data) -> int32 (0 for success; the counts by
+     !> value, the rest c_ptr by value), or c_null_funptr.
+     function octmesh_octree_refine_once_ext(h, max_level, refine, replace, ctx, refined) &
+          bind(c, name="octmesh_octree_refine_once_ext")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: max_level
+       type(c_funptr), value :: refine, replace
+       type(c_ptr), value :: ctx, refined
+       integer(c_int) :: octmesh_octree_refine_once_ext
+     end function octmesh_octree_refine_once_ext
+
+     function octmesh_octree_coarsen_ext(h, recursive, coarsen, replace, ctx, coarsened) &
+          bind(c, name="octmesh_octree_coarsen_ext")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: recursive
+       type(c_funptr), value :: coarsen, replace
+       type(c_ptr), value :: ctx, coarsened
+       integer(c_int) :: octmesh_octree_coarsen_ext
+     end function octmesh_octree_coarsen_ext
+
+     function octmesh_octree_adapt_ext(h, adapt, replace, ctx, refined, coarsened) &
+          bind(c, name="octmesh_octree_adapt_ext")
+       import :: c_ptr, c_funptr, c_int
+       type(c_ptr), value :: h
+       type(c_funptr), value :: adapt, replace
+       type(c_ptr), value :: ctx, refined, coarsened
+       integer(c_int) :: octmesh_octree_adapt_ext
+     end function octmesh_octree_adapt_ext
+
+     function octmesh_octree_balance_ext(h, connect, replace, ctx) &
+          bind(c, name="octmesh_octree_balance_ext")
+       import :: c_ptr, c_funptr, c_int32_t, c_int
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: connect
+       type(c_funptr), value :: replace
+       type(c_ptr), value :: ctx
+       integer(c_int) :: octmesh_octree_balance_ext
+     end function octmesh_octree_balance_ext
 
      function octmesh_octree_get_num_leaves(h, nlocal, nglobal) bind(c, name="octmesh_octree_get_num_leaves")
        import :: c_ptr, c_int32_t, c_int64_t, c_int

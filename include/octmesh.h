@@ -504,6 +504,28 @@ typedef int32_t (*octmesh_refine_fn)(void *ctx, const octmesh_octant_t *o);
 typedef int32_t octmesh_connect_t;
 
 /**
+ * Replace callback: `num_outgoing` leaves `outgoing` (with their data,
+ * `outgoing_data`, the data size bytes each, in the same order) are replaced
+ * by `num_incoming` leaves `incoming`, whose data the callback writes to
+ * `incoming_data` (zeroed before the call). Both lists are in Morton order
+ * and cover the same region: a leaf and its 8 children (refinement), 8
+ * siblings and their parent (coarsening; a recursive coarsening calls once
+ * per family, finest first), or a leaf and the n finer leaves balance put
+ * in its place. The data pointers are NULL when no data is attached.
+ * Returns 0 on success; any other value fails the call on every rank
+ * (`OCTMESH_STATUS_INVALID_ARGUMENT` on this rank,
+ * `OCTMESH_STATUS_REMOTE_FAILURE` on the others) with the octree and the
+ * data left as they were. Must not unwind or longjmp.
+ */
+typedef int32_t (*octmesh_replace_fn)(void *ctx,
+                                      int32_t num_outgoing,
+                                      const octmesh_octant_t *outgoing,
+                                      const void *outgoing_data,
+                                      int32_t num_incoming,
+                                      const octmesh_octant_t *incoming,
+                                      void *incoming_data);
+
+/**
  * Weight callback for partitioning: the weight of a leaf. When the sum
  * over all leaves does not fit in 64 bits, `octmesh_octree_partition`
  * fails with `OCTMESH_STATUS_INVALID_ARGUMENT`. Must not unwind or
@@ -856,6 +878,25 @@ octmesh_status_t octmesh_octree_refine_callback(octmesh_t *h,
 octmesh_status_t octmesh_octree_balance(octmesh_t *h, octmesh_connect_t connect);
 
 /**
+ * `octmesh_octree_balance` keeping the user data
+ * (`octmesh_octree_data_set_size`): each leaf balance splits goes through
+ * `replace` once with all the leaves that take its place (1 -> n), which
+ * writes their data (p4est's `p8est_balance_ext` with a `replace_fn`).
+ * If `replace` fails on any rank, every rank fails and the octree and the
+ * data are as they were. Collective.
+ *
+ * \param[in] h        the handle
+ * \param[in] connect  the contacts balanced: one of `octmesh_connect`
+ * \param[in] replace  the replace callback, or NULL (new leaves' data
+ *                     zeroed)
+ * \param[in] ctx      passed to the callback unchanged
+ */
+octmesh_status_t octmesh_octree_balance_ext(octmesh_t *h,
+                                            octmesh_connect_t connect,
+                                            octmesh_replace_fn replace,
+                                            void *ctx);
+
+/**
  * Repartitions the leaves in Morton order: equal counts when `weight` is
  * NULL, else about equal sums of `weight(ctx, &leaf)` (called once per
  * local leaf). Drops the mesh. Needs an octree. Collective.
@@ -932,6 +973,30 @@ octmesh_status_t octmesh_octree_refine_once(octmesh_t *h,
                                             octmesh_gloidx_t *refined);
 
 /**
+ * `octmesh_octree_refine_once` keeping the user data
+ * (`octmesh_octree_data_set_size`): each split leaf goes through
+ * `replace` (1 -> 8), which writes the children's data (p4est's
+ * `p8est_refine_ext` with a `replace_fn`). All `refine` calls come before
+ * the first `replace` call. If `replace` fails on any rank, every rank
+ * fails and the octree and the data are as they were. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  max_level  leaves at this level are not split, 0 to 18
+ * \param[in]  refine     the callback, called once per local leaf below
+ *                        max_level
+ * \param[in]  replace    the replace callback, or NULL (children's data
+ *                        zeroed)
+ * \param[in]  ctx        passed to both callbacks unchanged
+ * \param[out] refined    leaves split over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_refine_once_ext(octmesh_t *h,
+                                                int32_t max_level,
+                                                octmesh_refine_fn refine,
+                                                octmesh_replace_fn replace,
+                                                void *ctx,
+                                                octmesh_gloidx_t *refined);
+
+/**
  * Replaces each family of eight sibling leaves on this rank for which
  * `coarsen(ctx, family)` returns non-zero by its parent. A family whose
  * leaves are on different ranks is never offered nor coarsened (p4est's
@@ -955,6 +1020,29 @@ octmesh_status_t octmesh_octree_coarsen(octmesh_t *h,
                                         octmesh_gloidx_t *coarsened);
 
 /**
+ * `octmesh_octree_coarsen` keeping the user data: each coarsened family
+ * goes through `replace` (8 -> 1; with `recursive`, once per family,
+ * finest first), which writes the parent's data (p4est's
+ * `p8est_coarsen_ext` with a `replace_fn`). All `coarsen` calls come
+ * before the first `replace` call. If `replace` fails on any rank, every
+ * rank fails and the octree and the data are as they were. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  recursive  non-zero to coarsen repeatedly
+ * \param[in]  coarsen    the callback
+ * \param[in]  replace    the replace callback, or NULL (parents' data
+ *                        zeroed)
+ * \param[in]  ctx        passed to both callbacks unchanged
+ * \param[out] coarsened  families coarsened over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_coarsen_ext(octmesh_t *h,
+                                            int32_t recursive,
+                                            octmesh_coarsen_fn coarsen,
+                                            octmesh_replace_fn replace,
+                                            void *ctx,
+                                            octmesh_gloidx_t *coarsened);
+
+/**
  * Calls `adapt(ctx, &leaf)` once per local leaf, in Morton order, and
  * then refines each leaf that asked for it once (a leaf at level 18 is
  * kept) and coarsens each family of eight leaves on this rank that all
@@ -975,6 +1063,28 @@ octmesh_status_t octmesh_octree_adapt(octmesh_t *h,
                                       void *ctx,
                                       octmesh_gloidx_t *refined,
                                       octmesh_gloidx_t *coarsened);
+
+/**
+ * `octmesh_octree_adapt` keeping the user data: each split leaf (1 -> 8)
+ * and each coarsened family (8 -> 1) goes through `replace`, which writes
+ * the new leaves' data. All `adapt` calls come before the first `replace`
+ * call. If `replace` fails on any rank, every rank fails and the octree
+ * and the data are as they were. Collective.
+ *
+ * \param[in]  h          the handle
+ * \param[in]  adapt      the callback: > 0 refine, 0 keep, < 0 coarsen
+ * \param[in]  replace    the replace callback, or NULL (new leaves' data
+ *                        zeroed)
+ * \param[in]  ctx        passed to both callbacks unchanged
+ * \param[out] refined    leaves split over all ranks, or NULL
+ * \param[out] coarsened  families coarsened over all ranks, or NULL
+ */
+octmesh_status_t octmesh_octree_adapt_ext(octmesh_t *h,
+                                          octmesh_adapt_fn adapt,
+                                          octmesh_replace_fn replace,
+                                          void *ctx,
+                                          octmesh_gloidx_t *refined,
+                                          octmesh_gloidx_t *coarsened);
 
 /**
  * Repartitions the leaves in Morton order like `octmesh_octree_partition`
@@ -1019,6 +1129,46 @@ octmesh_status_t octmesh_octree_locate_points(const octmesh_t *h,
                                               const double *xyz,
                                               int32_t *rank_out,
                                               octmesh_gloidx_t *global_out);
+
+/**
+ * Attaches `bytes` bytes of user data to every local leaf, zeroed, kept in
+ * Morton order beside the leaves (`octmesh_octree_data_get`). The data
+ * survives `octmesh_octree_refine_once`, `octmesh_octree_coarsen`,
+ * `octmesh_octree_adapt`, `octmesh_octree_balance` (new leaves get zeros;
+ * their `_ext` forms call a replace callback instead), and moves with its
+ * leaves in `octmesh_octree_partition` and
+ * `octmesh_octree_partition_for_coarsening`. Other refinements, and a new
+ * octree, detach it. Calling again with the same size keeps the data;
+ * another size while data is attached fails with `OCTMESH_STATUS_STATE`
+ * (detach first with 0). Needs an octree. Collective.
+ *
+ * \param[in] h      the handle
+ * \param[in] bytes  bytes per leaf, 0 to detach the data
+ */
+octmesh_status_t octmesh_octree_data_set_size(octmesh_t *h, int32_t bytes);
+
+/**
+ * The bytes of user data per leaf: 0 when none is attached. Not
+ * collective.
+ *
+ * \param[in]  h      the handle
+ * \param[out] bytes  bytes per leaf
+ */
+octmesh_status_t octmesh_octree_data_get_size(octmesh_t *h, int32_t *bytes);
+
+/**
+ * The local user data: `num_leaves` entries of the data size each, leaf
+ * `i`'s at byte `i * size`, in the Morton order of
+ * `octmesh_octree_get_leaves`. The caller may read and write it; the
+ * pointer stays valid until the next call that changes the leaves or the
+ * data size. Fails with `OCTMESH_STATUS_STATE` when no data is attached.
+ * Not collective.
+ *
+ * \param[in]  h           the handle
+ * \param[out] data        the array (NULL when it is empty)
+ * \param[out] num_leaves  local leaves (entries)
+ */
+octmesh_status_t octmesh_octree_data_get(octmesh_t *h, void **data, octmesh_locidx_t *num_leaves);
 
 /* ---- The mesh: building it, its arrays, output ---- */
 

@@ -155,6 +155,78 @@ class Mesher {
     };
     detail::check(octmesh_octree_partition(h_, tramp, (void *)&w), h_, "octmesh_octree_partition");
   }
+  /// Attaches `bytes` of zeroed user data per leaf (0 detaches; another
+  /// size while attached throws with OCTMESH_STATUS_STATE).
+  void set_data_size(int32_t bytes) {
+    detail::check(octmesh_octree_data_set_size(h_, bytes), h_, "octmesh_octree_data_set_size");
+  }
+  /// Bytes of user data per leaf, 0 when none is attached.
+  int32_t data_size() const {
+    int32_t n = 0;
+    detail::check(octmesh_octree_data_get_size(h_, &n), h_, "octmesh_octree_data_get_size");
+    return n;
+  }
+  /// The local user data as `T` (sizeof(T) must be the data size), one per
+  /// leaf in Morton order: {pointer, count}, valid until the leaves change.
+  template <class T>
+  std::pair<T *, octmesh_locidx_t> data() {
+    static_assert(std::is_trivially_copyable<T>::value, "leaf data is raw bytes");
+    if ((int32_t)sizeof(T) != data_size())
+      throw std::invalid_argument("data: sizeof(T) differs from the leaf data size");
+    void *p = nullptr;
+    octmesh_locidx_t n = 0;
+    detail::check(octmesh_octree_data_get(h_, &p, &n), h_, "octmesh_octree_data_get");
+    return {static_cast<T *>(p), n};
+  }
+  /// A replace callback for the calls below: `r(nout, out, out_data, nin,
+  /// in, in_data)` (see octmesh_replace_fn) returning nothing; an exception
+  /// it throws fails the call on every rank (as a non-zero return in C).
+  struct NoReplace {};
+  /// Refines each leaf where `f(&octant)` is true once (below max_level),
+  /// keeping the user data through `r`; returns the leaves split. The
+  /// callables must give the same answer on every rank; `f` must not throw.
+  template <class F, class R = NoReplace>
+  octmesh_gloidx_t refine_once(int max_level, F &&f, R &&r = R()) {
+    Ctx<F, R> c{&f, &r};
+    octmesh_gloidx_t n = 0;
+    detail::check(octmesh_octree_refine_once_ext(h_, max_level, &Ctx<F, R>::octant, replace_of<F, R>(),
+                                                 &c, &n),
+                  h_, "octmesh_octree_refine_once_ext");
+    return n;
+  }
+  /// Coarsens families where `f(family)` (a pointer to 8 octants) is true, keeping the
+  /// user data through `r`; returns the families coarsened.
+  template <class F, class R = NoReplace>
+  octmesh_gloidx_t coarsen(bool recursive, F &&f, R &&r = R()) {
+    Ctx<F, R> c{&f, &r};
+    octmesh_gloidx_t n = 0;
+    detail::check(octmesh_octree_coarsen_ext(h_, recursive ? 1 : 0, &Ctx<F, R>::octant,
+                                             replace_of<F, R>(), &c, &n),
+                  h_, "octmesh_octree_coarsen_ext");
+    return n;
+  }
+  /// Adapts by `f(&octant)` (> 0 refine, 0 keep, < 0 coarsen), keeping the
+  /// user data through `r`; returns {leaves split, families coarsened}.
+  template <class F, class R = NoReplace>
+  std::pair<octmesh_gloidx_t, octmesh_gloidx_t> adapt(F &&f, R &&r = R()) {
+    Ctx<F, R> c{&f, &r};
+    octmesh_gloidx_t a = 0, b = 0;
+    detail::check(octmesh_octree_adapt_ext(h_, &Ctx<F, R>::octant, replace_of<F, R>(), &c, &a, &b),
+                  h_, "octmesh_octree_adapt_ext");
+    return {a, b};
+  }
+  /// Balances, keeping the user data through `r` (1 -> n replacements).
+  template <class R>
+  void balance(octmesh_connect_t connect, R &&r) {
+    Ctx<int, R> c{nullptr, &r};
+    detail::check(octmesh_octree_balance_ext(h_, connect, replace_of<int, R>(), &c), h_,
+                  "octmesh_octree_balance_ext");
+  }
+  /// Partitions keeping families together (the user data moves along).
+  void partition_for_coarsening() {
+    detail::check(octmesh_octree_partition_for_coarsening(h_, nullptr, nullptr), h_,
+                  "octmesh_octree_partition_for_coarsening");
+  }
   std::pair<octmesh_locidx_t, octmesh_gloidx_t> num_leaves() const {
     octmesh_locidx_t l = 0;
     octmesh_gloidx_t g = 0;
@@ -293,6 +365,38 @@ class Mesher {
   }
 
  private:
+  // The callables of one call, passed as the C context.
+  template <class F, class R>
+  struct Ctx {
+    typename std::remove_reference<F>::type *f;
+    typename std::remove_reference<R>::type *r;
+    static int32_t octant(void *ctx, const octmesh_octant_t *o) {
+      return (int32_t)(*static_cast<Ctx *>(ctx)->f)(o);
+    }
+    static int32_t replace(void *ctx, int32_t nout, const octmesh_octant_t *out,
+                           const void *out_data, int32_t nin, const octmesh_octant_t *in,
+                           void *in_data) {
+      try {
+        (*static_cast<Ctx *>(ctx)->r)(nout, out, out_data, nin, in, in_data);
+        return 0;
+      } catch (...) {
+        return 1;  // no exception crosses the C library
+      }
+    }
+  };
+  // NULL for NoReplace (C++14: overloads rather than if constexpr).
+  template <class F, class R>
+  static octmesh_replace_fn replace_of(std::false_type) {
+    return &Ctx<F, R>::replace;
+  }
+  template <class F, class R>
+  static octmesh_replace_fn replace_of(std::true_type) {
+    return nullptr;
+  }
+  template <class F, class R>
+  static octmesh_replace_fn replace_of() {
+    return replace_of<F, R>(std::is_same<typename std::decay<R>::type, NoReplace>{});
+  }
   octmesh_t *h_ = nullptr;
 };
 

@@ -33,6 +33,7 @@ pub mod ffi;
 pub mod geometry;
 pub mod ghost;
 pub mod io;
+pub mod leaf_data;
 pub mod leak;
 pub mod mesh;
 pub mod named;

@@ -556,3 +556,113 @@ fn adaptation_from_c_equals_p4est_on_1_to_3_ranks() {
         assert!(coarsened > 0, "np {np}: nothing coarsened");
     }
 }
+
+/// `tests/c/leaf_data.c`: 16 bytes of user data per leaf through the
+/// `_ext` adaptation and balance calls and both partitions, each leaf's
+/// data its own octant after every call; size rules; a replace callback
+/// failing on one rank fails every rank with the leaves and data as before.
+#[test]
+fn leaf_data_from_c_on_1_to_3_ranks() {
+    let dir = scratch("c_api_leaf_data");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("leaf_data", &lib, &dir);
+    for np in [1, 2, 3] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("LEAF DATA OK").count(), np, "{out}");
+        println!("np {np}: {}", line_starting(&out, "LEAF DATA refines"));
+    }
+}
+
+/// `tests/fortran/leaf_data.f90`: the user data from Fortran (the module
+/// `fortran/octmesh.f90` and its C shim built here with `mpif90` and
+/// `mpicc`): a bind(c) replace function conserves the integral through the
+/// `_ext` calls and both partitions; a failing one changes nothing.
+#[test]
+fn leaf_data_from_fortran_on_1_to_3_ranks() {
+    let dir = scratch("c_api_leaf_data_fortran");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let root = repo();
+    let run = |prog: &str, args: Vec<std::ffi::OsString>| {
+        let mut cmd = Command::new(prog);
+        cmd.current_dir(&dir).args(args);
+        let out = run_with_limit(cmd, Duration::from_secs(120));
+        assert!(
+            out.status.success(),
+            "{prog} failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    run(
+        "mpicc",
+        vec![
+            "-c".into(),
+            "-I".into(),
+            root.join("include").into(),
+            root.join("fortran/octmesh_f.c").into(),
+            "-o".into(),
+            "octmesh_f.o".into(),
+        ],
+    );
+    run(
+        "mpif90",
+        vec![
+            "-c".into(),
+            root.join("fortran/octmesh.f90").into(),
+            "-o".into(),
+            "octmesh.o".into(),
+        ],
+    );
+    run(
+        "mpif90",
+        vec![
+            root.join("tests/fortran/leaf_data.f90").into(),
+            "octmesh.o".into(),
+            "octmesh_f.o".into(),
+            "-o".into(),
+            "leaf_data_f".into(),
+            "-L".into(),
+            lib.clone().into(),
+            format!("-Wl,-rpath,{}", lib.display()).into(),
+            "-loctmesh".into(),
+        ],
+    );
+    for np in [1, 2, 3] {
+        let out = run_ok(np, &dir.join("leaf_data_f"), &[]);
+        assert_eq!(out.matches("FORTRAN LEAF DATA OK").count(), np, "{out}");
+    }
+}
+
+/// `tests/cpp/leaf_data.cpp`: the user data through the C++ wrapper
+/// (`include/octmesh.hpp`, C++14): lambdas as callbacks and replace
+/// callables, every leaf's data its own octant after each call, a throwing
+/// replace turned into `octmesh::Error` on every rank.
+#[test]
+fn leaf_data_from_cpp_on_1_to_3_ranks() {
+    let dir = scratch("c_api_leaf_data_cpp");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let root = repo();
+    let exe = dir.join("leaf_data_cpp");
+    let mut cmd = Command::new("mpicxx");
+    cmd.args(["-std=c++14", "-Wall", "-Wextra", "-Werror", "-I"])
+        .arg(root.join("include"))
+        .arg(root.join("tests/cpp/leaf_data.cpp"))
+        .arg("-o")
+        .arg(&exe)
+        .arg("-L")
+        .arg(&lib)
+        .arg(format!("-Wl,-rpath,{}", lib.display()))
+        .arg("-loctmesh");
+    let out = run_with_limit(cmd, Duration::from_secs(180));
+    assert!(
+        out.status.success(),
+        "mpicxx failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for np in [1, 2, 3] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("CPP LEAF DATA OK").count(), np, "{out}");
+    }
+}

@@ -4,11 +4,13 @@
 
 use std::ffi::c_void;
 
+use super::data::{octmesh_replace_fn, replacer};
 use super::handle::octmesh_t;
 use super::octree::{level_arg, octmesh_refine_fn, octmesh_weight_fn};
 use super::{octmesh_gloidx_t, octmesh_octant_t, octmesh_status_t, with_mut, write_out};
 use crate::adapt::{Adapt, AdaptStats};
 use crate::error::{Error, Result};
+use crate::leaf_data::ReplaceFn;
 use crate::Octant;
 
 /// Coarsening callback: `family` points to the eight sibling leaves of a
@@ -59,16 +61,47 @@ pub extern "C" fn octmesh_octree_refine_once(
     ctx: *mut c_void,
     refined: *mut octmesh_gloidx_t,
 ) -> octmesh_status_t {
+    octmesh_octree_refine_once_ext(h, max_level, refine, None, ctx, refined)
+}
+
+/// `octmesh_octree_refine_once` keeping the user data
+/// (`octmesh_octree_data_set_size`): each split leaf goes through
+/// `replace` (1 -> 8), which writes the children's data (p4est's
+/// `p8est_refine_ext` with a `replace_fn`). All `refine` calls come before
+/// the first `replace` call. If `replace` fails on any rank, every rank
+/// fails and the octree and the data are as they were. Collective.
+///
+/// \param[in]  h          the handle
+/// \param[in]  max_level  leaves at this level are not split, 0 to 18
+/// \param[in]  refine     the callback, called once per local leaf below
+///                        max_level
+/// \param[in]  replace    the replace callback, or NULL (children's data
+///                        zeroed)
+/// \param[in]  ctx        passed to both callbacks unchanged
+/// \param[out] refined    leaves split over all ranks, or NULL
+#[no_mangle]
+pub extern "C" fn octmesh_octree_refine_once_ext(
+    h: *mut octmesh_t,
+    max_level: i32,
+    refine: octmesh_refine_fn,
+    replace: octmesh_replace_fn,
+    ctx: *mut c_void,
+    refined: *mut octmesh_gloidx_t,
+) -> octmesh_status_t {
     with_mut(h, |h| {
         let checked =
             callback(refine, "refine").and_then(|f| Ok((f, level_arg(max_level, "max_level")?)));
         let (f, level) = h.agree(checked)?;
-        let s = h.session.refine_once(level, |o: Octant| {
+        let mut r = replacer(replace, ctx);
+        let split = |o: Octant| {
             let oc = octmesh_octant_t::of(o);
             // SAFETY: a C function pointer given by the caller, called with
             // its own context and a valid octant.
             unsafe { f(ctx, &oc) != 0 }
-        })?;
+        };
+        let s = h
+            .session
+            .refine_once(level, split, r.as_mut().map(|r| r as ReplaceFn))?;
         write_counts(s, refined, std::ptr::null_mut());
         Ok(())
     })
@@ -97,14 +130,44 @@ pub extern "C" fn octmesh_octree_coarsen(
     ctx: *mut c_void,
     coarsened: *mut octmesh_gloidx_t,
 ) -> octmesh_status_t {
+    octmesh_octree_coarsen_ext(h, recursive, coarsen, None, ctx, coarsened)
+}
+
+/// `octmesh_octree_coarsen` keeping the user data: each coarsened family
+/// goes through `replace` (8 -> 1; with `recursive`, once per family,
+/// finest first), which writes the parent's data (p4est's
+/// `p8est_coarsen_ext` with a `replace_fn`). All `coarsen` calls come
+/// before the first `replace` call. If `replace` fails on any rank, every
+/// rank fails and the octree and the data are as they were. Collective.
+///
+/// \param[in]  h          the handle
+/// \param[in]  recursive  non-zero to coarsen repeatedly
+/// \param[in]  coarsen    the callback
+/// \param[in]  replace    the replace callback, or NULL (parents' data
+///                        zeroed)
+/// \param[in]  ctx        passed to both callbacks unchanged
+/// \param[out] coarsened  families coarsened over all ranks, or NULL
+#[no_mangle]
+pub extern "C" fn octmesh_octree_coarsen_ext(
+    h: *mut octmesh_t,
+    recursive: i32,
+    coarsen: octmesh_coarsen_fn,
+    replace: octmesh_replace_fn,
+    ctx: *mut c_void,
+    coarsened: *mut octmesh_gloidx_t,
+) -> octmesh_status_t {
     with_mut(h, |h| {
         let f = h.agree(callback(coarsen, "coarsen"))?;
-        let s = h.session.coarsen(recursive != 0, |fam: &[Octant; 8]| {
+        let mut r = replacer(replace, ctx);
+        let merge = |fam: &[Octant; 8]| {
             let c = fam.map(octmesh_octant_t::of);
             // SAFETY: a C function pointer given by the caller, called with
             // its own context and eight valid octants.
             unsafe { f(ctx, c.as_ptr()) != 0 }
-        })?;
+        };
+        let s = h
+            .session
+            .coarsen(recursive != 0, merge, r.as_mut().map(|r| r as ReplaceFn))?;
         write_counts(s, std::ptr::null_mut(), coarsened);
         Ok(())
     })
@@ -132,9 +195,35 @@ pub extern "C" fn octmesh_octree_adapt(
     refined: *mut octmesh_gloidx_t,
     coarsened: *mut octmesh_gloidx_t,
 ) -> octmesh_status_t {
+    octmesh_octree_adapt_ext(h, adapt, None, ctx, refined, coarsened)
+}
+
+/// `octmesh_octree_adapt` keeping the user data: each split leaf (1 -> 8)
+/// and each coarsened family (8 -> 1) goes through `replace`, which writes
+/// the new leaves' data. All `adapt` calls come before the first `replace`
+/// call. If `replace` fails on any rank, every rank fails and the octree
+/// and the data are as they were. Collective.
+///
+/// \param[in]  h          the handle
+/// \param[in]  adapt      the callback: > 0 refine, 0 keep, < 0 coarsen
+/// \param[in]  replace    the replace callback, or NULL (new leaves' data
+///                        zeroed)
+/// \param[in]  ctx        passed to both callbacks unchanged
+/// \param[out] refined    leaves split over all ranks, or NULL
+/// \param[out] coarsened  families coarsened over all ranks, or NULL
+#[no_mangle]
+pub extern "C" fn octmesh_octree_adapt_ext(
+    h: *mut octmesh_t,
+    adapt: octmesh_adapt_fn,
+    replace: octmesh_replace_fn,
+    ctx: *mut c_void,
+    refined: *mut octmesh_gloidx_t,
+    coarsened: *mut octmesh_gloidx_t,
+) -> octmesh_status_t {
     with_mut(h, |h| {
         let f = h.agree(callback(adapt, "adapt"))?;
-        let s = h.session.adapt(|o: Octant| {
+        let mut r = replacer(replace, ctx);
+        let decide = |o: Octant| {
             let oc = octmesh_octant_t::of(o);
             // SAFETY: a C function pointer given by the caller, called with
             // its own context and a valid octant.
@@ -143,7 +232,10 @@ pub extern "C" fn octmesh_octree_adapt(
                 0 => Adapt::Keep,
                 _ => Adapt::Coarsen,
             }
-        })?;
+        };
+        let s = h
+            .session
+            .adapt(decide, r.as_mut().map(|r| r as ReplaceFn))?;
         write_counts(s, refined, coarsened);
         Ok(())
     })

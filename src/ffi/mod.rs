@@ -58,6 +58,7 @@ pub mod octree;
 pub mod adapt;
 pub mod quality;
 pub mod search;
+pub mod data;
 pub mod surface;
 
 use std::any::Any;

@@ -305,9 +305,33 @@ pub extern "C" fn octmesh_octree_balance(
     h: *mut octmesh_t,
     connect: octmesh_connect_t,
 ) -> octmesh_status_t {
+    octmesh_octree_balance_ext(h, connect, None, std::ptr::null_mut())
+}
+
+/// `octmesh_octree_balance` keeping the user data
+/// (`octmesh_octree_data_set_size`): each leaf balance splits goes through
+/// `replace` once with all the leaves that take its place (1 -> n), which
+/// writes their data (p4est's `p8est_balance_ext` with a `replace_fn`).
+/// If `replace` fails on any rank, every rank fails and the octree and the
+/// data are as they were. Collective.
+///
+/// \param[in] h        the handle
+/// \param[in] connect  the contacts balanced: one of `octmesh_connect`
+/// \param[in] replace  the replace callback, or NULL (new leaves' data
+///                     zeroed)
+/// \param[in] ctx      passed to the callback unchanged
+#[no_mangle]
+pub extern "C" fn octmesh_octree_balance_ext(
+    h: *mut octmesh_t,
+    connect: octmesh_connect_t,
+    replace: super::data::octmesh_replace_fn,
+    ctx: *mut c_void,
+) -> octmesh_status_t {
     with_mut(h, |h| {
         let conn = h.agree(Connectivity::from_c(connect))?;
-        h.session.balance(conn)
+        let mut r = super::data::replacer(replace, ctx);
+        let r = r.as_mut().map(|r| r as crate::leaf_data::ReplaceFn);
+        h.session.balance_replace(conn, r)
     })
 }
 

@@ -1,12 +1,17 @@
 //! Stages for adaptive simulations: the session's octree refined once,
 //! coarsened or adapted by callbacks (see [`crate::adapt`]), and
-//! partitioned so that families stay together.
+//! partitioned so that families stay together. Attached leaf data is kept
+//! (see [`crate::leaf_data`]): the replaced leaves go through the optional
+//! replace callback, new leaves' data is zero without one; on failure the
+//! octree and the data are as they were.
 
+use super::data::{changing, moving};
 use super::octree::over_budget;
 use super::{Classes, Session};
 use crate::adapt::{Adapt, AdaptStats};
 use crate::comm::agree;
 use crate::error::Result;
+use crate::leaf_data::{LeafData, ReplaceFn};
 use crate::octree::LinearOctree;
 use crate::refine::check_level;
 use crate::Octant;
@@ -20,6 +25,7 @@ impl Session {
         &mut self,
         max_level: u8,
         split: impl FnMut(Octant) -> bool,
+        replace: Option<ReplaceFn>,
     ) -> Result<AdaptStats> {
         agree(
             &*self.comm,
@@ -27,7 +33,9 @@ impl Session {
         )?;
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
-        let r = self.change("refine", |t| t.refine_once(max_level, split, limit));
+        let r = self.change("refine", |t, d| {
+            changing(t, d, replace, |t| t.refine_once(max_level, split, limit))
+        });
         over_budget(r, budget, limit, "refinement")
     }
 
@@ -39,20 +47,29 @@ impl Session {
         &mut self,
         recursive: bool,
         coarsen: impl FnMut(&[Octant; 8]) -> bool,
+        replace: Option<ReplaceFn>,
     ) -> Result<AdaptStats> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        self.change("coarsen", |t| t.coarsen(recursive, coarsen))
+        self.change("coarsen", |t, d| {
+            changing(t, d, replace, |t| t.coarsen(recursive, coarsen))
+        })
     }
 
     /// Refines, keeps or coarsens each leaf as `decide` asks
     /// ([`LinearOctree::adapt`]), within the octant limit and the memory
     /// budget (on failure the octree is as it was). Needs an octree. Drops
     /// the leaf classes and the mesh. Phase `adapt`.
-    pub fn adapt(&mut self, decide: impl FnMut(Octant) -> Adapt) -> Result<AdaptStats> {
+    pub fn adapt(
+        &mut self,
+        decide: impl FnMut(Octant) -> Adapt,
+        replace: Option<ReplaceFn>,
+    ) -> Result<AdaptStats> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
         let budget = self.memory_budget();
         let limit = self.octant_limit(budget);
-        let r = self.change("adapt", |t| t.adapt(decide, limit));
+        let r = self.change("adapt", |t, d| {
+            changing(t, d, replace, |t| t.adapt(decide, limit))
+        });
         over_budget(r, budget, limit, "adaptation")
     }
 
@@ -67,23 +84,26 @@ impl Session {
         weight: Option<impl Fn(Octant) -> u64>,
     ) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        self.change("partition", |t| match weight {
-            None => t.partition_for_coarsening(),
-            Some(w) => t.partition_for_coarsening_weighted(w),
+        self.change("partition", |t, d| {
+            moving(t, d, |t| match weight {
+                None => t.partition_for_coarsening(),
+                Some(w) => t.partition_for_coarsening_weighted(w),
+            })
         })
         .map(|_| ())
     }
 
-    /// Runs `f` on the octree as phase `phase`, then reports the new count
-    /// and drops what the old leaves determined.
+    /// Runs `f` on the octree and the leaf data as phase `phase`, then
+    /// reports the new count and drops what the old leaves determined.
     fn change<T>(
         &mut self,
         phase: &str,
-        f: impl FnOnce(&mut LinearOctree) -> Result<T>,
+        f: impl FnOnce(&mut LinearOctree, &mut Option<LeafData>) -> Result<T>,
     ) -> Result<T> {
         let comm = self.comm.clone();
         let tree = &mut self.tree.as_mut().expect("checked by the caller").0;
-        let r = self.timer.time(&*comm, phase, || f(tree))?;
+        let data = &mut self.data;
+        let r = self.timer.time(&*comm, phase, || f(tree, data))?;
         let n = self.tree().map_or(0, |t| t.global_len());
         self.report_phase(Some(n));
         self.facts.octants_refined = n;

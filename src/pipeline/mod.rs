@@ -20,6 +20,7 @@
 
 mod adapt;
 mod classes;
+mod data;
 mod mesh;
 pub mod observer;
 mod octree;
@@ -128,6 +129,8 @@ pub struct Session {
     released: Option<(Aabb, f64, String)>,
     /// The octree and the cube it was built in.
     tree: Option<(LinearOctree, Domain)>,
+    /// User data per local leaf, when attached (`data.rs`).
+    data: Option<crate::leaf_data::LeafData>,
     classes: Classes,
     mesh: Option<Mesh>,
     /// The faces of the mesh of a generation.
@@ -165,6 +168,7 @@ impl Session {
             boundary: None,
             quality: None,
             parts: Vec::new(),
+            data: None,
             locator: None,
             facts: Facts {
                 rss_start: peak_rss_bytes(),

@@ -13,6 +13,7 @@ use crate::curvature::CurvatureRule;
 use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::leaves::write_leaves;
+use crate::leaf_data::ReplaceFn;
 use crate::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::refine::{
@@ -21,6 +22,7 @@ use crate::refine::{
 };
 use crate::regions::RegionRules;
 
+use super::data;
 use super::*;
 
 impl Session {
@@ -358,12 +360,15 @@ impl Session {
         self.facts.octants_balanced = n;
         self.classes = Classes::default();
         self.mesh = None;
+        // These refinements have no replace callback: the data is detached.
+        self.data = None;
         Ok(())
     }
 
     pub(super) fn set_tree(&mut self, mut tree: LinearOctree, domain: Domain) {
         tree.set_brick(domain.brick);
         self.tree = Some((tree, domain));
+        self.data = None;
         self.classes = Classes::default();
         self.mesh = None;
     }
@@ -381,12 +386,13 @@ impl Session {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
         let comm = self.comm.clone();
         let tree = self.tree.as_mut().map(|t| &mut t.0);
+        let data = &mut self.data;
         self.timer.time(&*comm, "partition", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
-            match &weight {
+            data::moving(tree, data, |tree| match &weight {
                 None => tree.partition().map(|_| ()),
                 Some(w) => tree.partition_weighted(w).map(|_| ()),
-            }
+            })
         })?;
         let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
@@ -399,6 +405,18 @@ impl Session {
     /// limit (on failure the octree is as it was). Leaves stay on their
     /// ranks. Phase `balance`.
     pub fn balance(&mut self, conn: Connectivity) -> Result<()> {
+        self.balance_replace(conn, None)
+    }
+
+    /// [`Session::balance`] keeping the leaf data: each leaf balance splits
+    /// goes through `replace` (without it, new leaves' data is zero), see
+    /// [`crate::leaf_data`]; on failure the octree and the data are as they
+    /// were. Phase `balance`.
+    pub fn balance_replace(
+        &mut self,
+        conn: Connectivity,
+        replace: Option<ReplaceFn>,
+    ) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
         // Balance keeps a copy of the leaves to restore when it stops at a
         // limit; the budget applies only when the octree is within a
@@ -412,9 +430,12 @@ impl Session {
         let expected = self.facts.estimate.map(|e| e.balanced);
         let shown = self.progress("balance", expected);
         let tree = self.tree.as_mut().map(|t| &mut t.0);
+        let data = &mut self.data;
         let balanced = self.timer.time(&*comm, "balance", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
-            tree.balance_with_limit(conn, limit).map(|_| ())
+            data::changing(tree, data, replace, |tree| {
+                tree.balance_with_limit(conn, limit).map(|_| ())
+            })
         });
         drop(shown);
         over_budget(balanced, budget, limit, "balance")?;
