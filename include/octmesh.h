@@ -1107,30 +1107,6 @@ octmesh_status_t octmesh_octree_partition_for_coarsening(octmesh_t *h,
                                                          void *ctx);
 
 /**
- * Finds the leaf containing each of this rank's points: its rank and its
- * global index (leaves numbered in Morton order over all ranks, as
- * `octmesh_octree_get_leaves` lists them rank after rank). A point on a
- * face, edge or corner shared by several leaves belongs to the leaf whose
- * half-open box `[lo, hi)` holds it; points on the domain's highest faces
- * belong to the last leaves. Points outside the cube (or outside the box
- * of a box domain) and NaN points get -1 in both outputs. The answers do
- * not depend on the number of ranks. Needs an octree. Collective: every
- * rank calls it, with its own points (`n` may differ, and be 0).
- *
- * \param[in]  h           the handle
- * \param[in]  n           number of points on this rank, 0 or more
- * \param[in]  xyz         3 n coordinates (x, y, z per point), user units;
- *                         may be NULL when n is 0
- * \param[out] rank_out    n ranks holding the points' leaves, -1 outside
- * \param[out] global_out  n global leaf indices, -1 outside
- */
-octmesh_status_t octmesh_octree_locate_points(const octmesh_t *h,
-                                              octmesh_locidx_t n,
-                                              const double *xyz,
-                                              int32_t *rank_out,
-                                              octmesh_gloidx_t *global_out);
-
-/**
  * Attaches `bytes` bytes of user data to every local leaf, zeroed, kept in
  * Morton order beside the leaves (`octmesh_octree_data_get`). The data
  * survives `octmesh_octree_refine_once`, `octmesh_octree_coarsen`,
@@ -1169,6 +1145,30 @@ octmesh_status_t octmesh_octree_data_get_size(octmesh_t *h, int32_t *bytes);
  * \param[out] num_leaves  local leaves (entries)
  */
 octmesh_status_t octmesh_octree_data_get(octmesh_t *h, void **data, octmesh_locidx_t *num_leaves);
+
+/**
+ * Finds the leaf containing each of this rank's points: its rank and its
+ * global index (leaves numbered in Morton order over all ranks, as
+ * `octmesh_octree_get_leaves` lists them rank after rank). A point on a
+ * face, edge or corner shared by several leaves belongs to the leaf whose
+ * half-open box `[lo, hi)` holds it; points on the domain's highest faces
+ * belong to the last leaves. Points outside the cube (or outside the box
+ * of a box domain) and NaN points get -1 in both outputs. The answers do
+ * not depend on the number of ranks. Needs an octree. Collective: every
+ * rank calls it, with its own points (`n` may differ, and be 0).
+ *
+ * \param[in]  h           the handle
+ * \param[in]  n           number of points on this rank, 0 or more
+ * \param[in]  xyz         3 n coordinates (x, y, z per point), user units;
+ *                         may be NULL when n is 0
+ * \param[out] rank_out    n ranks holding the points' leaves, -1 outside
+ * \param[out] global_out  n global leaf indices, -1 outside
+ */
+octmesh_status_t octmesh_octree_locate_points(const octmesh_t *h,
+                                              octmesh_locidx_t n,
+                                              const double *xyz,
+                                              int32_t *rank_out,
+                                              octmesh_gloidx_t *global_out);
 
 /* ---- The mesh: building it, its arrays, output ---- */
 

@@ -56,9 +56,9 @@ pub mod mesh;
 pub mod octree;
 // After `octree`: cbindgen keeps declaration order, and these are octree functions.
 pub mod adapt;
+pub mod data;
 pub mod quality;
 pub mod search;
-pub mod data;
 pub mod surface;
 
 use std::any::Any;
