@@ -176,13 +176,11 @@ fn box_within_quick(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> Option<
     if gap2 > d2 {
         return Some(false);
     }
-    if triangle_box_overlap(t, lo, hi) {
-        return Some(true);
-    }
-    // Rounding margins keep both tests on the safe side of `d`.
+    // Rounding margins keep both tests on the safe side of `d`; the inner
+    // box holds the box itself, so it also accepts an overlap.
     let margin = 1e-9 * (d + (hi[0] - lo[0]));
-    let inner = d / 3f64.sqrt() - margin;
-    if inner > 0.0 && triangle_box_overlap(t, lo.map(|x| x - inner), hi.map(|x| x + inner)) {
+    let inner = (d / 3f64.sqrt() - margin).max(0.0);
+    if triangle_box_overlap(t, lo.map(|x| x - inner), hi.map(|x| x + inner)) {
         return Some(true);
     }
     let outer = d + margin;
