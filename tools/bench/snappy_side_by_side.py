@@ -14,8 +14,9 @@ For each rank count (default 1 and 2), in a scratch directory under target/bench
                  --region box:...:LBOX --distance D:LBAND --keep outside --openfoam DIR
 
 and measures the wall time of the whole command (reading the STL to the written case; for
-snappyHexMesh the sum of blockMesh, decomposePar and snappyHexMesh), the peak RSS of every rank
-(/usr/bin/time, one file per rank: the table gives the largest rank and the sum over ranks), the
+snappyHexMesh the sum of blockMesh, decomposePar and snappyHexMesh), the peak RSS and the user +
+system CPU time of every rank (/usr/bin/time, one file per rank: the table gives the largest rank's
+and the summed RSS, and the CPU time summed over ranks, steadier than wall time on a busy machine), the
 cells (checkMesh's count for both, octmesh's stats 'elements' too) and checkMesh's verdict.
 octmesh is run --octmesh-runs times (median), snappyHexMesh --snappy-runs times (median).
 
