@@ -335,6 +335,12 @@ pub struct RegionRules<'a> {
     surface: Option<&'a SurfaceIndex>,
 }
 
+/// Scratch space of [`RegionRules::refine_leaf`]: the candidate stack.
+#[derive(Default)]
+pub struct BandScratch {
+    stack: Vec<u32>,
+}
+
 /// A region's shape in lattice units.
 #[derive(Clone, Copy, Debug)]
 enum Lattice {
@@ -445,27 +451,25 @@ impl<'a> RegionRules<'a> {
     /// candidate triangles found once for `o` and passed down, each child
     /// keeping those whose boxes come within its band's distance, rather
     /// than one search of the bounding-box tree per octant (as surface
-    /// refinement passes its candidates down). `stack` is scratch space.
-    /// Fails (the octant limit's error) once `out` holds more than `limit`
-    /// leaves.
+    /// refinement passes its candidates down; sharing one search among
+    /// neighbouring leaves was tried and was slower). Fails (the octant
+    /// limit's error) once `out` holds more than `limit` leaves.
     pub fn refine_leaf(
         &self,
         o: Octant,
         out: &mut Vec<Octant>,
-        stack: &mut Vec<u32>,
+        scratch: &mut BandScratch,
         limit: u64,
     ) -> Result<()> {
         let w = self.widest(o.level());
         let (Some(s), true) = (self.surface, w >= 0.0 && !self.brick.is_void(o)) else {
-            let mut buf = std::mem::take(stack);
+            let buf = &mut scratch.stack;
             let max = self.max_level();
-            let r =
-                crate::refine::refine_rec(o, max, &mut |q| self.splits(q, &mut buf), out, limit);
-            *stack = buf;
-            return r;
+            return crate::refine::refine_rec(o, max, &mut |q| self.splits(q, buf), out, limit);
         };
-        stack.clear();
         let (lo, hi) = o.bounds_f64();
+        let stack = &mut scratch.stack;
+        stack.clear();
         s.bvh
             .query_candidates(lo.map(|x| x - w), hi.map(|x| x + w), stack);
         let n = stack.len();

@@ -183,8 +183,8 @@ fn box_within_quick(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> Option<
     if triangle_box_overlap(t, lo.map(|x| x - inner), hi.map(|x| x + inner)) {
         return Some(true);
     }
-    let outer = d + margin;
-    if !triangle_box_overlap(t, lo.map(|x| x - outer), hi.map(|x| x + outer)) {
+    // Apart by more than d along a separating axis: farther than d.
+    if crate::geometry::intersect::triangle_box_apart(t, lo, hi, d + margin) {
         return Some(false);
     }
     None

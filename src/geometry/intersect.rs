@@ -65,6 +65,54 @@ pub fn triangle_box_overlap(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3]
     true
 }
 
+/// Whether one of the overlap test's 13 axes puts the triangle more than
+/// `d` away from the closed box (gaps measured along unit axes): then
+/// their distance is more than `d`. A lower bound only: `false` does not
+/// mean they are within `d`.
+pub fn triangle_box_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], d: f64) -> bool {
+    let [p, q, r] = tri.v;
+    for k in 0..3 {
+        let lo = p[k].min(q[k]).min(r[k]);
+        let hi = p[k].max(q[k]).max(r[k]);
+        if lo - box_max[k] > d || box_min[k] - hi > d {
+            return true;
+        }
+    }
+    let v = [sub(p, box_min), sub(q, box_min), sub(r, box_min)];
+    let h = sub(box_max, box_min);
+    let e = [sub(v[1], v[0]), sub(v[2], v[1]), sub(v[0], v[2])];
+    let apart = |axis: [f64; 3]| {
+        let len = dot(axis, axis).sqrt();
+        len > 0.0 && gap(axis, &v, h) > d * len
+    };
+    if apart(cross(e[0], e[1])) {
+        return true;
+    }
+    const AXES: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    e.iter()
+        .any(|edge| AXES.iter().any(|axis| apart(cross(*edge, *axis))))
+}
+
+/// The gap between the projections of the triangle `v` and the box `[0, h]`
+/// on `axis` (negative when they overlap), in units of the axis's length.
+#[inline]
+fn gap(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> f64 {
+    let d0 = dot(axis, v[0]);
+    let d1 = dot(axis, v[1]);
+    let d2 = dot(axis, v[2]);
+    let (t_min, t_max) = (d0.min(d1).min(d2), d0.max(d1).max(d2));
+    let (mut b_min, mut b_max) = (0.0, 0.0);
+    for k in 0..3 {
+        let t = axis[k] * h[k];
+        if t > 0.0 {
+            b_max += t;
+        } else {
+            b_min += t;
+        }
+    }
+    (t_min - b_max).max(b_min - t_max)
+}
+
 /// True if `axis` separates the triangle `v` from the box `[0, h]` with a
 /// strictly positive gap. A zero axis separates nothing.
 #[inline]

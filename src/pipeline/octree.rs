@@ -244,8 +244,11 @@ impl Session {
         let refined = self.timer.time(&*comm, "regions", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
             check_level(rules.max_level())?;
-            let mut stack = Vec::new();
-            tree.refine_with(|o, out| rules.refine_leaf(o, out, &mut stack, limit), limit)
+            let mut scratch = crate::regions::BandScratch::default();
+            tree.refine_with(
+                |o, out| rules.refine_leaf(o, out, &mut scratch, limit),
+                limit,
+            )
         });
         drop(shown);
         self.refined(refined, budget, limit, "region refinement")
