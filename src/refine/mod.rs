@@ -202,7 +202,7 @@ pub(crate) fn refine_rec(
 impl LinearOctree {
     /// Replaces each local leaf by the leaves `expand` appends for it (in
     /// Morton order, covering exactly the leaf); `expand` fails as soon as
-    /// more than `limit` leaves are out ([`crate::refine::limit_error`]).
+    /// more than `limit` leaves are out (an [`crate::ErrorKind::Limit`] error).
     /// Collective.
     pub fn refine_with(
         &mut self,
