@@ -30,19 +30,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
-use common::{octmesh_bin, run_with_limit, scratch, shared_model};
-
-/// The OpenFOAM environment file, or `None` (reason printed) when OpenFOAM
-/// is not installed (`scripts/setup.sh` installs it).
-fn openfoam() -> Option<PathBuf> {
-    let rc = PathBuf::from("/usr/share/openfoam/etc/bashrc");
-    if rc.is_file() && Path::new("/usr/bin/checkMesh").is_file() {
-        Some(rc)
-    } else {
-        println!("SKIP: OpenFOAM is not installed (run scripts/setup.sh)");
-        None
-    }
-}
+use common::{foam, octmesh_bin, openfoam, scratch, shared_model};
 
 /// The reference case `../shared/openfoam/<name>`, or `None` (reason
 /// printed) when it is absent.
@@ -54,32 +42,6 @@ fn reference_case(name: &str) -> Option<PathBuf> {
         println!("SKIP: {} not found", dir.display());
         None
     }
-}
-
-/// Runs an OpenFOAM command line in `case` with its environment.
-fn foam(rc: &Path, case: &Path, line: &str) -> String {
-    let script = format!(
-        "set +u; source {} >/dev/null 2>&1; cd '{}' && {line}",
-        rc.display(),
-        case.display()
-    );
-    let mut cmd = Command::new("bash");
-    cmd.arg("-c")
-        .arg(script)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
-    let out = run_with_limit(cmd, Duration::from_secs(600));
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(
-        out.status.success(),
-        "{line} failed in {}:\n{text}",
-        case.display()
-    );
-    text
 }
 
 /// Runs octmesh on `np` ranks; returns its statistics.

@@ -14,44 +14,11 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use common::{json_file, octmesh_bin, octmesh_ok, run_with_limit, scratch, shared_model};
-
-/// The OpenFOAM environment file, or `None` (reason printed).
-fn openfoam() -> Option<PathBuf> {
-    let rc = PathBuf::from("/usr/share/openfoam/etc/bashrc");
-    if rc.is_file() && Path::new("/usr/bin/checkMesh").is_file() {
-        Some(rc)
-    } else {
-        println!("SKIP: OpenFOAM is not installed (run scripts/setup.sh)");
-        None
-    }
-}
-
-/// Runs an OpenFOAM command line in `case` with its environment.
-fn foam(rc: &Path, case: &Path, line: &str) -> String {
-    let script = format!(
-        "set +u; source {} >/dev/null 2>&1; cd '{}' && {line}",
-        rc.display(),
-        case.display()
-    );
-    let mut cmd = Command::new("bash");
-    cmd.arg("-c")
-        .arg(script)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
-    let out = run_with_limit(cmd, Duration::from_secs(600));
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(out.status.success(), "{line} failed:\n{text}");
-    text
-}
+use common::{foam, json_file, octmesh_bin, octmesh_ok, openfoam, scratch, shared_model};
 
 /// The number printed right after `label`, as text.
 fn printed_after<'a>(text: &'a str, label: &str) -> &'a str {

@@ -234,19 +234,9 @@ impl LinearOctree {
     ) -> Result<()> {
         let checked = check_level(max_level);
         agree(&**self.comm(), checked)?;
-        let mut out = Vec::with_capacity(self.local_len());
-        let mut result = Ok(());
-        for &o in self.leaves() {
-            if let Err(e) = refine_rec(o, max_level, &mut split, &mut out, limit) {
-                result = Err(e);
-                break;
-            }
-        }
-        let comm = self.comm().clone();
-        // Collective on every rank, as in `refine_surface`.
-        let global = global_limit(&comm, out.len(), limit);
-        agree(&*comm, result.and(global))?;
-        self.set_leaves(out);
-        self.refresh()
+        self.refine_with(
+            |o, out| refine_rec(o, max_level, &mut split, out, limit),
+            limit,
+        )
     }
 }

@@ -422,3 +422,41 @@ pub fn write_sphere_solids(path: &Path, parts: &[(&str, Option<bool>)]) {
     }
     std::fs::write(path, text).unwrap();
 }
+
+/// The OpenFOAM environment file, or `None` (reason printed) when OpenFOAM
+/// is not installed (`scripts/setup.sh` installs it).
+pub fn openfoam() -> Option<PathBuf> {
+    let rc = PathBuf::from("/usr/share/openfoam/etc/bashrc");
+    if rc.is_file() && Path::new("/usr/bin/checkMesh").is_file() {
+        Some(rc)
+    } else {
+        println!("SKIP: OpenFOAM is not installed (run scripts/setup.sh)");
+        None
+    }
+}
+
+/// Runs an OpenFOAM command line in `case` with its environment.
+pub fn foam(rc: &Path, case: &Path, line: &str) -> String {
+    let script = format!(
+        "set +u; source {} >/dev/null 2>&1; cd '{}' && {line}",
+        rc.display(),
+        case.display()
+    );
+    let mut cmd = Command::new("bash");
+    cmd.arg("-c")
+        .arg(script)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1");
+    let out = run_with_limit(cmd, Duration::from_secs(600));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        out.status.success(),
+        "{line} failed in {}:\n{text}",
+        case.display()
+    );
+    text
+}
