@@ -403,11 +403,13 @@ impl<'a> RegionRules<'a> {
         self
     }
 
-    /// Whether any rule asks for more than the root.
+    /// Whether no rule asks for more than the root cells (which the
+    /// octree's construction splits a box domain's cube into already).
     pub fn is_empty(&self) -> bool {
-        self.min_level == 0
-            && self.rules.iter().all(|r| r.1 == 0)
-            && self.bands.iter().all(|b| b.1 == 0)
+        let k = self.brick.level();
+        self.min_level <= k
+            && self.rules.iter().all(|r| r.1 <= k)
+            && self.bands.iter().all(|b| b.1 <= k)
     }
 
     /// The finest level any rule asks for.

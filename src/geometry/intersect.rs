@@ -115,9 +115,30 @@ fn gap(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> f64 {
 
 /// True if `axis` separates the triangle `v` from the box `[0, h]` with a
 /// strictly positive gap. A zero axis separates nothing.
+/// (Written out rather than through [`gap`]: this is the hottest test of
+/// surface refinement, and the two comparisons measured faster.)
 #[inline]
 fn separates(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> bool {
-    axis != [0.0; 3] && gap(axis, v, h) > 0.0
+    if axis == [0.0; 3] {
+        return false;
+    }
+    let d0 = dot(axis, v[0]);
+    let d1 = dot(axis, v[1]);
+    let d2 = dot(axis, v[2]);
+    let t_min = d0.min(d1).min(d2);
+    let t_max = d0.max(d1).max(d2);
+    // The box [0, h] projects onto [sum of negative terms, sum of positive
+    // terms] of axis[k] * h[k].
+    let (mut b_min, mut b_max) = (0.0, 0.0);
+    for k in 0..3 {
+        let t = axis[k] * h[k];
+        if t > 0.0 {
+            b_max += t;
+        } else {
+            b_min += t;
+        }
+    }
+    t_min > b_max || t_max < b_min
 }
 
 #[cfg(test)]

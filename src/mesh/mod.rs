@@ -207,16 +207,17 @@ impl Mesh {
         // Leaves outside a box domain are never elements.
         let brick = domain.brick;
         let with_void: Vec<u8>;
-        let local_class: &[u8] = if brick.is_cube() {
-            local_class
-        } else {
-            with_void = local_class
-                .iter()
-                .zip(tree.leaves())
-                .map(|(&c, &o)| if brick.is_void(o) { c | VOID } else { c })
-                .collect();
-            &with_void
-        };
+        let local_class: &[u8] =
+            if brick.is_cube() || !tree.leaves().iter().any(|o| brick.is_void(*o)) {
+                local_class
+            } else {
+                with_void = local_class
+                    .iter()
+                    .zip(tree.leaves())
+                    .map(|(&c, &o)| if brick.is_void(o) { c | VOID } else { c })
+                    .collect();
+                &with_void
+            };
         let keep =
             |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);
         let mut cleaned_classes;

@@ -520,5 +520,12 @@ fn fill_brick(tree: &mut LinearOctree, domain: Domain, limit: u64) -> Result<()>
     }
     tree.set_brick(brick);
     let k = brick.level();
-    tree.refine(k, |o| o.level() < k && !brick.is_void(o), limit)
+    let shallow = |o: &Octant| o.level() < k && !brick.is_void(*o);
+    // Surface refinement usually reaches every tree already: then no copy.
+    let mut any = [u64::from(tree.leaves().iter().any(shallow))];
+    tree.comm().max_u64(&mut any);
+    if any[0] == 0 {
+        return Ok(());
+    }
+    tree.refine(k, |o| shallow(&o), limit)
 }
