@@ -83,8 +83,7 @@ pub extern "C" fn octmesh_octree_locate_points(
             )
         });
         // Agreed before the exchanges, so that no rank waits alone.
-        let (pts, r, g) = h.agree(args.and_then(|a| tree.map(|_| a)))?;
-        let tree = h.session.tree().expect("checked above");
+        let ((pts, r, g), tree) = h.agree(args.and_then(|a| tree.map(|t| (a, t))))?;
         let found = locate(tree, &h.session.domain()?, &pts);
         write(&found, r, g);
         Ok(())
