@@ -59,6 +59,7 @@ pub(crate) mod numbering;
 pub mod patches;
 pub mod points;
 pub mod quality;
+pub mod transfer;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass, VOID};
 use crate::comm::{Comm, Traffic};
@@ -73,6 +74,7 @@ use std::sync::Arc;
 
 pub use boundary::{Boundary, BoundaryFace};
 pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, SURFACE_PATCH};
+pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
 
 use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
 
@@ -170,6 +172,9 @@ pub struct Mesh {
     first_global: u64,
     /// Global number of local element 0.
     first_element: u64,
+    /// The octree partition's first finest cell of each rank, with the
+    /// total appended ([`LinearOctree::first_cells`]).
+    first_cells: Vec<u64>,
     /// Kept elements of other ranks touching local ones.
     halo: Halo,
     counts: MeshCounts,
@@ -288,6 +293,7 @@ impl Mesh {
         });
         let mut mesh = crate::comm::agree(comm, mesh)?;
         mesh.first_element = first_element;
+        mesh.first_cells = tree.first_cells().to_vec();
         mesh.halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
         let with_hanging = mesh
             .connectivity
@@ -873,6 +879,7 @@ fn assemble(
         shared_ranks,
         first_global: num.first_global,
         first_element: 0,
+        first_cells: Vec::new(),
         halo: Halo::default(),
         counts: MeshCounts {
             independent_nodes: num.global_count,

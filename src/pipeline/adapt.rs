@@ -109,7 +109,7 @@ impl Session {
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
         self.classes = Classes::default();
-        self.mesh = None;
+        self.drop_mesh();
         Ok(r)
     }
 }

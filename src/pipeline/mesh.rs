@@ -70,6 +70,7 @@ impl Session {
             kept_volume: mesh.cells_to_volume(cells[0]),
             surface_volume: self.surface_volume(),
         });
+        self.drop_mesh();
         self.mesh = Some(mesh);
         self.mesh_generation += 1;
         Ok(())

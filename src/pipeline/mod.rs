@@ -27,6 +27,7 @@ mod octree;
 mod quality;
 pub mod stats;
 mod surface;
+mod transfer;
 
 use std::cell::OnceCell;
 
@@ -46,6 +47,7 @@ use crate::refine::{LeafEstimate, SurfaceIndex};
 use crate::report::{peak_rss_bytes, PhaseTimer};
 
 pub use observer::{Event, Observer, Silent};
+use transfer::Previous;
 
 /// The feature angle of curvature refinement when none is configured,
 /// degrees (snappyHexMesh's `resolveFeatureAngle` default).
@@ -133,6 +135,9 @@ pub struct Session {
     data: Option<crate::leaf_data::LeafData>,
     classes: Classes,
     mesh: Option<Mesh>,
+    /// The mesh before the octree last changed, kept for data transfer
+    /// when asked (`transfer.rs`).
+    previous: Previous,
     /// The faces of the mesh of a generation.
     faces: Option<(u64, Faces)>,
     /// The finite-element boundary of the mesh of a generation.
@@ -164,6 +169,7 @@ impl Session {
             tree: None,
             classes: Classes::default(),
             mesh: None,
+            previous: Previous::default(),
             faces: None,
             boundary: None,
             quality: None,

@@ -362,7 +362,7 @@ impl Session {
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
         self.classes = Classes::default();
-        self.mesh = None;
+        self.drop_mesh();
         // These refinements have no replace callback: the data is detached.
         self.data = None;
         Ok(())
@@ -373,7 +373,7 @@ impl Session {
         self.tree = Some((tree, domain));
         self.data = None;
         self.classes = Classes::default();
-        self.mesh = None;
+        self.drop_mesh();
     }
 
     /// Repartitions the leaves in Morton order, equal counts per rank.
@@ -400,7 +400,7 @@ impl Session {
         let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
         self.classes = Classes::default();
-        self.mesh = None;
+        self.drop_mesh();
         Ok(())
     }
 
@@ -446,7 +446,7 @@ impl Session {
         self.report_phase(count);
         self.facts.octants_balanced = self.tree().map_or(0, |t| t.forest_len());
         self.classes = Classes::default();
-        self.mesh = None;
+        self.drop_mesh();
         Ok(())
     }
 

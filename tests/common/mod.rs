@@ -460,3 +460,27 @@ pub fn foam(rc: &Path, case: &Path, line: &str) -> String {
     );
     text
 }
+
+/// The moving sphere of the adaptation tests and `tools/p4est_ref`'s
+/// adapt oracle, in lattice units: radius 131072 (a quarter of the root),
+/// centre `(x, 262144, 262144)`, `x` starting at 157286.
+pub const SPHERE_START_X: i64 = 157_286;
+
+/// Whether the closed box of `o` meets the surface of the moving sphere
+/// centred at `(x, 262144, 262144)` (exact integer distances).
+pub fn sphere_cuts(o: octmesh::Octant, x: i64) -> bool {
+    const HALF: i64 = 262_144;
+    const RADIUS: i64 = 131_072;
+    let centre = [x, HALF, HALF];
+    let c = o.coords();
+    let len = o.side() as i64;
+    let (mut near, mut far) = (0i64, 0i64);
+    for k in 0..3 {
+        let (lo, hi) = (c[k] as i64, c[k] as i64 + len);
+        let a = (lo - centre[k]).max(centre[k] - hi).max(0);
+        let b = (centre[k] - lo).max(hi - centre[k]);
+        near += a * a;
+        far += b * b;
+    }
+    near <= RADIUS * RADIUS && RADIUS * RADIUS <= far
+}
