@@ -591,6 +591,45 @@ typedef struct {
   double skewness_max;
 } octmesh_mesh_quality_t;
 
+/**
+ * Where each local element of the current mesh came from in the previous
+ * mesh (arrays owned by the handle, valid until the mesh changes).
+ *
+ * ```text
+ *   old  +-------+-------+      new  +---+---+-------+
+ *        |       |   |   |           |   |   |       |
+ *        |   a   +---+---+           +---+---+   B   |   A in a: level_change +1
+ *        |       |   |   |           |   |   |       |   B over 4: -1, old_count 4
+ *        +-------+---+---+           +---+---+-------+
+ * ```
+ */
+typedef struct {
+  /**
+   * Local elements of the current mesh (entries of each array).
+   */
+  octmesh_locidx_t num_elements;
+  /**
+   * Global number in the previous mesh of the first old element each
+   * element overlaps, -1 when none (a leaf the old mesh did not keep).
+   */
+  const octmesh_gloidx_t *old_first;
+  /**
+   * How many old elements it overlaps: global numbers `old_first ..
+   * old_first + old_count`.
+   */
+  const octmesh_locidx_t *old_count;
+  /**
+   * New level minus old level: 0 unchanged, `k > 0` inside an old
+   * element `k` levels coarser (refined), `-k` over old elements the
+   * finest of which is `k` levels finer (coarsened).
+   */
+  const int8_t *level_change;
+  /**
+   * Elements over all ranks that overlap no old element.
+   */
+  octmesh_gloidx_t uncovered;
+} octmesh_element_map_t;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -1511,6 +1550,75 @@ octmesh_status_t octmesh_mesh_locate_points(const octmesh_t *h,
                                             const double *xyz,
                                             int32_t *rank_out,
                                             octmesh_gloidx_t *element_out);
+
+/**
+ * Keeps (`keep` non-zero) or stops keeping the mesh that a change of the
+ * octree or a new `octmesh_mesh_build` replaces, for the transfer calls
+ * below. Off by default: the kept mesh costs about as much memory as the
+ * current one; turning it off frees a kept mesh. Not collective (call it
+ * alike on every rank).
+ *
+ * \param[in] h     the handle
+ * \param[in] keep  1 to keep the previous mesh, 0 to drop it
+ */
+octmesh_status_t octmesh_mesh_keep_previous(octmesh_t *h, int32_t keep);
+
+/**
+ * Where each local element of the current mesh came from in the previous
+ * one (`octmesh_element_map_t`). Needs a kept previous mesh and a current
+ * one. Collective (on the first call for a mesh).
+ *
+ * \param[in]  h    the handle
+ * \param[out] map  the map, arrays owned by the handle
+ */
+octmesh_status_t octmesh_mesh_get_element_map(octmesh_t *h, octmesh_element_map_t *map);
+
+/**
+ * Moves an element field from the previous mesh to the current one:
+ * copied into unchanged and refined elements, the volume-weighted mean of
+ * the old elements inside a coarsened one (in Morton order: the same bits
+ * on any number of ranks, and a conserved quantity stays conserved), NaN
+ * in an element that overlaps no old one. Collective.
+ *
+ * \param[in]  h           the handle
+ * \param[in]  ncomp       values per element, 1 or more
+ * \param[in]  old_values  `ncomp` values per local element of the previous
+ *                         mesh, element-major (`[e * ncomp + c]`)
+ * \param[out] new_values  `ncomp` values per local element of the current
+ *                         mesh, element-major
+ * \param[in]  capacity    room in `new_values`, in values
+ */
+octmesh_status_t octmesh_mesh_transfer_elements(octmesh_t *h,
+                                                int32_t ncomp,
+                                                const double *old_values,
+                                                double *new_values,
+                                                octmesh_locidx_t capacity);
+
+/**
+ * Moves a trilinear nodal field from the previous mesh to the current
+ * one: each new node gets the old field's value at its position (a node
+ * on an old face, edge or corner is evaluated in one element chosen by
+ * position alone, so the values are the same bits on any number of
+ * ranks). The old hanging nodes are taken as the means of their
+ * dependencies, and the new ones are set so. A field trilinear over the
+ * domain moves exactly. Nodes in no old element get NaN. Collective.
+ *
+ * \param[in]  h           the handle
+ * \param[in]  ncomp       values per node, 1 or more
+ * \param[in]  old_values  `ncomp` values per local node of the previous
+ *                         mesh (hanging nodes included), node-major
+ * \param[out] new_values  `ncomp` values per local node of the current
+ *                         mesh (hanging nodes included), node-major
+ * \param[in]  capacity    room in `new_values`, in values
+ * \param[out] missing     nodes over all ranks in no old element (may be
+ *                         NULL)
+ */
+octmesh_status_t octmesh_mesh_transfer_nodes(octmesh_t *h,
+                                             int32_t ncomp,
+                                             const double *old_values,
+                                             double *new_values,
+                                             octmesh_locidx_t capacity,
+                                             octmesh_gloidx_t *missing);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -574,6 +574,23 @@ fn leaf_data_from_c_on_1_to_3_ranks() {
     }
 }
 
+/// `tests/c/transfer.c`: fields across six adaptation steps with the
+/// previous mesh kept: a trilinear nodal field arrives exactly, an element
+/// field's integral is conserved, the element map agrees with the levels;
+/// bad calls fail on every rank.
+#[test]
+fn field_transfer_from_c_on_1_to_3_ranks() {
+    let dir = scratch("c_api_transfer");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("transfer", &lib, &dir);
+    for np in [1, 2, 3] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("TRANSFER OK").count(), np, "{out}");
+        println!("np {np}: {}", line_starting(&out, "TRANSFER refined"));
+    }
+}
+
 /// `tests/fortran/leaf_data.f90`: the user data from Fortran (the module
 /// `fortran/octmesh.f90` and its C shim built here with `mpif90` and
 /// `mpicc`): a bind(c) replace function conserves the integral through the

@@ -60,6 +60,7 @@ pub mod data;
 pub mod quality;
 pub mod search;
 pub mod surface;
+pub mod transfer;
 
 use std::any::Any;
 use std::cell::RefCell;

@@ -26,21 +26,7 @@ typedef struct {
 static int g_step, g_rank, g_size;
 static long g_refines, g_coarsens, g_wide;
 
-static int cut(const octmesh_octant_t *o) {
-  const int64_t c[3] = {157286 + (int64_t)20972 * g_step, 262144, 262144};
-  const int64_t r2 = (int64_t)131072 * 131072;
-  const int64_t len = (int64_t)1 << (19 - o->level);
-  const int64_t lo[3] = {o->x, o->y, o->z};
-  int64_t near = 0, far = 0;
-  for (int k = 0; k < 3; k++) {
-    int64_t hi = lo[k] + len;
-    int64_t a = c[k] < lo[k] ? lo[k] - c[k] : (c[k] > hi ? c[k] - hi : 0);
-    int64_t b = c[k] - lo[k] > hi - c[k] ? c[k] - lo[k] : hi - c[k];
-    near += a * a;
-    far += b * b;
-  }
-  return near <= r2 && r2 <= far;
-}
+static int cut(const octmesh_octant_t *o) { return check_sphere_cuts(o, g_step); }
 
 static int same(const datum_t *d, const octmesh_octant_t *o) {
   return d->x == o->x && d->y == o->y && d->z == o->z && d->level == o->level;
