@@ -84,6 +84,14 @@ module octmesh
      type(c_ptr) :: faces, node_offsets, node_patches
   end type octmesh_boundary_t
 
+  !> octmesh_element_map_t (octmesh_mesh_get_element_map): c_ptr arrays
+  !> old_first (int64, -1 none), old_count (int32), level_change (int8).
+  type, bind(c), public :: octmesh_element_map_t
+     integer(c_int32_t) :: num_elements
+     type(c_ptr) :: old_first, old_count, level_change
+     integer(c_int64_t) :: uncovered
+  end type octmesh_element_map_t
+
   !> octmesh_octant_t: lowest corner (lattice units) and level.
   type, bind(c), public :: octmesh_octant_t
      integer(c_int32_t) :: x, y, z, level
@@ -130,6 +138,8 @@ module octmesh
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
+  public :: octmesh_mesh_keep_previous, octmesh_mesh_get_element_map
+  public :: octmesh_mesh_transfer_elements, octmesh_mesh_transfer_nodes
 
   interface
      function octmesh_status_name(status) bind(c, name="octmesh_status_name")
@@ -586,6 +596,47 @@ module octmesh
        type(octmesh_boundary_t), intent(out) :: out
        integer(c_int) :: octmesh_mesh_get_boundary
      end function octmesh_mesh_get_boundary
+
+     !> Keep (1) or drop (0) the mesh a change replaces, for the transfers.
+     function octmesh_mesh_keep_previous(h, keep) bind(c, name="octmesh_mesh_keep_previous")
+       import :: c_ptr, c_int, c_int32_t
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: keep
+       integer(c_int) :: octmesh_mesh_keep_previous
+     end function octmesh_mesh_keep_previous
+
+     !> Collective on first call: where each element came from.
+     function octmesh_mesh_get_element_map(h, map) bind(c, name="octmesh_mesh_get_element_map")
+       import :: c_ptr, c_int, octmesh_element_map_t
+       type(c_ptr), value :: h
+       type(octmesh_element_map_t), intent(out) :: map
+       integer(c_int) :: octmesh_mesh_get_element_map
+     end function octmesh_mesh_get_element_map
+
+     !> Collective: old_values(ncomp, old elements) to new_values(ncomp,
+     !> new elements); capacity = size(new_values).
+     function octmesh_mesh_transfer_elements(h, ncomp, old_values, new_values, capacity) &
+          bind(c, name="octmesh_mesh_transfer_elements")
+       import :: c_ptr, c_int, c_int32_t, c_double
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: ncomp, capacity
+       real(c_double), intent(in) :: old_values(*)
+       real(c_double), intent(out) :: new_values(*)
+       integer(c_int) :: octmesh_mesh_transfer_elements
+     end function octmesh_mesh_transfer_elements
+
+     !> Collective: a trilinear nodal field old_values(ncomp, old nodes) at
+     !> the new nodes; missing counts nodes in no old element.
+     function octmesh_mesh_transfer_nodes(h, ncomp, old_values, new_values, capacity, missing) &
+          bind(c, name="octmesh_mesh_transfer_nodes")
+       import :: c_ptr, c_int, c_int32_t, c_int64_t, c_double
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: ncomp, capacity
+       real(c_double), intent(in) :: old_values(*)
+       real(c_double), intent(out) :: new_values(*)
+       integer(c_int64_t), intent(out) :: missing
+       integer(c_int) :: octmesh_mesh_transfer_nodes
+     end function octmesh_mesh_transfer_nodes
 
      function c_octmesh_mesh_get_patch_name(h, patch, name) &
           bind(c, name="octmesh_mesh_get_patch_name")

@@ -340,6 +340,36 @@ class Mesher {
     detail::check(octmesh_mesh_write_openfoam(h_, dir.c_str(), format, overwrite ? 1 : 0), h_,
                   "octmesh_mesh_write_openfoam");
   }
+  /// Keeps the mesh that a change of the octree replaces, for the
+  /// transfers below (off by default).
+  void keep_previous(bool keep = true) {
+    detail::check(octmesh_mesh_keep_previous(h_, keep ? 1 : 0), h_, "octmesh_mesh_keep_previous");
+  }
+  /// Where each element came from in the previous mesh (collective on the
+  /// first call); arrays owned by the handle.
+  octmesh_element_map_t element_map() {
+    octmesh_element_map_t m;
+    detail::check(octmesh_mesh_get_element_map(h_, &m), h_, "octmesh_mesh_get_element_map");
+    return m;
+  }
+  /// An element field of the previous mesh (ncomp values per element) on
+  /// the current elements: copy on refinement, volume mean on coarsening.
+  std::vector<double> transfer_elements(const std::vector<double> &old_values, int32_t ncomp = 1) {
+    std::vector<double> out(static_cast<size_t>(ncomp) * counts().local_elements);
+    detail::check(octmesh_mesh_transfer_elements(h_, ncomp, old_values.data(), out.data(),
+                                                 static_cast<octmesh_locidx_t>(out.size())),
+                  h_, "octmesh_mesh_transfer_elements");
+    return out;
+  }
+  /// A trilinear nodal field of the previous mesh (ncomp values per node)
+  /// at the current nodes; NaN at nodes in no old element.
+  std::vector<double> transfer_nodes(const std::vector<double> &old_values, int32_t ncomp = 1) {
+    std::vector<double> out(static_cast<size_t>(ncomp) * counts().local_nodes);
+    detail::check(octmesh_mesh_transfer_nodes(h_, ncomp, old_values.data(), out.data(),
+                                              static_cast<octmesh_locidx_t>(out.size()), nullptr),
+                  h_, "octmesh_mesh_transfer_nodes");
+    return out;
+  }
   void write_vtu(const std::string &pvtu) {
     detail::check(octmesh_mesh_write_vtu(h_, pvtu.c_str()), h_, "octmesh_mesh_write_vtu");
   }

@@ -31,26 +31,12 @@ const STEPS: u32 = 10;
 /// Initial level and maximum level of each case.
 const CASES: [(u8, u8); 2] = [(3, 8), (0, 5)];
 
-// The sphere of the reference program, in lattice units.
-const ROOT_HALF: i64 = 262_144;
-const RADIUS: i64 = 131_072;
-const START_X: i64 = 157_286;
+// The sphere of the reference program moves this far along x per step.
 const STEP_X: i64 = 20_972;
 
 /// Whether the closed box of `o` meets the surface of the sphere at `step`.
 fn cut(o: Octant, step: u32) -> bool {
-    let centre = [START_X + STEP_X * step as i64, ROOT_HALF, ROOT_HALF];
-    let c = o.coords();
-    let len = o.side() as i64;
-    let (mut near, mut far) = (0i64, 0i64);
-    for k in 0..3 {
-        let (lo, hi) = (c[k] as i64, c[k] as i64 + len);
-        let a = (lo - centre[k]).max(centre[k] - hi).max(0);
-        let b = (centre[k] - lo).max(hi - centre[k]);
-        near += a * a;
-        far += b * b;
-    }
-    near <= RADIUS * RADIUS && RADIUS * RADIUS <= far
+    common::sphere_cuts(o, common::SPHERE_START_X + STEP_X * step as i64)
 }
 
 fn main() {

@@ -41,25 +41,11 @@ const STEPS: u32 = 50;
 const LEVEL: u8 = 3;
 const MAX_LEVEL: u8 = 6;
 
-// The sphere, lattice units: it moves 6000 along x per step.
-const HALF: i64 = 262_144;
-const RADIUS: i64 = 131_072;
-const START_X: i64 = 157_286;
+// The sphere of the adaptation tests moves 6000 along x per step.
 const STEP_X: i64 = 6_000;
 
 fn cut(o: Octant, step: u32) -> bool {
-    let centre = [START_X + STEP_X * step as i64, HALF, HALF];
-    let c = o.coords();
-    let len = o.side() as i64;
-    let (mut near, mut far) = (0i64, 0i64);
-    for k in 0..3 {
-        let (lo, hi) = (c[k] as i64, c[k] as i64 + len);
-        let a = (lo - centre[k]).max(centre[k] - hi).max(0);
-        let b = (centre[k] - lo).max(hi - centre[k]);
-        near += a * a;
-        far += b * b;
-    }
-    near <= RADIUS * RADIUS && RADIUS * RADIUS <= far
+    common::sphere_cuts(o, common::SPHERE_START_X + STEP_X * step as i64)
 }
 
 fn key(d: &[u8]) -> u64 {

@@ -7,9 +7,10 @@
  *  - an element field, whose integral (volume x value) must be conserved;
  * and checks the element map against the new levels (refined: one old
  * element, level change > 0; coarsened: at least 8 old ones, < 0). Also:
- * calls before a previous mesh exists, a buffer too small, ncomp 0 and a
- * NULL field on one rank fail on every rank (REMOTE_FAILURE on the others) and leave the handle usable; turning the
- * keeping off drops the previous mesh.
+ * calls before a previous mesh exists fail; a buffer too small and a NULL
+ * field on one rank fail there and with REMOTE_FAILURE on the others; ncomp
+ * 0 fails everywhere; the handle stays usable; turning the keeping off
+ * drops the previous mesh.
  * Usage: transfer */
 #include <math.h>
 #include <stdlib.h>

@@ -2,12 +2,16 @@
 // own octant; lambdas refine, coarsen, adapt and balance with a replace
 // callable that computes the new leaves' octants; after each call every
 // leaf's data is its own. A replace callable that throws makes the call
-// throw octmesh::Error on every rank with the data unchanged. Prints
+// throw octmesh::Error on every rank with the data unchanged. Then fields
+// across one step with the previous mesh kept (transfer_nodes,
+// transfer_elements, element_map). Prints
 // CPP LEAF DATA OK on every rank.
 // First: it keeps mpi.h from pulling in the MPI C++ bindings.
 #include "octmesh.hpp"
 
+#include <cmath>
 #include <cstdio>
+#include <vector>
 #include <stdexcept>
 
 struct Datum {
@@ -95,6 +99,29 @@ int main(int argc, char **argv) {
     require(threw, "a throwing replace fails the call");
     require(m.leaves().size() == before.size(), "leaves unchanged");
     check_own(m);
+  }
+  {
+    // Fields across one step with the previous mesh kept: a trilinear field
+    // moves exactly, a constant element field stays.
+    octmesh::Mesher m(MPI_COMM_WORLD);
+    m.refine(3, [](const octmesh_octant_t &) { return true; });
+    m.balance();
+    m.keep_previous();
+    m.mesh();
+    auto f = [](const double *p) { return 1 + p[0] - 2 * p[1] * p[2] + p[0] * p[1] * p[2]; };
+    std::vector<double> u_old(m.counts().local_nodes);
+    for (size_t i = 0; i < u_old.size(); i++) u_old[i] = f(m.coordinates() + 3 * i);
+    std::vector<double> e_old(m.counts().local_elements, 3.0);
+    m.refine_once(18, [](const octmesh_octant_t *o) { return o->x == 0; });
+    m.balance();
+    m.partition();
+    m.mesh();
+    auto u = m.transfer_nodes(u_old);
+    const double *x = m.coordinates();
+    for (size_t i = 0; i < u.size(); i++)
+      require(std::fabs(u[i] - f(x + 3 * i)) < 1e-12, "trilinear field moved exactly");
+    for (double v : m.transfer_elements(e_old)) require(v == 3.0, "constant element field");
+    require(m.element_map().uncovered == 0, "every element covered");
   }
   std::printf("CPP LEAF DATA OK rank %d\n", g_rank);
   MPI_Finalize();

@@ -98,6 +98,7 @@ program leaf_data
                                      c_null_ptr)
   if (s == OCTMESH_STATUS_OK) call fail("a failing replace succeeded")
   if (any(values() /= before)) call fail("data changed by a failed call")
+  call transfer_step()
   call octmesh_destroy(h)
   print '(a,i2)', 'FORTRAN LEAF DATA OK rank', rank
   call MPI_Finalize(ierr)
@@ -153,6 +154,47 @@ contains
     mine = sum(d * (0.5d0**l(1:n)%level)**3)
     call MPI_Allreduce(mine, total, 1, MPI_DOUBLE_PRECISION, MPI_SUM, MPI_COMM_WORLD, ierr)
   end function integral
+
+  ! A field across one adaptation step with the previous mesh kept: the
+  ! trilinear 1 + x + y z moves exactly, an element field's sum of volume
+  ! x value is conserved.
+  subroutine transfer_step()
+    type(octmesh_mesh_counts_t) :: c
+    type(octmesh_element_map_t) :: map
+    type(c_ptr) :: p
+    real(c_double), pointer :: x(:, :)
+    real(c_double), allocatable :: u_old(:), u(:), e_old(:), e(:)
+    integer(c_int64_t) :: missing
+    real(c_double) :: sums(2), all(2)
+    call ok(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER))
+    call ok(octmesh_mesh_keep_previous(h, 1))
+    call ok(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER))
+    call ok(octmesh_mesh_get_counts(h, c))
+    call ok(octmesh_mesh_get_coordinates(h, p))
+    call c_f_pointer(p, x, [3, c%local_nodes])
+    u_old = 1 + x(1, :) + x(2, :) * x(3, :)
+    allocate(e_old(c%local_elements))
+    e_old = 2
+    call ok(octmesh_octree_refine_once(h, 18, c_funloc(near_origin), c_null_ptr, c_null_ptr))
+    call ok(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER))
+    call ok(octmesh_octree_partition(h, c_null_funptr, c_null_ptr))
+    call ok(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER))
+    call ok(octmesh_mesh_get_counts(h, c))
+    allocate(u(c%local_nodes), e(c%local_elements))
+    call ok(octmesh_mesh_transfer_nodes(h, 1, u_old, u, c%local_nodes, missing))
+    if (missing /= 0) call fail("nodes without a value")
+    call ok(octmesh_mesh_get_coordinates(h, p))
+    call c_f_pointer(p, x, [3, c%local_nodes])
+    if (maxval(abs(u - (1 + x(1, :) + x(2, :) * x(3, :))), mask=c%local_nodes > 0) > 1d-12) &
+         call fail("trilinear field changed")
+    call ok(octmesh_mesh_transfer_elements(h, 1, e_old, e, c%local_elements))
+    if (any(e /= 2)) call fail("a constant element field changed")
+    call ok(octmesh_mesh_get_element_map(h, map))
+    if (map%num_elements /= c%local_elements .or. map%uncovered /= 0) call fail("element map")
+    sums = [real(size(e_old), c_double), real(size(e), c_double)]
+    call MPI_Allreduce(sums, all, 2, MPI_DOUBLE_PRECISION, MPI_SUM, MPI_COMM_WORLD, ierr)
+    if (all(2) <= all(1)) call fail("the refinement added no element")
+  end subroutine transfer_step
 
   subroutine same(want)
     real(c_double), intent(in) :: want
