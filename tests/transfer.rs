@@ -23,13 +23,17 @@
 
 mod common;
 
+use std::cell::RefCell;
 use std::rc::Rc;
 use std::time::Duration;
 
 use octmesh::adapt::Adapt;
+use octmesh::classify::{CutRule, Keep};
 use octmesh::comm::{CommRef, MpiComm};
+use octmesh::config::Config;
 use octmesh::domain::Domain;
 use octmesh::mesh::{transfer_elements, transfer_nodes, ElementMap, Mesh, MeshOptions};
+use octmesh::pipeline::{Event, Observer, Session};
 use octmesh::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};
 
@@ -257,10 +261,99 @@ fn refinement_error(comm: &CommRef, level: u8) -> f64 {
     worst[0]
 }
 
+/// Collects the counts of the `classify` phases.
+struct Classified(Rc<RefCell<Vec<u64>>>);
+
+impl Observer for Classified {
+    fn event(&mut self, e: &Event<'_>) {
+        if let Event::Phase {
+            name: "classify",
+            count: Some(n),
+            ..
+        } = e
+        {
+            self.0.borrow_mut().push(*n);
+        }
+    }
+}
+
+/// A fluid mesh around the built-in sphere through a session, adapted
+/// near a moving point: the classes carried across adapt, balance and the
+/// partitions equal a fresh classification, and only some leaves are
+/// classified again; the nodal transfer through the session is exact for a
+/// trilinear field on the kept elements.
+fn carried_classes(comm: &CommRef) {
+    let mut config = Config::default();
+    config.surface.file = "sphere".into();
+    config.domain.cube = Some([-2.0, -2.0, -2.0, 4.0]);
+    let mut s = Session::new(comm.clone(), config);
+    s.load_surface().unwrap();
+    s.refine_surface(5).unwrap();
+    s.balance(Connectivity::Corner).unwrap();
+    s.partition().unwrap();
+    s.keep_previous_mesh(true);
+    s.build_mesh(Keep::Outside, CutRule::Center).unwrap();
+    let seen = Rc::new(RefCell::new(Vec::new()));
+    s.set_observer(Box::new(Classified(seen.clone())));
+    let rule = s.classified_with().expect("classified by the mesh");
+    let mut total_redone = 0;
+    for step in 0..4u32 {
+        // A point moving along x; leaves near it refined to level 7.
+        let p = [-1.2 + 0.5 * step as f64, 0.1, 0.0];
+        let near = |o: Octant| {
+            let (lo, hi) = o.bounds_f64();
+            let side = 4.0 / 524_288.0;
+            (0..3).all(|k| {
+                let (a, b) = (-2.0 + lo[k] * side, -2.0 + hi[k] * side);
+                p[k] >= a - 0.3 && p[k] <= b + 0.3
+            })
+        };
+        let old_coords = s.mesh().unwrap().coordinates();
+        let values: Vec<f64> = old_coords.iter().map(|&x| trilinear(x)[0]).collect();
+        s.adapt(
+            |o| match (near(o), o.level()) {
+                (true, l) if l < 7 => Adapt::Refine,
+                (false, l) if l > 5 => Adapt::Coarsen,
+                _ => Adapt::Keep,
+            },
+            None,
+        )
+        .unwrap();
+        s.balance(Connectivity::Corner).unwrap();
+        s.partition_for_coarsening(None::<fn(Octant) -> u64>)
+            .unwrap();
+        let carried = s.leaf_classes().expect("classes carried").to_vec();
+        let leaves = s.tree().unwrap().global_len();
+        let redone: u64 = seen.borrow_mut().drain(..).sum();
+        assert!(redone < leaves / 2, "{redone} of {leaves} classified again");
+        total_redone += redone;
+        s.classify(rule).unwrap();
+        seen.borrow_mut().clear();
+        assert_eq!(s.leaf_classes().unwrap(), &carried[..], "step {step}");
+        s.build_mesh(Keep::Outside, CutRule::Center).unwrap();
+        let (moved, missing) = s.transfer_nodes(1, &values).unwrap();
+        let new = s.mesh().unwrap();
+        let mut worst = [new
+            .coordinates()
+            .iter()
+            .zip(&moved)
+            .filter(|(_, v)| !v.is_nan())
+            .map(|(&x, v)| (v - trilinear(x)[0]).abs())
+            .fold(0.0, f64::max)];
+        comm.max_f64(&mut worst);
+        assert!(worst[0] < 1e-12, "step {step}: {}", worst[0]);
+        if comm.rank() == 0 {
+            println!("CLASSES step {step} classified again {redone} of {leaves}, nodes without an old element {missing}");
+        }
+    }
+    assert!(total_redone > 0, "no leaf near the surface changed");
+}
+
 fn child() {
     let universe = mpi::initialize().expect("MPI init");
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
     moving_loop(&comm);
+    carried_classes(&comm);
     let errors: Vec<f64> = (2..=5).map(|l| refinement_error(&comm, l)).collect();
     if comm.rank() == 0 {
         for w in errors.windows(2) {
@@ -289,10 +382,14 @@ fn main() {
         );
         let steps: Vec<String> = stdout
             .lines()
-            .filter(|l| l.starts_with("STEP") || l.starts_with("ERRORS"))
+            .filter(|l| {
+                ["STEP", "ERRORS", "CLASSES"]
+                    .iter()
+                    .any(|p| l.starts_with(p))
+            })
             .map(str::to_string)
             .collect();
-        assert_eq!(steps.len(), STEPS as usize + 1, "{stdout}");
+        assert_eq!(steps.len(), STEPS as usize + 5, "{stdout}");
         print!("np {np}: {}", steps.last().map_or("", |s| s.as_str()));
         println!();
         match &first {

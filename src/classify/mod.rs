@@ -145,6 +145,7 @@ use crate::geometry::{Aabb, Surface};
 use crate::octant::{Octant, ROOT_LEN};
 use crate::refine::SurfaceIndex;
 
+mod carry;
 mod masks;
 mod rules;
 mod walk;
@@ -152,6 +153,7 @@ mod walk;
 #[cfg(test)]
 mod tests;
 
+pub use carry::carry_classes;
 pub use rules::{
     keeps, CutRule, InsideRule, Keep, LeafClass, WindingSummary, CENTER_INSIDE, CUT, VOID,
 };

@@ -5,9 +5,10 @@
 //! replace callback, new leaves' data is zero without one; on failure the
 //! octree and the data are as they were.
 
+use super::classes::moving_classes;
 use super::data::{changing, moving};
 use super::octree::over_budget;
-use super::{Classes, Session};
+use super::Session;
 use crate::adapt::{Adapt, AdaptStats};
 use crate::comm::agree;
 use crate::error::Result;
@@ -84,17 +85,24 @@ impl Session {
         weight: Option<impl Fn(Octant) -> u64>,
     ) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
-        self.change("partition", |t, d| {
-            moving(t, d, |t| match weight {
-                None => t.partition_for_coarsening(),
-                Some(w) => t.partition_for_coarsening_weighted(w),
+        let comm = self.comm.clone();
+        let tree = &mut self.tree.as_mut().expect("checked above").0;
+        let (data, classes) = (&mut self.data, &mut self.classes);
+        self.timer.time(&*comm, "partition", || {
+            moving(tree, data, |t| {
+                moving_classes(t, classes, |t| match weight {
+                    None => t.partition_for_coarsening(),
+                    Some(w) => t.partition_for_coarsening_weighted(w),
+                })
             })
-        })
-        .map(|_| ())
+        })?;
+        self.changed();
+        Ok(())
     }
 
-    /// Runs `f` on the octree and the leaf data as phase `phase`, then
-    /// reports the new count and drops what the old leaves determined.
+    /// Runs `f`, a local change of the leaves, on the octree and the leaf
+    /// data as phase `phase`, then reports the new count, carries the leaf
+    /// classes over and drops the mesh.
     fn change<T>(
         &mut self,
         phase: &str,
@@ -102,14 +110,22 @@ impl Session {
     ) -> Result<T> {
         let comm = self.comm.clone();
         let tree = &mut self.tree.as_mut().expect("checked by the caller").0;
+        // Shared, not copied: the change makes new leaves.
+        let old = self.classes.rule.map(|_| tree.shared_leaves());
         let data = &mut self.data;
         let r = self.timer.time(&*comm, phase, || f(tree, data))?;
+        self.changed();
+        self.carry_classes(old);
+        Ok(r)
+    }
+
+    /// Reports the new count and drops the mesh after a change of the
+    /// leaves.
+    pub(super) fn changed(&mut self) {
         let n = self.tree().map_or(0, |t| t.global_len());
         self.report_phase(Some(n));
         self.facts.octants_refined = n;
         self.facts.octants_balanced = n;
-        self.classes = Classes::default();
         self.drop_mesh();
-        Ok(r)
     }
 }

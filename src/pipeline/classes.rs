@@ -2,10 +2,15 @@
 
 use std::path::Path;
 
-use crate::classify::{classify_leaves, InsideClassifier, InsideRule, LeafClass};
+use std::sync::Arc;
+
+use crate::classify::{carry_classes, classify_leaves, InsideClassifier, InsideRule, LeafClass};
 use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
+use crate::leaf_data::LeafData;
 use crate::leak::find_leak;
+use crate::octree::LinearOctree;
+use crate::Octant;
 
 use super::*;
 
@@ -46,13 +51,62 @@ impl Session {
         if let Some(w) = &summary {
             self.observer.event(&Event::Winding(w));
         }
+        let inherit = summary.as_ref().is_none_or(|w| w.cap_triangles == 0);
         self.facts.winding = summary;
         self.classes = Classes {
             bits,
             cut: true,
             rule: Some(rule),
+            inherit,
         };
         Ok(())
+    }
+
+    /// After a local change of the leaves (refine, coarsen, adapt,
+    /// balance) from `old`, carries the classes over
+    /// ([`crate::classify::carry_classes`]) and classifies only the new
+    /// leaves that need it; without old leaves, classes or a surface to
+    /// classify against, drops them. Collective. Phase `classify` (count:
+    /// the leaves classified again).
+    pub(super) fn carry_classes(&mut self, old: Option<Arc<Vec<Octant>>>) {
+        let domain = self.tree.as_ref().map(|t| t.1);
+        let (Some(old), Some(rule), Some(domain)) = (old, self.classes.rule, domain) else {
+            self.classes = Classes::default();
+            return;
+        };
+        // The surface is there on every rank or on none.
+        if self.index_for(domain).is_err() {
+            self.classes = Classes::default();
+            return;
+        }
+        let (Some((tree, _)), Some(surface)) = (&self.tree, &self.surface) else {
+            return;
+        };
+        let comm = self.comm.clone();
+        let classes = &mut self.classes;
+        let pending = self.timer.time(&*comm, "classify", || {
+            let old_bits = std::mem::take(&mut classes.bits);
+            let (mut bits, pending) =
+                carry_classes(&old, &old_bits, tree.leaves(), classes.inherit);
+            if !pending.is_empty() {
+                let leaves: Vec<Octant> = pending.iter().map(|&k| tree.leaves()[k]).collect();
+                let fresh = InsideClassifier::new(&surface.index, rule).classify(&leaves);
+                for (&k, b) in pending.iter().zip(fresh) {
+                    bits[k] = b;
+                }
+            }
+            classes.bits = bits;
+            pending.len()
+        });
+        let mut n = [pending as u64];
+        comm.sum_u64(&mut n);
+        self.report_phase(Some(n[0]));
+    }
+
+    /// The class byte of each local leaf (bits `classify::CENTER_INSIDE`,
+    /// `CUT`), when the leaves are classified.
+    pub fn leaf_classes(&self) -> Option<&[u8]> {
+        self.classes.rule.map(|_| self.classes.bits.as_slice())
     }
 
     /// Counts the leaves per class over all ranks (after
@@ -104,6 +158,7 @@ impl Session {
                 bits: classify_leaves(tree.leaves(), &s.index),
                 cut: true,
                 rule: None,
+                inherit: false,
             };
         }
         let comm = self.comm.clone();
@@ -142,4 +197,21 @@ impl Session {
         let bbox = self.surface_or_state()?.bbox;
         Err(path.to_error(&domain, Some(&bbox)))
     }
+}
+
+/// Runs `op`, a partition, moving the class bytes with the leaves when
+/// there are classes.
+pub(super) fn moving_classes<T>(
+    tree: &mut LinearOctree,
+    classes: &mut Classes,
+    op: impl FnOnce(&mut LinearOctree) -> Result<T>,
+) -> Result<T> {
+    if !classes.cut {
+        return op(tree);
+    }
+    let mut d = LeafData::new(1, tree.local_len());
+    d.as_bytes_mut().copy_from_slice(&classes.bits);
+    let r = tree.move_with_data(&mut d, op)?;
+    classes.bits = d.as_bytes().to_vec();
+    Ok(r)
 }

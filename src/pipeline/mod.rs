@@ -89,6 +89,10 @@ struct Classes {
     /// The rule the inside bits were classified with; `None` when only the
     /// cut bit was computed (for a leak check).
     rule: Option<InsideRule>,
+    /// Whether a leaf that is not cut passes its class to its descendants
+    /// and ancestors (`classify::carry_classes`): with the parity, or the
+    /// winding number of a closed surface.
+    inherit: bool,
 }
 
 /// Counts a run gathers for its statistics.

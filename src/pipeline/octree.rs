@@ -389,17 +389,18 @@ impl Session {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
         let comm = self.comm.clone();
         let tree = self.tree.as_mut().map(|t| &mut t.0);
-        let data = &mut self.data;
+        let (data, classes) = (&mut self.data, &mut self.classes);
         self.timer.time(&*comm, "partition", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
-            data::moving(tree, data, |tree| match &weight {
-                None => tree.partition().map(|_| ()),
-                Some(w) => tree.partition_weighted(w).map(|_| ()),
+            data::moving(tree, data, |tree| {
+                super::classes::moving_classes(tree, classes, |tree| match &weight {
+                    None => tree.partition().map(|_| ()),
+                    Some(w) => tree.partition_weighted(w).map(|_| ()),
+                })
             })
         })?;
         let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
-        self.classes = Classes::default();
         self.drop_mesh();
         Ok(())
     }
@@ -433,6 +434,12 @@ impl Session {
         let expected = self.facts.estimate.map(|e| e.balanced);
         let shown = self.progress("balance", expected);
         let tree = self.tree.as_mut().map(|t| &mut t.0);
+        // Kept only when there are classes to carry over (balance then
+        // splits a copy, since these are shared).
+        let old = match (&tree, self.classes.rule) {
+            (Some(t), Some(_)) => Some(t.shared_leaves()),
+            _ => None,
+        };
         let data = &mut self.data;
         let balanced = self.timer.time(&*comm, "balance", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
@@ -445,8 +452,8 @@ impl Session {
         let count = self.tree().map(|t| t.forest_len());
         self.report_phase(count);
         self.facts.octants_balanced = self.tree().map_or(0, |t| t.forest_len());
-        self.classes = Classes::default();
         self.drop_mesh();
+        self.carry_classes(old);
         Ok(())
     }
 
