@@ -349,9 +349,118 @@ fn carried_classes(comm: &CommRef) {
     assert!(total_redone > 0, "no leaf near the surface changed");
 }
 
+/// Collects every phase (name, seconds, count).
+struct Phases(Rc<RefCell<Vec<(String, f64, u64)>>>);
+
+impl Observer for Phases {
+    fn event(&mut self, e: &Event<'_>) {
+        if let Event::Phase {
+            name,
+            seconds,
+            count,
+        } = e
+        {
+            let n = count.unwrap_or(0);
+            self.0.borrow_mut().push((name.to_string(), *seconds, n));
+        }
+    }
+}
+
+/// `OCTMESH_TRANSFER_CHILD=bench OCTMESH_TRANSFER_LEVEL=L mpirun -np P
+/// <this test>`: one adaptation step of the fluid mesh around the sphere
+/// at level L (the leaves in the upper cap's box refined once, the far
+/// field coarsened once), then the classes carried against a fresh
+/// classification, and the transfers against the mesh build. Prints one
+/// BENCH line on rank 0.
+fn bench(comm: &CommRef) {
+    let level: u8 = std::env::var("OCTMESH_TRANSFER_LEVEL")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(8);
+    let mut config = Config::default();
+    config.surface.file = "sphere".into();
+    config.domain.cube = Some([-2.0, -2.0, -2.0, 4.0]);
+    let mut s = Session::new(comm.clone(), config);
+    s.load_surface().unwrap();
+    s.refine_surface(level).unwrap();
+    s.partition().unwrap();
+    s.balance(Connectivity::Corner).unwrap();
+    s.partition().unwrap();
+    s.keep_previous_mesh(true);
+    s.build_mesh(Keep::Outside, CutRule::Center).unwrap();
+    let rule = s.classified_with().unwrap();
+    let old = s.mesh().unwrap();
+    let values: Vec<f64> = old.coordinates().iter().map(|&x| trilinear(x)[0]).collect();
+    let evalues = vec![1.0; old.elements().len()];
+    let phases = Rc::new(RefCell::new(Vec::new()));
+    s.set_observer(Box::new(Phases(phases.clone())));
+    let to_user = |o: Octant| {
+        let (lo, hi) = o.bounds_f64();
+        let h = 4.0 / 524_288.0;
+        let c: [f64; 3] = std::array::from_fn(|k| -2.0 + (lo[k] + hi[k]) / 2.0 * h);
+        c
+    };
+    s.adapt(
+        |o| {
+            let c = to_user(o);
+            if c[2] > 0.5 && c[0].abs() < 1.2 && c[1].abs() < 1.2 && o.level() <= level {
+                Adapt::Refine
+            } else if c[0] < -1.2 && o.level() > 3 {
+                Adapt::Coarsen
+            } else {
+                Adapt::Keep
+            }
+        },
+        None,
+    )
+    .unwrap();
+    s.balance(Connectivity::Corner).unwrap();
+    s.partition_for_coarsening(None::<fn(Octant) -> u64>)
+        .unwrap();
+    s.build_mesh(Keep::Outside, CutRule::Center).unwrap();
+    s.element_map().unwrap();
+    s.transfer_elements(1, &evalues).unwrap();
+    s.transfer_nodes(1, &values).unwrap();
+    s.classify(rule).unwrap();
+    if comm.rank() == 0 {
+        let all = phases.borrow();
+        let sum = |names: &[&str]| -> f64 {
+            all.iter()
+                .filter(|p| names.contains(&p.0.as_str()))
+                .map(|p| p.1)
+                .sum()
+        };
+        let carried: Vec<String> = all
+            .iter()
+            .filter(|p| p.0 == "classify")
+            .map(|p| format!("{:.4} s ({} leaves)", p.1, p.2))
+            .collect();
+        let transfers: Vec<String> = all
+            .iter()
+            .filter(|p| p.0 == "transfer")
+            .map(|p| format!("{:.4}", p.1))
+            .collect();
+        println!(
+            "BENCH np={} level={level} leaves={} elements={}: classify carried {} (the last: \
+             all again); mesh build (ghost nodes numbering connectivity) {:.4} s; transfers \
+             (map, elements, nodes) {} s",
+            comm.size(),
+            s.tree().unwrap().global_len(),
+            s.mesh().unwrap().counts().elements,
+            carried.join(", "),
+            sum(&["ghost", "nodes", "numbering", "connectivity"]),
+            transfers.join(", ")
+        );
+    }
+}
+
 fn child() {
     let universe = mpi::initialize().expect("MPI init");
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
+    if std::env::var(CHILD).is_ok_and(|v| v == "bench") {
+        bench(&comm);
+        return;
+    }
     moving_loop(&comm);
     carried_classes(&comm);
     let errors: Vec<f64> = (2..=5).map(|l| refinement_error(&comm, l)).collect();

@@ -44,6 +44,7 @@ use crate::comm::{offsets, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::octant::{morton_encode, Octant, LATTICE_BITS};
 use crate::octree::owner_of_cell;
+use crate::sort::gallop_last_le;
 
 use super::{Mesh, VTK_TO_MORTON};
 
@@ -300,25 +301,51 @@ fn unpack(w: u64) -> [u32; 3] {
     ]
 }
 
-/// The finest cells around lattice point `p` in the canonical order: bit
-/// `j` of the position means one cell lower along axis `j`; `None` for
-/// cells outside `hi`.
-fn cells_around(p: [u32; 3], hi: [u32; 3]) -> [Option<u64>; 8] {
-    std::array::from_fn(|k| {
-        let mut c = [0u32; 3];
-        for j in 0..3 {
-            let down = (k >> j) & 1 == 1;
-            if down {
-                c[j] = p[j].checked_sub(1)?;
-            } else {
-                if p[j] >= hi[j] {
-                    return None;
-                }
-                c[j] = p[j];
-            }
+/// The finest cell `k` around lattice point `p` in the canonical order: bit
+/// `j` of `k` means one cell lower along axis `j`; `None` for a cell
+/// outside `[0, hi)`. Cell 0 is the highest of the eight in Morton order,
+/// cell 7 the lowest.
+#[inline]
+fn cell_around(p: [u32; 3], hi: [u32; 3], k: usize) -> Option<u64> {
+    let mut c = [0u32; 3];
+    for j in 0..3 {
+        c[j] = if (k >> j) & 1 == 1 {
+            p[j].checked_sub(1)?
+        } else if p[j] < hi[j] {
+            p[j]
+        } else {
+            return None;
+        };
+    }
+    Some(morton_encode(c[0], c[1], c[2]))
+}
+
+/// The old ranks holding the cells around `p` (the ranks' cell ranges are
+/// consecutive in Morton order, so when the lowest and the highest cell
+/// have one owner, all have).
+fn owners_around(p: [u32; 3], hi: [u32; 3], first: &[u64], out: &mut Vec<u32>) {
+    out.clear();
+    let ranks = first.len() - 1;
+    if ranks == 1 {
+        out.push(0);
+        return;
+    }
+    let lowest = (0..8).rev().find_map(|k| cell_around(p, hi, k));
+    let highest = (0..8).find_map(|k| cell_around(p, hi, k));
+    let (Some(a), Some(b)) = (lowest, highest) else {
+        return;
+    };
+    let (ra, rb) = (owner_of_cell(first, a), owner_of_cell(first, b));
+    if ra == rb {
+        out.push(ra as u32);
+        return;
+    }
+    for c in (0..8).filter_map(|k| cell_around(p, hi, k)) {
+        let r = owner_of_cell(first, c) as u32;
+        if !out.contains(&r) {
+            out.push(r);
         }
-        Some(morton_encode(c[0], c[1], c[2]))
-    })
+    }
 }
 
 /// Every local node's value with the hanging ones replaced by the means of
@@ -363,30 +390,35 @@ pub fn transfer_nodes(
     let ni = new.num_independent;
 
     // Requests: each independent new node to each distinct old owner of
-    // the cells around it.
-    let owners_of = |q: [u32; 3], out: &mut Vec<u32>| {
-        out.clear();
-        for c in cells_around(q, hi).into_iter().flatten() {
-            let r = owner_of_cell(first, c) as u32;
-            if !out.contains(&r) {
-                out.push(r);
-            }
-        }
-    };
+    // the cells around it (one for most nodes: remembered, not searched
+    // again).
+    const MANY: u32 = u32::MAX;
     let mut counts = vec![0usize; p];
     let mut owners = Vec::with_capacity(8);
-    for q in &lattice[..ni] {
-        owners_of(*q, &mut owners);
-        for &r in &owners {
-            counts[r as usize] += 1;
-        }
-    }
+    let single: Vec<u32> = lattice[..ni]
+        .iter()
+        .map(|&q| {
+            owners_around(q, hi, first, &mut owners);
+            for &r in &owners {
+                counts[r as usize] += 1;
+            }
+            if owners.len() == 1 {
+                owners[0]
+            } else {
+                MANY
+            }
+        })
+        .collect();
     let starts = offsets(&counts);
     let mut at = starts.clone();
     let mut send = vec![0u64; starts[p]];
     let mut node_of = vec![0u32; starts[p]];
     for (n, q) in lattice[..ni].iter().enumerate() {
-        owners_of(*q, &mut owners);
+        owners.clear();
+        match single[n] {
+            MANY => owners_around(*q, hi, first, &mut owners),
+            r => owners.push(r),
+        }
         for &r in &owners {
             let s = &mut at[r as usize];
             send[*s] = pack(*q);
@@ -394,6 +426,7 @@ pub fn transfer_nodes(
             *s += 1;
         }
     }
+    drop(single);
     drop(lattice);
     let (recv, recv_counts) = comm.alltoallv_u64(&send, &counts);
     drop(send);
@@ -404,18 +437,25 @@ pub fn transfer_nodes(
     let elements: &[Octant] = &old.elements;
     let mut answers = Vec::with_capacity(recv.len() * (1 + ncomp));
     let mut value = vec![0.0f64; ncomp];
+    // Requests come in the new mesh's node order, close in space one after
+    // the other: search from the last answer.
+    let mut hint = 0;
     for &w in &recv {
         let q = unpack(w);
         let mut found = NONE;
-        for (k, c) in cells_around(q, hi).into_iter().enumerate() {
-            let Some(c) = c.filter(|c| (begin..end).contains(c)) else {
+        for k in 0..8 {
+            let Some(c) = cell_around(q, hi, k).filter(|c| (begin..end).contains(c)) else {
                 continue;
             };
-            let i = elements.partition_point(|e| e.cell_begin() <= c);
-            if i == 0 || elements[i - 1].cell_end() <= c {
+            let Some(i) = gallop_last_le(elements.len(), hint, c, |i| elements[i].cell_begin())
+            else {
+                continue;
+            };
+            if elements[i].cell_end() <= c {
                 continue;
             }
-            evaluate(old, i - 1, q, ncomp, &field, &mut value);
+            hint = i;
+            evaluate(old, i, q, ncomp, &field, &mut value);
             found = k as u64;
             break;
         }
@@ -475,21 +515,36 @@ mod tests {
     use super::*;
 
     #[test]
-    fn points_pack_and_cells_go_round_in_order() {
+    fn points_pack_cells_go_round_in_order_and_owners_are_found() {
         let top = 1u32 << LATTICE_BITS;
         for p in [[0, 0, 0], [top, top, top], [5, top, 77]] {
             assert_eq!(unpack(pack(p)), p);
         }
         let hi = [top; 3];
-        let c = cells_around([0, 0, 0], hi);
+        let around =
+            |p: [u32; 3]| -> Vec<Option<u64>> { (0..8).map(|k| cell_around(p, hi, k)).collect() };
+        let c = around([0, 0, 0]);
         assert_eq!(c[0], Some(0));
         assert!(c[1..].iter().all(|c| c.is_none()));
-        let c = cells_around([top, top, top], hi);
+        let c = around([top, top, top]);
         assert_eq!(c.iter().filter(|c| c.is_some()).count(), 1);
         assert_eq!(c[7], Some(morton_encode(top - 1, top - 1, top - 1)));
-        let c = cells_around([4, 4, 4], hi);
+        let c = around([4, 4, 4]);
         assert_eq!(c[0], Some(morton_encode(4, 4, 4)));
         assert_eq!(c[1], Some(morton_encode(3, 4, 4)));
         assert_eq!(c[6], Some(morton_encode(4, 3, 3)));
+        // Cell 0 is the highest and cell 7 the lowest in Morton order.
+        let codes: Vec<u64> = c.iter().map(|c| c.unwrap()).collect();
+        assert_eq!(codes.iter().max(), Some(&codes[0]));
+        assert_eq!(codes.iter().min(), Some(&codes[7]));
+        // Owners: ranks split at cell 3 of the 8 around (4, 4, 4).
+        let mut sorted = codes.clone();
+        sorted.sort_unstable();
+        let first = [0, sorted[3], 1 << 57];
+        let mut out = Vec::new();
+        owners_around([4, 4, 4], hi, &first, &mut out);
+        assert_eq!(out.len(), 2);
+        owners_around([2, 2, 2], hi, &first, &mut out);
+        assert_eq!(out, vec![0]);
     }
 }
