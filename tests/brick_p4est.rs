@@ -111,19 +111,7 @@ fn compare(case: &Case, conn: &str, np: usize, dir: &Path) {
         seen.iter().all(|&s| s),
         "{tag}: some tree has no leaf: {seen:?}"
     );
-    assert_eq!(
-        a.len(),
-        b.len(),
-        "{tag}: octmesh {} leaves, p4est {}",
-        a.len(),
-        b.len()
-    );
-    if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
-        panic!(
-            "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
-            a[i], b[i]
-        );
-    }
+    common::assert_same_leaves(&a, &b, &tag);
     let (s, p) = (json_file(&our_stats), json_file(&their_stats));
     assert_eq!(int(&s, "octants_balanced"), a.len() as u64, "{tag}");
     if conn != "face" {

@@ -47,19 +47,7 @@ fn compare(surface: &Path, level: u32, conn: &str, np: usize, dir: &Path) {
         a.len() > leaves(&refined).len(),
         "{tag}: balance added nothing"
     );
-    assert_eq!(
-        a.len(),
-        b.len(),
-        "{tag}: octmesh {} leaves, p4est {}",
-        a.len(),
-        b.len()
-    );
-    if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
-        panic!(
-            "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
-            a[i], b[i]
-        );
-    }
+    common::assert_same_leaves(&a, &b, &tag);
     println!("{tag}: {} balanced leaves equal to p4est", a.len());
 }
 

@@ -7,7 +7,7 @@ use crate::classify::CUT;
 use crate::comm::Comm;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::octant::{morton_encode, Octant};
+use crate::octant::Octant;
 use crate::octree::LeafIndex;
 
 /// Distance of a leaf the search has not reached.
@@ -216,19 +216,17 @@ impl Search<'_> {
     }
 }
 
-/// The finest lattice cell holding `point` (user units), or an error if it
-/// is outside the cube.
+/// The finest lattice cell holding `point` (user units, the tie rule of
+/// [`crate::search::point_cell`]), or an error if it is outside the domain.
 pub(crate) fn point_cell(domain: &Domain, point: [f64; 3]) -> Result<u64> {
-    let q = domain.to_lattice(point);
-    let hi = domain.brick.hi();
-    if !(0..3).all(|k| (0.0..=hi[k] as f64).contains(&q[k])) {
+    crate::search::point_cell(domain, point).ok_or_else(|| {
         let top = domain.upper();
         let what = if domain.brick.is_cube() {
             "cube"
         } else {
             "box"
         };
-        return Err(Error::invalid(format!(
+        Error::invalid(format!(
             "the inside point ({}, {}, {}) is not in the {what} (from ({}, {}, {}) to ({}, {}, {}))",
             point[0],
             point[1],
@@ -239,10 +237,8 @@ pub(crate) fn point_cell(domain: &Domain, point: [f64; 3]) -> Result<u64> {
             top[0],
             top[1],
             top[2]
-        )));
-    }
-    let i: [u32; 3] = std::array::from_fn(|k| (q[k].floor() as u32).min(hi[k] - 1));
-    Ok(morton_encode(i[0], i[1], i[2]))
+        ))
+    })
 }
 
 pub(crate) fn put(b: &mut Vec<u8>, v: u64) {

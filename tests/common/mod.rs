@@ -484,3 +484,21 @@ pub fn sphere_cuts(o: octmesh::Octant, x: i64) -> bool {
     }
     near <= RADIUS * RADIUS && RADIUS * RADIUS <= far
 }
+
+/// Requires octmesh's leaves `ours` to equal p4est's `theirs` one for one
+/// (any leaf representation), naming the first difference.
+pub fn assert_same_leaves<T: PartialEq + std::fmt::Debug>(ours: &[T], theirs: &[T], tag: &str) {
+    assert_eq!(
+        ours.len(),
+        theirs.len(),
+        "{tag}: octmesh {} leaves, p4est {}",
+        ours.len(),
+        theirs.len()
+    );
+    if let Some(i) = (0..ours.len()).find(|&i| ours[i] != theirs[i]) {
+        panic!(
+            "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
+            ours[i], theirs[i]
+        );
+    }
+}
