@@ -68,7 +68,7 @@ LIB = OUT / "lib"
 # octmesh phases the table knows; any other phase the program reports (a
 # transfer timed after the mesh build) gets a row of its own.
 KNOWN = ("adapt", "refine", "coarsen", "balance", "partition", "mesh")
-CHECKED = ("leaves_before", "leaves_after", "per_rank", "nodes", "integral")
+CHECKED = ("leaves_before", "refined", "coarsened", "leaves_after", "per_rank", "nodes", "integral")
 
 PHASE_COLUMNS = [("np", "np"), ("phase", "phase"), ("om", "octmesh [s]"),
                  ("p4", "p4est [s]"), ("ratio", "octmesh/p4est"), ("bar", "<= 0.5")]
@@ -78,7 +78,8 @@ MEM_COLUMNS = [("np", "np"), ("om_before", "octmesh before cycle"),
                ("p4_bpl", "p4est B/leaf"), ("ratio", "peak octmesh/p4est"),
                ("bar", "<= 0.5"), ("om_warm", "octmesh warm-up peak"),
                ("p4_warm", "p4est warm-up peak")]
-COUNT_COLUMNS = [("np", "np"), ("before", "leaves before"), ("after", "leaves after"),
+COUNT_COLUMNS = [("np", "np"), ("before", "leaves before"),
+                 ("changed", "refined / coarsened families"), ("after", "leaves after"),
                  ("per_rank", "leaves per rank"), ("nodes", "independent nodes"),
                  ("hanging", "hanging nodes (face + edge, octmesh)"),
                  ("ghosts", "p4est ghosts"), ("integral", "integral of the data")]
@@ -259,6 +260,7 @@ def main():
             c = om[0]
             count_rows.append({
                 "np": str(np_), "before": fmt_int(c["leaves_before"]),
+                "changed": "%s / %s" % (fmt_int(c["refined"]), fmt_int(c["coarsened"])),
                 "after": fmt_int(c["leaves_after"]),
                 "per_rank": " + ".join(fmt_int(n) for n in c["per_rank"]),
                 "nodes": fmt_int(c["nodes"]),

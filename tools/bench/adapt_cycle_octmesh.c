@@ -29,9 +29,9 @@
  *
  * Memory and output as in the p4est program: rank 0 prints one line
  * "RESULT {json}" with the phase times (seconds, maximum over ranks), leaf
- * counts, leaves per rank, independent nodes, the integral of the data,
- * the RSS before the cycle, the peak of the warm-up and the peak during
- * the cycle (VmHWM reset through /proc/self/clear_refs just before it;
+ * counts, leaves refined and families coarsened, leaves per rank,
+ * independent nodes, the integral of the data, the RSS before the cycle,
+ * the peak of the warm-up and the peak during the cycle (VmHWM reset through /proc/self/clear_refs just before it;
  * bytes per rank, maximum over ranks).
  *
  * Usage: mpirun -np P adapt_cycle_octmesh --level L --max-level M
@@ -282,7 +282,7 @@ int main(int argc, char **argv) {
   fill(h);
   for (g_step = 1; g_step <= warmup; g_step++) step(h);
   octmesh_locidx_t nl;
-  octmesh_gloidx_t before, after;
+  octmesh_gloidx_t before, after, refined = 0, coarsened = 0;
   OK(octmesh_octree_get_num_leaves(h, &nl, &before), h);
 
   /* The cycle. */
@@ -305,10 +305,11 @@ int main(int argc, char **argv) {
 
   if (split) {
     PHASE(REFINE, octmesh_octree_refine_once_ext(h, g_max_level, refine_cut, replace, NULL,
-                                                 NULL));
-    PHASE(COARSEN, octmesh_octree_coarsen_ext(h, 0, coarsen_uncut, replace, NULL, NULL));
+                                                 &refined));
+    PHASE(COARSEN, octmesh_octree_coarsen_ext(h, 0, coarsen_uncut, replace, NULL, &coarsened));
   } else {
-    PHASE(ADAPT, octmesh_octree_adapt_ext(h, adapt_sphere, replace, NULL, NULL, NULL));
+    PHASE(ADAPT,
+          octmesh_octree_adapt_ext(h, adapt_sphere, replace, NULL, &refined, &coarsened));
   }
   PHASE(BALANCE, octmesh_octree_balance_ext(h, OCTMESH_CONNECT_CORNER, replace, NULL));
   PHASE(PARTITION, octmesh_octree_partition_for_coarsening(h, NULL, NULL));
@@ -344,9 +345,10 @@ int main(int argc, char **argv) {
         total += tmax[i];
         first = 0;
       }
-    printf("}, \"total_of_max\": %.9f, \"leaves_before\": %lld, \"leaves_after\": %lld, "
-           "\"per_rank\": [",
-           total, (long long)before, (long long)after);
+    printf("}, \"total_of_max\": %.9f, \"leaves_before\": %lld, \"refined\": %lld, "
+           "\"coarsened\": %lld, \"leaves_after\": %lld, \"per_rank\": [",
+           total, (long long)before, (long long)refined, (long long)coarsened,
+           (long long)after);
     for (int r = 0; r < g_size; r++) printf("%s%lld", r ? ", " : "", per[r]);
     printf("], \"nodes\": %lld, \"face_hanging\": %lld, \"edge_hanging\": %lld, "
            "\"integral\": %.17g, \"rss_before_cycle\": %lld, \"peak_cycle\": %lld, "

@@ -29,6 +29,7 @@
  *
  * Rank 0 prints one line "RESULT {json}" with the phase times (seconds,
  * maximum over ranks), the leaf counts before and after the cycle, the
+ * leaves refined and families coarsened (before balance), the
  * leaves per rank after it, lnodes' global node count, the integral of
  * the data (sum of volume * value, a check that the data went through
  * the cycle) and the memory figures.
@@ -261,7 +262,7 @@ main (int argc, char **argv)
   double              t[NPHASES], tmax[NPHASES], t0, total = 0;
   long long           mem[3], memmax[3];
   long long           lnodes_owned, lnodes_global, ghosts, ghosts_all;
-  p4est_gloidx_t      before;
+  p4est_gloidx_t      before, refined, coarsened;
   p8est_connectivity_t *conn;
   p8est_t            *p8est;
   p8est_ghost_t      *ghost;
@@ -314,8 +315,10 @@ main (int argc, char **argv)
 
   PHASE (REFINE, p8est_refine_ext (p8est, 0, g_max_level, refine_fn, NULL,
                                    replace_fn));
+  refined = (p8est->global_num_quadrants - before) / 7;
   PHASE (COARSEN, p8est_coarsen_ext (p8est, 0, 0, coarsen_fn, NULL,
                                      replace_fn));
+  coarsened = (before + 7 * refined - p8est->global_num_quadrants) / 7;
   PHASE (BALANCE, p8est_balance_ext (p8est, P8EST_CONNECT_FULL, NULL,
                                      replace_fn));
   PHASE (PARTITION, p8est_partition_ext (p8est, 1, NULL));
@@ -348,9 +351,10 @@ main (int argc, char **argv)
         total += tmax[i];
       }
       printf ("}, \"total_of_max\": %.9f, \"leaves_before\": %lld, "
+              "\"refined\": %lld, \"coarsened\": %lld, "
               "\"leaves_after\": %lld, \"per_rank\": [",
-              total, (long long) before,
-              (long long) p8est->global_num_quadrants);
+              total, (long long) before, (long long) refined,
+              (long long) coarsened, (long long) p8est->global_num_quadrants);
       for (r = 0; r < g_size; ++r)
         printf ("%s%lld", r ? ", " : "",
                 (long long) (p8est->global_first_quadrant[r + 1] -
