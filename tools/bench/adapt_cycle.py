@@ -78,6 +78,8 @@ MEM_COLUMNS = [("np", "np"), ("om_before", "octmesh before cycle"),
                ("p4_bpl", "p4est B/leaf"), ("ratio", "peak octmesh/p4est"),
                ("bar", "<= 0.5"), ("om_warm", "octmesh warm-up peak"),
                ("p4_warm", "p4est warm-up peak")]
+HWM_COLUMNS = [("np", "np"), ("code", "code"),
+               ("hwm", "peak RSS so far after each phase, MiB per rank")]
 COUNT_COLUMNS = [("np", "np"), ("before", "leaves before"),
                  ("changed", "refined / coarsened families"), ("after", "leaves after"),
                  ("per_rank", "leaves per rank"), ("nodes", "independent nodes"),
@@ -186,6 +188,15 @@ def mem_row(np_, om, p4):
             "p4_warm": mib(med_mem(p4, "peak_warmup"))}
 
 
+def hwm_rows(np_, om, p4):
+    def row(code, runs):
+        keys = list(runs[0]["peak_after"])
+        return {"np": str(np_), "code": code, "hwm": ", ".join(
+            "%s %.0f" % (k, median([r["peak_after"][k] for r in runs]) / MIB) for k in keys)}
+
+    return [row("octmesh", om), row("p4est", p4)]
+
+
 def check(np_, runs):
     """Mismatch messages: every run of every tool must agree on CHECKED."""
     bad = []
@@ -240,7 +251,8 @@ def main():
           % (args.level, args.warmup, args.max_level, args.dx, args.rounds), flush=True)
 
     tools = ["octmesh", "p4est"] + (["split"] if args.split else [])
-    phase_rows_all, mem_rows, count_rows, records, mismatches = [], [], [], [], []
+    phase_rows_all, mem_rows, hwm_rows_all, count_rows, records, mismatches = (
+        [], [], [], [], [], [])
     try:
         for np_ in nps:
             runs = {t: [] for t in tools}
@@ -257,6 +269,7 @@ def main():
             om, p4 = runs["octmesh"], runs["p4est"]
             phase_rows_all += phase_rows(np_, om, p4, runs.get("split"))
             mem_rows.append(mem_row(np_, om, p4))
+            hwm_rows_all += hwm_rows(np_, om, p4)
             c = om[0]
             count_rows.append({
                 "np": str(np_), "before": fmt_int(c["leaves_before"]),
@@ -275,6 +288,8 @@ def main():
     print()
     print(text_table(mem_rows, MEM_COLUMNS))
     print()
+    print(text_table(hwm_rows_all, HWM_COLUMNS))
+    print()
     print(text_table(count_rows, COUNT_COLUMNS))
     if args.markdown:
         with open(args.markdown, "w") as f:
@@ -288,6 +303,8 @@ def main():
             f.write("\nMemory (RSS per rank, max over ranks; the cycle's peak with VmHWM reset "
                     "before it; B/leaf = cycle peak x np / leaves after):\n\n")
             f.write(markdown_table(mem_rows, MEM_COLUMNS, left=()) + "\n")
+            f.write("\nWhere the peak is reached (VmHWM after each phase, medians):\n\n")
+            f.write(markdown_table(hwm_rows_all, HWM_COLUMNS, left=("code", "hwm")) + "\n")
             f.write("\nCounts (equal in both codes and every run):\n\n")
             f.write(markdown_table(count_rows, COUNT_COLUMNS, left=()) + "\n")
         print("markdown written to %s" % args.markdown)

@@ -31,8 +31,9 @@
  * "RESULT {json}" with the phase times (seconds, maximum over ranks), leaf
  * counts, leaves refined and families coarsened, leaves per rank,
  * independent nodes, the integral of the data, the RSS before the cycle,
- * the peak of the warm-up and the peak during the cycle (VmHWM reset through /proc/self/clear_refs just before it;
- * bytes per rank, maximum over ranks).
+ * the peak of the warm-up, the peak during the cycle (VmHWM reset through
+ * /proc/self/clear_refs just before it) and VmHWM after each phase (where
+ * the peak is reached); bytes per rank, maximum over ranks.
  *
  * Usage: mpirun -np P adapt_cycle_octmesh --level L --max-level M
  *          --warmup W [--dx DX] [--split]
@@ -286,7 +287,7 @@ int main(int argc, char **argv) {
   OK(octmesh_octree_get_num_leaves(h, &nl, &before), h);
 
   /* The cycle. */
-  long long mem[3], memmax[3];
+  long long mem[3], memmax[3], hwm[NPHASES] = {0}, hwmmax[NPHASES];
   mem[0] = status_bytes("VmRSS");
   mem[2] = status_bytes("VmHWM");
   int hwm_reset = reset_peak(), all_reset;
@@ -294,12 +295,14 @@ int main(int argc, char **argv) {
   int done[NPHASES] = {0};
   for (int i = 0; i < NPHASES; i++) t[i] = 0;
 
+/* The peak so far is read after each phase, outside its time. */
 #define PHASE(k, call)                                                               \
   do {                                                                               \
     MPI_Barrier(comm);                                                               \
     t0 = MPI_Wtime();                                                                \
     OK(call, h);                                                                     \
     t[k] = MPI_Wtime() - t0;                                                         \
+    hwm[k] = status_bytes("VmHWM");                                                  \
     done[k] = 1;                                                                     \
   } while (0)
 
@@ -325,6 +328,7 @@ int main(int argc, char **argv) {
   mem[1] = hwm_reset ? status_bytes("VmHWM") : maxrss_bytes();
   MPI_Reduce(t, tmax, NPHASES, MPI_DOUBLE, MPI_MAX, 0, comm);
   MPI_Reduce(mem, memmax, 3, MPI_LONG_LONG, MPI_MAX, 0, comm);
+  MPI_Reduce(hwm, hwmmax, NPHASES, MPI_LONG_LONG, MPI_MAX, 0, comm);
   MPI_Reduce(&hwm_reset, &all_reset, 1, MPI_INT, MPI_MIN, 0, comm);
 
   /* Counts and checks, after the measurements. */
@@ -352,10 +356,16 @@ int main(int argc, char **argv) {
     for (int r = 0; r < g_size; r++) printf("%s%lld", r ? ", " : "", per[r]);
     printf("], \"nodes\": %lld, \"face_hanging\": %lld, \"edge_hanging\": %lld, "
            "\"integral\": %.17g, \"rss_before_cycle\": %lld, \"peak_cycle\": %lld, "
-           "\"peak_warmup\": %lld, \"hwm_reset\": %d}\n",
+           "\"peak_warmup\": %lld, \"hwm_reset\": %d, \"peak_after\": {",
            (long long)c.global_independent, (long long)c.global_face_hanging,
            (long long)c.global_edge_hanging, integ, memmax[0], memmax[1], memmax[2],
            all_reset);
+    for (int i = 0, first = 1; i < NPHASES; i++)
+      if (done[i]) {
+        printf("%s\"%s\": %lld", first ? "" : ", ", phase_names[i], hwmmax[i]);
+        first = 0;
+      }
+    printf("}}\n");
     fflush(stdout);
   }
   free(per);

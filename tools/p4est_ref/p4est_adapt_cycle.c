@@ -25,7 +25,8 @@
  * before the cycle), and the peak during the cycle (VmHWM after resetting
  * it through /proc/self/clear_refs just before the cycle; if the reset
  * fails, getrusage's ru_maxrss, the peak of the whole run, and
- * "hwm_reset": 0); each the maximum over ranks, in bytes per rank.
+ * "hwm_reset": 0), and VmHWM after each phase (where the peak is reached);
+ * each the maximum over ranks, in bytes per rank.
  *
  * Rank 0 prints one line "RESULT {json}" with the phase times (seconds,
  * maximum over ranks), the leaf counts before and after the cycle, the
@@ -260,7 +261,7 @@ main (int argc, char **argv)
   MPI_Comm            comm = MPI_COMM_WORLD;
   int                 level = -1, warmup = -1, i, r, hwm_reset, all_reset;
   double              t[NPHASES], tmax[NPHASES], t0, total = 0;
-  long long           mem[3], memmax[3];
+  long long           mem[3], memmax[3], hwm[NPHASES], hwmmax[NPHASES];
   long long           lnodes_owned, lnodes_global, ghosts, ghosts_all;
   p4est_gloidx_t      before, refined, coarsened;
   p8est_connectivity_t *conn;
@@ -309,9 +310,10 @@ main (int argc, char **argv)
   for (i = 0; i < NPHASES; ++i)
     t[i] = 0;
 
+/* The peak so far is read after each phase, outside its time. */
 #define PHASE(k, call) \
-  do { MPI_Barrier (comm); t0 = MPI_Wtime (); call; t[k] = MPI_Wtime () - t0; } \
-  while (0)
+  do { MPI_Barrier (comm); t0 = MPI_Wtime (); call; t[k] = MPI_Wtime () - t0; \
+    hwm[k] = status_bytes ("VmHWM"); } while (0)
 
   PHASE (REFINE, p8est_refine_ext (p8est, 0, g_max_level, refine_fn, NULL,
                                    replace_fn));
@@ -330,6 +332,7 @@ main (int argc, char **argv)
   mem[1] = hwm_reset ? status_bytes ("VmHWM") : maxrss_bytes ();
   MPI_Reduce (t, tmax, NPHASES, MPI_DOUBLE, MPI_MAX, 0, comm);
   MPI_Reduce (mem, memmax, 3, MPI_LONG_LONG, MPI_MAX, 0, comm);
+  MPI_Reduce (hwm, hwmmax, NPHASES, MPI_LONG_LONG, MPI_MAX, 0, comm);
   MPI_Reduce (&hwm_reset, &all_reset, 1, MPI_INT, MPI_MIN, 0, comm);
 
   /* Counts and checks, after the measurements. */
@@ -361,9 +364,12 @@ main (int argc, char **argv)
                              p8est->global_first_quadrant[r]));
       printf ("], \"nodes\": %lld, \"ghosts\": %lld, \"integral\": %.17g, "
               "\"rss_before_cycle\": %lld, \"peak_cycle\": %lld, "
-              "\"peak_warmup\": %lld, \"hwm_reset\": %d}\n",
+              "\"peak_warmup\": %lld, \"hwm_reset\": %d, \"peak_after\": {",
               lnodes_global, ghosts_all, integ, memmax[0], memmax[1],
               memmax[2], all_reset);
+      for (i = 0; i < NPHASES; ++i)
+        printf ("%s\"%s\": %lld", i ? ", " : "", phase_names[i], hwmmax[i]);
+      printf ("}}\n");
       fflush (stdout);
     }
   }
