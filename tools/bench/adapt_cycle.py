@@ -39,6 +39,7 @@ integral of the data, in every run.
     python3 tools/bench/adapt_cycle.py                       # 1 and 2 ranks, 3 rounds
     python3 tools/bench/adapt_cycle.py --max-level 9 --rounds 1   # quick check
     python3 tools/bench/adapt_cycle.py --markdown target/bench/adapt_cycle.md
+    python3 tools/bench/adapt_cycle.py --from-json a.json b.json --markdown table.md
 
 Standard library only.
 """
@@ -71,7 +72,8 @@ KNOWN = ("adapt", "refine", "coarsen", "balance", "partition", "mesh")
 CHECKED = ("leaves_before", "refined", "coarsened", "leaves_after", "per_rank", "nodes", "integral")
 
 PHASE_COLUMNS = [("np", "np"), ("phase", "phase"), ("om", "octmesh [s]"),
-                 ("p4", "p4est [s]"), ("ratio", "octmesh/p4est"), ("bar", "<= 0.5")]
+                 ("p4", "p4est [s]"), ("ratio", "octmesh/p4est"), ("bar", "<= 0.5"),
+                 ("om_range", "octmesh min-max"), ("p4_range", "p4est min-max")]
 MEM_COLUMNS = [("np", "np"), ("om_before", "octmesh before cycle"),
                ("om_peak", "octmesh cycle peak"), ("om_bpl", "octmesh B/leaf"),
                ("p4_before", "p4est before cycle"), ("p4_peak", "p4est cycle peak"),
@@ -139,33 +141,42 @@ def med(runs, key):
     return median(values) if values and None not in values else None
 
 
+def spread(runs, key):
+    values = [r["phase"].get(key) for r in (runs or [])]
+    if not values or None in values:
+        return "-"
+    return "%s-%s" % (fmt_s(min(values)), fmt_s(max(values)))
+
+
 def med_mem(runs, key):
     return median([r[key] for r in runs])
 
 
 def phase_rows(np_, om, p4, split):
-    def row(phase, a, b):
+    def row(phase, a_runs, b_runs, a_key, b_key=None):
+        b_key = b_key or a_key
+        a = med(a_runs, a_key) if a_runs else None
+        b = med(b_runs, b_key) if b_runs else None
         ratio = a / b if a is not None and b and max(a, b) >= MIN_RATED else None
         return {"np": str(np_), "phase": phase, "om": fmt_s(a), "p4": fmt_s(b),
                 "ratio": "-" if ratio is None else "%.2f" % ratio,
-                "bar": "-" if ratio is None else ("yes" if ratio <= BAR else "no")}
+                "bar": "-" if ratio is None else ("yes" if ratio <= BAR else "no"),
+                "om_range": spread(a_runs, a_key), "p4_range": spread(b_runs, b_key)}
 
-    rows = [row("adapt (p4est: refine + coarsen)", med(om, "adapt"), med(p4, "adapt"))]
+    rows = [row("adapt (p4est: refine + coarsen)", om, p4, "adapt")]
     if split:
-        rows.append(row("refine (octmesh --split run)", med(split, "refine"),
-                        med(p4, "refine")))
-        rows.append(row("coarsen (octmesh --split run)", med(split, "coarsen"),
-                        med(p4, "coarsen")))
-    rows += [row("balance", med(om, "balance"), med(p4, "balance")),
-             row("partition for coarsening", med(om, "partition"), med(p4, "partition")),
-             row("mesh (p4est: ghost + lnodes)", med(om, "mesh"), med(p4, "mesh")),
-             row("- p4est ghost", None, med(p4, "ghost")),
-             row("- p4est lnodes", None, med(p4, "lnodes"))]
+        rows.append(row("refine (octmesh --split run)", split, p4, "refine"))
+        rows.append(row("coarsen (octmesh --split run)", split, p4, "coarsen"))
+    rows += [row("balance", om, p4, "balance"),
+             row("partition for coarsening", om, p4, "partition"),
+             row("mesh (p4est: ghost + lnodes)", om, p4, "mesh"),
+             row("- p4est ghost", None, p4, "ghost"),
+             row("- p4est lnodes", None, p4, "lnodes")]
     extra = [k for k in om[0]["phase"] if k not in KNOWN and k != "total"]
     for k in extra:
-        rows.append(row("%s (octmesh only)" % k, med(om, k), None))
+        rows.append(row("%s (octmesh only)" % k, om, None, k))
     rows.append(row("total" + (" (octmesh with %s)" % ", ".join(extra) if extra else ""),
-                    med(om, "total"), med(p4, "total")))
+                    om, p4, "total"))
     return rows
 
 
@@ -234,7 +245,13 @@ def main():
     ap.add_argument("--json", metavar="FILE", help="also write every run as JSON")
     ap.add_argument("--no-build", action="store_true", help="do not run cargo build first "
                     "(make and mpicc still run)")
+    ap.add_argument("--from-json", metavar="FILE", nargs="+",
+                    help="run nothing: print (and --markdown) the tables of saved --json "
+                    "files (several: their runs together; the first file's machine line)")
     args = ap.parse_args()
+    if args.from_json:
+        report(*merge_saved(args.from_json), markdown=args.markdown)
+        return
     if args.dx is None:
         args.dx = int(round(ORACLE_DX / 2.0 ** (args.max_level - ORACLE_MAX_LEVEL)))
     if args.rounds < 1:
@@ -251,8 +268,7 @@ def main():
           % (args.level, args.warmup, args.max_level, args.dx, args.rounds), flush=True)
 
     tools = ["octmesh", "p4est"] + (["split"] if args.split else [])
-    phase_rows_all, mem_rows, hwm_rows_all, count_rows, records, mismatches = (
-        [], [], [], [], [], [])
+    records = []
     try:
         for np_ in nps:
             runs = {t: [] for t in tools}
@@ -265,23 +281,55 @@ def main():
                           "leaves %s" % (np_, k + 1, tool, fmt_s(r["phase"]["total"]),
                                          r["peak_cycle"] / MIB, fmt_int(r["leaves_after"])),
                           flush=True)
-            mismatches += check(np_, runs)
-            om, p4 = runs["octmesh"], runs["p4est"]
-            phase_rows_all += phase_rows(np_, om, p4, runs.get("split"))
-            mem_rows.append(mem_row(np_, om, p4))
-            hwm_rows_all += hwm_rows(np_, om, p4)
-            c = om[0]
-            count_rows.append({
-                "np": str(np_), "before": fmt_int(c["leaves_before"]),
-                "changed": "%s / %s" % (fmt_int(c["refined"]), fmt_int(c["coarsened"])),
-                "after": fmt_int(c["leaves_after"]),
-                "per_rank": " + ".join(fmt_int(n) for n in c["per_rank"]),
-                "nodes": fmt_int(c["nodes"]),
-                "hanging": "%s + %s" % (fmt_int(c["face_hanging"]), fmt_int(c["edge_hanging"])),
-                "ghosts": fmt_int(p4[0]["ghosts"]), "integral": "%.15g" % c["integral"]})
             records.append({"np": np_, "runs": runs})
     except (RunError, OSError, KeyError, ValueError) as e:
         sys.exit("FAILED: %s" % e)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"info": info, "args": vars(args), "records": records}, f, indent=1)
+        print("json written to %s" % args.json)
+    report(info, vars(args), records, args.markdown)
+
+
+def merge_saved(paths):
+    """(info, params, records) of saved --json files, runs of equal np together."""
+    info = params = None
+    by_np = {}
+    for path in paths:
+        with open(path) as f:
+            saved = json.load(f)
+        if info is None:
+            info, params = saved["info"], dict(saved["args"])
+            params["rounds"] = 0
+        elif any(saved["args"][k] != params[k] for k in ("level", "max_level", "dx", "warmup")):
+            sys.exit("%s: another octree than %s" % (path, paths[0]))
+        params["rounds"] += saved["args"]["rounds"]
+        for rec in saved["records"]:
+            runs = by_np.setdefault(rec["np"], {})
+            for tool, rs in rec["runs"].items():
+                runs.setdefault(tool, []).extend(rs)
+    return info, params, [{"np": n, "runs": by_np[n]} for n in sorted(by_np)]
+
+
+def report(info, params, records, markdown):
+    """Prints the tables (and writes them as Markdown); exits 1 on a mismatch."""
+    phase_rows_all, mem_rows, hwm_rows_all, count_rows, mismatches = [], [], [], [], []
+    for rec in records:
+        np_, runs = rec["np"], rec["runs"]
+        mismatches += check(np_, runs)
+        om, p4 = runs["octmesh"], runs["p4est"]
+        phase_rows_all += phase_rows(np_, om, p4, runs.get("split"))
+        mem_rows.append(mem_row(np_, om, p4))
+        hwm_rows_all += hwm_rows(np_, om, p4)
+        c = om[0]
+        count_rows.append({
+            "np": str(np_), "before": fmt_int(c["leaves_before"]),
+            "changed": "%s / %s" % (fmt_int(c["refined"]), fmt_int(c["coarsened"])),
+            "after": fmt_int(c["leaves_after"]),
+            "per_rank": " + ".join(fmt_int(n) for n in c["per_rank"]),
+            "nodes": fmt_int(c["nodes"]),
+            "hanging": "%s + %s" % (fmt_int(c["face_hanging"]), fmt_int(c["edge_hanging"])),
+            "ghosts": fmt_int(p4[0]["ghosts"]), "integral": "%.15g" % c["integral"]})
 
     print()
     print(text_table(phase_rows_all, PHASE_COLUMNS))
@@ -291,13 +339,14 @@ def main():
     print(text_table(hwm_rows_all, HWM_COLUMNS))
     print()
     print(text_table(count_rows, COUNT_COLUMNS))
-    if args.markdown:
-        with open(args.markdown, "w") as f:
+    if markdown:
+        with open(markdown, "w") as f:
             f.write(header_line(info, "p4est %s. Uniform level %d, %d warm-up steps, max "
                                 "level %d, dx %d; medians of %d alternating rounds; seconds, "
                                 "max over ranks." % (
-                                    records[0]["runs"]["p4est"][0]["version"], args.level,
-                                    args.warmup, args.max_level, args.dx, args.rounds)))
+                                    records[0]["runs"]["p4est"][0]["version"], params["level"],
+                                    params["warmup"], params["max_level"], params["dx"],
+                                    params["rounds"])))
             f.write("\n\n" + markdown_table(phase_rows_all, PHASE_COLUMNS,
                                             left=("phase",)) + "\n")
             f.write("\nMemory (RSS per rank, max over ranks; the cycle's peak with VmHWM reset "
@@ -307,11 +356,7 @@ def main():
             f.write(markdown_table(hwm_rows_all, HWM_COLUMNS, left=("code", "hwm")) + "\n")
             f.write("\nCounts (equal in both codes and every run):\n\n")
             f.write(markdown_table(count_rows, COUNT_COLUMNS, left=()) + "\n")
-        print("markdown written to %s" % args.markdown)
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump({"info": info, "args": vars(args), "records": records}, f, indent=1)
-        print("json written to %s" % args.json)
+        print("markdown written to %s" % markdown)
     for msg in mismatches:
         print("*** MISMATCH " + msg + " ***")
     if mismatches:
