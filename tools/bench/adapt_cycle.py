@@ -26,11 +26,14 @@ lattice units per step for a maximum level of 5 (1.28 finest cells); here the
 step is scaled to the same 1.28 finest cells by default (--dx), so that the
 fine shell follows the sphere as in a CFL-limited simulation. The warm-up is a
 uniform octree at --level and --warmup steps of the loop; the cycle is the
-next step.
+next step. With the centre at mid-height (the oracle's; --z) the octree is
+symmetric about the plane z = 1/2, where two ranks split it, so the partition
+on 2 ranks moves nothing; a centre off the middle makes it move leaves and
+their data.
 
 The script runs both programs --rounds times per rank count, alternating
-which goes first, and prints medians, the ratio octmesh / p4est (bar: at most
-0.5), the peak RSS per rank during the cycle (VmHWM reset just before it) and
+which goes first, and prints medians (and the range), the ratio octmesh / p4est
+(bar: at most 0.5), the peak RSS per rank during the cycle (VmHWM reset just before it) and
 before it, and the leaf counts. It fails unless both codes have the same
 leaves before and after the cycle, the same leaves per rank, the same
 independent node count (octmesh's against p8est_lnodes') and the same
@@ -58,7 +61,7 @@ from benchlib import (  # noqa: E402
 
 BAR = 0.5
 MIN_RATED = 1e-4  # seconds; faster phases are shown but not rated
-ORACLE_DX, ORACLE_MAX_LEVEL = 20972, 5
+ORACLE_DX, ORACLE_MAX_LEVEL, ORACLE_Z = 20972, 5, 262144
 P4EST_DIR = ROOT / "tools" / "p4est_ref"
 P4EST_CYCLE = P4EST_DIR / "p4est_adapt_cycle"
 SOURCE = ROOT / "tools" / "bench" / "adapt_cycle_octmesh.c"
@@ -69,7 +72,8 @@ LIB = OUT / "lib"
 # octmesh phases the table knows; any other phase the program reports (a
 # transfer timed after the mesh build) gets a row of its own.
 KNOWN = ("adapt", "refine", "coarsen", "balance", "partition", "mesh")
-CHECKED = ("leaves_before", "refined", "coarsened", "leaves_after", "per_rank", "nodes", "integral")
+CHECKED = ("leaves_before", "refined", "coarsened", "leaves_after", "per_rank_before_partition",
+           "per_rank", "nodes", "integral")
 
 PHASE_COLUMNS = [("np", "np"), ("phase", "phase"), ("om", "octmesh [s]"),
                  ("p4", "p4est [s]"), ("ratio", "octmesh/p4est"), ("bar", "<= 0.5"),
@@ -84,7 +88,7 @@ HWM_COLUMNS = [("np", "np"), ("code", "code"),
                ("hwm", "peak RSS so far after each phase, MiB per rank")]
 COUNT_COLUMNS = [("np", "np"), ("before", "leaves before"),
                  ("changed", "refined / coarsened families"), ("after", "leaves after"),
-                 ("per_rank", "leaves per rank"), ("nodes", "independent nodes"),
+                 ("per_rank", "leaves per rank"), ("moved", "moved by the partition"), ("nodes", "independent nodes"),
                  ("hanging", "hanging nodes (face + edge, octmesh)"),
                  ("ghosts", "p4est ghosts"), ("integral", "integral of the data")]
 
@@ -118,7 +122,7 @@ def result(stdout):
 
 def run_one(tool, np_, args, env):
     common = ["--level", args.level, "--max-level", args.max_level, "--dx", args.dx,
-              "--warmup", args.warmup]
+              "--z", args.z, "--warmup", args.warmup]
     if tool == "p4est":
         cmd = mpirun(np_) + [P4EST_CYCLE] + common
     else:
@@ -215,7 +219,7 @@ def check(np_, runs):
     for tool, rs in runs.items():
         for i, r in enumerate(rs):
             for k in CHECKED:
-                if r[k] != ref[k]:
+                if r.get(k) != ref.get(k):
                     bad.append("np %d %s run %d: %s %s, p4est %s" % (np_, tool, i + 1, k,
                                                                     r[k], ref[k]))
             if not r["hwm_reset"]:
@@ -234,6 +238,10 @@ def main():
     ap.add_argument("--dx", type=int,
                     help="the centre's step in lattice units (default: the oracle's 20972 "
                     "scaled to the max level, round(20972 / 2^(max level - 5)))")
+    ap.add_argument("--z", type=int, default=ORACLE_Z,
+                    help="the centre's z in lattice units (default %d, the middle: the "
+                    "octree is then symmetric about the plane that splits it between 2 "
+                    "ranks, and a partition on 2 ranks moves nothing)" % ORACLE_Z)
     ap.add_argument("--warmup", type=int, default=8,
                     help="warm-up steps; the timed cycle is the next (default 8)")
     ap.add_argument("--np", default="1,2", help="rank counts (default 1,2)")
@@ -264,8 +272,9 @@ def main():
     print("One adaptive cycle, octmesh against p4est (issue 23)")
     for k in ("machine", "date", "commit", "mpi"):
         print("  %-8s %s" % (k + ":", info[k]))
-    print("  warm-up: uniform level %d, %d steps, max level %d, dx %d; %d rounds, alternating"
-          % (args.level, args.warmup, args.max_level, args.dx, args.rounds), flush=True)
+    print("  warm-up: uniform level %d, %d steps, max level %d, dx %d, z %d; %d rounds, "
+          "alternating" % (args.level, args.warmup, args.max_level, args.dx, args.z,
+                           args.rounds), flush=True)
 
     tools = ["octmesh", "p4est"] + (["split"] if args.split else [])
     records = []
@@ -291,6 +300,18 @@ def main():
     report(info, vars(args), records, args.markdown)
 
 
+def moved(old, new):
+    """Leaves that change rank when the counts per rank go from old to new
+    (both partitions cut one Morton order into consecutive pieces)."""
+    if old is None:
+        return None
+    stay, a, b = 0, 0, 0
+    for n_old, n_new in zip(old, new):
+        stay += max(0, min(a + n_old, b + n_new) - max(a, b))
+        a, b = a + n_old, b + n_new
+    return sum(new) - stay
+
+
 def merge_saved(paths):
     """(info, params, records) of saved --json files, runs of equal np together."""
     info = params = None
@@ -301,7 +322,8 @@ def merge_saved(paths):
         if info is None:
             info, params = saved["info"], dict(saved["args"])
             params["rounds"] = 0
-        elif any(saved["args"][k] != params[k] for k in ("level", "max_level", "dx", "warmup")):
+        elif any(saved["args"].get(k, ORACLE_Z) != params.get(k, ORACLE_Z)
+                 for k in ("level", "max_level", "dx", "z", "warmup")):
             sys.exit("%s: another octree than %s" % (path, paths[0]))
         params["rounds"] += saved["args"]["rounds"]
         for rec in saved["records"]:
@@ -327,6 +349,7 @@ def report(info, params, records, markdown):
             "changed": "%s / %s" % (fmt_int(c["refined"]), fmt_int(c["coarsened"])),
             "after": fmt_int(c["leaves_after"]),
             "per_rank": " + ".join(fmt_int(n) for n in c["per_rank"]),
+            "moved": fmt_int(moved(c.get("per_rank_before_partition"), c["per_rank"])),
             "nodes": fmt_int(c["nodes"]),
             "hanging": "%s + %s" % (fmt_int(c["face_hanging"]), fmt_int(c["edge_hanging"])),
             "ghosts": fmt_int(p4[0]["ghosts"]), "integral": "%.15g" % c["integral"]})
@@ -342,11 +365,11 @@ def report(info, params, records, markdown):
     if markdown:
         with open(markdown, "w") as f:
             f.write(header_line(info, "p4est %s. Uniform level %d, %d warm-up steps, max "
-                                "level %d, dx %d; medians of %d alternating rounds; seconds, "
-                                "max over ranks." % (
+                                "level %d, dx %d, z %d; medians of %d alternating rounds; "
+                                "seconds, max over ranks." % (
                                     records[0]["runs"]["p4est"][0]["version"], params["level"],
                                     params["warmup"], params["max_level"], params["dx"],
-                                    params["rounds"])))
+                                    params.get("z", ORACLE_Z), params["rounds"])))
             f.write("\n\n" + markdown_table(phase_rows_all, PHASE_COLUMNS,
                                             left=("phase",)) + "\n")
             f.write("\nMemory (RSS per rank, max over ranks; the cycle's peak with VmHWM reset "

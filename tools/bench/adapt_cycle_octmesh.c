@@ -6,7 +6,7 @@
  *
  * The same moving sphere (the exact cut test of
  * tools/p4est_ref/octmesh_p4est_adapt.c, centre x advancing DX lattice units
- * per step) and the same 16 bytes of data per leaf as the p4est program: a
+ * per step, centre z at Z, 262144 by default) and the same 16 bytes of data per leaf as the p4est program: a
  * double (a smooth function of the centre at the start), the level, int32,
  * and padding; copied on refinement and balance splits, the mean on
  * coarsening.
@@ -29,14 +29,14 @@
  *
  * Memory and output as in the p4est program: rank 0 prints one line
  * "RESULT {json}" with the phase times (seconds, maximum over ranks), leaf
- * counts, leaves refined and families coarsened, leaves per rank,
- * independent nodes, the integral of the data, the RSS before the cycle,
- * the peak of the warm-up, the peak during the cycle (VmHWM reset through
+ * counts, leaves refined and families coarsened, leaves per rank before
+ * and after the partition, independent nodes, the integral of the data,
+ * the RSS before the cycle, the peak of the warm-up, the peak during the cycle (VmHWM reset through
  * /proc/self/clear_refs just before it) and VmHWM after each phase (where
  * the peak is reached); bytes per rank, maximum over ranks.
  *
  * Usage: mpirun -np P adapt_cycle_octmesh --level L --max-level M
- *          --warmup W [--dx DX] [--split]
+ *          --warmup W [--dx DX] [--z Z] [--split]
  */
 
 #include <stdint.h>
@@ -68,7 +68,7 @@ static const char *phase_names[NPHASES] = {"adapt",     "refine", "coarsen", "ba
                                            "partition", "mesh"};
 
 static int g_rank, g_size, g_step, g_max_level;
-static int64_t g_dx = STEP_X;
+static int64_t g_dx = STEP_X, g_z = ROOT_HALF;
 
 static void fail(octmesh_t *h, const char *what, octmesh_status_t s) {
   fprintf(stderr, "adapt_cycle_octmesh: rank %d: %s failed: %s (%s)\n", g_rank, what,
@@ -87,7 +87,7 @@ static void usage_error(const char *msg) {
   if (g_rank == 0)
     fprintf(stderr,
             "adapt_cycle_octmesh: %s\nusage: adapt_cycle_octmesh --level L --max-level M"
-            " --warmup W [--dx DX] [--split]\n",
+            " --warmup W [--dx DX] [--z Z] [--split]\n",
             msg);
   MPI_Finalize();
   exit(1);
@@ -95,7 +95,7 @@ static void usage_error(const char *msg) {
 
 /* The oracle's cut test: the closed box meets the sphere's surface. */
 static int cut(const octmesh_octant_t *o) {
-  const int64_t c[3] = {START_X + g_dx * g_step, ROOT_HALF, ROOT_HALF};
+  const int64_t c[3] = {START_X + g_dx * g_step, ROOT_HALF, g_z};
   const int64_t r2 = (int64_t)RADIUS * RADIUS;
   const int64_t len = (int64_t)1 << (19 - o->level);
   const int64_t lo[3] = {o->x, o->y, o->z};
@@ -267,6 +267,8 @@ int main(int argc, char **argv) {
       g_max_level = (int)int_arg(argv[++i], 0, 18, "--max-level: 0-18");
     else if (!strcmp(a, "--dx"))
       g_dx = int_arg(argv[++i], 0, 262144, "--dx: 0 to 262144");
+    else if (!strcmp(a, "--z"))
+      g_z = int_arg(argv[++i], RADIUS, 524288 - RADIUS, "--z: 131072 to 393216");
     else if (!strcmp(a, "--warmup"))
       warmup = (int)int_arg(argv[++i], 0, 100000, "--warmup: 0-100000");
     else
@@ -315,6 +317,8 @@ int main(int argc, char **argv) {
           octmesh_octree_adapt_ext(h, adapt_sphere, replace, NULL, &refined, &coarsened));
   }
   PHASE(BALANCE, octmesh_octree_balance_ext(h, OCTMESH_CONNECT_CORNER, replace, NULL));
+  octmesh_locidx_t balanced_local;
+  OK(octmesh_octree_get_num_leaves(h, &balanced_local, &after), h);
   PHASE(PARTITION, octmesh_octree_partition_for_coarsening(h, NULL, NULL));
   PHASE(MESH, octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER));
   /* The data transfer onto the new mesh goes here, timed like the others:
@@ -335,14 +339,15 @@ int main(int argc, char **argv) {
   octmesh_mesh_counts_t c;
   OK(octmesh_mesh_get_counts(h, &c), h);
   OK(octmesh_octree_get_num_leaves(h, &nl, &after), h);
-  long long mine = nl, *per = malloc(sizeof *per * (size_t)g_size);
-  MPI_Gather(&mine, 1, MPI_LONG_LONG, per, 1, MPI_LONG_LONG, 0, comm);
+  long long mine[2] = {nl, balanced_local}, *per = malloc(sizeof *per * 2 * (size_t)g_size);
+  MPI_Gather(mine, 2, MPI_LONG_LONG, per, 2, MPI_LONG_LONG, 0, comm);
   double integ = integral(h);
   if (g_rank == 0) {
     double total = 0;
     printf("RESULT {\"tool\": \"octmesh\", \"ranks\": %d, \"level\": %d, \"max_level\": %d, "
-           "\"warmup\": %d, \"dx\": %lld, \"step\": %d, \"split\": %d, \"times\": {",
-           g_size, level, g_max_level, warmup, (long long)g_dx, g_step, split);
+           "\"warmup\": %d, \"dx\": %lld, \"z\": %lld, \"step\": %d, \"split\": %d, "
+           "\"times\": {",
+           g_size, level, g_max_level, warmup, (long long)g_dx, (long long)g_z, g_step, split);
     for (int i = 0, first = 1; i < NPHASES; i++)
       if (done[i]) {
         printf("%s\"%s\": %.9f", first ? "" : ", ", phase_names[i], tmax[i]);
@@ -353,7 +358,9 @@ int main(int argc, char **argv) {
            "\"coarsened\": %lld, \"leaves_after\": %lld, \"per_rank\": [",
            total, (long long)before, (long long)refined, (long long)coarsened,
            (long long)after);
-    for (int r = 0; r < g_size; r++) printf("%s%lld", r ? ", " : "", per[r]);
+    for (int r = 0; r < g_size; r++) printf("%s%lld", r ? ", " : "", per[2 * r]);
+    printf("], \"per_rank_before_partition\": [");
+    for (int r = 0; r < g_size; r++) printf("%s%lld", r ? ", " : "", per[2 * r + 1]);
     printf("], \"nodes\": %lld, \"face_hanging\": %lld, \"edge_hanging\": %lld, "
            "\"integral\": %.17g, \"rss_before_cycle\": %lld, \"peak_cycle\": %lld, "
            "\"peak_warmup\": %lld, \"hwm_reset\": %d, \"peak_after\": {",

@@ -30,13 +30,17 @@
  *
  * Rank 0 prints one line "RESULT {json}" with the phase times (seconds,
  * maximum over ranks), the leaf counts before and after the cycle, the
- * leaves refined and families coarsened (before balance), the
- * leaves per rank after it, lnodes' global node count, the integral of
- * the data (sum of volume * value, a check that the data went through
- * the cycle) and the memory figures.
+ * leaves refined and families coarsened (before balance), the leaves per
+ * rank before and after the partition, lnodes' global node count, the
+ * integral of the data (sum of volume * value, a check that the data went
+ * through the cycle) and the memory figures.
+ *
+ * --dx DX: the centre's step along x in lattice units (default the
+ * oracle's 20972); --z Z: the centre's z (default 262144, the middle, as
+ * in the oracle).
  *
  * Usage: mpirun -np P p4est_adapt_cycle --level L --max-level M
- *          --warmup W
+ *          --warmup W [--dx DX] [--z Z]
  */
 
 #include <stdint.h>
@@ -71,7 +75,7 @@ static const char  *phase_names[NPHASES] = {
 
 static int          g_rank, g_size;
 static int          g_step, g_max_level;
-static int64_t      g_dx = STEP_X;
+static int64_t      g_dx = STEP_X, g_z = ROOT_HALF;
 
 static void
 finish (int code)
@@ -86,7 +90,7 @@ usage_error (const char *msg)
 {
   if (g_rank == 0)
     fprintf (stderr, "p4est_adapt_cycle: %s\nusage: p4est_adapt_cycle"
-             " --level L --max-level M --warmup W [--dx DX]\n", msg);
+             " --level L --max-level M --warmup W [--dx DX] [--z Z]\n", msg);
   finish (1);
 }
 
@@ -110,7 +114,7 @@ is_cut (const p8est_quadrant_t * q)
   axis_dist (START_X + g_dx * g_step, q->x, q->x + len, &dmin,
              &dmax);
   axis_dist (ROOT_HALF, q->y, q->y + len, &dmin, &dmax);
-  axis_dist (ROOT_HALF, q->z, q->z + len, &dmin, &dmax);
+  axis_dist (g_z, q->z, q->z + len, &dmin, &dmax);
   return dmin <= r2 && r2 <= dmax;
 }
 
@@ -264,6 +268,7 @@ main (int argc, char **argv)
   long long           mem[3], memmax[3], hwm[NPHASES], hwmmax[NPHASES];
   long long           lnodes_owned, lnodes_global, ghosts, ghosts_all;
   p4est_gloidx_t      before, refined, coarsened;
+  long long           balanced_local, *balanced = NULL;
   p8est_connectivity_t *conn;
   p8est_t            *p8est;
   p8est_ghost_t      *ghost;
@@ -287,6 +292,9 @@ main (int argc, char **argv)
                                    "--max-level: 0-18");
     else if (!strcmp (a, "--dx"))
       g_dx = int_arg (argv[++i], 0, 262144, "--dx: 0 to 262144");
+    else if (!strcmp (a, "--z"))
+      g_z = int_arg (argv[++i], RADIUS, 524288 - RADIUS,
+                     "--z: 131072 to 393216");
     else if (!strcmp (a, "--warmup"))
       warmup = (int) int_arg (argv[++i], 0, 100000, "--warmup: 0-100000");
     else
@@ -323,6 +331,7 @@ main (int argc, char **argv)
   coarsened = (before + 7 * refined - p8est->global_num_quadrants) / 7;
   PHASE (BALANCE, p8est_balance_ext (p8est, P8EST_CONNECT_FULL, NULL,
                                      replace_fn));
+  balanced_local = (long long) p8est->local_num_quadrants;
   PHASE (PARTITION, p8est_partition_ext (p8est, 1, NULL));
   PHASE (GHOST, ghost = p8est_ghost_new (p8est, P8EST_CONNECT_FULL));
   PHASE (LNODES, lnodes = p8est_lnodes_new (p8est, ghost, 1));
@@ -336,6 +345,10 @@ main (int argc, char **argv)
   MPI_Reduce (&hwm_reset, &all_reset, 1, MPI_INT, MPI_MIN, 0, comm);
 
   /* Counts and checks, after the measurements. */
+  if (g_rank == 0)
+    balanced = (long long *) malloc (sizeof *balanced * (size_t) g_size);
+  MPI_Gather (&balanced_local, 1, MPI_LONG_LONG, balanced, 1, MPI_LONG_LONG,
+              0, comm);
   lnodes_owned = lnodes->owned_count;
   MPI_Allreduce (&lnodes_owned, &lnodes_global, 1, MPI_LONG_LONG, MPI_SUM,
                  comm);
@@ -346,9 +359,9 @@ main (int argc, char **argv)
     if (g_rank == 0) {
       printf ("RESULT {\"tool\": \"p4est\", \"version\": \"%s\", "
               "\"ranks\": %d, \"level\": %d, \"max_level\": %d, "
-              "\"warmup\": %d, \"dx\": %lld, \"step\": %d, \"times\": {",
-              P4EST_VERSION, g_size, level, g_max_level, warmup,
-              (long long) g_dx, g_step);
+              "\"warmup\": %d, \"dx\": %lld, \"z\": %lld, \"step\": %d, "
+              "\"times\": {", P4EST_VERSION, g_size, level, g_max_level,
+              warmup, (long long) g_dx, (long long) g_z, g_step);
       for (i = 0; i < NPHASES; ++i) {
         printf ("%s\"%s\": %.9f", i ? ", " : "", phase_names[i], tmax[i]);
         total += tmax[i];
@@ -362,6 +375,9 @@ main (int argc, char **argv)
         printf ("%s%lld", r ? ", " : "",
                 (long long) (p8est->global_first_quadrant[r + 1] -
                              p8est->global_first_quadrant[r]));
+      printf ("], \"per_rank_before_partition\": [");
+      for (r = 0; r < g_size; ++r)
+        printf ("%s%lld", r ? ", " : "", balanced[r]);
       printf ("], \"nodes\": %lld, \"ghosts\": %lld, \"integral\": %.17g, "
               "\"rss_before_cycle\": %lld, \"peak_cycle\": %lld, "
               "\"peak_warmup\": %lld, \"hwm_reset\": %d, \"peak_after\": {",
@@ -371,6 +387,7 @@ main (int argc, char **argv)
         printf ("%s\"%s\": %lld", i ? ", " : "", phase_names[i], hwmmax[i]);
       printf ("}}\n");
       fflush (stdout);
+      free (balanced);
     }
   }
 
