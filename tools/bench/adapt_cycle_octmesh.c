@@ -169,7 +169,10 @@ static octmesh_octant_t *leaves(octmesh_t *h, octmesh_locidx_t *n) {
   octmesh_gloidx_t ng;
   OK(octmesh_octree_get_num_leaves(h, n, &ng), h);
   octmesh_octant_t *l = malloc(sizeof *l * (size_t)(*n > 0 ? *n : 1));
-  if (l == NULL) fail(h, "malloc", OCTMESH_STATUS_OK);
+  if (l == NULL) {
+    fprintf(stderr, "adapt_cycle_octmesh: rank %d: out of memory\n", g_rank);
+    MPI_Abort(MPI_COMM_WORLD, 2);
+  }
   OK(octmesh_octree_get_leaves(h, l, *n), h);
   return l;
 }
