@@ -19,8 +19,13 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::octant::Octant;
 
 /// Reference to a pointer-tree entry: an internal node index, `LEAF | i`
-/// for leaf `i` of the merged array, or [`VOID`].
+/// for leaf `i` of the merged array, `FAMILY | i` for an internal node
+/// whose children are the eight leaves from `i` on, or [`VOID`].
 const LEAF: u32 = 1 << 31;
+/// See [`LEAF`]. Most internal nodes of a balanced octree are parents of
+/// eight leaves; naming them by their first leaf instead of an entry of 8
+/// words takes the pointer tree from about 4.6 to about 1 byte per leaf.
+const FAMILY: u32 = 1 << 30;
 /// A region with no leaf known here (or outside the domain).
 const VOID: u32 = u32::MAX;
 /// Marks a corner slot not yet given a node.
@@ -210,7 +215,7 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
             format!("{n} leaves and ghosts on one rank: at most 2^31 - 1 can be meshed"),
         ));
     }
-    let mut tree = Vec::with_capacity(n / 6 + 1);
+    let mut tree = Vec::with_capacity(n / 24 + 1);
     let root = build(&leaves, Octant::ROOT, 0, n, &mut tree);
     let mut w = Walker {
         tree: &tree,
@@ -364,6 +369,12 @@ fn build(leaves: &Merged, o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32; 
         tree[idx][c as usize] = r;
         a = b;
     }
+    // Eight leaves, the children themselves: no entry needed. Nothing was
+    // pushed after this entry, since no child is internal.
+    if (lo as u32) < FAMILY && (0..8).all(|c| tree[idx][c] == LEAF | (lo + c) as u32) {
+        tree.pop();
+        return FAMILY | lo as u32;
+    }
     idx as u32
 }
 
@@ -444,6 +455,8 @@ impl Walker<'_> {
     fn child(&self, r: u32, c: u32) -> u32 {
         if r & LEAF != 0 {
             r
+        } else if r & FAMILY != 0 {
+            LEAF | ((r & !FAMILY) + c)
         } else {
             self.tree[r as usize][c as usize]
         }

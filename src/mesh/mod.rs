@@ -70,6 +70,7 @@ use crate::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::report::PhaseTimer;
 
+use std::cell::OnceCell;
 use std::sync::Arc;
 
 pub use boundary::{Boundary, BoundaryFace};
@@ -151,7 +152,10 @@ pub struct Mesh {
     size: usize,
     domain: Domain,
     elements: Elements,
-    element_class: Vec<u8>,
+    /// Class of each element (made on first request when every element
+    /// has `uniform_class`).
+    element_class: OnceCell<Vec<u8>>,
+    uniform_class: u8,
     connectivity: Vec<[u32; 8]>,
     num_owned: usize,
     num_independent: usize,
@@ -201,38 +205,33 @@ impl Mesh {
         // Whatever earlier phases freed must not stay resident under the
         // mesh.
         crate::report::trim_heap();
-        let unclassified;
-        let local_class: &[u8] = match classes {
-            Some(c) => c,
-            None => {
-                unclassified = vec![LeafClass::Outside as u8; tree.local_len()];
-                &unclassified
-            }
-        };
         // Leaves outside a box domain are never elements.
         let brick = domain.brick;
         let with_void: Vec<u8>;
-        let local_class: &[u8] =
-            if brick.is_cube() || !tree.leaves().iter().any(|o| brick.is_void(*o)) {
-                local_class
-            } else {
-                with_void = local_class
-                    .iter()
-                    .zip(tree.leaves())
-                    .map(|(&c, &o)| if brick.is_void(o) { c | VOID } else { c })
+        let any_void = !brick.is_cube() && tree.leaves().iter().any(|o| brick.is_void(*o));
+        let local_class = match (classes, any_void) {
+            // Without classes every leaf counts as outside: one byte for
+            // all, not one per leaf.
+            (None, false) => ClassBytes::Uniform(LeafClass::Outside as u8, tree.local_len()),
+            (c, false) => ClassBytes::Slice(c.unwrap_or_default()),
+            (c, true) => {
+                let of = |i: usize| c.map_or(LeafClass::Outside as u8, |c| c[i]);
+                with_void = (tree.leaves().iter().enumerate())
+                    .map(|(i, &o)| of(i) | if brick.is_void(o) { VOID } else { 0 })
                     .collect();
-                &with_void
-            };
+                ClassBytes::Slice(&with_void)
+            }
+        };
         let keep =
             |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);
         let mut cleaned_classes;
         let mut cleaned = 0;
-        let local_class: &[u8] = if opts.clean_walls && opts.keep != Keep::All {
+        let local_class = if opts.clean_walls && opts.keep != Keep::All {
             cleaned_classes = local_class.to_vec();
             cleaned = timer.time(comm, "clean", || {
                 manifold::clean_walls(tree, &mut cleaned_classes, keep)
             });
-            &cleaned_classes
+            ClassBytes::Slice(&cleaned_classes)
         } else {
             local_class
         };
@@ -240,12 +239,12 @@ impl Mesh {
         // Each leaf travels with its class and, when kept, its global
         // element number, so the halo of the finite-volume faces needs no
         // second exchange.
-        let nkept = local_class.iter().filter(|&&c| keep(c)).count() as u64;
+        let nkept = local_class.iter().filter(|&c| keep(c)).count() as u64;
         // Only leaves sent to other ranks need their number: none on one.
         let element_index: Vec<u64> = if comm.size() > 1 {
             local_class
                 .iter()
-                .scan(0u64, |n, &c| {
+                .scan(0u64, |n, c| {
                     let i = *n;
                     *n += keep(c) as u64;
                     Some(i)
@@ -258,7 +257,7 @@ impl Mesh {
         let first_element: u64 = kept_counts[..comm.rank()].iter().sum();
         let ghosts = timer.time(comm, "ghost", || {
             build_ghost_layer(tree, |i| {
-                local_class[i] as u64 | (first_element + element_index[i]) << 8
+                local_class.get(i) as u64 | (first_element + element_index[i]) << 8
             })
         });
         drop(element_index);
@@ -271,12 +270,13 @@ impl Mesh {
         };
 
         let nodes = timer.time(comm, "nodes", || {
-            let classes = Merged {
-                before: &ghost_class[..b],
-                local: local_class,
-                after: &ghost_class[b..],
+            let nlocal = tree.local_len();
+            let class_of = |i: usize| match i.checked_sub(b) {
+                None => ghost_class[i],
+                Some(j) if j < nlocal => local_class.get(j),
+                Some(j) => ghost_class[b + j - nlocal],
             };
-            let kept = Bits::from_fn(merged.len(), |i| keep(classes.get(i)));
+            let kept = Bits::from_fn(merged.len(), |i| keep(class_of(i)));
             let d = dual::extract_nodes(merged, &kept)?;
             let counted = count_hanging(comm, tree.first_cells(), &d, merged);
             Ok((d, kept, counted))
@@ -289,7 +289,7 @@ impl Mesh {
         let numbering = crate::comm::agree(comm, numbering)?;
 
         let mesh = timer.time(comm, "connectivity", || {
-            assemble(tree, domain, d, merged, &kept, local_class, numbering)
+            assemble(tree, domain, d, merged, &kept, &local_class, numbering)
         });
         let mut mesh = crate::comm::agree(comm, mesh)?;
         mesh.first_element = first_element;
@@ -375,7 +375,8 @@ impl Mesh {
 
     /// Class of each local element ([`LeafClass`] as a byte).
     pub fn element_class(&self) -> &[u8] {
-        &self.element_class
+        self.element_class
+            .get_or_init(|| vec![self.uniform_class; self.elements.len()])
     }
 
     /// The 8 local node indices of each local element, VTK hexahedron order.
@@ -549,6 +550,34 @@ impl Mesh {
     }
 }
 
+/// The class byte of each local leaf: the caller's, or one for all.
+enum ClassBytes<'a> {
+    Slice(&'a [u8]),
+    Uniform(u8, usize),
+}
+
+impl ClassBytes<'_> {
+    #[inline]
+    fn get(&self, i: usize) -> u8 {
+        match self {
+            ClassBytes::Slice(s) => s[i],
+            ClassBytes::Uniform(c, _) => *c,
+        }
+    }
+
+    fn iter(&self) -> impl Iterator<Item = u8> + '_ {
+        let n = match self {
+            ClassBytes::Slice(s) => s.len(),
+            ClassBytes::Uniform(_, n) => *n,
+        };
+        (0..n).map(|i| self.get(i))
+    }
+
+    fn to_vec(&self) -> Vec<u8> {
+        self.iter().collect()
+    }
+}
+
 fn check_inputs(tree: &LinearOctree, classes: Option<&[u8]>, opts: &MeshOptions) -> Result<()> {
     match tree.balanced() {
         Some(Connectivity::Edge) | Some(Connectivity::Corner) => {}
@@ -718,7 +747,7 @@ fn assemble(
     d: dual::DualNodes,
     leaves: Merged,
     kept: &Bits,
-    local_class: &[u8],
+    local_class: &ClassBytes,
     num: Independent,
 ) -> Result<Mesh> {
     let comm: &dyn Comm = &**tree.comm();
@@ -817,14 +846,21 @@ fn assemble(
     // move to the front (never past their own slot), renumbered.
     let local_range = leaves.local_range();
     let nkept = local_range.clone().filter(|&i| kept.get(i)).count();
-    let mut element_class = Vec::with_capacity(nkept);
+    // One class for all is kept as one byte until asked for.
+    let uniform = match local_class {
+        ClassBytes::Uniform(c, _) => Some(LeafClass::from_bits(*c) as u8),
+        ClassBytes::Slice(_) => None,
+    };
+    let mut element_class = Vec::with_capacity(if uniform.is_some() { 0 } else { nkept });
     let mut connectivity = corners;
     let mut w = 0;
     for (j, i) in local_range.clone().enumerate() {
         if !kept.get(i) {
             continue;
         }
-        element_class.push(LeafClass::from_bits(local_class[j]) as u8);
+        if uniform.is_none() {
+            element_class.push(LeafClass::from_bits(local_class.get(j)) as u8);
+        }
         let c = connectivity[i];
         connectivity[w] = std::array::from_fn(|v| new_of(c[VTK_TO_MORTON[v]]));
         w += 1;
@@ -865,7 +901,11 @@ fn assemble(
         size: comm.size(),
         domain: *domain,
         elements,
-        element_class,
+        element_class: match uniform {
+            None => OnceCell::from(element_class),
+            Some(_) => OnceCell::new(),
+        },
+        uniform_class: uniform.unwrap_or(0),
         connectivity,
         num_owned,
         num_independent,
