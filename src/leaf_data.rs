@@ -164,24 +164,48 @@ impl LeafData {
         let lo: usize = send[..me].iter().sum();
         let (got, _) = comm.alltoallv_u64(&buf, &counts);
         drop(buf);
-        let mut out = Vec::with_capacity(n * s);
-        let mut w = 0usize;
-        for (r, &k) in recv.iter().enumerate() {
-            if r == me {
-                out.extend_from_slice(&self.bytes[lo * s..(lo + send[me]) * s]);
-                continue;
+        // The middle stays where it is, as the leaves' does: the suffix
+        // sent away is cut, the middle moves only by the difference between
+        // the prefix sent and the prefix received (no second array whose
+        // pages would all be faulted in).
+        let received = |range: std::ops::Range<usize>| {
+            let mut w: usize = recv[..range.start]
+                .iter()
+                .enumerate()
+                .filter(|&(r, _)| r != me)
+                .map(|(_, &k)| words(k))
+                .sum();
+            let mut out = Vec::new();
+            for (r, &k) in recv.iter().enumerate().take(range.end).skip(range.start) {
+                if r == me {
+                    continue;
+                }
+                let block = &got[w..w + words(k)];
+                w += words(k);
+                out.extend(block.iter().flat_map(|x| x.to_ne_bytes()).take(k * s));
             }
-            let block = &got[w..w + words(k)];
-            w += words(k);
-            let bytes: Vec<u8> = block.iter().flat_map(|x| x.to_ne_bytes()).collect();
-            out.extend_from_slice(&bytes[..k * s]);
-        }
-        debug_assert_eq!(out.len(), n * s);
-        *self = LeafData {
-            size: s,
-            len: n,
-            bytes: out,
+            out
         };
+        let before = received(0..me);
+        let after = received(me + 1..p);
+        let keep = send[me] * s;
+        let bytes = &mut self.bytes;
+        bytes.truncate((lo + send[me]) * s);
+        if before.len() > lo * s {
+            let grow = before.len() - lo * s;
+            bytes.resize(bytes.len() + grow, 0);
+            bytes.copy_within(lo * s..lo * s + keep, before.len());
+        } else {
+            bytes.copy_within(lo * s..lo * s + keep, before.len());
+            bytes.truncate(before.len() + keep);
+        }
+        bytes[..before.len()].copy_from_slice(&before);
+        bytes.extend_from_slice(&after);
+        if bytes.capacity() > 2 * bytes.len() {
+            bytes.shrink_to_fit();
+        }
+        debug_assert_eq!(bytes.len(), n * s);
+        self.len = n;
     }
 }
 

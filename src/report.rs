@@ -30,14 +30,24 @@ pub fn peak_rss_bytes() -> u64 {
 /// heap below [`TRIM_MIN_FREE`] stays: it is small against any peak, and a
 /// small octree would otherwise pay those faults in every phase.
 pub fn trim_heap() {
+    trim_heap_above(TRIM_MIN_FREE);
+}
+
+/// [`trim_heap`] with another threshold: a stage about to allocate arrays
+/// for many leaves gives back a free heap of `min_free` bytes or more (the
+/// large arrays it makes are mapped apart from the heap, so they would not
+/// reuse it).
+pub fn trim_heap_above(min_free: usize) {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallinfo2 only reads the allocator's statistics, and
     // malloc_trim only releases free heap pages; no pointer is involved.
     unsafe {
-        if libc::mallinfo2().fordblks >= TRIM_MIN_FREE {
+        if libc::mallinfo2().fordblks >= min_free {
             libc::malloc_trim(0);
         }
     }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    let _ = min_free;
 }
 
 /// Free heap bytes below which [`trim_heap`] keeps them (glibc's own

@@ -203,8 +203,9 @@ impl Mesh {
         crate::comm::agree(comm, check)?;
         let mut timer = PhaseTimer::new();
         // Whatever earlier phases freed must not stay resident under the
-        // mesh.
-        crate::report::trim_heap();
+        // mesh, which needs about 40 bytes per leaf: a free heap of more
+        // than 4 bytes per leaf is given back.
+        crate::report::trim_heap_above(crate::report::TRIM_MIN_FREE.min(4 * tree.local_len()));
         // Leaves outside a box domain are never elements.
         let brick = domain.brick;
         let with_void: Vec<u8>;
