@@ -149,11 +149,34 @@ impl Mesh {
         faces: &Faces,
         part_at: Option<&dyn Fn([f64; 3]) -> u16>,
     ) -> Vec<u64> {
+        let lattice = self.node_lattice();
+        let mut masks = self.local_patch_masks(&lattice);
+        if faces.num_patches() > SURFACE_PATCH as usize + 1 {
+            self.surface_parts(&lattice, faces, part_at, &mut masks);
+        }
+        self.or_shared_masks(comm, &mut masks);
+        masks
+    }
+
+    /// Each local node's patches with the surface as the one patch
+    /// [`SURFACE_PATCH`] (bit `p` for patch `p`), the same on every rank
+    /// holding the node: from the kept elements around it, and for nodes
+    /// that are only a dependency from the sharing ranks. `lattice` is
+    /// [`Mesh::node_lattice`]. Collective: one exchange with the ranks
+    /// sharing nodes.
+    pub(crate) fn plain_patch_masks(&self, comm: &dyn Comm, lattice: &[[u32; 3]]) -> Vec<u64> {
+        let mut masks = self.local_patch_masks(lattice);
+        self.or_shared_masks(comm, &mut masks);
+        masks
+    }
+
+    /// The patches of the local nodes seen from this rank's elements and
+    /// halo; 0 for the nodes that are no local element's corner.
+    fn local_patch_masks(&self, lattice: &[[u32; 3]]) -> Vec<u64> {
         let kept = Kept {
             local: &self.elements,
             halo: &self.halo,
         };
-        let lattice = self.node_lattice();
         let hi = self.domain.brick.hi();
         // A local element at each node, as the look-ups' starting point.
         let mut near = vec![0u32; lattice.len()];
@@ -172,9 +195,11 @@ impl Mesh {
         for &(n, _) in &self.dep_only {
             masks[n as usize] = 0;
         }
-        if faces.num_patches() > SURFACE_PATCH as usize + 1 {
-            self.surface_parts(&lattice, faces, part_at, &mut masks);
-        }
+        masks
+    }
+
+    /// Ors each shared node's mask with those of the ranks sharing it.
+    fn or_shared_masks(&self, comm: &dyn Comm, masks: &mut [u64]) {
         if comm.size() > 1 {
             let lists = self.exchange_lists();
             let mut counts = vec![0usize; comm.size()];
@@ -194,7 +219,6 @@ impl Mesh {
                 at += n;
             }
         }
-        masks
     }
 
     /// Replaces the surface bit of each node on the surface by the bits of
