@@ -48,7 +48,7 @@ use crate::error::Result;
 
 use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
 use super::points::{face_polygon, point_key, PointIndex};
-use super::Mesh;
+use super::{Mesh, VTK_TO_MORTON};
 
 /// A local element's face on the boundary.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -165,8 +165,30 @@ impl Mesh {
     /// [`Mesh::node_lattice`]. Collective: one exchange with the ranks
     /// sharing nodes.
     pub(crate) fn plain_patch_masks(&self, comm: &dyn Comm, lattice: &[[u32; 3]]) -> Vec<u64> {
-        let mut masks = self.local_patch_masks(lattice);
+        let ni = self.num_independent;
+        let mut masks = self.local_patch_masks(&lattice[..ni]);
+        masks.resize(lattice.len(), 0);
         self.or_shared_masks(comm, &mut masks);
+        // A hanging node can only be on the boundary where one of its
+        // dependencies is: the others are not looked up.
+        let kept = Kept {
+            local: &self.elements,
+            halo: &self.halo,
+        };
+        let hi = self.domain.brick.hi();
+        let mut near = vec![u32::MAX; lattice.len() - ni];
+        for (e, c) in self.connectivity.iter().enumerate() {
+            for &n in c {
+                if n as usize >= ni {
+                    near[n as usize - ni] = e as u32;
+                }
+            }
+        }
+        for k in 0..near.len() {
+            if near[k] != u32::MAX && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0) {
+                masks[ni + k] = node_patch_mask(&kept, lattice[ni + k], near[k] as usize, hi);
+            }
+        }
         masks
     }
 
@@ -178,22 +200,40 @@ impl Mesh {
             halo: &self.halo,
         };
         let hi = self.domain.brick.hi();
-        // A local element at each node, as the look-ups' starting point.
+        // A local element at each node, as the look-ups' starting point
+        // (`lattice` may hold the independent nodes only).
         let mut near = vec![0u32; lattice.len()];
+        let mut covered = vec![0u8; lattice.len()];
         for (e, c) in self.connectivity.iter().enumerate() {
-            for &n in c {
-                near[n as usize] = e as u32;
+            for (v, &n) in c.iter().enumerate() {
+                if let Some(x) = near.get_mut(n as usize) {
+                    *x = e as u32;
+                    covered[n as usize] |= 1 << (7 - VTK_TO_MORTON[v]);
+                }
             }
         }
+        // The cells around a node that local elements cover with it as
+        // their corner (bit b: the cell on the positive side of axis a
+        // when bit a of b is set). A node all eight cover is inside: no
+        // look-up needed.
         let mut masks: Vec<u64> = lattice
             .iter()
             .zip(&near)
-            .map(|(&p, &e)| node_patch_mask(&kept, p, e as usize, hi))
+            .zip(&covered)
+            .map(|((&p, &e), &c)| {
+                if c == 0xff {
+                    0
+                } else {
+                    node_patch_mask(&kept, p, e as usize, hi)
+                }
+            })
             .collect();
         // Nodes no local element has as a corner: the halo may not reach
         // around them, so they take what the sharing ranks found.
         for &(n, _) in &self.dep_only {
-            masks[n as usize] = 0;
+            if let Some(m) = masks.get_mut(n as usize) {
+                *m = 0;
+            }
         }
         masks
     }

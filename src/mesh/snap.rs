@@ -18,7 +18,7 @@
 //! corners' scaled Jacobians ([`super::quality`]). In an element with a
 //! corner below [`MIN_JACOBIAN`], the displacement of each surface node it
 //! depends on is halved, and again, until the element is valid; after
-//! [`HALVINGS`] halvings the node stays where the octree put it. The nodes
+//! [`STEPS`] halvings the node stays where the octree put it. The nodes
 //! that end between are *partly snapped*, and the elements holding them
 //! are reported. Then, `iterations` times, the interior nodes within
 //! `layers` element layers of the surface nodes take the mean displacement
@@ -58,17 +58,25 @@ pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
 /// Default element layers around the surface nodes that are relaxed.
 pub const DEFAULT_LAYERS: u32 = 2;
 /// Default relaxation iterations.
-pub const DEFAULT_ITERATIONS: u32 = 10;
+pub const DEFAULT_ITERATIONS: u32 = 3;
 /// The least scaled Jacobian a corner of a snapped element may have.
-pub const MIN_JACOBIAN: f64 = 0.05;
-/// Halvings of a surface node's displacement before it is left unmoved.
-pub const HALVINGS: u8 = 6;
+pub const MIN_JACOBIAN: f64 = 0.001;
+/// The fractions of its displacement a surface node may move, in the order
+/// they are tried: the first steps back little, as the curvature of a
+/// smooth surface only asks for a back-off of the order of the cell size
+/// squared over the radius of curvature.
+pub const FRACTIONS: [f64; 8] = [1.0, 0.96875, 0.9375, 0.875, 0.75, 0.5, 0.25, 0.0];
+/// Steps back of a surface node's displacement before it is left unmoved.
+pub const STEPS: u8 = (FRACTIONS.len() - 1) as u8;
 /// How near a feature corner or edge (in cells of the node's finest
 /// element) a surface node must be to be attracted to it.
 pub const FEATURE_REACH: f64 = 0.6;
 /// Surface nodes further than this (in cells of the node's finest element)
 /// from the surface are not moved.
 pub const SURFACE_REACH: f64 = 4.0;
+/// The relaxation stops when no node moves by more than this fraction of
+/// its cell in an iteration.
+pub const RELAX_TOLERANCE: f64 = 1e-3;
 /// Fixed-point scale of the smoothing's sums: 2^32 per lattice unit.
 const FIXED: f64 = 4294967296.0;
 
@@ -281,14 +289,20 @@ struct Snapper<'a> {
     /// Current positions of every local node.
     pos: Vec<[f64; 3]>,
     /// Independent surface nodes that move, with their targets and
-    /// halvings (`HALVINGS`: unmoved).
+    /// halvings (`STEPS`: unmoved).
     snap: Vec<bool>,
     target: Vec<[f64; 3]>,
-    halved: Vec<u8>,
+    step: Vec<u8>,
     /// Interior independent nodes that the relaxation moves.
     layer: Vec<bool>,
     /// Elements touching a node that may move.
     active: Vec<u32>,
+    /// The active elements depending on each independent node: node `n`'s
+    /// are `adj[adj_start[n]..adj_start[n + 1]]`.
+    adj_start: Vec<u32>,
+    adj: Vec<u32>,
+    /// The finest element side at each independent node (lattice units).
+    side: Vec<u64>,
 }
 
 impl<'a> Snapper<'a> {
@@ -336,8 +350,12 @@ impl<'a> Snapper<'a> {
             if j[v] >= MIN_JACOBIAN {
                 continue;
             }
+            // A hanging corner is where its face or edge puts it: moving
+            // its dependencies back rarely helps, its neighbours do.
             let mut here = false;
-            flag(c[v], &mut here);
+            if (c[v] as usize) < self.ni {
+                flag(c[v], &mut here);
+            }
             if !here {
                 for w in CORNER_EDGES[v] {
                     flag(c[w], &mut here);
@@ -398,12 +416,12 @@ impl<'a> Snapper<'a> {
 
     /// The position of surface node `n` after its halvings.
     fn snapped_position(&self, n: usize) -> [f64; 3] {
-        let (x, t, k) = (self.lattice[n], self.target[n], self.halved[n]);
+        let (x, t, k) = (self.lattice[n], self.target[n], self.step[n]);
         match k {
             0 => t,
-            HALVINGS => x,
+            STEPS => x,
             _ => {
-                let s = 0.5f64.powi(k as i32);
+                let s = FRACTIONS[k as usize];
                 std::array::from_fn(|a| x[a] + (t[a] - x[a]) * s)
             }
         }
@@ -424,10 +442,10 @@ impl<'a> Snapper<'a> {
         }
     }
 
-    /// Active elements with a corner below [`MIN_JACOBIAN`].
-    fn bad_elements(&self) -> Vec<usize> {
+    /// The elements of `cands` with a corner below [`MIN_JACOBIAN`].
+    fn bad_among(&self, cands: &[u32]) -> Vec<usize> {
         let conn = self.mesh.connectivity();
-        self.active
+        cands
             .iter()
             .map(|&e| e as usize)
             .filter(|&e| {
@@ -439,16 +457,37 @@ impl<'a> Snapper<'a> {
             .collect()
     }
 
-    /// Halves the displacements of the surface nodes of invalid elements
-    /// until every element is valid or those nodes are back.
+    /// The active elements depending on a node with `flags[n]` set, once
+    /// each: only they can have changed.
+    fn around(&self, flags: impl Fn(usize) -> bool) -> Vec<u32> {
+        let mut seen = vec![false; self.mesh.elements().len()];
+        let mut out = Vec::new();
+        for n in 0..self.ni {
+            if !flags(n) {
+                continue;
+            }
+            let (a, b) = (self.adj_start[n] as usize, self.adj_start[n + 1] as usize);
+            for &e in &self.adj[a..b] {
+                if !seen[e as usize] {
+                    seen[e as usize] = true;
+                    out.push(e);
+                }
+            }
+        }
+        out
+    }
+
+    /// Steps back the displacements of the surface nodes of invalid
+    /// elements until every element is valid or those nodes are back.
     fn scale_back(&mut self) {
+        let mut cands = self.active.clone();
         loop {
             self.place_surface_nodes();
             self.update_hanging();
-            let bad = self.bad_elements();
+            let bad = self.bad_among(&cands);
             let mut flags = vec![0u64; self.ni];
             for e in bad {
-                self.blame(e, |n| self.snap[n] && self.halved[n] < HALVINGS, &mut flags);
+                self.blame(e, |n| self.snap[n] && self.step[n] < STEPS, &mut flags);
             }
             // The owner of a flagged node has its flag after the exchange.
             if self.agree_flags(&mut flags) == 0 {
@@ -456,19 +495,23 @@ impl<'a> Snapper<'a> {
             }
             for n in 0..self.ni {
                 if flags[n] != 0 {
-                    self.halved[n] += 1;
+                    self.step[n] += 1;
                 }
             }
+            cands = self.around(|n| flags[n] != 0);
         }
     }
 
     /// Undoes the moves of `moved` nodes in invalid elements (restoring
     /// `undo`) until every element is valid or nothing is left to undo.
+    /// Only elements around moved nodes are measured: the others were
+    /// valid (or beyond help) before.
     fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
+        let mut cands = self.around(|n| moved[n]);
         loop {
             self.place_surface_nodes();
             self.update_hanging();
-            let bad = self.bad_elements();
+            let bad = self.bad_among(&cands);
             let mut flags = vec![0u64; self.ni];
             for e in bad {
                 self.blame(e, |n| moved[n], &mut flags);
@@ -482,11 +525,13 @@ impl<'a> Snapper<'a> {
                     undo(self, n);
                 }
             }
+            cands = self.around(|n| flags[n] != 0);
         }
     }
 
-    /// One relaxation step of the layer nodes; returns how many moved
-    /// (over all ranks, owned nodes).
+    /// One relaxation step of the layer nodes; returns how many moved by
+    /// more than [`RELAX_TOLERANCE`] of their cell (over all ranks, owned
+    /// nodes).
     fn relax(&mut self) -> u64 {
         let ni = self.ni;
         let conn = self.mesh.connectivity();
@@ -539,9 +584,14 @@ impl<'a> Snapper<'a> {
             let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
             s.pos[n] = old[k].1;
         });
-        let mut count = [moved[..self.mesh.num_owned()]
+        let far = |n: usize, p: [f64; 3]| {
+            let tol = RELAX_TOLERANCE * self.side[n] as f64;
+            (0..3).any(|a| (self.pos[n][a] - p[a]).abs() > tol)
+        };
+        let mut count = [old
             .iter()
-            .filter(|&&m| m)
+            .filter(|o| (o.0 as usize) < self.mesh.num_owned() && moved[o.0 as usize])
+            .filter(|o| far(o.0 as usize, o.1))
             .count() as u64];
         self.comm.sum_u64(&mut count);
         count[0]
@@ -551,14 +601,14 @@ impl<'a> Snapper<'a> {
     /// elements stay valid; returns how many advanced (over all ranks).
     fn advance(&mut self) -> u64 {
         let mut moved: Vec<bool> = (0..self.ni)
-            .map(|n| self.snap[n] && self.halved[n] > 0)
+            .map(|n| self.snap[n] && self.step[n] > 0)
             .collect();
         for n in 0..self.ni {
             if moved[n] {
-                self.halved[n] -= 1;
+                self.step[n] -= 1;
             }
         }
-        self.refuse_invalid(&mut moved, |s, n| s.halved[n] += 1);
+        self.refuse_invalid(&mut moved, |s, n| s.step[n] += 1);
         let mut count = [moved[..self.mesh.num_owned()]
             .iter()
             .filter(|&&m| m)
@@ -566,6 +616,48 @@ impl<'a> Snapper<'a> {
         self.comm.sum_u64(&mut count);
         count[0]
     }
+}
+
+/// The volume of the trilinear hexahedron with corners `p` in VTK order:
+/// its Jacobian determinant integrated by 2 x 2 x 2 Gauss points, which is
+/// exact (the determinant has degree 2 in each reference coordinate). The
+/// elements of a snapped mesh, hanging faces included, fit together
+/// without gaps, so these add up to the mesh's volume.
+pub fn hexahedron_volume(p: &[[f64; 3]; 8]) -> f64 {
+    let g = [0.5 - 0.5 / 3f64.sqrt(), 0.5 + 0.5 / 3f64.sqrt()];
+    // Corners in Morton order: bit a set means the far side along axis a.
+    let q: [[f64; 3]; 8] = std::array::from_fn(|m| {
+        let v = VTK_TO_MORTON.iter().position(|&x| x == m).unwrap_or(0);
+        p[v]
+    });
+    let mut volume = 0.0;
+    for &u in &g {
+        for &v in &g {
+            for &w in &g {
+                let t = [u, v, w];
+                let mut jac = [[0.0f64; 3]; 3];
+                for (m, x) in q.iter().enumerate() {
+                    for a in 0..3 {
+                        // d N_m / d t_a
+                        let mut dn = if m >> a & 1 == 1 { 1.0 } else { -1.0 };
+                        for b in 0..3 {
+                            if b != a {
+                                dn *= if m >> b & 1 == 1 { t[b] } else { 1.0 - t[b] };
+                            }
+                        }
+                        for k in 0..3 {
+                            jac[a][k] += dn * x[k];
+                        }
+                    }
+                }
+                let [a, b, c] = jac;
+                let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                    + a[2] * (b[0] * c[1] - b[1] * c[0]);
+                volume += det / 8.0;
+            }
+        }
+    }
+    volume
 }
 
 /// The mean of the positions of a hanging node's dependencies, in the
@@ -625,20 +717,23 @@ impl Mesh {
             deps,
             snap: vec![false; ni],
             target: vec![[0.0; 3]; ni],
-            halved: vec![HALVINGS; ni],
+            step: vec![STEPS; ni],
             layer: vec![false; ni],
             active: Vec::new(),
+            adj_start: Vec::new(),
+            adj: Vec::new(),
+            side: Vec::new(),
         };
         let surface_bit = 1u64 << SURFACE_PATCH;
         let sides = (1u64 << SURFACE_PATCH) - 1;
         let on_surface = |n: usize| masks[n] & surface_bit != 0;
 
-        // The finest element side at each surface node, over the ranks.
+        // The finest element side at each node, over the ranks.
         let mut side = vec![u64::MAX; ni];
         for (e, c) in self.elements().iter().zip(self.connectivity()) {
             for &n in c {
                 let n = n as usize;
-                if n < ni && on_surface(n) {
+                if n < ni {
                     side[n] = side[n].min(e.side() as u64);
                 }
             }
@@ -653,7 +748,7 @@ impl Mesh {
             if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64) {
                 s.snap[n] = true;
                 s.target[n] = t;
-                s.halved[n] = 0;
+                s.step[n] = 0;
                 feature[n] = f;
             }
         }
@@ -677,6 +772,7 @@ impl Mesh {
         for n in 0..ni {
             s.layer[n] = near[n] != 0 && masks[n] == 0 && opts.iterations > 0;
         }
+        s.side = side;
         drop(near);
         for e in 0..self.elements().len() {
             let mut moves = false;
@@ -685,6 +781,25 @@ impl Mesh {
                 s.active.push(e as u32);
             }
         }
+        // Node -> active elements, compressed rows (an element may list a
+        // node twice through two hanging corners; harmless).
+        let mut start = vec![0u32; ni + 1];
+        for &e in &s.active {
+            s.support(e as usize, |n| start[n + 1] += 1);
+        }
+        for n in 0..ni {
+            start[n + 1] += start[n];
+        }
+        let mut adj = vec![0u32; start[ni] as usize];
+        let mut fill = start.clone();
+        for &e in &s.active {
+            s.support(e as usize, |n| {
+                adj[fill[n] as usize] = e;
+                fill[n] += 1;
+            });
+        }
+        s.adj_start = start;
+        s.adj = adj;
 
         s.scale_back();
         let mut relaxed = vec![false; ni];
@@ -709,12 +824,12 @@ impl Mesh {
         for n in 0..owned {
             if on_surface(n) {
                 counts[0] += 1;
-                match (s.snap[n], s.halved[n]) {
+                match (s.snap[n], s.step[n]) {
                     (true, 0) => {
                         counts[1] += 1;
                         counts[4] += feature[n] as u64;
                     }
-                    (true, k) if k < HALVINGS => counts[2] += 1,
+                    (true, k) if k < STEPS => counts[2] += 1,
                     _ => counts[3] += 1,
                 }
             }
@@ -728,26 +843,28 @@ impl Mesh {
                 counts[5] += 1;
             }
         }
-        let mut min_j = 1.0f64;
-        let conn = self.connectivity();
         for &e in &s.active {
-            let e = e as usize;
             let mut reported = false;
-            s.support(e, |n| reported |= on_surface(n) && s.halved[n] > 0);
+            s.support(e as usize, |n| reported |= on_surface(n) && s.step[n] > 0);
             counts[7] += reported as u64;
-            let p = conn[e].map(|n| s.pos[n as usize]);
+        }
+        comm.sum_u64(&mut counts);
+
+        let domain = *self.domain();
+        let active = std::mem::take(&mut s.active);
+        let pos = s.pos;
+        self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
+        self.moved_lattice = Some(pos);
+        // The minimum in user units, as the quality measures it.
+        let mut min_j = 1.0f64;
+        for &e in &active {
+            let p = self.element_corners(e as usize, None);
             for j in corner_scaled_jacobians(&p) {
                 min_j = min_j.min(j);
             }
         }
-        comm.sum_u64(&mut counts);
         let mut worst = [-min_j];
         comm.max_f64(&mut worst);
-
-        let domain = *self.domain();
-        let pos = s.pos;
-        self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
-        self.moved_lattice = Some(pos);
         Ok(SnapReport {
             surface_nodes: counts[0],
             snapped: counts[1],
@@ -933,6 +1050,29 @@ mod tests {
         let s = default_sphere();
         let (edges, corners) = features(s.triangles(), 30.0);
         assert!(edges.is_empty() && corners.is_empty());
+    }
+
+    #[test]
+    fn hexahedron_volumes() {
+        let cube: [[f64; 3]; 8] = std::array::from_fn(|v| {
+            let m = VTK_TO_MORTON[v];
+            [
+                (m & 1) as f64 * 2.0,
+                (m >> 1 & 1) as f64,
+                (m >> 2 & 1) as f64 * 3.0,
+            ]
+        });
+        assert!((hexahedron_volume(&cube) - 6.0).abs() < 1e-14);
+        // A sheared box keeps its volume.
+        let mut sheared = cube;
+        for v in 4..8 {
+            sheared[v][0] += 0.7;
+        }
+        assert!((hexahedron_volume(&sheared) - 6.0).abs() < 1e-14);
+        let mut raised = cube;
+        raised[6][2] += 1.0;
+        // The top face z = 3 + x y / 2 over [0, 2] x [0, 1]: 6 + 0.5.
+        assert!((hexahedron_volume(&raised) - 6.5).abs() < 1e-14);
     }
 
     #[test]

@@ -1,0 +1,282 @@
+//! Snapped meshes (`Mesh::snap`): on the surface, valid, converging, and
+//! the same bits on any number of ranks.
+//!
+//! Run by `cargo test`, this program launches itself under `mpirun` on 1
+//! to 4 ranks. Every run snaps the solid and fluid sphere and the solid
+//! torus on all ranks, gathers each node's position by its lattice point
+//! on rank 0 and compares the bits (and the report) with the same mesh
+//! snapped by rank 0 alone. The run on one rank also checks, on one
+//! process:
+//!
+//! - every surface node the report counts as snapped is on the surface to
+//!   within 1e-6 of its cell size (exact distance to the triangles);
+//! - no element has a corner with a non-positive scaled Jacobian (sphere
+//!   and torus, inside and outside, and the real models when
+//!   `../shared/data` has them);
+//! - the volume error of the snapped sphere and torus against the volume
+//!   the surface encloses, level by level, against the staircase's;
+//! - sharp models (fandisk, flange) put nodes on their feature edges.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::rc::Rc;
+use std::time::Duration;
+
+use octmesh::classify::{classify_leaves, CutRule, Keep};
+use octmesh::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::domain::{Domain, DEFAULT_FIT};
+use octmesh::geometry::{load_surface, Bvh, Surface};
+use octmesh::mesh::snap::{hexahedron_volume, SnapOptions, SnapReport};
+use octmesh::mesh::{Mesh, MeshOptions, SURFACE_PATCH};
+use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::Connectivity;
+
+const CHILD: &str = "OCTMESH_SNAP_CHILD";
+
+fn main() {
+    if std::env::var(CHILD).is_ok() {
+        child();
+        return;
+    }
+    common::run_self_on_1_to_4_ranks(
+        "snap",
+        CHILD,
+        "snap: all checks passed",
+        Duration::from_secs(900),
+    );
+}
+
+/// The mesh of `surface` at `level` keeping `keep`, built and partitioned
+/// on `comm`, with its domain.
+fn mesh_of(comm: CommRef, s: &Surface, level: u8, keep: Keep) -> (Mesh, Domain) {
+    let b = s.bbox();
+    let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+    let index = SurfaceIndex::new(s, &domain);
+    let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
+    t.partition().unwrap();
+    t.balance(Connectivity::Corner).unwrap();
+    t.partition().unwrap();
+    let classes = classify_leaves(t.leaves(), &index);
+    let opts = MeshOptions {
+        keep,
+        cut_rule: CutRule::Center,
+        clean_walls: true,
+    };
+    (
+        Mesh::build(&t, &domain, Some(&classes), &opts).unwrap(),
+        domain,
+    )
+}
+
+/// Every local node as (lattice point, position bits).
+fn positions(m: &Mesh) -> Vec<u64> {
+    let x = m.coordinates();
+    let mut v = Vec::new();
+    for (q, p) in m.node_lattice().iter().zip(&x) {
+        v.extend(q.map(u64::from));
+        v.extend(p.map(f64::to_bits));
+    }
+    v
+}
+
+fn report_words(r: &SnapReport) -> Vec<u64> {
+    vec![
+        r.surface_nodes,
+        r.snapped,
+        r.partial,
+        r.unsnapped,
+        r.feature_nodes,
+        r.hanging_surface_nodes,
+        r.relaxed_nodes,
+        r.reported_elements,
+        r.min_scaled_jacobian.to_bits(),
+    ]
+}
+
+/// Snapped on all ranks and on rank 0 alone: the same bits at every node.
+fn same_on_all_ranks(comm: &CommRef, name: &str, level: u8, keep: Keep) {
+    let s = load_surface(name).unwrap();
+    let (mut m, _) = mesh_of(comm.clone(), &s, level, keep);
+    let r = m.snap(&**comm, &s, &SnapOptions::default()).unwrap();
+    let parts = common::gather(comm, positions(&m));
+    if comm.rank() != 0 {
+        return;
+    }
+    let serial: CommRef = Rc::new(SerialComm);
+    let (mut one, _) = mesh_of(serial.clone(), &s, level, keep);
+    let r1 = one.snap(&*serial, &s, &SnapOptions::default()).unwrap();
+    let tag = format!("{name} level {level} {keep:?} on {} ranks", comm.size());
+    assert_eq!(report_words(&r), report_words(&r1), "{tag}: reports differ");
+    let mut alone: BTreeMap<[u64; 3], [u64; 3]> = BTreeMap::new();
+    for w in positions(&one).chunks_exact(6) {
+        alone.insert([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
+    }
+    let mut seen = 0usize;
+    let mut moved = 0usize;
+    let mut all: BTreeMap<[u64; 3], [u64; 3]> = BTreeMap::new();
+    for part in &parts {
+        for w in part.chunks_exact(6) {
+            let (q, p) = ([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
+            let a = alone
+                .get(&q)
+                .unwrap_or_else(|| panic!("{tag}: node {q:?} unknown"));
+            assert_eq!(&p, a, "{tag}: node {q:?} moved differently");
+            if let Some(prev) = all.insert(q, p) {
+                assert_eq!(prev, p, "{tag}: two ranks disagree on node {q:?}");
+            }
+            seen += 1;
+        }
+    }
+    for (q, p) in &alone {
+        let x = q.map(|c| c as f64);
+        let y = p.map(f64::from_bits);
+        moved += (one.domain().from_lattice(x) != y) as usize;
+    }
+    assert_eq!(all.len(), alone.len(), "{tag}: node sets differ");
+    assert!(moved > 100, "{tag}: only {moved} nodes moved");
+    println!(
+        "{tag}: {} nodes ({seen} copies, {moved} moved) bitwise equal to one rank; {r:?}",
+        all.len()
+    );
+}
+
+/// The checks of a snapped mesh on one process: valid elements, snapped
+/// nodes on the surface; returns the report and the mesh volume.
+fn check_snapped(s: &Surface, level: u8, keep: Keep, opts: &SnapOptions) -> (SnapReport, f64, f64) {
+    let comm: CommRef = Rc::new(SerialComm);
+    let (mut m, domain) = mesh_of(comm.clone(), s, level, keep);
+    let staircase: f64 = (0..m.elements().len())
+        .map(|e| hexahedron_volume(&m.element_corners(e, None)))
+        .sum();
+    let t0 = std::time::Instant::now();
+    let r = m.snap(&*comm, s, opts).unwrap();
+    let seconds = t0.elapsed().as_secs_f64();
+    let tag = format!("{level} {keep:?}");
+    // Valid: every corner's scaled Jacobian positive.
+    let jac = m.scaled_jacobians(None);
+    let worst = jac.iter().copied().fold(1.0f64, f64::min);
+    assert!(
+        worst > 0.0,
+        "{tag}: an element with scaled Jacobian {worst}"
+    );
+    assert_eq!(worst, r.min_scaled_jacobian, "{tag}: the report's minimum");
+    assert_eq!(
+        r.snapped + r.partial + r.unsnapped,
+        r.surface_nodes,
+        "{tag}"
+    );
+    // Snapped nodes: on the surface to within 1e-6 of the cell size.
+    let faces = m.faces().unwrap();
+    let boundary = m.boundary(&*comm, &faces, None).unwrap();
+    let x = m.coordinates();
+    let tris = s.triangles();
+    let bvh = Bvh::new(tris);
+    let mut cell = vec![f64::INFINITY; m.num_nodes()];
+    let h0 = domain.side / (1u64 << 19) as f64;
+    for (e, c) in m.elements().iter().zip(m.connectivity()) {
+        for &n in c {
+            cell[n as usize] = cell[n as usize].min(e.side() as f64 * h0);
+        }
+    }
+    let mut on = 0u64;
+    let mut surface = 0u64;
+    for n in 0..m.num_independent() {
+        let p = boundary.node_patches(n);
+        if !p.contains(&SURFACE_PATCH) || p.iter().any(|&q| q < SURFACE_PATCH) {
+            continue;
+        }
+        surface += 1;
+        let tol = 1e-6 * cell[n];
+        if bvh.nearest(tris, x[n], tol * tol).is_some() {
+            on += 1;
+        }
+    }
+    assert!(
+        on >= r.snapped && r.snapped * 10 >= surface * 5,
+        "{tag}: {on} surface nodes on the surface, {surface} in all, report {r:?}"
+    );
+    let volume: f64 = (0..m.elements().len())
+        .map(|e| hexahedron_volume(&m.element_corners(e, None)))
+        .sum();
+    println!(
+        "  level {level} {keep:?}: {} elements, snap {seconds:.3} s, {r:?}",
+        m.elements().len()
+    );
+    let (v, v0) = match keep {
+        Keep::Outside => (domain.volume() - volume, domain.volume() - staircase),
+        _ => (volume, staircase),
+    };
+    (r, v, v0)
+}
+
+fn child() {
+    // A failed check must end the job, not unwind into MPI_Finalize while
+    // the other ranks wait in a collective.
+    std::panic::set_hook(Box::new(|info| {
+        eprintln!("{info}");
+        std::process::exit(101);
+    }));
+    let universe = mpi::initialize().expect("MPI init");
+    let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
+    same_on_all_ranks(&comm, "sphere", 5, Keep::Inside);
+    same_on_all_ranks(&comm, "sphere", 5, Keep::Outside);
+    same_on_all_ranks(&comm, "torus", 5, Keep::Inside);
+    if comm.size() == 1 {
+        serial_checks();
+    }
+    if comm.rank() == 0 {
+        println!("snap: all checks passed");
+    }
+}
+
+fn serial_checks() {
+    let opts = SnapOptions::default();
+    for name in ["sphere", "torus"] {
+        let s = load_surface(name).unwrap();
+        let exact = s.signed_volume();
+        for keep in [Keep::Inside, Keep::Outside] {
+            let mut errors = Vec::new();
+            for level in 4..=6 {
+                let (_, v, v0) = check_snapped(&s, level, keep, &opts);
+                let (e, e0) = ((v - exact).abs() / exact, (v0 - exact).abs() / exact);
+                println!(
+                    "{name} {keep:?} level {level}: volume error snapped {e:.3e}, staircase {e0:.3e}"
+                );
+                errors.push((e, e0));
+            }
+            for w in errors.windows(2) {
+                let (rate, rate0) = (w[0].0 / w[1].0, w[0].1 / w[1].1);
+                println!("{name} {keep:?}: error ratio per level snapped {rate:.2}, staircase {rate0:.2}");
+            }
+            let last = errors[errors.len() - 1];
+            assert!(
+                last.0 < last.1,
+                "{name} {keep:?}: the snapped volume error {:.3e} is not below the staircase's {:.3e}",
+                last.0,
+                last.1
+            );
+        }
+    }
+    for (model, level, sharp) in [
+        ("bunny", 6, false),
+        ("armadillo", 6, false),
+        ("fandisk", 6, true),
+        ("flange", 6, true),
+    ] {
+        let Some(path) = common::shared_model(&format!("{model}.stl")) else {
+            println!("SKIP {model}: not in ../shared/data");
+            continue;
+        };
+        let s = load_surface(path.to_str().unwrap()).unwrap();
+        for keep in [Keep::Inside, Keep::Outside] {
+            let (r, _, _) = check_snapped(&s, level, keep, &opts);
+            if sharp {
+                assert!(
+                    r.feature_nodes > 0,
+                    "{model} {keep:?}: no node on a feature"
+                );
+            }
+        }
+    }
+}
