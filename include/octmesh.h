@@ -618,11 +618,6 @@ typedef struct {
    */
   octmesh_gloidx_t feature_nodes;
   /**
-   * Hanging nodes on the surface patch (the mean of their
-   * dependencies).
-   */
-  octmesh_gloidx_t hanging_surface_nodes;
-  /**
    * Interior nodes the relaxation moved.
    */
   octmesh_gloidx_t relaxed_nodes;

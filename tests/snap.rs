@@ -88,7 +88,6 @@ fn report_words(r: &SnapReport) -> Vec<u64> {
         r.partial,
         r.unsnapped,
         r.feature_nodes,
-        r.hanging_surface_nodes,
         r.relaxed_nodes,
         r.reported_elements,
         r.min_scaled_jacobian.to_bits(),

@@ -22,9 +22,6 @@ pub struct octmesh_snap_report_t {
     pub unsnapped: octmesh_gloidx_t,
     /// Snapped nodes that went to a feature edge or corner.
     pub feature_nodes: octmesh_gloidx_t,
-    /// Hanging nodes on the surface patch (the mean of their
-    /// dependencies).
-    pub hanging_surface_nodes: octmesh_gloidx_t,
     /// Interior nodes the relaxation moved.
     pub relaxed_nodes: octmesh_gloidx_t,
     /// Elements that depend on a partly or not snapped surface node.
@@ -42,7 +39,6 @@ impl From<&SnapReport> for octmesh_snap_report_t {
             partial: n(r.partial),
             unsnapped: n(r.unsnapped),
             feature_nodes: n(r.feature_nodes),
-            hanging_surface_nodes: n(r.hanging_surface_nodes),
             relaxed_nodes: n(r.relaxed_nodes),
             reported_elements: n(r.reported_elements),
             min_scaled_jacobian: r.min_scaled_jacobian,

@@ -144,9 +144,6 @@ pub struct SnapReport {
     pub unsnapped: u64,
     /// Snapped nodes that went to a feature edge or corner.
     pub feature_nodes: u64,
-    /// Hanging nodes on the surface patch (they follow their
-    /// dependencies).
-    pub hanging_surface_nodes: u64,
     /// Interior nodes the relaxation moved.
     pub relaxed_nodes: u64,
     /// Elements that depend on a partly or not snapped surface node.
@@ -835,14 +832,6 @@ impl Mesh {
             }
             counts[6] += relaxed[n] as u64;
         }
-        // Hanging nodes are counted where their point's lowest dependency
-        // is owned, so once over the ranks.
-        for (k, &(d, _)) in s.deps.iter().enumerate() {
-            let n = ni + k;
-            if (d[0] as usize) < owned && on_surface(n) {
-                counts[5] += 1;
-            }
-        }
         for &e in &s.active {
             let mut reported = false;
             s.support(e as usize, |n| reported |= on_surface(n) && s.step[n] > 0);
@@ -871,7 +860,6 @@ impl Mesh {
             partial: counts[2],
             unsnapped: counts[3],
             feature_nodes: counts[4],
-            hanging_surface_nodes: counts[5],
             relaxed_nodes: counts[6],
             reported_elements: counts[7],
             min_scaled_jacobian: -worst[0],
