@@ -1556,7 +1556,9 @@ octmesh_status_t octmesh_mesh_locate_points(const octmesh_t *h,
  * Snaps the current mesh to the surface: every node on the surface patch
  * moves to the closest point of the surface (to a feature edge or corner
  * where the surface is sharper than `feature_angle`), scaled back where an
- * element would have a corner with a scaled Jacobian below 0.001, and the
+ * element would have a corner with a scaled Jacobian below `min_jacobian`
+ * (0.001 keeps the elements valid and near the surface; 0.1 keeps
+ * OpenFOAM's skewness below 4), and the
  * interior nodes within `layers` element layers are relaxed for
  * `iterations` iterations. Hanging nodes stay the mean of their
  * dependencies. The coordinates, the VTU and the OpenFOAM output then
@@ -1570,11 +1572,14 @@ octmesh_status_t octmesh_mesh_locate_points(const octmesh_t *h,
  *                           features)
  * \param[in] layers         element layers relaxed, 0 to 100 (2 is usual)
  * \param[in] iterations     relaxation iterations, 0 to 1000 (3 is usual)
+ * \param[in] min_jacobian   the least scaled Jacobian of an element's
+ *                           corner afterwards, above 0 and at most 0.5
  */
 octmesh_status_t octmesh_mesh_snap(octmesh_t *h,
                                    double feature_angle,
                                    int32_t layers,
-                                   int32_t iterations);
+                                   int32_t iterations,
+                                   double min_jacobian);
 
 /**
  * Writes what the snap of the current mesh did to `*out`. Needs a mesh

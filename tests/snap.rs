@@ -15,7 +15,10 @@
 //!   `../shared/data` has them);
 //! - the volume error of the snapped sphere and torus against the volume
 //!   the surface encloses, level by level, against the staircase's;
-//! - sharp models (fandisk, flange) put nodes on their feature edges.
+//! - sharp models (fandisk, flange) put nodes on their feature edges;
+//!
+//! and then `checkMesh -allTopology` on the snapped fluid sphere written as
+//! an OpenFOAM case on 1 and 2 ranks must say `Mesh OK.`.
 
 mod common;
 
@@ -45,6 +48,55 @@ fn main() {
         "snap: all checks passed",
         Duration::from_secs(900),
     );
+    check_mesh_on_the_fluid_sphere();
+}
+
+/// `checkMesh -allTopology` says `Mesh OK.` on the snapped fluid sphere
+/// written as an OpenFOAM case, on 1 and on 2 ranks (`-parallel`).
+fn check_mesh_on_the_fluid_sphere() {
+    let Some(rc) = common::openfoam() else {
+        return;
+    };
+    for np in [1, 2] {
+        let case = common::scratch(&format!("snap_foam_{np}"));
+        let _ = std::fs::remove_dir_all(&case);
+        let dir = case.to_str().unwrap();
+        let args = [
+            "mesh",
+            "sphere",
+            "--level",
+            "6",
+            "--keep",
+            "outside",
+            "--snap",
+            "--openfoam",
+            dir,
+            "--quiet",
+        ];
+        let out = common::mpirun(np, &common::octmesh_bin(), &args, Duration::from_secs(600));
+        assert!(
+            out.status.success(),
+            "octmesh {args:?} on {np} ranks failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let run = if np > 1 {
+            format!("mpirun --oversubscribe -np {np} checkMesh -parallel -allTopology")
+        } else {
+            "checkMesh -allTopology".to_string()
+        };
+        let text = common::foam(&rc, &case, &run);
+        assert!(
+            text.contains("\nMesh OK."),
+            "snapped fluid sphere on {np} ranks: checkMesh -allTopology:\n{text}"
+        );
+        let skew = text
+            .lines()
+            .find(|l| l.contains("Max skewness"))
+            .unwrap_or("")
+            .trim()
+            .to_string();
+        println!("snapped fluid sphere, level 6, {np} rank(s): checkMesh Mesh OK ({skew})");
+    }
 }
 
 /// The snapped mesh of the built-in or shared surface `name` at `level`

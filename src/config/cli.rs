@@ -53,6 +53,7 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("mesh.snap_feature_angle", "--snap-feature-angle"),
     ("mesh.snap_layers", "--snap-layers"),
     ("mesh.snap_iterations", "--snap-iterations"),
+    ("mesh.snap_min_jacobian", "--snap-min-jacobian"),
     ("output.quiet", "--quiet"),
     ("output.stats", "--stats"),
     ("output.leaves", "--write-leaves"),
@@ -278,6 +279,10 @@ struct MeshArgs {
     /// Relaxation iterations of the snap [default: 3]
     #[arg(long, value_name = "N")]
     snap_iterations: Option<u32>,
+    /// The least scaled Jacobian an element's corner may have after the
+    /// snap, in (0, 0.5] [default: 0.1 with --openfoam, else 0.001]
+    #[arg(long, value_name = "J")]
+    snap_min_jacobian: Option<f64>,
     /// Measure the mesh's quality: scaled Jacobian histogram, checkMesh's
     /// non-orthogonality and skewness, in the table and --stats
     #[arg(long)]
@@ -348,7 +353,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         Err(e) => return clap_error(e),
     };
     let mut quality = (false, None, None);
-    let mut snap = (false, None, None, None);
+    let mut snap = (false, None, None, None, None);
     let (command, octree, mesh) = match cli.command {
         CliCommand::Check(c) => {
             return Ok(Invocation::Check {
@@ -372,6 +377,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
                 m.snap_feature_angle,
                 m.snap_layers,
                 m.snap_iterations,
+                m.snap_min_jacobian,
             );
             (
                 Command::Mesh,
@@ -578,7 +584,10 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         if set("output.quality_worst", worst.is_some()) {
             config.output.quality_worst = worst;
         }
-        let (on, angle, layers, iterations) = snap;
+        let (on, angle, layers, iterations, min_jacobian) = snap;
+        if set("mesh.snap_min_jacobian", min_jacobian.is_some()) {
+            config.mesh.snap_min_jacobian = min_jacobian;
+        }
         if set("mesh.snap", on) {
             config.mesh.snap = true;
         }

@@ -53,6 +53,7 @@
 //! snap_feature_angle = 30.0 # surface edges sharper than this stay sharp
 //! snap_layers = 2           # element layers relaxed around the surface nodes
 //! snap_iterations = 3       # relaxation iterations
+//! # snap_min_jacobian = 0.001  # least scaled Jacobian (unset: 0.1 with an OpenFOAM case)
 //!
 //! [output]
 //! quiet = false
@@ -327,15 +328,26 @@ pub struct MeshConfig {
     pub snap_layers: u32,
     /// Relaxation iterations of the snap.
     pub snap_iterations: u32,
+    /// The least scaled Jacobian an element's corner may have after the
+    /// snap, in (0, 0.5]. Unset: 0.1 when writing an OpenFOAM case (what
+    /// keeps `checkMesh`'s skewness below 4), else 0.001.
+    pub snap_min_jacobian: Option<f64>,
 }
 
 impl MeshConfig {
-    /// The snap's options.
-    pub fn snap_options(&self) -> crate::mesh::snap::SnapOptions {
+    /// The snap's options; `foam`: an OpenFOAM case is written.
+    pub fn snap_options(&self, foam: bool) -> crate::mesh::snap::SnapOptions {
+        use crate::mesh::snap::{DEFAULT_MIN_JACOBIAN, FOAM_MIN_JACOBIAN};
+        let j = if foam {
+            FOAM_MIN_JACOBIAN
+        } else {
+            DEFAULT_MIN_JACOBIAN
+        };
         crate::mesh::snap::SnapOptions {
             feature_angle_deg: self.snap_feature_angle,
             layers: self.snap_layers,
             iterations: self.snap_iterations,
+            min_jacobian: self.snap_min_jacobian.unwrap_or(j),
         }
     }
 }
@@ -351,6 +363,7 @@ impl Default for MeshConfig {
             snap_feature_angle: crate::mesh::snap::DEFAULT_FEATURE_ANGLE,
             snap_layers: crate::mesh::snap::DEFAULT_LAYERS,
             snap_iterations: crate::mesh::snap::DEFAULT_ITERATIONS,
+            snap_min_jacobian: None,
         }
     }
 }
@@ -478,6 +491,7 @@ pub const KEYS: &[&str] = &[
     "mesh.snap_feature_angle",
     "mesh.snap_layers",
     "mesh.snap_iterations",
+    "mesh.snap_min_jacobian",
     "output.quiet",
     "output.stats",
     "output.leaves",
@@ -666,6 +680,14 @@ impl Config {
                     "mesh.snap_layers",
                     format!("must be at most 100, got {}", self.mesh.snap_layers),
                 ));
+            }
+            if let Some(j) = self.mesh.snap_min_jacobian {
+                if !(j > 0.0 && j <= 0.5) {
+                    return Err(ConfigError::new(
+                        "mesh.snap_min_jacobian",
+                        format!("must be above 0 and at most 0.5, got {j}"),
+                    ));
+                }
             }
             if self.mesh.snap_iterations > 1000 {
                 return Err(ConfigError::new(
@@ -999,6 +1021,7 @@ mod tests {
         c.mesh.snap_feature_angle = 45.0;
         c.mesh.snap_layers = 3;
         c.mesh.snap_iterations = 7;
+        c.mesh.snap_min_jacobian = Some(0.2);
         c.output.stats = Some("s.json".into());
         c.output.vtu = Some("m.pvtu".into());
         c.surface.drop_duplicates = true;

@@ -49,7 +49,9 @@ impl From<&SnapReport> for octmesh_snap_report_t {
 /// Snaps the current mesh to the surface: every node on the surface patch
 /// moves to the closest point of the surface (to a feature edge or corner
 /// where the surface is sharper than `feature_angle`), scaled back where an
-/// element would have a corner with a scaled Jacobian below 0.001, and the
+/// element would have a corner with a scaled Jacobian below `min_jacobian`
+/// (0.001 keeps the elements valid and near the surface; 0.1 keeps
+/// OpenFOAM's skewness below 4), and the
 /// interior nodes within `layers` element layers are relaxed for
 /// `iterations` iterations. Hanging nodes stay the mean of their
 /// dependencies. The coordinates, the VTU and the OpenFOAM output then
@@ -63,12 +65,15 @@ impl From<&SnapReport> for octmesh_snap_report_t {
 ///                           features)
 /// \param[in] layers         element layers relaxed, 0 to 100 (2 is usual)
 /// \param[in] iterations     relaxation iterations, 0 to 1000 (3 is usual)
+/// \param[in] min_jacobian   the least scaled Jacobian of an element's
+///                           corner afterwards, above 0 and at most 0.5
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_snap(
     h: *mut octmesh_t,
     feature_angle: f64,
     layers: i32,
     iterations: i32,
+    min_jacobian: f64,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
         let count = |v: i32, what: &str| {
@@ -80,6 +85,7 @@ pub extern "C" fn octmesh_mesh_snap(
                 feature_angle_deg: feature_angle,
                 layers: l,
                 iterations: count(iterations, "iterations")?,
+                min_jacobian,
             })
         });
         let opts = h.agree(opts.and_then(|o| o.check().map(|_| o)))?;

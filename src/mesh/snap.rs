@@ -16,7 +16,8 @@
 //!
 //! After the move every element touching a moved node is measured by its
 //! corners' scaled Jacobians ([`super::quality`]). In an element with a
-//! corner below [`MIN_JACOBIAN`], the displacement of each surface node it
+//! corner below the least scaled Jacobian allowed
+//! ([`SnapOptions::min_jacobian`]), the displacement of each surface node it
 //! depends on is halved, and again, until the element is valid; after
 //! [`STEPS`] halvings the node stays where the octree put it. The nodes
 //! that end between are *partly snapped*, and the elements holding them
@@ -59,8 +60,13 @@ pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
 pub const DEFAULT_LAYERS: u32 = 2;
 /// Default relaxation iterations.
 pub const DEFAULT_ITERATIONS: u32 = 3;
-/// The least scaled Jacobian a corner of a snapped element may have.
-pub const MIN_JACOBIAN: f64 = 0.001;
+/// The least scaled Jacobian a corner of a snapped element may have by
+/// default: valid elements, as close to the surface as they go.
+pub const DEFAULT_MIN_JACOBIAN: f64 = 0.001;
+/// The least scaled Jacobian for a finite-volume mesh (an OpenFOAM case):
+/// flatter cells put their centres so far from their faces that
+/// `checkMesh` finds faces skewer than 4.
+pub const FOAM_MIN_JACOBIAN: f64 = 0.1;
 /// The fractions of its displacement a surface node may move, in the order
 /// they are tried: the first steps back little, as the curvature of a
 /// smooth surface only asks for a back-off of the order of the cell size
@@ -91,6 +97,9 @@ pub struct SnapOptions {
     pub layers: u32,
     /// Relaxation iterations (0: the surface nodes alone, scaled back).
     pub iterations: u32,
+    /// The least scaled Jacobian a corner of an element may have after
+    /// the snap, in (0, 0.5].
+    pub min_jacobian: f64,
 }
 
 impl Default for SnapOptions {
@@ -99,13 +108,14 @@ impl Default for SnapOptions {
             feature_angle_deg: DEFAULT_FEATURE_ANGLE,
             layers: DEFAULT_LAYERS,
             iterations: DEFAULT_ITERATIONS,
+            min_jacobian: DEFAULT_MIN_JACOBIAN,
         }
     }
 }
 
 impl SnapOptions {
     /// Checks the ranges: the angle in [0, 180], at most 100 layers and
-    /// 1000 iterations.
+    /// 1000 iterations, the least scaled Jacobian in (0, 0.5].
     pub fn check(&self) -> Result<()> {
         let a = self.feature_angle_deg;
         if !(0.0..=180.0).contains(&a) {
@@ -117,6 +127,12 @@ impl SnapOptions {
             return Err(Error::invalid(format!(
                 "at most 100 snap relaxation layers (got {})",
                 self.layers
+            )));
+        }
+        let j = self.min_jacobian;
+        if !(j > 0.0 && j <= 0.5) {
+            return Err(Error::invalid(format!(
+                "the least scaled Jacobian of a snapped element must be above 0 and at most 0.5 (got {j})"
             )));
         }
         if self.iterations > 1000 {
@@ -300,6 +316,8 @@ struct Snapper<'a> {
     adj: Vec<u32>,
     /// The finest element side at each independent node (lattice units).
     side: Vec<u64>,
+    /// The least scaled Jacobian allowed.
+    min_jacobian: f64,
 }
 
 impl<'a> Snapper<'a> {
@@ -320,7 +338,7 @@ impl<'a> Snapper<'a> {
     }
 
     /// Flags the `eligible` nodes to blame for invalid element `e`: at
-    /// each corner below [`MIN_JACOBIAN`] the corner's node (through its
+    /// each corner below the least scaled Jacobian the corner's node (through its
     /// dependencies when it hangs), else its three neighbours along the
     /// edges, else every eligible node of the element.
     fn blame(&self, e: usize, eligible: impl Fn(usize) -> bool, flags: &mut [u64]) {
@@ -344,7 +362,7 @@ impl<'a> Snapper<'a> {
             }
         };
         for v in 0..8 {
-            if j[v] >= MIN_JACOBIAN {
+            if j[v] >= self.min_jacobian {
                 continue;
             }
             // A hanging corner is where its face or edge puts it: moving
@@ -439,7 +457,8 @@ impl<'a> Snapper<'a> {
         }
     }
 
-    /// The elements of `cands` with a corner below [`MIN_JACOBIAN`].
+    /// The elements of `cands` with a corner below the least scaled
+    /// Jacobian.
     fn bad_among(&self, cands: &[u32]) -> Vec<usize> {
         let conn = self.mesh.connectivity();
         cands
@@ -449,7 +468,7 @@ impl<'a> Snapper<'a> {
                 let p = conn[e].map(|n| self.pos[n as usize]);
                 corner_scaled_jacobians(&p)
                     .iter()
-                    .any(|&j| !(j >= MIN_JACOBIAN))
+                    .any(|&j| !(j >= self.min_jacobian))
             })
             .collect()
     }
@@ -720,6 +739,7 @@ impl Mesh {
             adj_start: Vec::new(),
             adj: Vec::new(),
             side: Vec::new(),
+            min_jacobian: opts.min_jacobian,
         };
         let surface_bit = 1u64 << SURFACE_PATCH;
         let sides = (1u64 << SURFACE_PATCH) - 1;
@@ -1003,7 +1023,10 @@ mod tests {
             eprintln!("{keep:?} {r:?}");
             assert!(r.surface_nodes > 1000);
             assert_eq!(r.snapped + r.partial + r.unsnapped, r.surface_nodes);
-            assert!(r.min_scaled_jacobian >= MIN_JACOBIAN * 0.99, "{r:?}");
+            assert!(
+                r.min_scaled_jacobian >= DEFAULT_MIN_JACOBIAN * 0.99,
+                "{r:?}"
+            );
             let x = m.coordinates();
             assert!(m.moved().is_some());
             let j = m.scaled_jacobians(None);

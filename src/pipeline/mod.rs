@@ -360,7 +360,8 @@ impl Session {
             let m = self.config.mesh.clone();
             self.build_mesh(m.keep, m.cut_rule)?;
             if snap {
-                self.snap(&m.snap_options())?;
+                let foam = self.config.output.openfoam.is_some();
+                self.snap(&m.snap_options(foam))?;
                 self.release_surface();
             }
             if let Some(out) = self.config.output.vtu.clone() {
