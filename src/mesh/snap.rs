@@ -80,8 +80,8 @@ pub const FEATURE_REACH: f64 = 0.6;
 /// Surface nodes further than this (in cells of the node's finest element)
 /// from the surface are not moved.
 pub const SURFACE_REACH: f64 = 4.0;
-/// The relaxation stops when no node moves by more than this fraction of
-/// its cell in an iteration.
+/// A relaxation move shorter than this fraction of the node's cell is
+/// not made; the relaxation stops when no node moves.
 pub const RELAX_TOLERANCE: f64 = 1e-3;
 /// Fixed-point scale of the smoothing's sums: 2^32 per lattice unit.
 const FIXED: f64 = 4294967296.0;
@@ -461,14 +461,13 @@ impl<'a> Snapper<'a> {
     /// Jacobian.
     fn bad_among(&self, cands: &[u32]) -> Vec<usize> {
         let conn = self.mesh.connectivity();
+        let j2 = self.min_jacobian * self.min_jacobian;
         cands
             .iter()
             .map(|&e| e as usize)
             .filter(|&e| {
                 let p = conn[e].map(|n| self.pos[n as usize]);
-                corner_scaled_jacobians(&p)
-                    .iter()
-                    .any(|&j| !(j >= self.min_jacobian))
+                !corners_valid(&p, j2)
             })
             .collect()
     }
@@ -509,10 +508,8 @@ impl<'a> Snapper<'a> {
             if self.agree_flags(&mut flags) == 0 {
                 break;
             }
-            for n in 0..self.ni {
-                if flags[n] != 0 {
-                    self.step[n] += 1;
-                }
+            for (step, &f) in self.step.iter_mut().zip(&flags) {
+                *step += (f != 0) as u8;
             }
             cands = self.around(|n| flags[n] != 0);
         }
@@ -522,10 +519,17 @@ impl<'a> Snapper<'a> {
     /// `undo`) until every element is valid or nothing is left to undo.
     /// Only elements around moved nodes are measured: the others were
     /// valid (or beyond help) before.
-    fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
+    fn refuse_invalid(
+        &mut self,
+        moved: &mut [bool],
+        surface: bool,
+        mut undo: impl FnMut(&mut Self, usize),
+    ) {
         let mut cands = self.around(|n| moved[n]);
         loop {
-            self.place_surface_nodes();
+            if surface {
+                self.place_surface_nodes();
+            }
             self.update_hanging();
             let bad = self.bad_among(&cands);
             let mut flags = vec![0u64; self.ni];
@@ -545,9 +549,9 @@ impl<'a> Snapper<'a> {
         }
     }
 
-    /// One relaxation step of the layer nodes; returns how many moved by
-    /// more than [`RELAX_TOLERANCE`] of their cell (over all ranks, owned
-    /// nodes).
+    /// One relaxation step of the layer nodes, each moving only by more
+    /// than [`RELAX_TOLERANCE`] of its cell; returns how many moved (over
+    /// all ranks, owned nodes).
     fn relax(&mut self) -> u64 {
         let ni = self.ni;
         let conn = self.mesh.connectivity();
@@ -590,24 +594,22 @@ impl<'a> Snapper<'a> {
             let p: [f64; 3] = std::array::from_fn(|a| {
                 x[a] + (sums[4 * n + a] as i64 as f64 / FIXED) / count as f64
             });
-            if p != self.pos[n] {
+            // Moves below the tolerance are not made: the elements around
+            // need no new check, and the relaxation ends.
+            let tol = RELAX_TOLERANCE * self.side[n] as f64;
+            if (0..3).any(|a| (self.pos[n][a] - p[a]).abs() > tol) {
                 old.push((n as u32, self.pos[n]));
                 self.pos[n] = p;
                 moved[n] = true;
             }
         }
-        self.refuse_invalid(&mut moved, |s, n| {
+        self.refuse_invalid(&mut moved, false, |s, n| {
             let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
             s.pos[n] = old[k].1;
         });
-        let far = |n: usize, p: [f64; 3]| {
-            let tol = RELAX_TOLERANCE * self.side[n] as f64;
-            (0..3).any(|a| (self.pos[n][a] - p[a]).abs() > tol)
-        };
-        let mut count = [old
+        let mut count = [moved[..self.mesh.num_owned()]
             .iter()
-            .filter(|o| (o.0 as usize) < self.mesh.num_owned() && moved[o.0 as usize])
-            .filter(|o| far(o.0 as usize, o.1))
+            .filter(|&&m| m)
             .count() as u64];
         self.comm.sum_u64(&mut count);
         count[0]
@@ -619,12 +621,10 @@ impl<'a> Snapper<'a> {
         let mut moved: Vec<bool> = (0..self.ni)
             .map(|n| self.snap[n] && self.step[n] > 0)
             .collect();
-        for n in 0..self.ni {
-            if moved[n] {
-                self.step[n] -= 1;
-            }
+        for (step, &m) in self.step.iter_mut().zip(&moved) {
+            *step -= m as u8;
         }
-        self.refuse_invalid(&mut moved, |s, n| s.step[n] += 1);
+        self.refuse_invalid(&mut moved, true, |s, n| s.step[n] += 1);
         let mut count = [moved[..self.mesh.num_owned()]
             .iter()
             .filter(|&&m| m)
@@ -632,6 +632,20 @@ impl<'a> Snapper<'a> {
         self.comm.sum_u64(&mut count);
         count[0]
     }
+}
+
+/// Whether every corner of the hexahedron `p` (VTK order) has a scaled
+/// Jacobian of at least `sqrt(j2)` (positive): `det >= j |e0| |e1| |e2|`
+/// compared squared, without roots or divisions.
+fn corners_valid(p: &[[f64; 3]; 8], j2: f64) -> bool {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+    CORNER_EDGES.iter().enumerate().all(|(k, nb)| {
+        let [a, b, c] = nb.map(|j| sub(p[j], p[k]));
+        let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
+        det > 0.0 && det * det >= j2 * (dot(a) * dot(b) * dot(c))
+    })
 }
 
 /// The volume of the trilinear hexahedron with corners `p` in VTK order:
@@ -653,16 +667,16 @@ pub fn hexahedron_volume(p: &[[f64; 3]; 8]) -> f64 {
                 let t = [u, v, w];
                 let mut jac = [[0.0f64; 3]; 3];
                 for (m, x) in q.iter().enumerate() {
-                    for a in 0..3 {
+                    for (a, row) in jac.iter_mut().enumerate() {
                         // d N_m / d t_a
                         let mut dn = if m >> a & 1 == 1 { 1.0 } else { -1.0 };
-                        for b in 0..3 {
+                        for (b, &tb) in t.iter().enumerate() {
                             if b != a {
-                                dn *= if m >> b & 1 == 1 { t[b] } else { 1.0 - t[b] };
+                                dn *= if m >> b & 1 == 1 { tb } else { 1.0 - tb };
                             }
                         }
-                        for k in 0..3 {
-                            jac[a][k] += dn * x[k];
+                        for (r, &xk) in row.iter_mut().zip(x) {
+                            *r += dn * xk;
                         }
                     }
                 }
@@ -829,8 +843,8 @@ impl Mesh {
                 break;
             }
         }
-        for n in 0..ni {
-            relaxed[n] = s.layer[n] && s.pos[n] != s.lattice[n];
+        for (n, r) in relaxed.iter_mut().enumerate() {
+            *r = s.layer[n] && s.pos[n] != s.lattice[n];
         }
         s.place_surface_nodes();
         s.update_hanging();
@@ -1076,14 +1090,42 @@ mod tests {
         assert!((hexahedron_volume(&cube) - 6.0).abs() < 1e-14);
         // A sheared box keeps its volume.
         let mut sheared = cube;
-        for v in 4..8 {
-            sheared[v][0] += 0.7;
+        for p in &mut sheared[4..] {
+            p[0] += 0.7;
         }
         assert!((hexahedron_volume(&sheared) - 6.0).abs() < 1e-14);
         let mut raised = cube;
         raised[6][2] += 1.0;
         // The top face z = 3 + x y / 2 over [0, 2] x [0, 1]: 6 + 0.5.
         assert!((hexahedron_volume(&raised) - 6.5).abs() < 1e-14);
+    }
+
+    #[test]
+    fn the_squared_test_agrees_with_the_scaled_jacobians() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut agree = 0;
+        for _ in 0..2000 {
+            let p: [[f64; 3]; 8] = std::array::from_fn(|v| {
+                let m = VTK_TO_MORTON[v];
+                [0, 1, 2].map(|a| (m >> a & 1) as f64 + 0.6 * next())
+            });
+            let j = corner_scaled_jacobians(&p);
+            for t in [0.001, 0.1, 0.3] {
+                let slow = j.iter().all(|&v| v >= t);
+                let near = j.iter().any(|&v| (v - t).abs() < 1e-12);
+                if !near {
+                    assert_eq!(corners_valid(&p, t * t), slow, "{p:?} {t}");
+                    agree += slow as usize;
+                }
+            }
+        }
+        assert!(agree > 500, "{agree}");
     }
 
     #[test]
