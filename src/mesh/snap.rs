@@ -15,24 +15,38 @@
 //! # Validity
 //!
 //! After the move every element touching a moved node is measured by its
-//! corners' scaled Jacobians ([`super::quality`]). In an element with a
-//! corner below the least scaled Jacobian allowed
-//! ([`SnapOptions::min_jacobian`]), the displacement of each surface node it
-//! depends on is halved, and again, until the element is valid; after
-//! [`STEPS`] halvings the node stays where the octree put it. The nodes
-//! that end between are *partly snapped*, and the elements holding them
-//! are reported. Then, `iterations` times, the interior nodes within
-//! `layers` element layers of the surface nodes take the mean displacement
-//! of the elements around them (the surface and everything further in
-//! fixed), each move kept only where every element around stays valid, and
-//! every partly snapped node tries to double its displacement again under
-//! the same rule; the relaxed layers make room for it.
+//! corners' scaled Jacobians ([`super::quality`]). At a corner below the
+//! least scaled Jacobian allowed ([`SnapOptions::min_jacobian`]) the
+//! corner's surface node is blamed (a hanging corner's neighbours along
+//! the edges, as it follows its face or edge; else every surface node of
+//! the element), and a blamed node moves a smaller fraction of its
+//! displacement, down the steps of [`FRACTIONS`], until the element is
+//! valid; after [`STEPS`] steps the node stays where the octree put it.
+//! Only the elements around nodes that changed are measured again. The
+//! nodes that end between are *partly snapped*, and the elements that
+//! depend on them are reported. Then, up to `iterations` times, the
+//! interior nodes within `layers` element layers of the surface nodes take
+//! the mean displacement of the elements around them (the surface and
+//! everything further in fixed), each move kept only where every element
+//! around stays valid, and every partly snapped node tries a step up again
+//! under the same rule; the relaxed layers make room for it.
+//!
+//! # Limits
+//!
+//! The topology does not change. An element at a corner of the staircase
+//! that is convex seen from the kept side has two or three faces on the
+//! surface; where the surface bends away from the kept side (a fluid mesh
+//! around a convex body, a saddle) moving all their nodes onto it flattens
+//! or inverts the element, so some of those nodes stay partly snapped
+//! (about half of a fluid sphere's). Hanging nodes on the surface cannot
+//! reach it either: refining the leaves next to the surface to its level
+//! (a distance band) keeps 2:1 steps off it.
 //!
 //! # Rank counts
 //!
 //! A node's target depends only on its lattice point and the surface, and
 //! every rank holding a node computes it the same way. Every decision that
-//! involves elements of several ranks (a halving, a refused move, the
+//! involves elements of several ranks (a step back, a refused move, the
 //! layers) is a flag per node or-ed over the ranks sharing it through the
 //! node exchange lists, and the smoothing's sums over the elements around
 //! a node are fixed-point integers, exact in any order. So every rank
@@ -302,7 +316,7 @@ struct Snapper<'a> {
     /// Current positions of every local node.
     pos: Vec<[f64; 3]>,
     /// Independent surface nodes that move, with their targets and
-    /// halvings (`STEPS`: unmoved).
+    /// steps back (`STEPS`: unmoved).
     snap: Vec<bool>,
     target: Vec<[f64; 3]>,
     step: Vec<u8>,
@@ -429,7 +443,7 @@ impl<'a> Snapper<'a> {
         n[0]
     }
 
-    /// The position of surface node `n` after its halvings.
+    /// The position of surface node `n` after its steps back.
     fn snapped_position(&self, n: usize) -> [f64; 3] {
         let (x, t, k) = (self.lattice[n], self.target[n], self.step[n]);
         match k {
@@ -615,8 +629,8 @@ impl<'a> Snapper<'a> {
         count[0]
     }
 
-    /// Doubles the displacement of every partly snapped node where the
-    /// elements stay valid; returns how many advanced (over all ranks).
+    /// Moves every partly snapped node one step up where the elements stay
+    /// valid; returns how many advanced (over all ranks).
     fn advance(&mut self) -> u64 {
         let mut moved: Vec<bool> = (0..self.ni)
             .map(|n| self.snap[n] && self.step[n] > 0)
