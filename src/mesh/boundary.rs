@@ -186,7 +186,7 @@ impl Mesh {
         }
         for k in 0..near.len() {
             if near[k] != u32::MAX && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0) {
-                masks[ni + k] = node_patch_mask(&kept, lattice[ni + k], near[k] as usize, hi);
+                masks[ni + k] = node_patch_mask(&kept, lattice[ni + k], near[k] as usize, hi, 0);
             }
         }
         masks
@@ -224,7 +224,7 @@ impl Mesh {
                 if c == 0xff {
                     0
                 } else {
-                    node_patch_mask(&kept, p, e as usize, hi)
+                    node_patch_mask(&kept, p, e as usize, hi, c)
                 }
             })
             .collect();
@@ -308,8 +308,10 @@ impl Mesh {
 
 /// The patches (bit `p` for patch `p`) of the boundary faces holding
 /// lattice point `p`.
-/// `hi`: the upper lattice bounds of the domain (the cube's or a brick's).
-fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3]) -> u64 {
+/// `hi`: the upper lattice bounds of the domain (the cube's or a brick's);
+/// `covered`: the cells known to be kept (bit `b` for cell `b`), which
+/// need no look-up.
+fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3], covered: u8) -> u64 {
     // Cell `b` (bit `a` of `b` set: on the positive side of axis `a`),
     // kept or not; `outside[b]` when it leaves the domain.
     let mut inside = [false; 8];
@@ -326,7 +328,9 @@ fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3]) -> u64 {
                 q[a] = p[a].wrapping_sub(1);
             }
         }
-        if !outside[b] {
+        if covered >> b & 1 == 1 {
+            inside[b] = true;
+        } else if !outside[b] {
             let cell = crate::octant::morton_encode(q[0], q[1], q[2]);
             inside[b] = kept.holding_cell(cell, hint).is_some();
         }

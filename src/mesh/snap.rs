@@ -234,8 +234,14 @@ impl Target {
             let [a, b, c] = self.edges[i as usize].v;
             return Some((closest_point_triangle(x, a, b, c), true));
         }
+        // Most surface nodes lie within a cell of the surface: a tight
+        // first bound prunes most of the tree (the answer is the same).
+        let near = 1.5 * h;
         let far = SURFACE_REACH * h;
-        let (i, _) = self.bvh.nearest(&self.tris, x, far * far)?;
+        let (i, _) = self
+            .bvh
+            .nearest(&self.tris, x, near * near)
+            .or_else(|| self.bvh.nearest(&self.tris, x, far * far))?;
         let [a, b, c] = self.tris[i as usize].v;
         Some((closest_point_triangle(x, a, b, c), false))
     }
@@ -510,9 +516,10 @@ impl<'a> Snapper<'a> {
     /// elements until every element is valid or those nodes are back.
     fn scale_back(&mut self) {
         let mut cands = self.active.clone();
+        self.place_surface_nodes();
+        self.update_hanging();
         loop {
-            self.place_surface_nodes();
-            self.update_hanging();
+            self.refresh_hanging(&cands);
             let bad = self.bad_among(&cands);
             let mut flags = vec![0u64; self.ni];
             for e in bad {
@@ -522,29 +529,37 @@ impl<'a> Snapper<'a> {
             if self.agree_flags(&mut flags) == 0 {
                 break;
             }
-            for (step, &f) in self.step.iter_mut().zip(&flags) {
-                *step += (f != 0) as u8;
+            for (n, _) in flags.iter().enumerate().filter(|f| *f.1 != 0) {
+                self.step[n] += 1;
+                self.pos[n] = self.snapped_position(n);
             }
             cands = self.around(|n| flags[n] != 0);
         }
     }
 
-    /// Undoes the moves of `moved` nodes in invalid elements (restoring
-    /// `undo`) until every element is valid or nothing is left to undo.
-    /// Only elements around moved nodes are measured: the others were
-    /// valid (or beyond help) before.
-    fn refuse_invalid(
-        &mut self,
-        moved: &mut [bool],
-        surface: bool,
-        mut undo: impl FnMut(&mut Self, usize),
-    ) {
+    /// The hanging corners of elements `cands` from their dependencies:
+    /// every hanging node depending on a changed node is a corner of an
+    /// element around it.
+    fn refresh_hanging(&mut self, cands: &[u32]) {
+        let conn = self.mesh.connectivity();
+        for &e in cands {
+            for &c in &conn[e as usize] {
+                let c = c as usize;
+                if c >= self.ni {
+                    self.pos[c] = mean(&self.pos, self.deps[c - self.ni]);
+                }
+            }
+        }
+    }
+
+    /// Undoes the moves of `moved` nodes (already made) in invalid
+    /// elements (`undo` restores a node's position) until every element is
+    /// valid or nothing is left to undo. Only elements around moved nodes
+    /// are measured: the others were valid (or beyond help) before.
+    fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
         let mut cands = self.around(|n| moved[n]);
         loop {
-            if surface {
-                self.place_surface_nodes();
-            }
-            self.update_hanging();
+            self.refresh_hanging(&cands);
             let bad = self.bad_among(&cands);
             let mut flags = vec![0u64; self.ni];
             for e in bad {
@@ -567,6 +582,7 @@ impl<'a> Snapper<'a> {
     /// than [`RELAX_TOLERANCE`] of its cell; returns how many moved (over
     /// all ranks, owned nodes).
     fn relax(&mut self) -> u64 {
+        self.update_hanging();
         let ni = self.ni;
         let conn = self.mesh.connectivity();
         let mut sums = vec![0u64; 4 * ni];
@@ -617,7 +633,7 @@ impl<'a> Snapper<'a> {
                 moved[n] = true;
             }
         }
-        self.refuse_invalid(&mut moved, false, |s, n| {
+        self.refuse_invalid(&mut moved, |s, n| {
             let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
             s.pos[n] = old[k].1;
         });
@@ -635,10 +651,14 @@ impl<'a> Snapper<'a> {
         let mut moved: Vec<bool> = (0..self.ni)
             .map(|n| self.snap[n] && self.step[n] > 0)
             .collect();
-        for (step, &m) in self.step.iter_mut().zip(&moved) {
-            *step -= m as u8;
+        for (n, _) in moved.iter().enumerate().filter(|m| *m.1) {
+            self.step[n] -= 1;
+            self.pos[n] = self.snapped_position(n);
         }
-        self.refuse_invalid(&mut moved, true, |s, n| s.step[n] += 1);
+        self.refuse_invalid(&mut moved, |s, n| {
+            s.step[n] += 1;
+            s.pos[n] = s.snapped_position(n);
+        });
         let mut count = [moved[..self.mesh.num_owned()]
             .iter()
             .filter(|&&m| m)
