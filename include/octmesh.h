@@ -1222,7 +1222,8 @@ octmesh_status_t octmesh_octree_locate_points(const octmesh_t *h,
 octmesh_status_t octmesh_mesh_build_faces(octmesh_t *h);
 
 /**
- * Writes the finite-volume faces and cells to `*out`. Needs
+ * Writes the finite-volume faces and cells to `*out`: on a snapped mesh
+ * (`octmesh_mesh_snap`) their geometry is that of the moved points. Needs
  * `octmesh_mesh_build_faces`. Not collective.
  *
  * \param[in]  h    the handle

@@ -32,7 +32,7 @@ use octmesh::config::{Command, Config};
 use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::{load_surface, Bvh};
 use octmesh::mesh::snap::{hexahedron_volume, SnapReport};
-use octmesh::mesh::{Mesh, SURFACE_PATCH};
+use octmesh::mesh::{Mesh, Other, SURFACE_PATCH};
 use octmesh::pipeline::Session;
 
 const CHILD: &str = "OCTMESH_SNAP_CHILD";
@@ -261,6 +261,32 @@ fn check_snapped(name: &str, level: u8, keep: Keep, band: bool) -> (SnapReport, 
         on >= r.snapped && r.snapped as f64 >= least * surface as f64,
         "{tag}: {on} surface nodes on the surface, {surface} in all, report {r:?}"
     );
+    // The finite-volume geometry from the moved points closes every cell:
+    // its faces' area vectors (out of it) sum to zero.
+    let g = m.snapped_fv_geometry(&faces).unwrap().expect("snapped");
+    let mut sum = vec![[0.0f64; 3]; m.elements().len()];
+    let mut size = vec![0.0f64; m.elements().len()];
+    for (k, f) in faces.faces().iter().enumerate() {
+        let s = g.face_normal[k].map(|x| x * g.face_area[k]);
+        let o = f.owner as usize;
+        for a in 0..3 {
+            sum[o][a] += s[a];
+        }
+        size[o] += g.face_area[k];
+        if let Other::Element(j) = f.other {
+            for a in 0..3 {
+                sum[j as usize][a] -= s[a];
+            }
+            size[j as usize] += g.face_area[k];
+        }
+    }
+    for (e, (s, a)) in sum.iter().zip(&size).enumerate() {
+        let open = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+        assert!(
+            open <= 1e-12 * a,
+            "{tag}: element {e} is open by {open:e} of {a:e}"
+        );
+    }
     let lattice = m.lattice_coordinates();
     let (mut volume, mut staircase) = (0.0, 0.0);
     for e in 0..m.elements().len() {

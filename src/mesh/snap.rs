@@ -184,6 +184,22 @@ pub struct SnapReport {
     pub iterations: u32,
 }
 
+/// The finite-volume geometry of a snapped mesh
+/// ([`Mesh::snapped_fv_geometry`]), user units.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FvGeometry {
+    /// Per face, its area.
+    pub face_area: Vec<f64>,
+    /// Per face, its centre.
+    pub face_centre: Vec<[f64; 3]>,
+    /// Per face, its unit normal (from its owner out).
+    pub face_normal: Vec<[f64; 3]>,
+    /// Per local element, its centre.
+    pub cell_centre: Vec<[f64; 3]>,
+    /// Per local element, its volume.
+    pub cell_volume: Vec<f64>,
+}
+
 /// The surface in lattice units with its trees, and its features.
 struct Target {
     tris: Vec<Triangle>,
@@ -688,40 +704,101 @@ fn corners_valid(p: &[[f64; 3]; 8], j2: f64) -> bool {
 /// elements of a snapped mesh, hanging faces included, fit together
 /// without gaps, so these add up to the mesh's volume.
 pub fn hexahedron_volume(p: &[[f64; 3]; 8]) -> f64 {
+    hexahedron_volume_centre(p).0
+}
+
+/// The area vector and centroid of the quadrilateral `p` (in order), as
+/// OpenFOAM computes them: the triangles from the mean of the corners to
+/// each edge, their area vectors summed and their centroids weighted by
+/// the area along the total's direction. Exact for a planar face.
+pub fn quad_area_centre(p: &[[f64; 3]; 4]) -> ([f64; 3], [f64; 3]) {
+    let m: [f64; 3] = std::array::from_fn(|a| (p[0][a] + p[1][a] + p[2][a] + p[3][a]) * 0.25);
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let tri: [([f64; 3], [f64; 3]); 4] = std::array::from_fn(|k| {
+        let (a, b) = (p[k], p[(k + 1) % 4]);
+        let s = cross(sub(a, m), sub(b, m)).map(|x| 0.5 * x);
+        let c = std::array::from_fn(|i| (m[i] + a[i] + b[i]) / 3.0);
+        (s, c)
+    });
+    let total: [f64; 3] = std::array::from_fn(|i| tri.iter().map(|t| t.0[i]).sum());
+    let len2 = total[0] * total[0] + total[1] * total[1] + total[2] * total[2];
+    if len2 == 0.0 {
+        return (total, m);
+    }
+    let mut weight = 0.0;
+    let mut centre = [0.0; 3];
+    for (s, c) in &tri {
+        // The triangle's area along the face's normal.
+        let w = (s[0] * total[0] + s[1] * total[1] + s[2] * total[2]) / len2.sqrt();
+        weight += w;
+        for i in 0..3 {
+            centre[i] += w * c[i];
+        }
+    }
+    (total, centre.map(|x| x / weight))
+}
+
+/// The volume and centroid of the trilinear hexahedron with corners `p`
+/// in VTK order (2 x 2 x 2 Gauss points, exact for both).
+pub fn hexahedron_volume_centre(p: &[[f64; 3]; 8]) -> (f64, [f64; 3]) {
     let g = [0.5 - 0.5 / 3f64.sqrt(), 0.5 + 0.5 / 3f64.sqrt()];
-    // Corners in Morton order: bit a set means the far side along axis a.
     let q: [[f64; 3]; 8] = std::array::from_fn(|m| {
         let v = VTK_TO_MORTON.iter().position(|&x| x == m).unwrap_or(0);
         p[v]
     });
-    let mut volume = 0.0;
+    let (mut volume, mut first) = (0.0, [0.0; 3]);
     for &u in &g {
         for &v in &g {
             for &w in &g {
                 let t = [u, v, w];
-                let mut jac = [[0.0f64; 3]; 3];
-                for (m, x) in q.iter().enumerate() {
-                    for (a, row) in jac.iter_mut().enumerate() {
-                        // d N_m / d t_a
-                        let mut dn = if m >> a & 1 == 1 { 1.0 } else { -1.0 };
-                        for (b, &tb) in t.iter().enumerate() {
-                            if b != a {
-                                dn *= if m >> b & 1 == 1 { tb } else { 1.0 - tb };
-                            }
-                        }
-                        for (r, &xk) in row.iter_mut().zip(x) {
-                            *r += dn * xk;
-                        }
+                let det = jacobian_at(&q, t) / 8.0;
+                let mut x = [0.0; 3];
+                for (m, y) in q.iter().enumerate() {
+                    let n: f64 = (0..3)
+                        .map(|a| if m >> a & 1 == 1 { t[a] } else { 1.0 - t[a] })
+                        .product();
+                    for a in 0..3 {
+                        x[a] += n * y[a];
                     }
                 }
-                let [a, b, c] = jac;
-                let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                    + a[2] * (b[0] * c[1] - b[1] * c[0]);
-                volume += det / 8.0;
+                volume += det;
+                for a in 0..3 {
+                    first[a] += det * x[a];
+                }
             }
         }
     }
-    volume
+    (volume, first.map(|x| x / volume))
+}
+
+/// The Jacobian determinant of the trilinear map of corners `q` (Morton
+/// order) at reference point `t`.
+fn jacobian_at(q: &[[f64; 3]; 8], t: [f64; 3]) -> f64 {
+    let mut jac = [[0.0f64; 3]; 3];
+    for (m, x) in q.iter().enumerate() {
+        for (a, row) in jac.iter_mut().enumerate() {
+            // d N_m / d t_a
+            let mut dn = if m >> a & 1 == 1 { 1.0 } else { -1.0 };
+            for (b, &tb) in t.iter().enumerate() {
+                if b != a {
+                    dn *= if m >> b & 1 == 1 { tb } else { 1.0 - tb };
+                }
+            }
+            for (r, &xk) in row.iter_mut().zip(x) {
+                *r += dn * xk;
+            }
+        }
+    }
+    let [a, b, c] = jac;
+    a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
 }
 
 /// The mean of the positions of a hanging node's dependencies, in the
@@ -933,6 +1010,36 @@ impl Mesh {
             min_scaled_jacobian: -worst[0],
             iterations,
         })
+    }
+
+    /// The finite-volume geometry of a snapped mesh, from the moved
+    /// points: per face of `faces` its area, centre and unit normal
+    /// ([`quad_area_centre`]), per local element its centre and volume
+    /// (the trilinear element's, [`hexahedron_volume_centre`]). `None` on
+    /// an unsnapped mesh, whose faces are the octree's
+    /// ([`Mesh::face_area`], [`Mesh::face_centre`]).
+    pub fn snapped_fv_geometry(&self, faces: &super::Faces) -> Result<Option<FvGeometry>> {
+        if self.moved.is_none() {
+            return Ok(None);
+        }
+        let list = faces.faces();
+        let corners: Vec<[u32; 3]> = list.iter().flat_map(|f| f.corners()).collect();
+        let at = self.point_positions(&corners)?;
+        let mut g = FvGeometry::default();
+        for q in at.chunks_exact(4) {
+            let (s, c) = quad_area_centre(&[q[0], q[1], q[2], q[3]]);
+            let a = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+            g.face_area.push(a);
+            g.face_centre.push(c);
+            g.face_normal
+                .push(if a > 0.0 { s.map(|x| x / a) } else { s });
+        }
+        for e in 0..self.elements().len() {
+            let (v, c) = hexahedron_volume_centre(&self.element_corners(e, None));
+            g.cell_volume.push(v);
+            g.cell_centre.push(c);
+        }
+        Ok(Some(g))
     }
 
     /// User-unit positions of lattice points `points` that are local nodes
@@ -1160,6 +1267,30 @@ mod tests {
             }
         }
         assert!(agree > 500, "{agree}");
+    }
+
+    #[test]
+    fn quads_and_hexahedra_centres() {
+        // A planar trapezoid: area 1.5, centroid x = (0 + 2 + 1 + 0 ...).
+        let p = [
+            [0.0, 0.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let (s, c) = quad_area_centre(&p);
+        assert!((s[2] - 1.5).abs() < 1e-15 && s[0] == 0.0 && s[1] == 0.0);
+        // Its centroid: the square [0,1]^2 (area 1, centre 0.5, 0.5) and
+        // the triangle (1,0) (2,0) (1,1) (area 0.5, centre 4/3, 1/3).
+        let want = [(0.5 + 0.5 * 4.0 / 3.0) / 1.5, (0.5 + 0.5 / 3.0) / 1.5];
+        assert!((c[0] - want[0]).abs() < 1e-15 && (c[1] - want[1]).abs() < 1e-15);
+        let cube: [[f64; 3]; 8] = std::array::from_fn(|v| {
+            let m = VTK_TO_MORTON[v];
+            [(m & 1) as f64, (m >> 1 & 1) as f64, (m >> 2 & 1) as f64]
+        });
+        let (v, c) = hexahedron_volume_centre(&cube);
+        assert!((v - 1.0).abs() < 1e-15);
+        assert!(c.iter().all(|&x| (x - 0.5).abs() < 1e-15));
     }
 
     #[test]
