@@ -592,6 +592,46 @@ typedef struct {
 } octmesh_mesh_quality_t;
 
 /**
+ * What `octmesh_mesh_snap` did, over all ranks (each node counted once),
+ * the same on every rank.
+ */
+typedef struct {
+  /**
+   * Independent nodes on the surface patch.
+   */
+  octmesh_gloidx_t surface_nodes;
+  /**
+   * Of those, the ones moved onto the surface.
+   */
+  octmesh_gloidx_t snapped;
+  /**
+   * Moved part of the way (no valid position nearer the surface).
+   */
+  octmesh_gloidx_t partial;
+  /**
+   * Not moved (no valid position, on a side of the domain too, or no
+   * surface within reach).
+   */
+  octmesh_gloidx_t unsnapped;
+  /**
+   * Snapped nodes that went to a feature edge or corner.
+   */
+  octmesh_gloidx_t feature_nodes;
+  /**
+   * Interior nodes the relaxation moved.
+   */
+  octmesh_gloidx_t relaxed_nodes;
+  /**
+   * Elements that depend on a partly or not snapped surface node.
+   */
+  octmesh_gloidx_t reported_elements;
+  /**
+   * The smallest scaled Jacobian over all elements afterwards.
+   */
+  double min_scaled_jacobian;
+} octmesh_snap_report_t;
+
+/**
  * Where each local element of the current mesh came from in the previous
  * mesh (arrays owned by the handle, valid until the mesh changes).
  *
@@ -1221,7 +1261,8 @@ octmesh_status_t octmesh_octree_locate_points(const octmesh_t *h,
 octmesh_status_t octmesh_mesh_build_faces(octmesh_t *h);
 
 /**
- * Writes the finite-volume faces and cells to `*out`. Needs
+ * Writes the finite-volume faces and cells to `*out`: on a snapped mesh
+ * (`octmesh_mesh_snap`) their geometry is that of the moved points. Needs
  * `octmesh_mesh_build_faces`. Not collective.
  *
  * \param[in]  h    the handle
@@ -1550,6 +1591,44 @@ octmesh_status_t octmesh_mesh_locate_points(const octmesh_t *h,
                                             const double *xyz,
                                             int32_t *rank_out,
                                             octmesh_gloidx_t *element_out);
+
+/**
+ * Snaps the current mesh to the surface: every node on the surface patch
+ * moves to the closest point of the surface (to a feature edge or corner
+ * where the surface is sharper than `feature_angle`), scaled back where an
+ * element would have a corner with a scaled Jacobian below `min_jacobian`
+ * (0.001 keeps the elements valid and near the surface; 0.1 keeps
+ * OpenFOAM's skewness below 4), and the
+ * interior nodes within `layers` element layers are relaxed for
+ * `iterations` iterations. Hanging nodes stay the mean of their
+ * dependencies. The coordinates, the VTU and the OpenFOAM output then
+ * give the moved positions (arrays handed out before are replaced). The
+ * positions are the same bits on any number of ranks. Needs a mesh kept
+ * inside or outside and the surface. Collective; every rank must pass the
+ * same values.
+ *
+ * \param[in] h              the handle
+ * \param[in] feature_angle  degrees, 0 to 180 (30 is usual; 180: no
+ *                           features)
+ * \param[in] layers         element layers relaxed, 0 to 100 (2 is usual)
+ * \param[in] iterations     relaxation iterations, 0 to 1000 (3 is usual)
+ * \param[in] min_jacobian   the least scaled Jacobian of an element's
+ *                           corner afterwards, above 0 and at most 0.5
+ */
+octmesh_status_t octmesh_mesh_snap(octmesh_t *h,
+                                   double feature_angle,
+                                   int32_t layers,
+                                   int32_t iterations,
+                                   double min_jacobian);
+
+/**
+ * Writes what the snap of the current mesh did to `*out`. Needs a mesh
+ * snapped by `octmesh_mesh_snap`. Collective.
+ *
+ * \param[in]  h    the handle
+ * \param[out] out  the counts, the same on every rank
+ */
+octmesh_status_t octmesh_mesh_get_snap_report(octmesh_t *h, octmesh_snap_report_t *out);
 
 /**
  * Keeps (`keep` non-zero) or stops keeping the mesh that a change of the

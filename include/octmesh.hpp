@@ -292,6 +292,17 @@ class Mesher {
     detail::check(octmesh_mesh_get_quality(h_, &q), h_, "octmesh_mesh_get_quality");
     return q;
   }
+  /// Snaps the mesh to the surface (collective): surface nodes onto it,
+  /// scaled back where an element's corner would fall below min_jacobian,
+  /// the layers next to it relaxed. Returns what it did.
+  octmesh_snap_report_t snap(double feature_angle = 30.0, int layers = 2, int iterations = 3,
+                             double min_jacobian = 0.001) {
+    detail::check(octmesh_mesh_snap(h_, feature_angle, layers, iterations, min_jacobian), h_,
+                  "octmesh_mesh_snap");
+    octmesh_snap_report_t r;
+    detail::check(octmesh_mesh_get_snap_report(h_, &r), h_, "octmesh_mesh_get_snap_report");
+    return r;
+  }
   /// 8 local node numbers per element (VTK hexahedron order); owned by the handle.
   const int32_t *connectivity() const {
     const int32_t *p = nullptr;

@@ -168,6 +168,20 @@ impl Observer for Table {
                     .collect();
                 say!("  scaled Jacobian histogram: {}", bins.join(" | "));
             }
+            Event::Snapped(r) => {
+                say!(
+                    "  snap: surface nodes {} | snapped {} ({} to features) | partly {} | not {} | \
+                     relaxed {} | elements reported {} | scaled Jacobian min {:.4}",
+                    r.surface_nodes,
+                    r.snapped,
+                    r.feature_nodes,
+                    r.partial,
+                    r.unsnapped,
+                    r.relaxed_nodes,
+                    r.reported_elements,
+                    r.min_scaled_jacobian
+                );
+            }
             Event::Wrote(p) => say!("  wrote {}", p.display()),
             Event::Finished {
                 seconds,

@@ -436,6 +436,60 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
     }
 }
 
+/// Snapping through `octmesh_mesh_snap` (`tests/c/snap.c`) on 1 and 2
+/// ranks: the report equal to the command's statistics on the same
+/// settings.
+#[test]
+fn snap_from_c_equals_the_command() {
+    let dir = scratch("c_api_snap");
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile("snap", &lib, &dir);
+    let stats = dir.join("stats.json");
+    common::octmesh_ok(
+        1,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "5",
+            "--keep",
+            "outside",
+            "--snap",
+            "--quiet",
+            "--stats",
+            stats.to_str().unwrap(),
+        ],
+    );
+    let r = common::json_file(&stats)["snap"].clone();
+    for np in [1, 2] {
+        let out = run_ok(np, &exe, &[]);
+        assert_eq!(out.matches("SNAP OK").count(), np, "{out}");
+        let line = line_starting(&out, "SNAP surface");
+        let field = |key: &str| -> &str {
+            line.split_whitespace()
+                .find_map(|w| w.strip_prefix(&format!("{key}=")))
+                .unwrap_or_else(|| panic!("no {key} in {line}"))
+        };
+        for (key, json) in [
+            ("surface", "surface_nodes"),
+            ("snapped", "snapped"),
+            ("partial", "partial"),
+            ("unsnapped", "unsnapped"),
+            ("reported", "reported_elements"),
+        ] {
+            assert_eq!(
+                field(key).parse::<u64>().ok(),
+                r[json].as_u64(),
+                "np {np}: {key}"
+            );
+        }
+        let c: f64 = field("sj_min").parse().unwrap();
+        let j = r["min_scaled_jacobian"].as_f64().unwrap();
+        assert!((c - j).abs() <= 1e-15 * j.abs(), "np {np}: {c} against {j}");
+    }
+}
+
 /// The mesh's quality through `octmesh_mesh_get_quality` (`tests/c/quality.c`)
 /// on 1 and 2 ranks: every figure equal to the command's statistics on the
 /// same settings.

@@ -49,6 +49,11 @@ pub const OPTIONS: &[(&str, &str)] = &[
     ("mesh.cut_rule", "--cut-rule"),
     ("mesh.patches", "--patch"),
     ("mesh.clean_walls", "--clean-walls"),
+    ("mesh.snap", "--snap"),
+    ("mesh.snap_feature_angle", "--snap-feature-angle"),
+    ("mesh.snap_layers", "--snap-layers"),
+    ("mesh.snap_iterations", "--snap-iterations"),
+    ("mesh.snap_min_jacobian", "--snap-min-jacobian"),
     ("output.quiet", "--quiet"),
     ("output.stats", "--stats"),
     ("output.leaves", "--write-leaves"),
@@ -258,6 +263,26 @@ struct MeshArgs {
     /// walls are manifold [default: true with --openfoam, else false]
     #[arg(long, value_name = "BOOL")]
     clean_walls: Option<bool>,
+    /// Snap the mesh to the surface: the nodes on the surface move onto
+    /// it (sharp edges kept), scaled back where an element would be
+    /// invalid, the layers next to it relaxed (needs --keep inside or
+    /// outside)
+    #[arg(long)]
+    snap: bool,
+    /// Surface edges whose facets' normals differ by more than this many
+    /// degrees stay sharp in the snapped mesh [default: 30]
+    #[arg(long, value_name = "DEGREES")]
+    snap_feature_angle: Option<f64>,
+    /// Element layers around the surface nodes the snap relaxes [default: 2]
+    #[arg(long, value_name = "N")]
+    snap_layers: Option<u32>,
+    /// Relaxation iterations of the snap [default: 3]
+    #[arg(long, value_name = "N")]
+    snap_iterations: Option<u32>,
+    /// The least scaled Jacobian an element's corner may have after the
+    /// snap, in (0, 0.5] [default: 0.1 with --openfoam, else 0.001]
+    #[arg(long, value_name = "J")]
+    snap_min_jacobian: Option<f64>,
     /// Measure the mesh's quality: scaled Jacobian histogram, checkMesh's
     /// non-orthogonality and skewness, in the table and --stats
     #[arg(long)]
@@ -328,6 +353,7 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         Err(e) => return clap_error(e),
     };
     let mut quality = (false, None, None);
+    let mut snap = (false, None, None, None, None);
     let (command, octree, mesh) = match cli.command {
         CliCommand::Check(c) => {
             return Ok(Invocation::Check {
@@ -346,6 +372,13 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
                 m.clean_walls,
             );
             quality = (m.quality, m.quality_out, m.quality_worst);
+            snap = (
+                m.snap,
+                m.snap_feature_angle,
+                m.snap_layers,
+                m.snap_iterations,
+                m.snap_min_jacobian,
+            );
             (
                 Command::Mesh,
                 m.octree,
@@ -550,6 +583,25 @@ pub fn parse(args: &[String]) -> Result<Invocation> {
         }
         if set("output.quality_worst", worst.is_some()) {
             config.output.quality_worst = worst;
+        }
+        let (on, angle, layers, iterations, min_jacobian) = snap;
+        if set("mesh.snap_min_jacobian", min_jacobian.is_some()) {
+            config.mesh.snap_min_jacobian = min_jacobian;
+        }
+        if set("mesh.snap", on) {
+            config.mesh.snap = true;
+        }
+        if let Some(a) = angle {
+            set("mesh.snap_feature_angle", true);
+            config.mesh.snap_feature_angle = a;
+        }
+        if let Some(l) = layers {
+            set("mesh.snap_layers", true);
+            config.mesh.snap_layers = l;
+        }
+        if let Some(i) = iterations {
+            set("mesh.snap_iterations", true);
+            config.mesh.snap_iterations = i;
         }
     }
     let label = |key: &str| match &case {

@@ -49,6 +49,11 @@
 //! [mesh]
 //! keep = "all"              # all | inside | outside
 //! cut_rule = "center"       # center | all | none
+//! snap = false              # move the surface nodes onto the surface (inside | outside)
+//! snap_feature_angle = 30.0 # surface edges sharper than this stay sharp
+//! snap_layers = 2           # element layers relaxed around the surface nodes
+//! snap_iterations = 3       # relaxation iterations
+//! # snap_min_jacobian = 0.001  # least scaled Jacobian (unset: 0.1 with an OpenFOAM case)
 //!
 //! [output]
 //! quiet = false
@@ -312,6 +317,39 @@ pub struct MeshConfig {
     /// walls are manifold (see [`crate::mesh::manifold`]). Unset: on when
     /// writing an OpenFOAM case.
     pub clean_walls: Option<bool>,
+    /// Snap the mesh to the surface ([`crate::mesh::snap`]): the nodes on
+    /// the surface patch move onto it, where every element stays valid.
+    /// Needs `keep` inside or outside.
+    pub snap: bool,
+    /// Surface edges whose facets' normals differ by more than this
+    /// (degrees, 0 to 180) are features the snapped mesh keeps.
+    pub snap_feature_angle: f64,
+    /// Element layers around the surface nodes that the snap relaxes.
+    pub snap_layers: u32,
+    /// Relaxation iterations of the snap.
+    pub snap_iterations: u32,
+    /// The least scaled Jacobian an element's corner may have after the
+    /// snap, in (0, 0.5]. Unset: 0.1 when writing an OpenFOAM case (what
+    /// keeps `checkMesh`'s skewness below 4), else 0.001.
+    pub snap_min_jacobian: Option<f64>,
+}
+
+impl MeshConfig {
+    /// The snap's options; `foam`: an OpenFOAM case is written.
+    pub fn snap_options(&self, foam: bool) -> crate::mesh::snap::SnapOptions {
+        use crate::mesh::snap::{DEFAULT_MIN_JACOBIAN, FOAM_MIN_JACOBIAN};
+        let j = if foam {
+            FOAM_MIN_JACOBIAN
+        } else {
+            DEFAULT_MIN_JACOBIAN
+        };
+        crate::mesh::snap::SnapOptions {
+            feature_angle_deg: self.snap_feature_angle,
+            layers: self.snap_layers,
+            iterations: self.snap_iterations,
+            min_jacobian: self.snap_min_jacobian.unwrap_or(j),
+        }
+    }
 }
 
 impl Default for MeshConfig {
@@ -321,6 +359,11 @@ impl Default for MeshConfig {
             cut_rule: CutRule::default(),
             patches: BTreeMap::new(),
             clean_walls: None,
+            snap: false,
+            snap_feature_angle: crate::mesh::snap::DEFAULT_FEATURE_ANGLE,
+            snap_layers: crate::mesh::snap::DEFAULT_LAYERS,
+            snap_iterations: crate::mesh::snap::DEFAULT_ITERATIONS,
+            snap_min_jacobian: None,
         }
     }
 }
@@ -444,6 +487,11 @@ pub const KEYS: &[&str] = &[
     "mesh.cut_rule",
     "mesh.patches",
     "mesh.clean_walls",
+    "mesh.snap",
+    "mesh.snap_feature_angle",
+    "mesh.snap_layers",
+    "mesh.snap_iterations",
+    "mesh.snap_min_jacobian",
     "output.quiet",
     "output.stats",
     "output.leaves",
@@ -613,6 +661,39 @@ impl Config {
                     ))
                 }
                 _ => {}
+            }
+            if self.mesh.snap && self.mesh.keep == Keep::All {
+                return Err(ConfigError::new(
+                    "mesh.snap",
+                    "needs {mesh.keep} inside or outside: with all leaves kept no node is on the surface",
+                ));
+            }
+            let a = self.mesh.snap_feature_angle;
+            if !(0.0..=180.0).contains(&a) {
+                return Err(ConfigError::new(
+                    "mesh.snap_feature_angle",
+                    format!("must be between 0 and 180 degrees, got {a}"),
+                ));
+            }
+            if self.mesh.snap_layers > 100 {
+                return Err(ConfigError::new(
+                    "mesh.snap_layers",
+                    format!("must be at most 100, got {}", self.mesh.snap_layers),
+                ));
+            }
+            if let Some(j) = self.mesh.snap_min_jacobian {
+                if !(j > 0.0 && j <= 0.5) {
+                    return Err(ConfigError::new(
+                        "mesh.snap_min_jacobian",
+                        format!("must be above 0 and at most 0.5, got {j}"),
+                    ));
+                }
+            }
+            if self.mesh.snap_iterations > 1000 {
+                return Err(ConfigError::new(
+                    "mesh.snap_iterations",
+                    format!("must be at most 1000, got {}", self.mesh.snap_iterations),
+                ));
             }
             // The patches renamed must exist, which only the surface's
             // parts tell (checked once it is read); the new names are
@@ -936,6 +1017,11 @@ mod tests {
         c.leak.path = Some("leak.csv".into());
         c.mesh.keep = Keep::Outside;
         c.mesh.cut_rule = CutRule::None;
+        c.mesh.snap = true;
+        c.mesh.snap_feature_angle = 45.0;
+        c.mesh.snap_layers = 3;
+        c.mesh.snap_iterations = 7;
+        c.mesh.snap_min_jacobian = Some(0.2);
         c.output.stats = Some("s.json".into());
         c.output.vtu = Some("m.pvtu".into());
         c.surface.drop_duplicates = true;

@@ -223,6 +223,23 @@ fn neighbour_code(f: &crate::mesh::Face) -> i32 {
 fn fv_arrays(m: &Mesh, faces: &Faces) -> FvArrays {
     let list = faces.faces();
     let n = m.elements().len();
+    // A snapped mesh's geometry comes from its moved points (the point
+    // look-ups cannot fail for its own faces; the octree's otherwise).
+    if let Ok(Some(g)) = m.snapped_fv_geometry(faces) {
+        return FvArrays {
+            owner: list.iter().map(|f| f.owner as i32).collect(),
+            neighbour: list.iter().map(neighbour_code).collect(),
+            area: g.face_area,
+            centre: g.face_centre.into_flattened(),
+            normal: g.face_normal.into_flattened(),
+            patch_offsets: (0..faces.num_patches())
+                .map(|p| faces.patch_range(p).start as i32)
+                .chain([faces.halo_range().start as i32])
+                .collect(),
+            cell_centre: g.cell_centre.into_flattened(),
+            cell_volume: g.cell_volume,
+        };
+    }
     FvArrays {
         owner: list.iter().map(|f| f.owner as i32).collect(),
         neighbour: list.iter().map(neighbour_code).collect(),
@@ -279,7 +296,8 @@ fn boundary_arrays(b: &Boundary) -> BoundaryArrays {
     }
 }
 
-/// Writes the finite-volume faces and cells to `*out`. Needs
+/// Writes the finite-volume faces and cells to `*out`: on a snapped mesh
+/// (`octmesh_mesh_snap`) their geometry is that of the moved points. Needs
 /// `octmesh_mesh_build_faces`. Not collective.
 ///
 /// \param[in]  h    the handle

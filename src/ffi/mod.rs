@@ -59,6 +59,7 @@ pub mod adapt;
 pub mod data;
 pub mod quality;
 pub mod search;
+pub mod snap;
 pub mod surface;
 pub mod transfer;
 

@@ -11,6 +11,7 @@
 //! order) so candidate queries do not need the triangles; exact queries take
 //! the triangle slice the tree was built from.
 
+use super::distance::{point_box2, point_triangle2};
 use super::intersect::triangle_box_overlap;
 use super::{Aabb, Triangle};
 
@@ -190,6 +191,79 @@ impl Bvh {
         });
     }
 
+    /// The triangle nearest `p` by exact point-triangle distance, with its
+    /// squared distance, among those closer than `sqrt(limit2)` (`None`
+    /// when there is none, or no triangle). Equally near triangles go to
+    /// the lowest index, so the answer depends on `p` and the triangles
+    /// only. `tris` must be the slice the tree was built from.
+    pub fn nearest(&self, tris: &[Triangle], p: [f64; 3], limit2: f64) -> Option<(u32, f64)> {
+        debug_assert_eq!(tris.len(), self.order.len());
+        if self.nodes.is_empty() {
+            return None;
+        }
+        let mut best: Option<(u32, f64)> = None;
+        let mut bound = limit2;
+        let node_d2 = |i: u32| {
+            let b = &self.nodes[i as usize].bbox;
+            point_box2(p, b.min, b.max)
+        };
+        // (node, its box's squared distance); the nearer child is visited
+        // first so the bound shrinks early.
+        let mut stack = [(0u32, 0.0f64); STACK];
+        let mut sp = 0;
+        let root = node_d2(0);
+        if root <= bound {
+            stack[0] = (0, root);
+            sp = 1;
+        }
+        while sp > 0 {
+            sp -= 1;
+            let (ni, d2) = stack[sp];
+            if d2 > bound {
+                continue;
+            }
+            let node = &self.nodes[ni as usize];
+            if node.count == 0 {
+                debug_assert!(sp + 2 <= STACK);
+                let (l, r) = (node.first, node.first + 1);
+                let (dl, dr) = (node_d2(l), node_d2(r));
+                let (near, far) = if dl <= dr {
+                    ((l, dl), (r, dr))
+                } else {
+                    ((r, dr), (l, dl))
+                };
+                if far.1 <= bound {
+                    stack[sp] = far;
+                    sp += 1;
+                }
+                if near.1 <= bound {
+                    stack[sp] = near;
+                    sp += 1;
+                }
+                continue;
+            }
+            let first = node.first as usize;
+            for slot in first..first + node.count as usize {
+                let b = &self.boxes[slot];
+                if point_box2(p, b.min, b.max) > bound {
+                    continue;
+                }
+                let ti = self.order[slot];
+                let [a, bb, c] = tris[ti as usize].v;
+                let d = point_triangle2(p, a, bb, c);
+                let better = match best {
+                    None => d <= bound,
+                    Some((bi, bd)) => d < bd || (d == bd && ti < bi),
+                };
+                if better {
+                    best = Some((ti, d));
+                    bound = d;
+                }
+            }
+        }
+        best
+    }
+
     /// Calls `hit` for each triangle whose box overlaps the query box, until
     /// `hit` returns true; returns whether it did.
     #[inline]
@@ -339,6 +413,34 @@ mod tests {
     #[test]
     fn torus_matches_brute_force() {
         compare_with_brute_force(&default_torus(), 0x0fed_cba9_8765_4321, 600);
+    }
+
+    #[test]
+    fn nearest_matches_brute_force() {
+        for s in [default_sphere(), default_torus()] {
+            let tris = s.triangles();
+            let bvh = Bvh::new(tris);
+            let sb = s.bbox();
+            let mut rng = Rng(0x5eed_1234_abcd_0001);
+            for _ in 0..300 {
+                let p: [f64; 3] =
+                    std::array::from_fn(|k| rng.uniform(sb.min[k] - 0.2, sb.max[k] + 0.2));
+                let brute = (0..tris.len() as u32)
+                    .map(|i| {
+                        let [a, b, c] = tris[i as usize].v;
+                        (point_triangle2(p, a, b, c), i)
+                    })
+                    .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)))
+                    .unwrap();
+                let got = bvh.nearest(tris, p, f64::INFINITY).unwrap();
+                assert_eq!((got.1, got.0), brute);
+                // A limit below the distance finds nothing.
+                assert!(bvh.nearest(tris, p, 0.5 * brute.0).is_none() || brute.0 == 0.0);
+            }
+        }
+        assert!(Bvh::new(&[])
+            .nearest(&[], [0.0; 3], f64::INFINITY)
+            .is_none());
     }
 
     #[test]

@@ -40,46 +40,58 @@ pub fn point_box2(p: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> f64 {
 /// Squared distance from `p` to the triangle `a b c` (Ericson's region
 /// tests, "Real-Time Collision Detection" 5.1.5).
 pub fn point_triangle2(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
+    dist2(p, closest_point_triangle(p, a, b, c))
+}
+
+/// The point of the triangle `a b c` closest to `p` (Ericson's region
+/// tests, "Real-Time Collision Detection" 5.1.5); a degenerate triangle is
+/// the union of its edges.
+pub fn closest_point_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
     let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
     let (d1, d2) = (dot(ab, ap), dot(ac, ap));
     if d1 <= 0.0 && d2 <= 0.0 {
-        return dist2(p, a);
+        return a;
     }
     let bp = sub(p, b);
     let (d3, d4) = (dot(ab, bp), dot(ac, bp));
     if d3 >= 0.0 && d4 <= d3 {
-        return dist2(p, b);
+        return b;
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return dist2(p, add_scaled(a, ab, d1 / (d1 - d3)));
+        return add_scaled(a, ab, d1 / (d1 - d3));
     }
     let cp = sub(p, c);
     let (d5, d6) = (dot(ab, cp), dot(ac, cp));
     if d6 >= 0.0 && d5 <= d6 {
-        return dist2(p, c);
+        return c;
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return dist2(p, add_scaled(a, ac, d2 / (d2 - d6)));
+        return add_scaled(a, ac, d2 / (d2 - d6));
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return dist2(p, add_scaled(b, sub(c, b), w));
+        return add_scaled(b, sub(c, b), w);
     }
     let denom = va + vb + vc;
     if denom.is_nan() || denom <= 0.0 {
-        // A degenerate triangle: its edges hold it.
-        return segment_point2(a, b, p)
-            .min(segment_point2(b, c, p))
-            .min(segment_point2(a, c, p));
+        // A degenerate triangle: its edges hold it; the first nearest wins.
+        let mut best = segment_closest(a, b, p);
+        for q in [segment_closest(b, c, p), segment_closest(a, c, p)] {
+            if dist2(p, q) < dist2(p, best) {
+                best = q;
+            }
+        }
+        return best;
     }
     let (v, w) = (vb / denom, vc / denom);
-    dist2(p, add_scaled(add_scaled(a, ab, v), ac, w))
+    add_scaled(add_scaled(a, ab, v), ac, w)
 }
 
-fn segment_point2(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> f64 {
+/// The point of the segment `a b` closest to `p`.
+fn segment_closest(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> [f64; 3] {
     let d = sub(b, a);
     let l = dot(d, d);
     let t = if l > 0.0 {
@@ -87,7 +99,7 @@ fn segment_point2(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> f64 {
     } else {
         0.0
     };
-    dist2(p, add_scaled(a, d, t))
+    add_scaled(a, d, t)
 }
 
 /// Squared distance between the segments `p1 q1` and `p2 q2` (Ericson

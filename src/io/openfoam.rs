@@ -366,7 +366,8 @@ fn write_polymesh(
         format!("processor{me}/constant/polyMesh")
     };
     let loc = location.as_str();
-    let domain = mesh.domain();
+    // The moved positions on a snapped mesh, the lattice's otherwise.
+    let positions = mesh.point_positions(&poly.points)?;
     let nf = faces.faces().len();
     let ni = faces.num_internal();
     let counts = FoamCounts {
@@ -384,12 +385,11 @@ fn write_polymesh(
         let mut w = create(&path).map_err(std::io::Error::other)?;
         header(&mut w, fmt, "vectorField", loc, "points", None)?;
         write!(w, "{}\n(", poly.points.len())?;
-        let user = |q: &[u32; 3]| domain.from_lattice([q[0] as f64, q[1] as f64, q[2] as f64]);
         match fmt {
             FoamFormat::Binary => {
                 let mut buf = Vec::with_capacity(24 * poly.points.len());
-                for q in &poly.points {
-                    for x in user(q) {
+                for q in &positions {
+                    for &x in q {
                         buf.extend_from_slice(&x.to_le_bytes());
                     }
                 }
@@ -398,8 +398,7 @@ fn write_polymesh(
             }
             FoamFormat::Ascii => {
                 writeln!(w)?;
-                for q in &poly.points {
-                    let x = user(q);
+                for x in &positions {
                     writeln!(w, "({:.17e} {:.17e} {:.17e})", x[0], x[1], x[2])?;
                 }
                 writeln!(w, ")")?;

@@ -69,7 +69,7 @@ struct Piece {
     element: Vec<i64>,
 }
 
-fn piece_of(mesh: &Mesh, faces: &Faces) -> Piece {
+fn piece_of(mesh: &Mesh, faces: &Faces) -> Result<Piece> {
     let end = faces.halo_range().start;
     let list = &faces.faces()[faces.num_internal()..end];
     let mut p = Piece {
@@ -77,16 +77,18 @@ fn piece_of(mesh: &Mesh, faces: &Faces) -> Piece {
         patch: Vec::with_capacity(list.len()),
         element: Vec::with_capacity(list.len()),
     };
+    let mut corners = Vec::with_capacity(4 * list.len());
     for f in list {
         let Other::Patch(id) = f.other else { continue };
-        for c in f.corners() {
-            p.points
-                .extend(mesh.domain().from_lattice(c.map(f64::from)));
-        }
+        corners.extend(f.corners());
         p.patch.push(id as i32);
         p.element.push(mesh.global_element(f.owner as usize) as i64);
     }
-    p
+    // Where the nodes are: moved on a snapped mesh.
+    for x in mesh.point_positions(&corners)? {
+        p.points.extend(x);
+    }
+    Ok(p)
 }
 
 /// Writes one piece (not collective).
@@ -197,7 +199,7 @@ pub fn write_boundary(
     names: &PatchNames,
 ) -> Result<PathBuf> {
     let pvtp = boundary_path(pvtu);
-    let piece = piece_of(mesh, faces);
+    let piece = agree(comm, piece_of(mesh, faces))?;
     agree(
         comm,
         write_piece(&piece_path(&pvtp, comm.rank()), &piece, names),

@@ -48,7 +48,7 @@ use crate::error::Result;
 
 use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
 use super::points::{face_polygon, point_key, PointIndex};
-use super::Mesh;
+use super::{Mesh, VTK_TO_MORTON};
 
 /// A local element's face on the boundary.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -149,32 +149,97 @@ impl Mesh {
         faces: &Faces,
         part_at: Option<&dyn Fn([f64; 3]) -> u16>,
     ) -> Vec<u64> {
+        let lattice = self.node_lattice();
+        let mut masks = self.local_patch_masks(&lattice);
+        if faces.num_patches() > SURFACE_PATCH as usize + 1 {
+            self.surface_parts(&lattice, faces, part_at, &mut masks);
+        }
+        self.or_shared_masks(comm, &mut masks);
+        masks
+    }
+
+    /// Each local node's patches with the surface as the one patch
+    /// [`SURFACE_PATCH`] (bit `p` for patch `p`), the same on every rank
+    /// holding the node: from the kept elements around it, and for nodes
+    /// that are only a dependency from the sharing ranks. `lattice` is
+    /// [`Mesh::node_lattice`]. Collective: one exchange with the ranks
+    /// sharing nodes.
+    pub(crate) fn plain_patch_masks(&self, comm: &dyn Comm, lattice: &[[u32; 3]]) -> Vec<u64> {
+        let ni = self.num_independent;
+        let mut masks = self.local_patch_masks(&lattice[..ni]);
+        masks.resize(lattice.len(), 0);
+        self.or_shared_masks(comm, &mut masks);
+        // A hanging node can only be on the boundary where one of its
+        // dependencies is: the others are not looked up.
         let kept = Kept {
             local: &self.elements,
             halo: &self.halo,
         };
-        let lattice = self.node_lattice();
         let hi = self.domain.brick.hi();
-        // A local element at each node, as the look-ups' starting point.
-        let mut near = vec![0u32; lattice.len()];
+        let mut near = vec![u32::MAX; lattice.len() - ni];
         for (e, c) in self.connectivity.iter().enumerate() {
             for &n in c {
-                near[n as usize] = e as u32;
+                if n as usize >= ni {
+                    near[n as usize - ni] = e as u32;
+                }
             }
         }
+        for k in 0..near.len() {
+            if near[k] != u32::MAX && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0) {
+                masks[ni + k] = node_patch_mask(&kept, lattice[ni + k], near[k] as usize, hi, 0);
+            }
+        }
+        masks
+    }
+
+    /// The patches of the local nodes seen from this rank's elements and
+    /// halo; 0 for the nodes that are no local element's corner.
+    fn local_patch_masks(&self, lattice: &[[u32; 3]]) -> Vec<u64> {
+        let kept = Kept {
+            local: &self.elements,
+            halo: &self.halo,
+        };
+        let hi = self.domain.brick.hi();
+        // A local element at each node, as the look-ups' starting point
+        // (`lattice` may hold the independent nodes only).
+        let mut near = vec![0u32; lattice.len()];
+        let mut covered = vec![0u8; lattice.len()];
+        for (e, c) in self.connectivity.iter().enumerate() {
+            for (v, &n) in c.iter().enumerate() {
+                if let Some(x) = near.get_mut(n as usize) {
+                    *x = e as u32;
+                    covered[n as usize] |= 1 << (7 - VTK_TO_MORTON[v]);
+                }
+            }
+        }
+        // The cells around a node that local elements cover with it as
+        // their corner (bit b: the cell on the positive side of axis a
+        // when bit a of b is set). A node all eight cover is inside: no
+        // look-up needed.
         let mut masks: Vec<u64> = lattice
             .iter()
             .zip(&near)
-            .map(|(&p, &e)| node_patch_mask(&kept, p, e as usize, hi))
+            .zip(&covered)
+            .map(|((&p, &e), &c)| {
+                if c == 0xff {
+                    0
+                } else {
+                    node_patch_mask(&kept, p, e as usize, hi, c)
+                }
+            })
             .collect();
         // Nodes no local element has as a corner: the halo may not reach
         // around them, so they take what the sharing ranks found.
         for &(n, _) in &self.dep_only {
-            masks[n as usize] = 0;
+            if let Some(m) = masks.get_mut(n as usize) {
+                *m = 0;
+            }
         }
-        if faces.num_patches() > SURFACE_PATCH as usize + 1 {
-            self.surface_parts(&lattice, faces, part_at, &mut masks);
-        }
+        masks
+    }
+
+    /// Ors each shared node's mask with those of the ranks sharing it.
+    fn or_shared_masks(&self, comm: &dyn Comm, masks: &mut [u64]) {
         if comm.size() > 1 {
             let lists = self.exchange_lists();
             let mut counts = vec![0usize; comm.size()];
@@ -194,7 +259,6 @@ impl Mesh {
                 at += n;
             }
         }
-        masks
     }
 
     /// Replaces the surface bit of each node on the surface by the bits of
@@ -244,8 +308,10 @@ impl Mesh {
 
 /// The patches (bit `p` for patch `p`) of the boundary faces holding
 /// lattice point `p`.
-/// `hi`: the upper lattice bounds of the domain (the cube's or a brick's).
-fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3]) -> u64 {
+/// `hi`: the upper lattice bounds of the domain (the cube's or a brick's);
+/// `covered`: the cells known to be kept (bit `b` for cell `b`), which
+/// need no look-up.
+fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3], covered: u8) -> u64 {
     // Cell `b` (bit `a` of `b` set: on the positive side of axis `a`),
     // kept or not; `outside[b]` when it leaves the domain.
     let mut inside = [false; 8];
@@ -262,7 +328,9 @@ fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3]) -> u64 {
                 q[a] = p[a].wrapping_sub(1);
             }
         }
-        if !outside[b] {
+        if covered >> b & 1 == 1 {
+            inside[b] = true;
+        } else if !outside[b] {
             let cell = crate::octant::morton_encode(q[0], q[1], q[2]);
             inside[b] = kept.holding_cell(cell, hint).is_some();
         }

@@ -41,7 +41,8 @@
 //! nodes on partition boundaries. The elements are the octree's own leaves
 //! when all are kept (shared, not copied). Node coordinates are not stored:
 //! [`Mesh::node_lattice`] and [`Mesh::coordinates`] compute them from the
-//! elements' corners.
+//! elements' corners. A snapped mesh ([`snap`]) stores its moved positions,
+//! 24 bytes per local node.
 //!
 //! # Orderings and units
 //!
@@ -59,6 +60,7 @@ pub(crate) mod numbering;
 pub mod patches;
 pub mod points;
 pub mod quality;
+pub mod snap;
 pub mod transfer;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass, VOID};
@@ -184,6 +186,12 @@ pub struct Mesh {
     counts: MeshCounts,
     /// Time, traffic, time inside collectives and peak memory per phase.
     timer: PhaseTimer,
+    /// Node positions in user units after [`Mesh::snap`], one per local
+    /// node; `None` while the nodes are where the octree put them.
+    moved: Option<Vec<[f64; 3]>>,
+    /// The same in lattice units (what the midpoints of the faces' corners
+    /// are computed from).
+    moved_lattice: Option<Vec<[f64; 3]>>,
 }
 
 impl Mesh {
@@ -484,8 +492,24 @@ impl Mesh {
         out
     }
 
-    /// Coordinates of all local nodes in user units (a new vector).
+    /// Coordinates of all local nodes in user units (a new vector): the
+    /// moved positions after [`Mesh::snap`], else the lattice points.
     pub fn coordinates(&self) -> Vec<[f64; 3]> {
+        if let Some(m) = &self.moved {
+            return m.clone();
+        }
+        self.lattice_coordinates()
+    }
+
+    /// The moved node positions (user units, one per local node) when the
+    /// mesh was snapped ([`Mesh::snap`]).
+    pub fn moved(&self) -> Option<&[[f64; 3]]> {
+        self.moved.as_deref()
+    }
+
+    /// Coordinates of all local nodes in user units where the octree puts
+    /// them, whether or not the mesh was snapped (a new vector).
+    pub fn lattice_coordinates(&self) -> Vec<[f64; 3]> {
         self.node_lattice()
             .into_iter()
             .map(|q| {
@@ -927,5 +951,7 @@ fn assemble(
             ..MeshCounts::default()
         },
         timer: PhaseTimer::new(),
+        moved: None,
+        moved_lattice: None,
     })
 }

@@ -251,10 +251,11 @@ fn cosine_words(c: f64) -> [u64; 2] {
 
 impl Mesh {
     /// The corners of local element `i` in VTK order, user units: from
-    /// `coords` (one per local node, e.g. moved ones), or without it where
+    /// `coords` (one per local node, e.g. moved ones), or without it the
+    /// snapped positions ([`Mesh::moved`]) or, on an unsnapped mesh, where
     /// the octree puts them (computed from the element, no node array).
     pub fn element_corners(&self, i: usize, coords: Option<&[[f64; 3]]>) -> [[f64; 3]; 8] {
-        match coords {
+        match coords.or(self.moved()) {
             Some(x) => self.connectivity()[i].map(|n| x[n as usize]),
             None => {
                 let e = self.elements()[i];

@@ -10,6 +10,7 @@ use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
 use crate::io::vtp::write_boundary;
 use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
+use crate::mesh::snap::{SnapOptions, SnapReport};
 use crate::mesh::{Boundary, Mesh, MeshOptions};
 
 use super::*;
@@ -74,6 +75,45 @@ impl Session {
         self.mesh = Some(mesh);
         self.mesh_generation += 1;
         Ok(())
+    }
+
+    /// Snaps the current mesh to the surface ([`crate::mesh::snap`]): the
+    /// nodes on the surface patch move onto it where every element stays
+    /// valid, the layers next to it are relaxed. Needs the mesh and the
+    /// surface (a run keeps it for this stage). The derived views (faces,
+    /// boundary, quality, the C arrays) are made again for the moved
+    /// mesh. Phase `snap`.
+    pub fn snap(&mut self, opts: &SnapOptions) -> Result<SnapReport> {
+        self.mesh_or_state()?;
+        let surface = self.surface.as_ref().map(|_| ()).ok_or_else(|| {
+            Error::new(
+                ErrorKind::State,
+                "snapping needs the surface: load it again (it was released after meshing)",
+            )
+        });
+        agree(&*self.comm, surface)?;
+        let comm = self.comm.clone();
+        let (mesh, surface) = (&mut self.mesh, &self.surface);
+        let report = self.timer.time(&*comm, "snap", || match (mesh, surface) {
+            (Some(m), Some(s)) => m.snap(&*comm, &s.surface, opts),
+            _ => Ok(SnapReport::default()),
+        });
+        let report = agree(&*comm, report)?;
+        self.report_phase(Some(report.snapped));
+        self.observer.event(&Event::Snapped(&report));
+        // Views of the mesh see that it changed.
+        self.mesh_generation += 1;
+        self.snapped = Some((self.mesh_generation, report.clone()));
+        Ok(report)
+    }
+
+    /// The report of the snap of the current mesh, if it was snapped (not
+    /// collective).
+    pub fn current_snap(&self) -> Option<&SnapReport> {
+        self.snapped
+            .as_ref()
+            .filter(|s| s.0 == self.mesh_generation)
+            .map(|s| &s.1)
     }
 
     pub(super) fn surface_volume(&self) -> f64 {

@@ -5,8 +5,9 @@
 //!  load_surface ─► refine_surface ─► partition ─► balance ─► partition
 //!   (read)         (construct,                  (balance)
 //!                   refine)
-//!      ─► classify ─► check_leak ─► build_mesh ─► write_vtu ─► quality
-//!                                   (ghost, nodes, numbering,   (when asked)
+//!      ─► classify ─► check_leak ─► build_mesh ─► snap ─► write_vtu ─► quality
+//!                                   (ghost, nodes,  (when    (when asked)
+//!                                    numbering,      asked)
 //!                                    connectivity)
 //! ```
 //!
@@ -148,6 +149,8 @@ pub struct Session {
     boundary: Option<(u64, Boundary)>,
     /// The quality of the mesh of a generation, when measured.
     quality: Option<(u64, crate::mesh::quality::Quality)>,
+    /// The snap that made the mesh of a generation.
+    snapped: Option<(u64, crate::mesh::snap::SnapReport)>,
     /// The named parts of the surface (patches), kept when it is released.
     parts: Vec<String>,
     /// Which part is nearest a point, for surfaces of several parts.
@@ -177,6 +180,7 @@ impl Session {
             faces: None,
             boundary: None,
             quality: None,
+            snapped: None,
             parts: Vec::new(),
             data: None,
             locator: None,
@@ -357,10 +361,19 @@ impl Session {
                 return leak.map(|_| Stats::default());
             }
         }
-        self.release_surface();
+        // A snap needs the surface after meshing.
+        let snap = command == Command::Mesh && self.config.mesh.snap;
+        if !snap {
+            self.release_surface();
+        }
         if command == Command::Mesh && leak.is_ok() {
             let m = self.config.mesh.clone();
             self.build_mesh(m.keep, m.cut_rule)?;
+            if snap {
+                let foam = self.config.output.openfoam.is_some();
+                self.snap(&m.snap_options(foam))?;
+                self.release_surface();
+            }
             if let Some(out) = self.config.output.vtu.clone() {
                 self.write_vtu(&out, &[])?;
                 self.write_boundary_vtp(&out)?;

@@ -67,6 +67,8 @@ pub enum Event<'a> {
     },
     /// The mesh's quality was measured.
     Quality(&'a Quality),
+    /// The mesh was snapped to the surface.
+    Snapped(&'a crate::mesh::snap::SnapReport),
     /// A file was written.
     Wrote(&'a Path),
     /// The run ended.

@@ -24,8 +24,9 @@ impl Session {
             let Some(m) = mesh else {
                 return Ok(Quality::default());
             };
-            // The nodes are where the octree put them: corners from the
-            // elements, no node array.
+            // The nodes are where the octree put them (corners from the
+            // elements, no node array) or, on a snapped mesh, where the
+            // snap moved them.
             let (q, jac) = m.quality(&*comm, None)?;
             if let Some(path) = &out {
                 let list = m.worst_elements(&*comm, None, &jac, worst);

@@ -157,6 +157,10 @@ pub struct Stats {
     /// The mesh's quality, when measured (see [`crate::mesh::quality`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub quality: Option<Quality>,
+    /// What the snap did, when the mesh was snapped (see
+    /// [`crate::mesh::snap`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub snap: Option<crate::mesh::snap::SnapReport>,
     /// Volume enclosed by the surface, user units.
     pub surface_volume: f64,
     /// Facets the clean-up dropped.
@@ -213,7 +217,9 @@ impl Session {
         }
         if meshed.is_some() {
             keys.extend(["clean"].into_iter().filter(|k| ran(k)));
-            keys.extend(["ghost", "nodes", "numbering", "connectivity", "write"]);
+            keys.extend(["ghost", "nodes", "numbering", "connectivity"]);
+            keys.extend(["snap"].into_iter().filter(|k| ran(k)));
+            keys.push("write");
             keys.extend(
                 ["faces", "openfoam", "quality"]
                     .into_iter()
@@ -306,6 +312,7 @@ impl Session {
             },
             mesh,
             quality: self.current_quality().cloned(),
+            snap: self.current_snap().cloned(),
             surface_volume: self.surface_volume(),
             dropped_facets: f.dropped.unwrap_or(0) as u64,
             timings: named(keys.iter().map(|k| (k.to_string(), t.get(k))).collect()),

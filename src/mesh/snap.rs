@@ -1,0 +1,1310 @@
+//! Body-fitted meshes: the nodes on the surface moved onto it.
+//!
+//! [`Mesh::snap`] moves every independent node on the surface patch (a
+//! node of a kept element next to a dropped one, not on the domain's
+//! sides) to the closest point of the surface, found by exact
+//! point-triangle distance through a bounding-box tree. Sharp features are
+//! kept: surface edges whose facets' normals differ by more than the
+//! feature angle (and open or non-manifold edges) are *feature edges*,
+//! their ends where not exactly two of them meet are *feature corners*; a
+//! node within [`FEATURE_REACH`] cells of a corner goes to the corner,
+//! else one that near a feature edge goes to the edge's closest point.
+//! Hanging nodes stay the mean of their dependencies, so the constraint
+//! stays exact.
+//!
+//! # Validity
+//!
+//! After the move every element touching a moved node is measured by its
+//! corners' scaled Jacobians ([`super::quality`]). At a corner below the
+//! least scaled Jacobian allowed ([`SnapOptions::min_jacobian`]) the
+//! corner's surface node is blamed (a hanging corner's neighbours along
+//! the edges, as it follows its face or edge; else every surface node of
+//! the element), and a blamed node moves a smaller fraction of its
+//! displacement, down the steps of [`FRACTIONS`], until the element is
+//! valid; after [`STEPS`] steps the node stays where the octree put it.
+//! Only the elements around nodes that changed are measured again. The
+//! nodes that end between are *partly snapped*, and the elements that
+//! depend on them are reported. Then, up to `iterations` times, the
+//! interior nodes within `layers` element layers of the surface nodes take
+//! the mean displacement of the elements around them (the surface and
+//! everything further in fixed), each move kept only where every element
+//! around stays valid, and every partly snapped node tries a step up again
+//! under the same rule; the relaxed layers make room for it.
+//!
+//! # Limits
+//!
+//! The topology does not change. An element at a corner of the staircase
+//! that is convex seen from the kept side has two or three faces on the
+//! surface; where the surface bends away from the kept side (a fluid mesh
+//! around a convex body, a saddle) moving all their nodes onto it flattens
+//! or inverts the element, so some of those nodes stay partly snapped
+//! (about half of a fluid sphere's). Hanging nodes on the surface cannot
+//! reach it either: refining the leaves next to the surface to its level
+//! (a distance band) keeps 2:1 steps off it.
+//!
+//! # Rank counts
+//!
+//! A node's target depends only on its lattice point and the surface, and
+//! every rank holding a node computes it the same way. Every decision that
+//! involves elements of several ranks (a step back, a refused move, the
+//! layers) is a flag per node or-ed over the ranks sharing it through the
+//! node exchange lists, and the smoothing's sums over the elements around
+//! a node are fixed-point integers, exact in any order. So every rank
+//! holding a node gives it the same bits, whatever the number of ranks.
+//! Hanging nodes are the mean of their dependencies taken in the order of
+//! their lattice points.
+
+use serde::Serialize;
+
+use crate::comm::{agree, Comm};
+use crate::error::{Error, Result};
+use crate::geometry::bvh::Bvh;
+use crate::geometry::diagnostics::weld;
+use crate::geometry::distance::closest_point_triangle;
+use crate::geometry::{Surface, Triangle};
+
+use super::faces::SURFACE_PATCH;
+use super::quality::{corner_scaled_jacobians, CORNER_EDGES};
+use super::{Mesh, VTK_TO_MORTON};
+
+/// Default feature angle, degrees: surface edges whose facets' normals
+/// differ by more are kept as features.
+pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
+/// Default element layers around the surface nodes that are relaxed.
+pub const DEFAULT_LAYERS: u32 = 2;
+/// Default relaxation iterations.
+pub const DEFAULT_ITERATIONS: u32 = 3;
+/// The least scaled Jacobian a corner of a snapped element may have by
+/// default: valid elements, as close to the surface as they go.
+pub const DEFAULT_MIN_JACOBIAN: f64 = 0.001;
+/// The least scaled Jacobian for a finite-volume mesh (an OpenFOAM case):
+/// flatter cells put their centres so far from their faces that
+/// `checkMesh` finds faces skewer than 4.
+pub const FOAM_MIN_JACOBIAN: f64 = 0.1;
+/// The fractions of its displacement a surface node may move, in the order
+/// they are tried: the first steps back little, as the curvature of a
+/// smooth surface only asks for a back-off of the order of the cell size
+/// squared over the radius of curvature.
+pub const FRACTIONS: [f64; 8] = [1.0, 0.96875, 0.9375, 0.875, 0.75, 0.5, 0.25, 0.0];
+/// Steps back of a surface node's displacement before it is left unmoved.
+pub const STEPS: u8 = (FRACTIONS.len() - 1) as u8;
+/// How near a feature corner or edge (in cells of the node's finest
+/// element) a surface node must be to be attracted to it.
+pub const FEATURE_REACH: f64 = 0.6;
+/// Surface nodes further than this (in cells of the node's finest element)
+/// from the surface are not moved.
+pub const SURFACE_REACH: f64 = 4.0;
+/// A relaxation move shorter than this fraction of the node's cell is
+/// not made; the relaxation stops when no node moves.
+pub const RELAX_TOLERANCE: f64 = 1e-3;
+/// Fixed-point scale of the smoothing's sums: 2^32 per lattice unit.
+const FIXED: f64 = 4294967296.0;
+
+/// How [`Mesh::snap`] moves the nodes.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct SnapOptions {
+    /// Surface edges whose facets' normals differ by more than this
+    /// (degrees, 0 to 180) are features; 180 keeps none.
+    pub feature_angle_deg: f64,
+    /// Element layers around the surface nodes whose interior nodes are
+    /// relaxed (0: none).
+    pub layers: u32,
+    /// Relaxation iterations (0: the surface nodes alone, scaled back).
+    pub iterations: u32,
+    /// The least scaled Jacobian a corner of an element may have after
+    /// the snap, in (0, 0.5].
+    pub min_jacobian: f64,
+}
+
+impl Default for SnapOptions {
+    fn default() -> Self {
+        SnapOptions {
+            feature_angle_deg: DEFAULT_FEATURE_ANGLE,
+            layers: DEFAULT_LAYERS,
+            iterations: DEFAULT_ITERATIONS,
+            min_jacobian: DEFAULT_MIN_JACOBIAN,
+        }
+    }
+}
+
+impl SnapOptions {
+    /// Checks the ranges: the angle in [0, 180], at most 100 layers and
+    /// 1000 iterations, the least scaled Jacobian in (0, 0.5].
+    pub fn check(&self) -> Result<()> {
+        let a = self.feature_angle_deg;
+        if !(0.0..=180.0).contains(&a) {
+            return Err(Error::invalid(format!(
+                "the snap feature angle must be between 0 and 180 degrees (got {a})"
+            )));
+        }
+        if self.layers > 100 {
+            return Err(Error::invalid(format!(
+                "at most 100 snap relaxation layers (got {})",
+                self.layers
+            )));
+        }
+        let j = self.min_jacobian;
+        if !(j > 0.0 && j <= 0.5) {
+            return Err(Error::invalid(format!(
+                "the least scaled Jacobian of a snapped element must be above 0 and at most 0.5 (got {j})"
+            )));
+        }
+        if self.iterations > 1000 {
+            return Err(Error::invalid(format!(
+                "at most 1000 snap relaxation iterations (got {})",
+                self.iterations
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What [`Mesh::snap`] did, over all ranks (each node counted once, by its
+/// owner), the same on every rank.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SnapReport {
+    /// Independent nodes on the surface patch.
+    pub surface_nodes: u64,
+    /// Of those, the ones moved onto the surface.
+    pub snapped: u64,
+    /// Moved part of the way (a valid position nearer was not found).
+    pub partial: u64,
+    /// Not moved: no valid position, also on a side of the domain, or no
+    /// surface within reach.
+    pub unsnapped: u64,
+    /// Snapped nodes that went to a feature edge or corner.
+    pub feature_nodes: u64,
+    /// Interior nodes the relaxation moved.
+    pub relaxed_nodes: u64,
+    /// Elements that depend on a partly or not snapped surface node.
+    pub reported_elements: u64,
+    /// Smallest scaled Jacobian over all elements afterwards.
+    pub min_scaled_jacobian: f64,
+    /// Relaxation iterations run (they stop early when nothing moves).
+    pub iterations: u32,
+}
+
+/// The finite-volume geometry of a snapped mesh
+/// ([`Mesh::snapped_fv_geometry`]), user units.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FvGeometry {
+    /// Per face, its area.
+    pub face_area: Vec<f64>,
+    /// Per face, its centre.
+    pub face_centre: Vec<[f64; 3]>,
+    /// Per face, its unit normal (from its owner out).
+    pub face_normal: Vec<[f64; 3]>,
+    /// Per local element, its centre.
+    pub cell_centre: Vec<[f64; 3]>,
+    /// Per local element, its volume.
+    pub cell_volume: Vec<f64>,
+}
+
+/// The surface in lattice units with its trees, and its features.
+struct Target {
+    tris: Vec<Triangle>,
+    bvh: Bvh,
+    /// Feature edges as degenerate triangles `a b b`.
+    edges: Vec<Triangle>,
+    edge_bvh: Bvh,
+    /// Feature corners as degenerate triangles `p p p`.
+    corners: Vec<Triangle>,
+    corner_bvh: Bvh,
+}
+
+impl Target {
+    fn new(surface: &Surface, mesh: &Mesh, feature_angle_deg: f64) -> Target {
+        let d = mesh.domain();
+        let tris: Vec<Triangle> = surface
+            .triangles()
+            .iter()
+            .map(|t| Triangle {
+                v: t.v.map(|p| d.to_lattice(p)),
+            })
+            .collect();
+        let bvh = Bvh::new(&tris);
+        let (edges, corners) = if feature_angle_deg < 180.0 {
+            features(&tris, feature_angle_deg)
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        Target {
+            bvh,
+            edge_bvh: Bvh::new(&edges),
+            corner_bvh: Bvh::new(&corners),
+            tris,
+            edges,
+            corners,
+        }
+    }
+
+    /// Where a surface node at `x` goes, for cells of side `h` around it
+    /// (lattice units): a feature corner, a feature edge's or the surface's
+    /// closest point, and whether it is a feature.
+    fn of(&self, x: [f64; 3], h: f64) -> Option<([f64; 3], bool)> {
+        let reach2 = (FEATURE_REACH * h) * (FEATURE_REACH * h);
+        if let Some((i, _)) = self.corner_bvh.nearest(&self.corners, x, reach2) {
+            return Some((self.corners[i as usize].v[0], true));
+        }
+        if let Some((i, _)) = self.edge_bvh.nearest(&self.edges, x, reach2) {
+            let [a, b, c] = self.edges[i as usize].v;
+            return Some((closest_point_triangle(x, a, b, c), true));
+        }
+        // Most surface nodes lie within a cell of the surface: a tight
+        // first bound prunes most of the tree (the answer is the same).
+        let near = 1.5 * h;
+        let far = SURFACE_REACH * h;
+        let (i, _) = self
+            .bvh
+            .nearest(&self.tris, x, near * near)
+            .or_else(|| self.bvh.nearest(&self.tris, x, far * far))?;
+        let [a, b, c] = self.tris[i as usize].v;
+        Some((closest_point_triangle(x, a, b, c), false))
+    }
+}
+
+/// The feature edges (as triangles `a b b`) and corners (`p p p`) of
+/// `tris` for a feature angle in degrees: edges between facets whose
+/// normals differ by more, and edges without exactly two facets; corners
+/// where not exactly two feature edges meet.
+fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>) {
+    let (ids, nv) = weld(tris);
+    let mut point = vec![[0.0; 3]; nv];
+    // (low vertex, high vertex, facet)
+    let mut uses: Vec<(u64, u64, u32)> = Vec::with_capacity(3 * tris.len());
+    for (t, v) in ids.iter().enumerate() {
+        for k in 0..3 {
+            point[v[k] as usize] = tris[t].v[k];
+        }
+        if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+            continue;
+        }
+        for k in 0..3 {
+            let (a, b) = (v[k], v[(k + 1) % 3]);
+            uses.push((a.min(b), a.max(b), t as u32));
+        }
+    }
+    uses.sort_unstable();
+    let cos_limit = angle_deg.to_radians().cos();
+    let unit = |t: u32| {
+        let n = tris[t as usize].normal();
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if l > 0.0 {
+            [n[0] / l, n[1] / l, n[2] / l]
+        } else {
+            [0.0; 3]
+        }
+    };
+    let mut edges = Vec::new();
+    let mut degree = vec![0u32; nv];
+    let mut i = 0;
+    while i < uses.len() {
+        let mut j = i + 1;
+        while j < uses.len() && uses[j].0 == uses[i].0 && uses[j].1 == uses[i].1 {
+            j += 1;
+        }
+        let sharp = if j - i == 2 {
+            let (n, m) = (unit(uses[i].2), unit(uses[i + 1].2));
+            n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_limit
+        } else {
+            true
+        };
+        if sharp {
+            let (a, b) = (uses[i].0 as usize, uses[i].1 as usize);
+            edges.push(Triangle::new(point[a], point[b], point[b]));
+            degree[a] += 1;
+            degree[b] += 1;
+        }
+        i = j;
+    }
+    let corners = (0..nv)
+        .filter(|&v| degree[v] > 0 && degree[v] != 2)
+        .map(|v| Triangle::new(point[v], point[v], point[v]))
+        .collect();
+    (edges, corners)
+}
+
+/// The state of one snap: positions in lattice units, per local node.
+struct Snapper<'a> {
+    mesh: &'a Mesh,
+    comm: &'a dyn Comm,
+    lists: Vec<(u32, Vec<u32>)>,
+    ni: usize,
+    /// Lattice points of every local node, as `f64`.
+    lattice: Vec<[f64; 3]>,
+    /// Hanging node `k`'s dependencies in the order of their lattice
+    /// points (2 or 4).
+    deps: Vec<([u32; 4], u8)>,
+    /// Current positions of every local node.
+    pos: Vec<[f64; 3]>,
+    /// Independent surface nodes that move, with their targets and
+    /// steps back (`STEPS`: unmoved).
+    snap: Vec<bool>,
+    target: Vec<[f64; 3]>,
+    step: Vec<u8>,
+    /// Interior independent nodes that the relaxation moves.
+    layer: Vec<bool>,
+    /// Elements touching a node that may move.
+    active: Vec<u32>,
+    /// The active elements depending on each independent node: node `n`'s
+    /// are `adj[adj_start[n]..adj_start[n + 1]]`.
+    adj_start: Vec<u32>,
+    adj: Vec<u32>,
+    /// The finest element side at each independent node (lattice units).
+    side: Vec<u64>,
+    /// The least scaled Jacobian allowed.
+    min_jacobian: f64,
+}
+
+impl<'a> Snapper<'a> {
+    /// Calls `f` with each independent node element `e`'s corners depend
+    /// on (hanging corners through their dependencies; repeats possible).
+    fn support(&self, e: usize, mut f: impl FnMut(usize)) {
+        for &c in &self.mesh.connectivity()[e] {
+            let c = c as usize;
+            if c < self.ni {
+                f(c);
+            } else {
+                let (d, n) = self.deps[c - self.ni];
+                for &x in &d[..n as usize] {
+                    f(x as usize);
+                }
+            }
+        }
+    }
+
+    /// Flags the `eligible` nodes to blame for invalid element `e`: at
+    /// each corner below the least scaled Jacobian the corner's node (through its
+    /// dependencies when it hangs), else its three neighbours along the
+    /// edges, else every eligible node of the element.
+    fn blame(&self, e: usize, eligible: impl Fn(usize) -> bool, flags: &mut [u64]) {
+        let c = &self.mesh.connectivity()[e];
+        let p = c.map(|n| self.pos[n as usize]);
+        let j = corner_scaled_jacobians(&p);
+        let mut any = false;
+        let mut flag = |node: u32, any: &mut bool| {
+            let node = node as usize;
+            let mut visit = |n: usize| {
+                if eligible(n) {
+                    flags[n] = 1;
+                    *any = true;
+                }
+            };
+            if node < self.ni {
+                visit(node);
+            } else {
+                let (d, k) = self.deps[node - self.ni];
+                d[..k as usize].iter().for_each(|&x| visit(x as usize));
+            }
+        };
+        for v in 0..8 {
+            if j[v] >= self.min_jacobian {
+                continue;
+            }
+            // A hanging corner is where its face or edge puts it: moving
+            // its dependencies back rarely helps, its neighbours do.
+            let mut here = false;
+            if (c[v] as usize) < self.ni {
+                flag(c[v], &mut here);
+            }
+            if !here {
+                for w in CORNER_EDGES[v] {
+                    flag(c[w], &mut here);
+                }
+            }
+            any |= here;
+        }
+        if !any {
+            for &n in c {
+                flag(n, &mut any);
+            }
+        }
+    }
+
+    /// Combines `words` values per independent node over the ranks sharing
+    /// it: each rank's own values are sent, and `combine` folds in those
+    /// received (it must be commutative and associative).
+    fn exchange(&self, vals: &mut [u64], words: usize, combine: impl Fn(&mut u64, u64)) {
+        if self.comm.size() == 1 {
+            return;
+        }
+        let mut counts = vec![0usize; self.comm.size()];
+        let mut send = Vec::new();
+        for (r, nodes) in &self.lists {
+            counts[*r as usize] = nodes.len() * words;
+            for &n in nodes {
+                let n = n as usize;
+                send.extend_from_slice(&vals[n * words..(n + 1) * words]);
+            }
+        }
+        let (recv, got) = self.comm.alltoallv_u64(&send, &counts);
+        let mut at = 0;
+        for (r, &len) in got.iter().enumerate() {
+            if let Ok(k) = self.lists.binary_search_by_key(&(r as u32), |l| l.0) {
+                let nodes = &self.lists[k].1;
+                for (j, &n) in nodes.iter().enumerate() {
+                    let n = n as usize;
+                    for w in 0..words {
+                        combine(&mut vals[n * words + w], recv[at + j * words + w]);
+                    }
+                }
+            }
+            at += len;
+        }
+    }
+
+    /// Ors flags over the sharing ranks; returns how many flags are set on
+    /// owned nodes, summed over the ranks.
+    fn agree_flags(&self, flags: &mut [u64]) -> u64 {
+        self.exchange(flags, 1, |a, b| *a |= b);
+        let mut n = [flags[..self.mesh.num_owned()]
+            .iter()
+            .filter(|&&f| f != 0)
+            .count() as u64];
+        self.comm.sum_u64(&mut n);
+        n[0]
+    }
+
+    /// The position of surface node `n` after its steps back.
+    fn snapped_position(&self, n: usize) -> [f64; 3] {
+        let (x, t, k) = (self.lattice[n], self.target[n], self.step[n]);
+        match k {
+            0 => t,
+            STEPS => x,
+            _ => {
+                let s = FRACTIONS[k as usize];
+                std::array::from_fn(|a| x[a] + (t[a] - x[a]) * s)
+            }
+        }
+    }
+
+    /// Hanging nodes from their dependencies.
+    fn update_hanging(&mut self) {
+        for k in 0..self.deps.len() {
+            self.pos[self.ni + k] = mean(&self.pos, self.deps[k]);
+        }
+    }
+
+    fn place_surface_nodes(&mut self) {
+        for n in 0..self.ni {
+            if self.snap[n] {
+                self.pos[n] = self.snapped_position(n);
+            }
+        }
+    }
+
+    /// The elements of `cands` with a corner below the least scaled
+    /// Jacobian.
+    fn bad_among(&self, cands: &[u32]) -> Vec<usize> {
+        let conn = self.mesh.connectivity();
+        let j2 = self.min_jacobian * self.min_jacobian;
+        cands
+            .iter()
+            .map(|&e| e as usize)
+            .filter(|&e| {
+                let p = conn[e].map(|n| self.pos[n as usize]);
+                !corners_valid(&p, j2)
+            })
+            .collect()
+    }
+
+    /// The active elements depending on a node with `flags[n]` set, once
+    /// each: only they can have changed.
+    fn around(&self, flags: impl Fn(usize) -> bool) -> Vec<u32> {
+        let mut seen = vec![false; self.mesh.elements().len()];
+        let mut out = Vec::new();
+        for n in 0..self.ni {
+            if !flags(n) {
+                continue;
+            }
+            let (a, b) = (self.adj_start[n] as usize, self.adj_start[n + 1] as usize);
+            for &e in &self.adj[a..b] {
+                if !seen[e as usize] {
+                    seen[e as usize] = true;
+                    out.push(e);
+                }
+            }
+        }
+        out
+    }
+
+    /// Steps back the displacements of the surface nodes of invalid
+    /// elements until every element is valid or those nodes are back.
+    fn scale_back(&mut self) {
+        let mut cands = self.active.clone();
+        self.place_surface_nodes();
+        self.update_hanging();
+        loop {
+            self.refresh_hanging(&cands);
+            let bad = self.bad_among(&cands);
+            let mut flags = vec![0u64; self.ni];
+            for e in bad {
+                self.blame(e, |n| self.snap[n] && self.step[n] < STEPS, &mut flags);
+            }
+            // The owner of a flagged node has its flag after the exchange.
+            if self.agree_flags(&mut flags) == 0 {
+                break;
+            }
+            for (n, _) in flags.iter().enumerate().filter(|f| *f.1 != 0) {
+                self.step[n] += 1;
+                self.pos[n] = self.snapped_position(n);
+            }
+            cands = self.around(|n| flags[n] != 0);
+        }
+    }
+
+    /// The hanging corners of elements `cands` from their dependencies:
+    /// every hanging node depending on a changed node is a corner of an
+    /// element around it.
+    fn refresh_hanging(&mut self, cands: &[u32]) {
+        let conn = self.mesh.connectivity();
+        for &e in cands {
+            for &c in &conn[e as usize] {
+                let c = c as usize;
+                if c >= self.ni {
+                    self.pos[c] = mean(&self.pos, self.deps[c - self.ni]);
+                }
+            }
+        }
+    }
+
+    /// Undoes the moves of `moved` nodes (already made) in invalid
+    /// elements (`undo` restores a node's position) until every element is
+    /// valid or nothing is left to undo. Only elements around moved nodes
+    /// are measured: the others were valid (or beyond help) before.
+    fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
+        let mut cands = self.around(|n| moved[n]);
+        loop {
+            self.refresh_hanging(&cands);
+            let bad = self.bad_among(&cands);
+            let mut flags = vec![0u64; self.ni];
+            for e in bad {
+                self.blame(e, |n| moved[n], &mut flags);
+            }
+            if self.agree_flags(&mut flags) == 0 {
+                break;
+            }
+            for n in 0..self.ni {
+                if flags[n] != 0 {
+                    moved[n] = false;
+                    undo(self, n);
+                }
+            }
+            cands = self.around(|n| flags[n] != 0);
+        }
+    }
+
+    /// One relaxation step of the layer nodes, each moving only by more
+    /// than [`RELAX_TOLERANCE`] of its cell; returns how many moved (over
+    /// all ranks, owned nodes).
+    fn relax(&mut self) -> u64 {
+        self.update_hanging();
+        let ni = self.ni;
+        let conn = self.mesh.connectivity();
+        let mut sums = vec![0u64; 4 * ni];
+        for &e in &self.active {
+            let c = &conn[e as usize];
+            if !c
+                .iter()
+                .any(|&n| (n as usize) < ni && self.layer[n as usize])
+            {
+                continue;
+            }
+            let mut d = [0.0f64; 3];
+            for &n in c {
+                let (p, x) = (self.pos[n as usize], self.lattice[n as usize]);
+                for a in 0..3 {
+                    d[a] += p[a] - x[a];
+                }
+            }
+            let fixed = d.map(|v| ((v / 8.0) * FIXED).round() as i64 as u64);
+            for &n in c {
+                let n = n as usize;
+                if n < ni && self.layer[n] {
+                    for a in 0..3 {
+                        sums[4 * n + a] = sums[4 * n + a].wrapping_add(fixed[a]);
+                    }
+                    sums[4 * n + 3] += 1;
+                }
+            }
+        }
+        self.exchange(&mut sums, 4, |a, b| *a = a.wrapping_add(b));
+        let mut moved = vec![false; ni];
+        let mut old = Vec::new();
+        for n in 0..ni {
+            let count = sums[4 * n + 3];
+            if !self.layer[n] || count == 0 {
+                continue;
+            }
+            let x = self.lattice[n];
+            let p: [f64; 3] = std::array::from_fn(|a| {
+                x[a] + (sums[4 * n + a] as i64 as f64 / FIXED) / count as f64
+            });
+            // Moves below the tolerance are not made: the elements around
+            // need no new check, and the relaxation ends.
+            let tol = RELAX_TOLERANCE * self.side[n] as f64;
+            if (0..3).any(|a| (self.pos[n][a] - p[a]).abs() > tol) {
+                old.push((n as u32, self.pos[n]));
+                self.pos[n] = p;
+                moved[n] = true;
+            }
+        }
+        self.refuse_invalid(&mut moved, |s, n| {
+            let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
+            s.pos[n] = old[k].1;
+        });
+        let mut count = [moved[..self.mesh.num_owned()]
+            .iter()
+            .filter(|&&m| m)
+            .count() as u64];
+        self.comm.sum_u64(&mut count);
+        count[0]
+    }
+
+    /// Moves every partly snapped node one step up where the elements stay
+    /// valid; returns how many advanced (over all ranks).
+    fn advance(&mut self) -> u64 {
+        let mut moved: Vec<bool> = (0..self.ni)
+            .map(|n| self.snap[n] && self.step[n] > 0)
+            .collect();
+        for (n, _) in moved.iter().enumerate().filter(|m| *m.1) {
+            self.step[n] -= 1;
+            self.pos[n] = self.snapped_position(n);
+        }
+        self.refuse_invalid(&mut moved, |s, n| {
+            s.step[n] += 1;
+            s.pos[n] = s.snapped_position(n);
+        });
+        let mut count = [moved[..self.mesh.num_owned()]
+            .iter()
+            .filter(|&&m| m)
+            .count() as u64];
+        self.comm.sum_u64(&mut count);
+        count[0]
+    }
+}
+
+/// Whether every corner of the hexahedron `p` (VTK order) has a scaled
+/// Jacobian of at least `sqrt(j2)` (positive): `det >= j |e0| |e1| |e2|`
+/// compared squared, without roots or divisions.
+fn corners_valid(p: &[[f64; 3]; 8], j2: f64) -> bool {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+    CORNER_EDGES.iter().enumerate().all(|(k, nb)| {
+        let [a, b, c] = nb.map(|j| sub(p[j], p[k]));
+        let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
+        det > 0.0 && det * det >= j2 * (dot(a) * dot(b) * dot(c))
+    })
+}
+
+/// The volume of the trilinear hexahedron with corners `p` in VTK order:
+/// its Jacobian determinant integrated by 2 x 2 x 2 Gauss points, which is
+/// exact (the determinant has degree 2 in each reference coordinate). The
+/// elements of a snapped mesh, hanging faces included, fit together
+/// without gaps, so these add up to the mesh's volume.
+pub fn hexahedron_volume(p: &[[f64; 3]; 8]) -> f64 {
+    hexahedron_volume_centre(p).0
+}
+
+/// The area vector and centroid of the quadrilateral `p` (in order), as
+/// OpenFOAM computes them: the triangles from the mean of the corners to
+/// each edge, their area vectors summed and their centroids weighted by
+/// the area along the total's direction. Exact for a planar face.
+pub fn quad_area_centre(p: &[[f64; 3]; 4]) -> ([f64; 3], [f64; 3]) {
+    let m: [f64; 3] = std::array::from_fn(|a| (p[0][a] + p[1][a] + p[2][a] + p[3][a]) * 0.25);
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let tri: [([f64; 3], [f64; 3]); 4] = std::array::from_fn(|k| {
+        let (a, b) = (p[k], p[(k + 1) % 4]);
+        let s = cross(sub(a, m), sub(b, m)).map(|x| 0.5 * x);
+        let c = std::array::from_fn(|i| (m[i] + a[i] + b[i]) / 3.0);
+        (s, c)
+    });
+    let total: [f64; 3] = std::array::from_fn(|i| tri.iter().map(|t| t.0[i]).sum());
+    let len2 = total[0] * total[0] + total[1] * total[1] + total[2] * total[2];
+    if len2 == 0.0 {
+        return (total, m);
+    }
+    let mut weight = 0.0;
+    let mut centre = [0.0; 3];
+    for (s, c) in &tri {
+        // The triangle's area along the face's normal.
+        let w = (s[0] * total[0] + s[1] * total[1] + s[2] * total[2]) / len2.sqrt();
+        weight += w;
+        for i in 0..3 {
+            centre[i] += w * c[i];
+        }
+    }
+    (total, centre.map(|x| x / weight))
+}
+
+/// The volume and centroid of the trilinear hexahedron with corners `p`
+/// in VTK order (2 x 2 x 2 Gauss points, exact for both).
+pub fn hexahedron_volume_centre(p: &[[f64; 3]; 8]) -> (f64, [f64; 3]) {
+    let g = [0.5 - 0.5 / 3f64.sqrt(), 0.5 + 0.5 / 3f64.sqrt()];
+    let q: [[f64; 3]; 8] = std::array::from_fn(|m| {
+        let v = VTK_TO_MORTON.iter().position(|&x| x == m).unwrap_or(0);
+        p[v]
+    });
+    let (mut volume, mut first) = (0.0, [0.0; 3]);
+    for &u in &g {
+        for &v in &g {
+            for &w in &g {
+                let t = [u, v, w];
+                let det = jacobian_at(&q, t) / 8.0;
+                let mut x = [0.0; 3];
+                for (m, y) in q.iter().enumerate() {
+                    let n: f64 = (0..3)
+                        .map(|a| if m >> a & 1 == 1 { t[a] } else { 1.0 - t[a] })
+                        .product();
+                    for a in 0..3 {
+                        x[a] += n * y[a];
+                    }
+                }
+                volume += det;
+                for a in 0..3 {
+                    first[a] += det * x[a];
+                }
+            }
+        }
+    }
+    (volume, first.map(|x| x / volume))
+}
+
+/// The Jacobian determinant of the trilinear map of corners `q` (Morton
+/// order) at reference point `t`.
+fn jacobian_at(q: &[[f64; 3]; 8], t: [f64; 3]) -> f64 {
+    let mut jac = [[0.0f64; 3]; 3];
+    for (m, x) in q.iter().enumerate() {
+        for (a, row) in jac.iter_mut().enumerate() {
+            // d N_m / d t_a
+            let mut dn = if m >> a & 1 == 1 { 1.0 } else { -1.0 };
+            for (b, &tb) in t.iter().enumerate() {
+                if b != a {
+                    dn *= if m >> b & 1 == 1 { tb } else { 1.0 - tb };
+                }
+            }
+            for (r, &xk) in row.iter_mut().zip(x) {
+                *r += dn * xk;
+            }
+        }
+    }
+    let [a, b, c] = jac;
+    a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
+}
+
+/// The mean of the positions of a hanging node's dependencies, in the
+/// order given (their lattice points'), pairwise.
+fn mean(pos: &[[f64; 3]], (d, n): ([u32; 4], u8)) -> [f64; 3] {
+    let p = |k: usize| pos[d[k] as usize];
+    if n == 2 {
+        let (a, b) = (p(0), p(1));
+        std::array::from_fn(|k| (a[k] + b[k]) * 0.5)
+    } else {
+        let (a, b, c, e) = (p(0), p(1), p(2), p(3));
+        std::array::from_fn(|k| ((a[k] + b[k]) + (c[k] + e[k])) * 0.25)
+    }
+}
+
+impl Mesh {
+    /// Snaps the mesh to `surface` (see the module documentation): moves
+    /// the surface nodes onto it, scales back where an element would be
+    /// invalid, relaxes the layers next to it, and stores the positions,
+    /// which [`Mesh::coordinates`] and everything built on it then return.
+    /// A snapped mesh is snapped again from the lattice. Collective; the
+    /// positions are the same bits on any number of ranks.
+    pub fn snap(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        opts: &SnapOptions,
+    ) -> Result<SnapReport> {
+        agree(comm, opts.check())?;
+        self.moved = None;
+        self.moved_lattice = None;
+        let lattice_u = self.node_lattice();
+        let masks = self.plain_patch_masks(comm, &lattice_u);
+        let ni = self.num_independent();
+        let lattice: Vec<[f64; 3]> = lattice_u.iter().map(|q| q.map(f64::from)).collect();
+        let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
+            .map(|k| {
+                let mut d = [0u32; 4];
+                let h = self.hanging_deps(k);
+                d[..h.len()].copy_from_slice(h);
+                d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
+                (d, h.len() as u8)
+            })
+            .collect();
+        let target_surface = Target::new(surface, self, opts.feature_angle_deg);
+        let mut s = Snapper {
+            mesh: self,
+            comm,
+            lists: if comm.size() > 1 {
+                self.exchange_lists()
+            } else {
+                Vec::new()
+            },
+            ni,
+            pos: lattice.clone(),
+            lattice,
+            deps,
+            snap: vec![false; ni],
+            target: vec![[0.0; 3]; ni],
+            step: vec![STEPS; ni],
+            layer: vec![false; ni],
+            active: Vec::new(),
+            adj_start: Vec::new(),
+            adj: Vec::new(),
+            side: Vec::new(),
+            min_jacobian: opts.min_jacobian,
+        };
+        let surface_bit = 1u64 << SURFACE_PATCH;
+        let sides = (1u64 << SURFACE_PATCH) - 1;
+        let on_surface = |n: usize| masks[n] & surface_bit != 0;
+
+        // The finest element side at each node, over the ranks.
+        let mut side = vec![u64::MAX; ni];
+        for (e, c) in self.elements().iter().zip(self.connectivity()) {
+            for &n in c {
+                let n = n as usize;
+                if n < ni {
+                    side[n] = side[n].min(e.side() as u64);
+                }
+            }
+        }
+        s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
+
+        let mut feature = vec![false; ni];
+        for n in 0..ni {
+            if !on_surface(n) || masks[n] & sides != 0 || side[n] == u64::MAX {
+                continue;
+            }
+            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64) {
+                s.snap[n] = true;
+                s.target[n] = t;
+                s.step[n] = 0;
+                feature[n] = f;
+            }
+        }
+        drop(target_surface);
+
+        // The layers: interior nodes within `layers` elements of a
+        // moving surface node.
+        let mut near: Vec<u64> = (0..ni).map(|n| s.snap[n] as u64).collect();
+        for _ in 0..opts.layers {
+            let mut next = near.clone();
+            for e in 0..self.elements().len() {
+                let mut touch = false;
+                s.support(e, |n| touch |= near[n] != 0);
+                if touch {
+                    s.support(e, |n| next[n] = 1);
+                }
+            }
+            s.exchange(&mut next, 1, |a, b| *a |= b);
+            near = next;
+        }
+        for n in 0..ni {
+            s.layer[n] = near[n] != 0 && masks[n] == 0 && opts.iterations > 0;
+        }
+        s.side = side;
+        drop(near);
+        for e in 0..self.elements().len() {
+            let mut moves = false;
+            s.support(e, |n| moves |= s.snap[n] || s.layer[n]);
+            if moves {
+                s.active.push(e as u32);
+            }
+        }
+        // Node -> active elements, compressed rows (an element may list a
+        // node twice through two hanging corners; harmless).
+        let mut start = vec![0u32; ni + 1];
+        for &e in &s.active {
+            s.support(e as usize, |n| start[n + 1] += 1);
+        }
+        for n in 0..ni {
+            start[n + 1] += start[n];
+        }
+        let mut adj = vec![0u32; start[ni] as usize];
+        let mut fill = start.clone();
+        for &e in &s.active {
+            s.support(e as usize, |n| {
+                adj[fill[n] as usize] = e;
+                fill[n] += 1;
+            });
+        }
+        s.adj_start = start;
+        s.adj = adj;
+
+        s.scale_back();
+        let mut relaxed = vec![false; ni];
+        let mut iterations = 0;
+        for _ in 0..opts.iterations {
+            iterations += 1;
+            let moved = s.relax();
+            let advanced = s.advance();
+            if moved + advanced == 0 {
+                break;
+            }
+        }
+        for (n, r) in relaxed.iter_mut().enumerate() {
+            *r = s.layer[n] && s.pos[n] != s.lattice[n];
+        }
+        s.place_surface_nodes();
+        s.update_hanging();
+
+        // Figures, each node once (by its owner).
+        let owned = self.num_owned();
+        let mut counts = [0u64; 8];
+        for n in 0..owned {
+            if on_surface(n) {
+                counts[0] += 1;
+                match (s.snap[n], s.step[n]) {
+                    (true, 0) => {
+                        counts[1] += 1;
+                        counts[4] += feature[n] as u64;
+                    }
+                    (true, k) if k < STEPS => counts[2] += 1,
+                    _ => counts[3] += 1,
+                }
+            }
+            counts[6] += relaxed[n] as u64;
+        }
+        for &e in &s.active {
+            let mut reported = false;
+            s.support(e as usize, |n| reported |= on_surface(n) && s.step[n] > 0);
+            counts[7] += reported as u64;
+        }
+        comm.sum_u64(&mut counts);
+
+        let domain = *self.domain();
+        let active = std::mem::take(&mut s.active);
+        let pos = s.pos;
+        self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
+        self.moved_lattice = Some(pos);
+        // The minimum in user units, as the quality measures it.
+        let mut min_j = 1.0f64;
+        for &e in &active {
+            let p = self.element_corners(e as usize, None);
+            for j in corner_scaled_jacobians(&p) {
+                min_j = min_j.min(j);
+            }
+        }
+        let mut worst = [-min_j];
+        comm.max_f64(&mut worst);
+        Ok(SnapReport {
+            surface_nodes: counts[0],
+            snapped: counts[1],
+            partial: counts[2],
+            unsnapped: counts[3],
+            feature_nodes: counts[4],
+            relaxed_nodes: counts[6],
+            reported_elements: counts[7],
+            min_scaled_jacobian: -worst[0],
+            iterations,
+        })
+    }
+
+    /// The finite-volume geometry of a snapped mesh, from the moved
+    /// points: per face of `faces` its area, centre and unit normal
+    /// ([`quad_area_centre`]), per local element its centre and volume
+    /// (the trilinear element's, [`hexahedron_volume_centre`]). `None` on
+    /// an unsnapped mesh, whose faces are the octree's
+    /// ([`Mesh::face_area`], [`Mesh::face_centre`]).
+    pub fn snapped_fv_geometry(&self, faces: &super::Faces) -> Result<Option<FvGeometry>> {
+        if self.moved.is_none() {
+            return Ok(None);
+        }
+        let list = faces.faces();
+        let corners: Vec<[u32; 3]> = list.iter().flat_map(|f| f.corners()).collect();
+        let at = self.point_positions(&corners)?;
+        let mut g = FvGeometry::default();
+        for q in at.chunks_exact(4) {
+            let (s, c) = quad_area_centre(&[q[0], q[1], q[2], q[3]]);
+            let a = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+            g.face_area.push(a);
+            g.face_centre.push(c);
+            g.face_normal
+                .push(if a > 0.0 { s.map(|x| x / a) } else { s });
+        }
+        for e in 0..self.elements().len() {
+            let (v, c) = hexahedron_volume_centre(&self.element_corners(e, None));
+            g.cell_volume.push(v);
+            g.cell_centre.push(c);
+        }
+        Ok(Some(g))
+    }
+
+    /// User-unit positions of lattice points `points` that are local nodes
+    /// or the midpoints of local elements' edges and faces (the corners of
+    /// the finite-volume faces): where the octree puts them, or on a
+    /// snapped mesh the moved nodes and the means of the corners of those
+    /// edges and faces (as hanging nodes are, so the same bits as the
+    /// ranks holding them as nodes). A point that is neither is an
+    /// internal error.
+    pub fn point_positions(&self, points: &[[u32; 3]]) -> Result<Vec<[f64; 3]>> {
+        let domain = self.domain();
+        let Some(moved) = &self.moved_lattice else {
+            return Ok(points
+                .iter()
+                .map(|q| domain.from_lattice(q.map(f64::from)))
+                .collect());
+        };
+        let lattice = self.node_lattice();
+        let mut nodes: Vec<([u32; 3], u32)> = lattice
+            .iter()
+            .enumerate()
+            .map(|(n, &q)| (q, n as u32))
+            .collect();
+        nodes.sort_unstable();
+        let mut out = vec![[f64::NAN; 3]; points.len()];
+        let mut missing: Vec<([u32; 3], u32)> = Vec::new();
+        for (i, q) in points.iter().enumerate() {
+            match nodes.binary_search_by_key(q, |x| x.0) {
+                Ok(k) => out[i] = domain.from_lattice(moved[nodes[k].1 as usize]),
+                Err(_) => missing.push((*q, i as u32)),
+            }
+        }
+        if missing.is_empty() {
+            return Ok(out);
+        }
+        missing.sort_unstable();
+        for (e, c) in self.elements().iter().zip(self.connectivity()) {
+            let (a, s) = (e.coords(), e.side());
+            if s < 2 {
+                continue;
+            }
+            let corner = |m: usize| [0, 1, 2].map(|k| a[k] + if m >> k & 1 == 1 { s } else { 0 });
+            // Edges: corner pairs differing in one bit; faces: the four
+            // corners with one bit fixed.
+            let mut sets: Vec<Vec<usize>> = Vec::with_capacity(18);
+            for m in 0..8usize {
+                for k in 0..3 {
+                    if m >> k & 1 == 0 {
+                        sets.push(vec![m, m | 1 << k]);
+                    }
+                }
+            }
+            for k in 0..3 {
+                for bit in [0, 1usize << k] {
+                    sets.push((0..8).filter(|m| m & (1 << k) == bit).collect());
+                }
+            }
+            for set in sets {
+                let mid: [u32; 3] = std::array::from_fn(|k| {
+                    let lo = set.iter().map(|&m| corner(m)[k]).min().unwrap_or(0);
+                    let hi = set.iter().map(|&m| corner(m)[k]).max().unwrap_or(0);
+                    (lo + hi) / 2
+                });
+                let Ok(first) = missing.binary_search_by_key(&mid, |x| x.0) else {
+                    continue;
+                };
+                // The corners as nodes, in the order of their points.
+                let mut corners: Vec<([u32; 3], u32)> = set
+                    .iter()
+                    .map(|&m| {
+                        let v = VTK_TO_MORTON.iter().position(|&x| x == m).unwrap_or(0);
+                        (corner(m), c[v])
+                    })
+                    .collect();
+                corners.sort_unstable();
+                let mut d = [0u32; 4];
+                for (j, x) in corners.iter().enumerate() {
+                    d[j] = x.1;
+                }
+                let p = domain.from_lattice(mean(moved, (d, corners.len() as u8)));
+                let mut j = first;
+                while j > 0 && missing[j - 1].0 == mid {
+                    j -= 1;
+                }
+                while j < missing.len() && missing[j].0 == mid {
+                    out[missing[j].1 as usize] = p;
+                    j += 1;
+                }
+            }
+        }
+        if out.iter().any(|p| p[0].is_nan()) {
+            return Err(Error::new(
+                crate::error::ErrorKind::Internal,
+                "a face corner of the snapped mesh is no node and no midpoint of a local element",
+            ));
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::{classify_leaves, CutRule, Keep};
+    use crate::comm::{CommRef, SerialComm};
+    use crate::domain::{Domain, DEFAULT_FIT};
+    use crate::geometry::load_surface;
+    use crate::geometry::shapes::default_sphere;
+    use crate::mesh::MeshOptions;
+    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+    use crate::Connectivity;
+    use std::rc::Rc;
+
+    fn mesh_of(name: &str, level: u8, keep: Keep) -> (Mesh, Surface) {
+        let comm: CommRef = Rc::new(SerialComm);
+        let s = load_surface(name).unwrap();
+        let b = s.bbox();
+        let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+        let index = SurfaceIndex::new(&s, &domain);
+        let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
+        t.balance(Connectivity::Corner).unwrap();
+        let classes = classify_leaves(t.leaves(), &index);
+        let opts = MeshOptions {
+            keep,
+            cut_rule: CutRule::Center,
+            clean_walls: true,
+        };
+        (Mesh::build(&t, &domain, Some(&classes), &opts).unwrap(), s)
+    }
+
+    #[test]
+    fn snapped_sphere_is_valid_and_on_the_surface() {
+        for keep in [Keep::Inside, Keep::Outside] {
+            let (mut m, s) = mesh_of("sphere", 5, keep);
+            let r = m.snap(&SerialComm, &s, &SnapOptions::default()).unwrap();
+            eprintln!("{keep:?} {r:?}");
+            assert!(r.surface_nodes > 1000);
+            assert_eq!(r.snapped + r.partial + r.unsnapped, r.surface_nodes);
+            assert!(
+                r.min_scaled_jacobian >= DEFAULT_MIN_JACOBIAN * 0.99,
+                "{r:?}"
+            );
+            let x = m.coordinates();
+            assert!(m.moved().is_some());
+            let j = m.scaled_jacobians(None);
+            assert!(j.iter().all(|&j| j > 0.0));
+            let _ = x;
+        }
+    }
+
+    #[test]
+    fn a_cube_has_twelve_feature_edges_and_eight_corners() {
+        // Two triangles per face of the unit cube.
+        let v = |m: usize| [(m & 1) as f64, (m >> 1 & 1) as f64, (m >> 2 & 1) as f64];
+        let quads = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let mut tris = Vec::new();
+        for q in quads {
+            tris.push(Triangle::new(v(q[0]), v(q[1]), v(q[2])));
+            tris.push(Triangle::new(v(q[0]), v(q[2]), v(q[3])));
+        }
+        let (edges, corners) = features(&tris, 30.0);
+        assert_eq!(edges.len(), 12);
+        assert_eq!(corners.len(), 8);
+        // The face diagonals are flat: no feature even at 0 degrees.
+        let (edges, _) = features(&tris, 0.0);
+        assert_eq!(edges.len(), 12);
+        let s = default_sphere();
+        let (edges, corners) = features(s.triangles(), 30.0);
+        assert!(edges.is_empty() && corners.is_empty());
+    }
+
+    #[test]
+    fn hexahedron_volumes() {
+        let cube: [[f64; 3]; 8] = std::array::from_fn(|v| {
+            let m = VTK_TO_MORTON[v];
+            [
+                (m & 1) as f64 * 2.0,
+                (m >> 1 & 1) as f64,
+                (m >> 2 & 1) as f64 * 3.0,
+            ]
+        });
+        assert!((hexahedron_volume(&cube) - 6.0).abs() < 1e-14);
+        // A sheared box keeps its volume.
+        let mut sheared = cube;
+        for p in &mut sheared[4..] {
+            p[0] += 0.7;
+        }
+        assert!((hexahedron_volume(&sheared) - 6.0).abs() < 1e-14);
+        let mut raised = cube;
+        raised[6][2] += 1.0;
+        // The top face z = 3 + x y / 2 over [0, 2] x [0, 1]: 6 + 0.5.
+        assert!((hexahedron_volume(&raised) - 6.5).abs() < 1e-14);
+    }
+
+    #[test]
+    fn the_squared_test_agrees_with_the_scaled_jacobians() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut agree = 0;
+        for _ in 0..2000 {
+            let p: [[f64; 3]; 8] = std::array::from_fn(|v| {
+                let m = VTK_TO_MORTON[v];
+                [0, 1, 2].map(|a| (m >> a & 1) as f64 + 0.6 * next())
+            });
+            let j = corner_scaled_jacobians(&p);
+            for t in [0.001, 0.1, 0.3] {
+                let slow = j.iter().all(|&v| v >= t);
+                let near = j.iter().any(|&v| (v - t).abs() < 1e-12);
+                if !near {
+                    assert_eq!(corners_valid(&p, t * t), slow, "{p:?} {t}");
+                    agree += slow as usize;
+                }
+            }
+        }
+        assert!(agree > 500, "{agree}");
+    }
+
+    #[test]
+    fn quads_and_hexahedra_centres() {
+        // A planar trapezoid: area 1.5, centroid x = (0 + 2 + 1 + 0 ...).
+        let p = [
+            [0.0, 0.0, 0.0],
+            [2.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let (s, c) = quad_area_centre(&p);
+        assert!((s[2] - 1.5).abs() < 1e-15 && s[0] == 0.0 && s[1] == 0.0);
+        // Its centroid: the square [0,1]^2 (area 1, centre 0.5, 0.5) and
+        // the triangle (1,0) (2,0) (1,1) (area 0.5, centre 4/3, 1/3).
+        let want = [(0.5 + 0.5 * 4.0 / 3.0) / 1.5, (0.5 + 0.5 / 3.0) / 1.5];
+        assert!((c[0] - want[0]).abs() < 1e-15 && (c[1] - want[1]).abs() < 1e-15);
+        let cube: [[f64; 3]; 8] = std::array::from_fn(|v| {
+            let m = VTK_TO_MORTON[v];
+            [(m & 1) as f64, (m >> 1 & 1) as f64, (m >> 2 & 1) as f64]
+        });
+        let (v, c) = hexahedron_volume_centre(&cube);
+        assert!((v - 1.0).abs() < 1e-15);
+        assert!(c.iter().all(|&x| (x - 0.5).abs() < 1e-15));
+    }
+
+    #[test]
+    fn options_are_checked() {
+        assert!(SnapOptions::default().check().is_ok());
+        let bad = SnapOptions {
+            feature_angle_deg: 200.0,
+            ..SnapOptions::default()
+        };
+        assert!(bad.check().is_err());
+        let bad = SnapOptions {
+            feature_angle_deg: f64::NAN,
+            ..SnapOptions::default()
+        };
+        assert!(bad.check().is_err());
+    }
+}

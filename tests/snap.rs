@@ -1,0 +1,372 @@
+//! Snapped meshes (`Mesh::snap`): on the surface, valid, converging, and
+//! the same bits on any number of ranks.
+//!
+//! Run by `cargo test`, this program launches itself under `mpirun` on 1
+//! to 4 ranks. Every run snaps the solid and fluid sphere and the solid
+//! torus on all ranks, gathers each node's position by its lattice point
+//! on rank 0 and compares the bits (and the report) with the same mesh
+//! snapped by rank 0 alone. The run on one rank also checks, on one
+//! process:
+//!
+//! - every surface node the report counts as snapped is on the surface to
+//!   within 1e-6 of its cell size (exact distance to the triangles);
+//! - no element has a corner with a non-positive scaled Jacobian (sphere
+//!   and torus, inside and outside, and the real models when
+//!   `../shared/data` has them);
+//! - the volume error of the snapped sphere and torus against the volume
+//!   the surface encloses, level by level, against the staircase's;
+//! - sharp models (fandisk, flange) put nodes on their feature edges;
+//!
+//! and then `checkMesh -allTopology` on the snapped fluid sphere written as
+//! an OpenFOAM case on 1 and 2 ranks must say `Mesh OK.`.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::rc::Rc;
+use std::time::Duration;
+
+use octmesh::classify::Keep;
+use octmesh::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::config::{Command, Config};
+use octmesh::domain::{Domain, DEFAULT_FIT};
+use octmesh::geometry::{load_surface, Bvh};
+use octmesh::mesh::snap::{hexahedron_volume, SnapReport};
+use octmesh::mesh::{Mesh, Other, SURFACE_PATCH};
+use octmesh::pipeline::Session;
+
+const CHILD: &str = "OCTMESH_SNAP_CHILD";
+
+fn main() {
+    if std::env::var(CHILD).is_ok() {
+        child();
+        return;
+    }
+    common::run_self_on_1_to_4_ranks(
+        "snap",
+        CHILD,
+        "snap: all checks passed",
+        Duration::from_secs(900),
+    );
+    check_mesh_on_the_fluid_sphere();
+}
+
+/// `checkMesh -allTopology` says `Mesh OK.` on the snapped fluid sphere
+/// written as an OpenFOAM case, on 1 and on 2 ranks (`-parallel`).
+fn check_mesh_on_the_fluid_sphere() {
+    let Some(rc) = common::openfoam() else {
+        return;
+    };
+    for np in [1, 2] {
+        let case = common::scratch(&format!("snap_foam_{np}"));
+        let _ = std::fs::remove_dir_all(&case);
+        let dir = case.to_str().unwrap();
+        let args = [
+            "mesh",
+            "sphere",
+            "--level",
+            "6",
+            "--keep",
+            "outside",
+            "--snap",
+            "--openfoam",
+            dir,
+            "--quiet",
+        ];
+        let out = common::mpirun(np, &common::octmesh_bin(), &args, Duration::from_secs(600));
+        assert!(
+            out.status.success(),
+            "octmesh {args:?} on {np} ranks failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let run = if np > 1 {
+            format!("mpirun --oversubscribe -np {np} checkMesh -parallel -allTopology")
+        } else {
+            "checkMesh -allTopology".to_string()
+        };
+        let text = common::foam(&rc, &case, &run);
+        assert!(
+            text.contains("\nMesh OK."),
+            "snapped fluid sphere on {np} ranks: checkMesh -allTopology:\n{text}"
+        );
+        let skew = text
+            .lines()
+            .find(|l| l.contains("Max skewness"))
+            .unwrap_or("")
+            .trim()
+            .to_string();
+        println!("snapped fluid sphere, level 6, {np} rank(s): checkMesh Mesh OK ({skew})");
+    }
+}
+
+/// The snapped mesh of the built-in or shared surface `name` at `level`
+/// keeping `keep`, through a session on `comm` (walls cleaned); with
+/// `band`, the leaves within 1.5 cells of the surface are refined to
+/// `level` too, so that no 2:1 step lies on the surface.
+fn snapped(comm: CommRef, name: &str, level: u8, keep: Keep, band: bool) -> Session {
+    let mut c = Config::default();
+    c.surface.file = name.to_string();
+    c.octree.level = Some(level);
+    c.mesh.keep = keep;
+    c.mesh.clean_walls = Some(true);
+    c.mesh.snap = true;
+    c.output.quiet = true;
+    if band {
+        let s = load_surface(name).unwrap();
+        let b = s.bbox();
+        let d = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+        c.octree.distance = vec![(1.5 * d.side / (1u64 << level) as f64, level)];
+    }
+    let mut session = Session::new(comm, c);
+    session.run(Command::Mesh).unwrap();
+    session
+}
+
+/// Every local node as (lattice point, position bits).
+fn positions(m: &Mesh) -> Vec<u64> {
+    let x = m.coordinates();
+    let mut v = Vec::new();
+    for (q, p) in m.node_lattice().iter().zip(&x) {
+        v.extend(q.map(u64::from));
+        v.extend(p.map(f64::to_bits));
+    }
+    v
+}
+
+fn report_words(r: &SnapReport) -> Vec<u64> {
+    vec![
+        r.surface_nodes,
+        r.snapped,
+        r.partial,
+        r.unsnapped,
+        r.feature_nodes,
+        r.relaxed_nodes,
+        r.reported_elements,
+        r.min_scaled_jacobian.to_bits(),
+    ]
+}
+
+/// Snapped on all ranks and on rank 0 alone: the same bits at every node.
+fn same_on_all_ranks(comm: &CommRef, name: &str, level: u8, keep: Keep) {
+    let session = snapped(comm.clone(), name, level, keep, false);
+    let m = session.mesh().unwrap();
+    let r = session.current_snap().unwrap().clone();
+    let parts = common::gather(comm, positions(m));
+    if comm.rank() != 0 {
+        return;
+    }
+    let serial: CommRef = Rc::new(SerialComm);
+    let alone_session = snapped(serial, name, level, keep, false);
+    let one = alone_session.mesh().unwrap();
+    let r1 = alone_session.current_snap().unwrap();
+    let tag = format!("{name} level {level} {keep:?} on {} ranks", comm.size());
+    assert_eq!(report_words(&r), report_words(r1), "{tag}: reports differ");
+    let mut alone: BTreeMap<[u64; 3], [u64; 3]> = BTreeMap::new();
+    for w in positions(one).chunks_exact(6) {
+        alone.insert([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
+    }
+    let mut seen = 0usize;
+    let mut moved = 0usize;
+    let mut all: BTreeMap<[u64; 3], [u64; 3]> = BTreeMap::new();
+    for part in &parts {
+        for w in part.chunks_exact(6) {
+            let (q, p) = ([w[0], w[1], w[2]], [w[3], w[4], w[5]]);
+            let a = alone
+                .get(&q)
+                .unwrap_or_else(|| panic!("{tag}: node {q:?} unknown"));
+            assert_eq!(&p, a, "{tag}: node {q:?} moved differently");
+            if let Some(prev) = all.insert(q, p) {
+                assert_eq!(prev, p, "{tag}: two ranks disagree on node {q:?}");
+            }
+            seen += 1;
+        }
+    }
+    for (q, p) in &alone {
+        let x = q.map(|c| c as f64);
+        let y = p.map(f64::from_bits);
+        moved += (one.domain().from_lattice(x) != y) as usize;
+    }
+    assert_eq!(all.len(), alone.len(), "{tag}: node sets differ");
+    assert!(moved > 100, "{tag}: only {moved} nodes moved");
+    println!(
+        "{tag}: {} nodes ({seen} copies, {moved} moved) bitwise equal to one rank; {r:?}",
+        all.len()
+    );
+}
+
+/// The checks of a snapped mesh on one process: valid elements, snapped
+/// nodes on the surface. Returns the report, the snapped and the staircase
+/// volume of the kept region (for fluid meshes, the cube's volume minus
+/// the mesh's).
+fn check_snapped(name: &str, level: u8, keep: Keep, band: bool) -> (SnapReport, f64, f64) {
+    let comm: CommRef = Rc::new(SerialComm);
+    let session = snapped(comm.clone(), name, level, keep, band);
+    let m = session.mesh().unwrap();
+    let r = session.current_snap().unwrap().clone();
+    let seconds = session.timer().get("snap");
+    let rest: f64 = ["ghost", "nodes", "numbering", "connectivity", "clean"]
+        .iter()
+        .map(|k| session.timer().get(k))
+        .sum();
+    let domain = *m.domain();
+    let s = load_surface(name).unwrap();
+    let tag = format!("{name} level {level} {keep:?}");
+    // Valid: every corner's scaled Jacobian positive.
+    let jac = m.scaled_jacobians(None);
+    let worst = jac.iter().copied().fold(1.0f64, f64::min);
+    assert!(
+        worst > 0.0,
+        "{tag}: an element with scaled Jacobian {worst}"
+    );
+    assert_eq!(worst, r.min_scaled_jacobian, "{tag}: the report's minimum");
+    assert_eq!(
+        r.snapped + r.partial + r.unsnapped,
+        r.surface_nodes,
+        "{tag}"
+    );
+    // Snapped nodes: on the surface to within 1e-6 of the cell size.
+    let faces = m.faces().unwrap();
+    let boundary = m.boundary(&*comm, &faces, None).unwrap();
+    let x = m.coordinates();
+    let tris = s.triangles();
+    let bvh = Bvh::new(tris);
+    let mut cell = vec![f64::INFINITY; m.num_nodes()];
+    let h0 = domain.side / (1u64 << 19) as f64;
+    for (e, c) in m.elements().iter().zip(m.connectivity()) {
+        for &n in c {
+            cell[n as usize] = cell[n as usize].min(e.side() as f64 * h0);
+        }
+    }
+    let mut on = 0u64;
+    let mut surface = 0u64;
+    for n in 0..m.num_independent() {
+        let p = boundary.node_patches(n);
+        if !p.contains(&SURFACE_PATCH) || p.iter().any(|&q| q < SURFACE_PATCH) {
+            continue;
+        }
+        surface += 1;
+        let tol = 1e-6 * cell[n];
+        if bvh.nearest(tris, x[n], tol * tol).is_some() {
+            on += 1;
+        }
+    }
+    assert_eq!(surface, r.surface_nodes, "{tag}: surface nodes");
+    // Nodes at the staircase's corners that are convex seen from the kept
+    // side cannot reach the surface without flattening their elements
+    // where the surface curves away from the kept side (see
+    // `octmesh::mesh::snap`): about half of a fluid mesh's, some of the
+    // torus's saddle.
+    let least = 0.4;
+    assert!(
+        on >= r.snapped && r.snapped as f64 >= least * surface as f64,
+        "{tag}: {on} surface nodes on the surface, {surface} in all, report {r:?}"
+    );
+    // The finite-volume geometry from the moved points closes every cell:
+    // its faces' area vectors (out of it) sum to zero.
+    let g = m.snapped_fv_geometry(&faces).unwrap().expect("snapped");
+    let mut sum = vec![[0.0f64; 3]; m.elements().len()];
+    let mut size = vec![0.0f64; m.elements().len()];
+    for (k, f) in faces.faces().iter().enumerate() {
+        let s = g.face_normal[k].map(|x| x * g.face_area[k]);
+        let o = f.owner as usize;
+        for a in 0..3 {
+            sum[o][a] += s[a];
+        }
+        size[o] += g.face_area[k];
+        if let Other::Element(j) = f.other {
+            for a in 0..3 {
+                sum[j as usize][a] -= s[a];
+            }
+            size[j as usize] += g.face_area[k];
+        }
+    }
+    for (e, (s, a)) in sum.iter().zip(&size).enumerate() {
+        let open = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+        assert!(
+            open <= 1e-12 * a,
+            "{tag}: element {e} is open by {open:e} of {a:e}"
+        );
+    }
+    let lattice = m.lattice_coordinates();
+    let (mut volume, mut staircase) = (0.0, 0.0);
+    for e in 0..m.elements().len() {
+        volume += hexahedron_volume(&m.element_corners(e, None));
+        staircase += hexahedron_volume(&m.element_corners(e, Some(&lattice)));
+    }
+    println!(
+        "  {tag}: {} elements, snap {seconds:.3} s (mesh {rest:.3} s), {on} of {surface} surface nodes on it, {r:?}",
+        m.elements().len()
+    );
+    match keep {
+        Keep::Outside => (r, domain.volume() - volume, domain.volume() - staircase),
+        _ => (r, volume, staircase),
+    }
+}
+
+fn child() {
+    // A failed check must end the job, not unwind into MPI_Finalize while
+    // the other ranks wait in a collective.
+    std::panic::set_hook(Box::new(|info| {
+        eprintln!("{info}");
+        std::process::exit(101);
+    }));
+    let universe = mpi::initialize().expect("MPI init");
+    let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
+    same_on_all_ranks(&comm, "sphere", 5, Keep::Inside);
+    same_on_all_ranks(&comm, "sphere", 5, Keep::Outside);
+    same_on_all_ranks(&comm, "torus", 5, Keep::Inside);
+    if comm.size() == 1 {
+        serial_checks();
+    }
+    if comm.rank() == 0 {
+        println!("snap: all checks passed");
+    }
+}
+
+fn serial_checks() {
+    for (name, levels) in [("sphere", 4..=6), ("torus", 5..=7)] {
+        let exact = load_surface(name).unwrap().signed_volume();
+        for keep in [Keep::Inside, Keep::Outside] {
+            let mut errors = Vec::new();
+            for level in levels.clone() {
+                let (_, v, v0) = check_snapped(name, level, keep, true);
+                let (e, e0) = ((v - exact) / exact, (v0 - exact) / exact);
+                println!(
+                    "{name} {keep:?} level {level}: relative volume error snapped {e:+.3e}, staircase {e0:+.3e}"
+                );
+                errors.push((e.abs(), e0.abs()));
+            }
+            for w in errors.windows(2) {
+                let (rate, rate0) = (w[0].0 / w[1].0, w[0].1 / w[1].1);
+                println!("{name} {keep:?}: error ratio per level snapped {rate:.2}, staircase {rate0:.2}");
+                // Second order where the nodes reach the surface.
+                if keep == Keep::Inside && name == "sphere" {
+                    assert!(
+                        rate > 3.0,
+                        "{name} {keep:?}: volume error ratio {rate:.2} per level"
+                    );
+                }
+            }
+        }
+    }
+    for (model, sharp) in [
+        ("bunny", false),
+        ("armadillo", false),
+        ("fandisk", true),
+        ("flange", true),
+    ] {
+        let Some(path) = common::shared_model(&format!("{model}.stl")) else {
+            println!("SKIP {model}: not in ../shared/data");
+            continue;
+        };
+        for keep in [Keep::Inside, Keep::Outside] {
+            let (r, _, _) = check_snapped(path.to_str().unwrap(), 6, keep, false);
+            if sharp {
+                assert!(
+                    r.feature_nodes > 0,
+                    "{model} {keep:?}: no node on a feature"
+                );
+            }
+        }
+    }
+}
