@@ -84,6 +84,13 @@ module octmesh
      type(c_ptr) :: faces, node_offsets, node_patches
   end type octmesh_boundary_t
 
+  !> octmesh_snap_report_t (octmesh_mesh_get_snap_report)
+  type, bind(c), public :: octmesh_snap_report_t
+     integer(c_int64_t) :: surface_nodes, snapped, partial, unsnapped, feature_nodes, relaxed_nodes, &
+          reported_elements
+     real(c_double) :: min_scaled_jacobian
+  end type octmesh_snap_report_t
+
   !> octmesh_element_map_t (octmesh_mesh_get_element_map): c_ptr arrays
   !> old_first (int64, -1 none), old_count (int32), level_change (int8).
   type, bind(c), public :: octmesh_element_map_t
@@ -138,6 +145,7 @@ module octmesh
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
+  public :: octmesh_mesh_snap, octmesh_mesh_get_snap_report
   public :: octmesh_mesh_keep_previous, octmesh_mesh_get_element_map
   public :: octmesh_mesh_transfer_elements, octmesh_mesh_transfer_nodes
 
@@ -596,6 +604,26 @@ module octmesh
        type(octmesh_boundary_t), intent(out) :: out
        integer(c_int) :: octmesh_mesh_get_boundary
      end function octmesh_mesh_get_boundary
+
+     !> Collective: moves the surface nodes onto the surface (feature angle
+     !> in degrees, relaxation layers and iterations, least scaled Jacobian
+     !> kept: above 0, at most 0.5; 0.1 for OpenFOAM cases).
+     function octmesh_mesh_snap(h, feature_angle, layers, iterations, min_jacobian) &
+          bind(c, name="octmesh_mesh_snap")
+       import :: c_ptr, c_int, c_int32_t, c_double
+       type(c_ptr), value :: h
+       real(c_double), value :: feature_angle, min_jacobian
+       integer(c_int32_t), value :: layers, iterations
+       integer(c_int) :: octmesh_mesh_snap
+     end function octmesh_mesh_snap
+
+     !> What the last snap did (global counts).
+     function octmesh_mesh_get_snap_report(h, out) bind(c, name="octmesh_mesh_get_snap_report")
+       import :: c_ptr, c_int, octmesh_snap_report_t
+       type(c_ptr), value :: h
+       type(octmesh_snap_report_t), intent(out) :: out
+       integer(c_int) :: octmesh_mesh_get_snap_report
+     end function octmesh_mesh_get_snap_report
 
      !> Keep (1) or drop (0) the mesh a change replaces, for the transfers.
      function octmesh_mesh_keep_previous(h, keep) bind(c, name="octmesh_mesh_keep_previous")

@@ -1,6 +1,7 @@
 ! Fluid mesh (elements outside the surface) around the built-in torus, with
-! a Fortran refinement callback and a context; prints the counts and writes
-! a VTU with the point field "z" (height of each node). Usage: fluid [OUT.pvtu]
+! a Fortran refinement callback and a context, snapped onto the torus;
+! prints the counts and the snap report and writes a VTU with the point
+! field "z" (height of each node). Usage: fluid [OUT.pvtu]
 module fluid_refine
   use, intrinsic :: iso_c_binding
   use octmesh
@@ -32,6 +33,7 @@ program fluid
   type(c_ptr) :: h
   type(half_ctx), target :: ctx
   type(octmesh_mesh_counts_t) :: counts
+  type(octmesh_snap_report_t) :: snapped
   integer :: rank, ierr
   integer(c_int64_t) :: calls
   character(len=256) :: out
@@ -54,6 +56,11 @@ program fluid
   call check(octmesh_octree_partition(h, c_null_funptr, c_null_ptr), h)
   call check(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_CENTER), h)
   call check(octmesh_mesh_get_counts(h, counts), h)
+  ! Body-fitted: the wall's nodes onto the torus, elements kept valid.
+  call check(octmesh_mesh_snap(h, 30.0_c_double, 2_c_int32_t, 3_c_int32_t, 0.1_c_double), h)
+  call check(octmesh_mesh_get_snap_report(h, snapped), h)
+  if (snapped%snapped <= 0 .or. snapped%min_scaled_jacobian < 0.1_c_double) &
+       error stop 'snapping moved no node or left a poor element'
   if (len_trim(out) > 0) then
      call check(octmesh_mesh_get_coordinates(h, pxyz), h)
      call c_f_pointer(pxyz, xyz, [3_c_int64_t, int(counts%local_nodes, c_int64_t)])
@@ -66,6 +73,9 @@ program fluid
      write (*, '(a,i0,a,i0,a,i0,a,i0,a,i0)') 'FLUID calls=', calls, &
           ' elements=', counts%global_elements, ' independent=', counts%global_independent, &
           ' face_hanging=', counts%global_face_hanging, ' edge_hanging=', counts%global_edge_hanging
+     write (*, '(a,i0,a,i0,a,i0,a,f6.3)') 'FLUID snapped=', snapped%snapped, ' of ', &
+          snapped%surface_nodes, ' partial=', snapped%partial, ' min_scaled_jacobian=', &
+          snapped%min_scaled_jacobian
   end if
   ! A failing call: the message comes back as a Fortran string.
   if (octmesh_surface_from_stl_f(h, "/nonexistent/torus.stl") /= OCTMESH_STATUS_OK) then
