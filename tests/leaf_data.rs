@@ -28,7 +28,6 @@
 mod common;
 
 use std::rc::Rc;
-use std::time::Duration;
 
 use octmesh::adapt::Adapt;
 use octmesh::comm::{CommRef, MpiComm};
@@ -199,30 +198,10 @@ fn main() {
         child();
         return;
     }
-    let me = std::env::current_exe().expect("own path");
-    let mut first: Option<Vec<String>> = None;
-    for np in 1..=4 {
-        let out = common::mpirun_env(np, &me, &[], &[(CHILD, "1")], Duration::from_secs(600));
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(
-            out.status.success(),
-            "np {np} failed:\n{stdout}\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let steps: Vec<String> = stdout
-            .lines()
-            .filter(|l| l.starts_with("STEP"))
-            .map(str::to_string)
-            .collect();
-        assert_eq!(steps.len(), STEPS as usize, "{stdout}");
-        println!(
-            "{}",
-            stdout.lines().find(|l| l.starts_with("DONE")).unwrap_or("")
-        );
-        match &first {
-            None => first = Some(steps),
-            Some(f) => assert_eq!(f, &steps, "np {np} differs from np 1"),
-        }
+    let outputs = common::run_self_identical_on_1_to_4_ranks(CHILD, &["STEP"], STEPS as usize);
+    for stdout in &outputs {
+        let done = stdout.lines().find(|l| l.starts_with("DONE"));
+        println!("{}", done.expect("a DONE line"));
     }
     println!("leaf_data: 50 steps on np 1-4, data on every leaf its own, integral conserved, identical results");
 }

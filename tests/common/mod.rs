@@ -502,3 +502,39 @@ pub fn assert_same_leaves<T: PartialEq + std::fmt::Debug>(ours: &[T], theirs: &[
         );
     }
 }
+
+/// Test programs that launch themselves and must give the same results on
+/// every rank count: runs this executable under `mpirun` on 1 to 4 ranks
+/// with `child_var` set to 1; each run must succeed and print `count` lines
+/// starting with one of `prefixes`, and those lines must be the same on
+/// every rank count. Returns each run's standard output.
+pub fn run_self_identical_on_1_to_4_ranks(
+    child_var: &str,
+    prefixes: &[&str],
+    count: usize,
+) -> Vec<String> {
+    let me = std::env::current_exe().expect("own path");
+    let mut first: Option<Vec<String>> = None;
+    let mut outputs = Vec::new();
+    for np in 1..=4 {
+        let out = mpirun_env(np, &me, &[], &[(child_var, "1")], Duration::from_secs(600));
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "np {np} failed:\n{stdout}\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let lines: Vec<String> = stdout
+            .lines()
+            .filter(|l| prefixes.iter().any(|p| l.starts_with(p)))
+            .map(str::to_string)
+            .collect();
+        assert_eq!(lines.len(), count, "np {np}:\n{stdout}");
+        match &first {
+            None => first = Some(lines),
+            Some(f) => assert_eq!(f, &lines, "np {np} differs from np 1"),
+        }
+        outputs.push(stdout);
+    }
+    outputs
+}

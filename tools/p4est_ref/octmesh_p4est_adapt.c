@@ -38,21 +38,12 @@
 #include <p8est_bits.h>
 #include <p8est_extended.h>
 
-#define ROOT_HALF 262144
-#define RADIUS 131072
-#define START_X 157286
+#include "moving_sphere.h"
+
 #define STEP_X 20972
 
 static int          g_rank, g_size;
 static int          g_step, g_max_level;
-
-static void
-finish (int code)
-{
-  sc_finalize ();
-  MPI_Finalize ();
-  exit (code);
-}
 
 static void
 usage_error (const char *msg)
@@ -65,29 +56,10 @@ usage_error (const char *msg)
   finish (1);
 }
 
-/* Smallest and largest squared distance from c to [lo, hi] along one axis,
- * added to the sums. */
-static void
-axis_dist (int64_t c, int64_t lo, int64_t hi, int64_t * dmin, int64_t * dmax)
-{
-  int64_t             a = c < lo ? lo - c : (c > hi ? c - hi : 0);
-  int64_t             b = c - lo > hi - c ? c - lo : hi - c;
-  *dmin += a * a;
-  *dmax += b * b;
-}
-
 static int
 is_cut (const p8est_quadrant_t * q)
 {
-  int64_t             len = P8EST_QUADRANT_LEN (q->level);
-  int64_t             dmin = 0, dmax = 0;
-  const int64_t       r2 = (int64_t) RADIUS * RADIUS;
-
-  axis_dist (START_X + (int64_t) STEP_X * g_step, q->x, q->x + len, &dmin,
-             &dmax);
-  axis_dist (ROOT_HALF, q->y, q->y + len, &dmin, &dmax);
-  axis_dist (ROOT_HALF, q->z, q->z + len, &dmin, &dmax);
-  return dmin <= r2 && r2 <= dmax;
+  return sphere_cuts (q, START_X + (int64_t) STEP_X * g_step, ROOT_HALF);
 }
 
 static int

@@ -56,9 +56,8 @@
 #include <p8est_ghost.h>
 #include <p8est_lnodes.h>
 
-#define ROOT_HALF 262144
-#define RADIUS 131072
-#define START_X 157286
+#include "moving_sphere.h"
+
 #define STEP_X 20972
 #define ROOT_LEN 524288.0
 
@@ -78,14 +77,6 @@ static int          g_step, g_max_level;
 static int64_t      g_dx = STEP_X, g_z = ROOT_HALF;
 
 static void
-finish (int code)
-{
-  sc_finalize ();
-  MPI_Finalize ();
-  exit (code);
-}
-
-static void
 usage_error (const char *msg)
 {
   if (g_rank == 0)
@@ -94,28 +85,11 @@ usage_error (const char *msg)
   finish (1);
 }
 
-/* The oracle's cut test (octmesh_p4est_adapt.c), unchanged. */
-static void
-axis_dist (int64_t c, int64_t lo, int64_t hi, int64_t * dmin, int64_t * dmax)
-{
-  int64_t             a = c < lo ? lo - c : (c > hi ? c - hi : 0);
-  int64_t             b = c - lo > hi - c ? c - lo : hi - c;
-  *dmin += a * a;
-  *dmax += b * b;
-}
-
+/* The oracle's cut test, with the centre's step and height of this run. */
 static int
 is_cut (const p8est_quadrant_t * q)
 {
-  int64_t             len = P8EST_QUADRANT_LEN (q->level);
-  int64_t             dmin = 0, dmax = 0;
-  const int64_t       r2 = (int64_t) RADIUS * RADIUS;
-
-  axis_dist (START_X + g_dx * g_step, q->x, q->x + len, &dmin,
-             &dmax);
-  axis_dist (ROOT_HALF, q->y, q->y + len, &dmin, &dmax);
-  axis_dist (g_z, q->z, q->z + len, &dmin, &dmax);
-  return dmin <= r2 && r2 <= dmax;
+  return sphere_cuts (q, START_X + g_dx * g_step, g_z);
 }
 
 static int
