@@ -82,7 +82,7 @@ pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
 use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
 
 /// VTK hexahedron corner `v` is Morton corner `VTK_TO_MORTON[v]`
-/// (Morton corner bits: x, y, z).
+/// (Morton corner bits: x, y, z). The permutation is its own inverse.
 pub const VTK_TO_MORTON: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
 
 /// What [`Mesh::build`] keeps.

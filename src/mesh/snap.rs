@@ -531,23 +531,42 @@ impl<'a> Snapper<'a> {
     /// Steps back the displacements of the surface nodes of invalid
     /// elements until every element is valid or those nodes are back.
     fn scale_back(&mut self) {
-        let mut cands = self.active.clone();
+        let cands = self.active.clone();
         self.place_surface_nodes();
         self.update_hanging();
+        self.settle(
+            cands,
+            |s, n| s.snap[n] && s.step[n] < STEPS,
+            |s, n| {
+                s.step[n] += 1;
+                s.pos[n] = s.snapped_position(n);
+            },
+        );
+    }
+
+    /// Measures the elements `cands`; while some are invalid, the nodes
+    /// they blame (among those `blamable` accepts) take one step back
+    /// (`step_back`, on every rank holding them) and the elements around
+    /// them are measured again. Collective.
+    fn settle(
+        &mut self,
+        mut cands: Vec<u32>,
+        blamable: impl Fn(&Self, usize) -> bool,
+        mut step_back: impl FnMut(&mut Self, usize),
+    ) {
         loop {
             self.refresh_hanging(&cands);
             let bad = self.bad_among(&cands);
             let mut flags = vec![0u64; self.ni];
             for e in bad {
-                self.blame(e, |n| self.snap[n] && self.step[n] < STEPS, &mut flags);
+                self.blame(e, |n| blamable(self, n), &mut flags);
             }
             // The owner of a flagged node has its flag after the exchange.
             if self.agree_flags(&mut flags) == 0 {
                 break;
             }
             for (n, _) in flags.iter().enumerate().filter(|f| *f.1 != 0) {
-                self.step[n] += 1;
-                self.pos[n] = self.snapped_position(n);
+                step_back(self, n);
             }
             cands = self.around(|n| flags[n] != 0);
         }
@@ -573,25 +592,16 @@ impl<'a> Snapper<'a> {
     /// valid or nothing is left to undo. Only elements around moved nodes
     /// are measured: the others were valid (or beyond help) before.
     fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
-        let mut cands = self.around(|n| moved[n]);
-        loop {
-            self.refresh_hanging(&cands);
-            let bad = self.bad_among(&cands);
-            let mut flags = vec![0u64; self.ni];
-            for e in bad {
-                self.blame(e, |n| moved[n], &mut flags);
-            }
-            if self.agree_flags(&mut flags) == 0 {
-                break;
-            }
-            for n in 0..self.ni {
-                if flags[n] != 0 {
-                    moved[n] = false;
-                    undo(self, n);
-                }
-            }
-            cands = self.around(|n| flags[n] != 0);
-        }
+        let cands = self.around(|n| moved[n]);
+        let moved = std::cell::Cell::from_mut(moved).as_slice_of_cells();
+        self.settle(
+            cands,
+            |_, n| moved[n].get(),
+            |s, n| {
+                moved[n].set(false);
+                undo(s, n);
+            },
+        );
     }
 
     /// One relaxation step of the layer nodes, each moving only by more
@@ -749,10 +759,9 @@ pub fn quad_area_centre(p: &[[f64; 3]; 4]) -> ([f64; 3], [f64; 3]) {
 /// in VTK order (2 x 2 x 2 Gauss points, exact for both).
 pub fn hexahedron_volume_centre(p: &[[f64; 3]; 8]) -> (f64, [f64; 3]) {
     let g = [0.5 - 0.5 / 3f64.sqrt(), 0.5 + 0.5 / 3f64.sqrt()];
-    let q: [[f64; 3]; 8] = std::array::from_fn(|m| {
-        let v = VTK_TO_MORTON.iter().position(|&x| x == m).unwrap_or(0);
-        p[v]
-    });
+    // The permutation is its own inverse: Morton corner m is VTK corner
+    // VTK_TO_MORTON[m].
+    let q: [[f64; 3]; 8] = std::array::from_fn(|m| p[VTK_TO_MORTON[m]]);
     let (mut volume, mut first) = (0.0, [0.0; 3]);
     for &u in &g {
         for &v in &g {
@@ -1076,28 +1085,28 @@ impl Mesh {
             return Ok(out);
         }
         missing.sort_unstable();
+        // Edges: Morton corner pairs differing in one bit; faces: the four
+        // corners with one bit fixed. The same for every element.
+        let mut sets: Vec<Vec<usize>> = Vec::with_capacity(18);
+        for m in 0..8usize {
+            for k in 0..3 {
+                if m >> k & 1 == 0 {
+                    sets.push(vec![m, m | 1 << k]);
+                }
+            }
+        }
+        for k in 0..3 {
+            for bit in [0, 1usize << k] {
+                sets.push((0..8).filter(|m| m & (1 << k) == bit).collect());
+            }
+        }
         for (e, c) in self.elements().iter().zip(self.connectivity()) {
             let (a, s) = (e.coords(), e.side());
             if s < 2 {
                 continue;
             }
             let corner = |m: usize| [0, 1, 2].map(|k| a[k] + if m >> k & 1 == 1 { s } else { 0 });
-            // Edges: corner pairs differing in one bit; faces: the four
-            // corners with one bit fixed.
-            let mut sets: Vec<Vec<usize>> = Vec::with_capacity(18);
-            for m in 0..8usize {
-                for k in 0..3 {
-                    if m >> k & 1 == 0 {
-                        sets.push(vec![m, m | 1 << k]);
-                    }
-                }
-            }
-            for k in 0..3 {
-                for bit in [0, 1usize << k] {
-                    sets.push((0..8).filter(|m| m & (1 << k) == bit).collect());
-                }
-            }
-            for set in sets {
+            for set in sets.iter().map(|s| s.as_slice()) {
                 let mid: [u32; 3] = std::array::from_fn(|k| {
                     let lo = set.iter().map(|&m| corner(m)[k]).min().unwrap_or(0);
                     let hi = set.iter().map(|&m| corner(m)[k]).max().unwrap_or(0);
@@ -1109,10 +1118,7 @@ impl Mesh {
                 // The corners as nodes, in the order of their points.
                 let mut corners: Vec<([u32; 3], u32)> = set
                     .iter()
-                    .map(|&m| {
-                        let v = VTK_TO_MORTON.iter().position(|&x| x == m).unwrap_or(0);
-                        (corner(m), c[v])
-                    })
+                    .map(|&m| (corner(m), c[VTK_TO_MORTON[m]]))
                     .collect();
                 corners.sort_unstable();
                 let mut d = [0u32; 4];

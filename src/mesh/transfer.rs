@@ -195,16 +195,14 @@ impl ElementMap {
                 map.level_change.push(0);
                 continue;
             }
+            // One old element at most as fine (unchanged, refined), or the
+            // finest of those inside (coarsened).
             let finest = got.leaves[range.clone()]
                 .iter()
                 .map(|o| o.level())
                 .max()
                 .unwrap_or(0);
-            let change = if range.len() == 1 && got.leaves[range.start].level() <= e.level() {
-                e.level() as i8 - got.leaves[range.start].level() as i8
-            } else {
-                e.level() as i8 - finest as i8
-            };
+            let change = e.level() as i8 - finest as i8;
             map.old_first.push(got.global[range.start]);
             map.old_count.push(range.len() as u32);
             map.level_change.push(change);
