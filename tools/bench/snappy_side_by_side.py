@@ -155,7 +155,9 @@ def vec(v):
     return "(%s)" % " ".join("%.9g" % x for x in v)
 
 
-def write_snappy_case(case, spec, np_):
+def write_snappy_case(case, spec, np_, snap=False):
+    """The snappyHexMesh case of spec for np_ ranks: castellated only, or castellated and
+    snapped with snap (addLayers false in both)."""
     if case.exists():
         shutil.rmtree(case)
     (case / "system").mkdir(parents=True)
@@ -195,7 +197,7 @@ def write_snappy_case(case, spec, np_):
     name = spec["name"]
     (sysd / "snappyHexMeshDict").write_text(
         HEADER % "snappyHexMeshDict"
-        + "castellatedMesh true; snap false; addLayers false;\n"
+        + "castellatedMesh true; snap %s; addLayers false;\n" % ("true" if snap else "false")
         + "geometry {\n"
         + "  %s.stl { type triSurfaceMesh; name %s; }\n" % (name, name)
         + "  wake { type searchableBox; min %s; max %s; }\n" % (vec(spec["wake_lo"]), vec(spec["wake_hi"]))
