@@ -1014,10 +1014,9 @@ fn speed(u: [f64; 3]) -> f64 {
 /// not asserted: on both meshes it lies off the equator, at the fluid's
 /// staircase corners (BENCHMARKS.md, "Snapping").
 ///
-/// Caveat: with the reference's two non-orthogonal correctors this
-/// OpenFOAM build does not keep a uniform stream through a sheared box
-/// (BENCHMARKS.md), so on the snapped, non-orthogonal mesh the fluxes this
-/// test judges are themselves in doubt until it runs on a sound build.
+/// The solver settings are the reference's (two non-orthogonal
+/// correctors); without the correction the staircase's equatorial peak is
+/// within 2 % too (BENCHMARKS.md).
 #[test]
 fn potential_flow_peaks_at_one_and_a_half_on_the_snapped_sphere() {
     let Some(rc) = openfoam() else { return };
