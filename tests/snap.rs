@@ -14,7 +14,9 @@
 //!   and torus, inside and outside, and the real models when
 //!   `../shared/data` has them);
 //! - the volume error of the snapped sphere and torus against the volume
-//!   the surface encloses, level by level, against the staircase's;
+//!   the surface encloses, level by level, against the staircase's: for
+//!   the solid sphere (levels 4 to 6) and the solid torus (5 to 7) it
+//!   falls more than 3 times per level (second order);
 //! - sharp models (fandisk, flange) put nodes on their feature edges;
 //!
 //! and then `checkMesh -allTopology` on the snapped fluid sphere written as
@@ -339,8 +341,10 @@ fn serial_checks() {
             for w in errors.windows(2) {
                 let (rate, rate0) = (w[0].0 / w[1].0, w[0].1 / w[1].1);
                 println!("{name} {keep:?}: error ratio per level snapped {rate:.2}, staircase {rate0:.2}");
-                // Second order where the nodes reach the surface.
-                if keep == Keep::Inside && name == "sphere" {
+                // Second order where the nodes reach the surface: the
+                // solids (the torus's first ratio, 5 to 6, is 3.19; 92 of
+                // its 1,280 surface nodes stay partly snapped at level 5).
+                if keep == Keep::Inside {
                     assert!(
                         rate > 3.0,
                         "{name} {keep:?}: volume error ratio {rate:.2} per level"
