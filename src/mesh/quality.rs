@@ -97,7 +97,7 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{FaceKind, Faces, Kept, Other};
-use crate::mesh::points::{face_polygon, point_key, PointIndex};
+use crate::mesh::points::{face_polygon, point_key, PointFilter, PointIndex};
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
@@ -527,16 +527,41 @@ impl Mesh {
                 ));
             }
         }
+        let filter = PointFilter::new(&keys);
         let mut index = PointIndex::new(keys);
+        let (elements, conn) = (self.elements(), self.connectivity());
+        let moved = self.moved().unwrap_or(&[]);
+        // The node at lattice point `p` if it is a corner of local element
+        // `e` (most face points are): no search.
+        let corner_node = |e: u32, p: [u32; 3]| -> Option<usize> {
+            let (c, s) = (elements[e as usize].coords(), elements[e as usize].side());
+            let mut m = 0;
+            for a in 0..3 {
+                if p[a] == c[a] + s {
+                    m |= 1 << a;
+                } else if p[a] != c[a] {
+                    return None;
+                }
+            }
+            Some(conn[e as usize][VTK_TO_MORTON[m]] as usize)
+        };
         let list = faces.faces();
         let mut start = Vec::with_capacity(list.len() + 1);
         start.push(0);
-        let mut lattice: Vec<[u32; 3]> = Vec::with_capacity(4 * list.len());
+        let mut points: Vec<[f64; 3]> = Vec::with_capacity(4 * list.len());
+        // The other points (hanging points of other ranks' elements, the
+        // centres of split faces), found by their lattice points.
+        let mut rest: Vec<[u32; 3]> = Vec::new();
+        let mut rest_at: Vec<usize> = Vec::new();
         let mut flipped = Vec::with_capacity(list.len());
         let mut poly: Vec<(u64, [u32; 3])> = Vec::with_capacity(8);
         for f in list {
             poly.clear();
-            face_polygon(&f.corners(), |k| index.find(k).is_some(), &mut poly);
+            face_polygon(
+                &f.corners(),
+                |k| filter.may_hold(k) && index.find(k).is_some(),
+                &mut poly,
+            );
             let flip = match f.other {
                 Other::Halo(h) => {
                     self.halo().global[h as usize] < self.global_element(f.owner as usize)
@@ -550,11 +575,26 @@ impl Mesh {
             if flip {
                 poly[1..].reverse();
             }
-            lattice.extend(poly.iter().map(|p| p.1));
-            start.push(lattice.len());
+            for &(_, p) in &poly {
+                let node = corner_node(f.owner, p).or(match f.other {
+                    Other::Element(j) => corner_node(j, p),
+                    _ => None,
+                });
+                match node {
+                    Some(n) if n < moved.len() => points.push(moved[n]),
+                    _ => {
+                        rest_at.push(points.len());
+                        rest.push(p);
+                        points.push([f64::NAN; 3]);
+                    }
+                }
+            }
+            start.push(points.len());
             flipped.push(flip);
         }
-        let points = self.point_positions(&lattice)?;
+        for (k, x) in rest_at.into_iter().zip(self.point_positions(&rest)?) {
+            points[k] = x;
+        }
         let geometry = start
             .windows(2)
             .map(|w| polygon_area_centre(&points[w[0]..w[1]]))
@@ -587,33 +627,47 @@ impl Mesh {
             // Each element's faces with their area vectors out of it, in the
             // order of the faces' corner sums (unique among one element's
             // faces, the same on any rank).
-            let mut sides: Vec<(u32, [u64; 3], u32, bool)> = Vec::new();
-            for (k, f) in faces.faces().iter().enumerate() {
+            let list = faces.faces();
+            let n = self.elements().len();
+            // Bucketed by element (a counting sort), then each element's few
+            // faces sorted by key.
+            let mut offset = vec![0usize; n + 1];
+            for f in list {
+                offset[f.owner as usize + 1] += 1;
+                if let Other::Element(j) = f.other {
+                    offset[j as usize + 1] += 1;
+                }
+            }
+            for e in 0..n {
+                offset[e + 1] += offset[e];
+            }
+            let mut next = offset.clone();
+            let mut sides = vec![([0u64; 3], 0u32, false); offset[n]];
+            for (k, f) in list.iter().enumerate() {
                 let mut key = [0u64; 3];
                 for c in f.corners() {
                     for a in 0..3 {
                         key[a] += c[a] as u64;
                     }
                 }
-                sides.push((f.owner, key, k as u32, moved.flipped[k]));
+                sides[next[f.owner as usize]] = (key, k as u32, moved.flipped[k]);
+                next[f.owner as usize] += 1;
                 if let Other::Element(j) = f.other {
-                    sides.push((j, key, k as u32, true));
+                    sides[next[j as usize]] = (key, k as u32, true);
+                    next[j as usize] += 1;
                 }
             }
-            sides.sort_unstable();
-            let mut centres = vec![[0.0; 3]; self.elements().len()];
+            let mut centres = vec![[0.0; 3]; n];
             let mut cell: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(32);
-            let mut a = 0;
-            while a < sides.len() {
-                let e = sides[a].0;
+            for (e, centre) in centres.iter_mut().enumerate() {
+                let mine = &mut sides[offset[e]..offset[e + 1]];
+                mine.sort_unstable_by_key(|x| x.0);
                 cell.clear();
-                while a < sides.len() && sides[a].0 == e {
-                    let (_, _, k, negate) = sides[a];
+                for &(_, k, negate) in mine.iter() {
                     let (s, c) = moved.geometry[k as usize];
                     cell.push((c, if negate { scale(s, -1.0) } else { s }));
-                    a += 1;
                 }
-                centres[e as usize] = cell_centre(&cell);
+                *centre = cell_centre(&cell);
             }
             Ok((faces, moved, centres))
         })();
