@@ -734,6 +734,23 @@ contains
     end do
   end function c_to_f_string
 
+  !> NUL-terminated copies of `strings` in `buf` (each `len(strings) + 1`
+  !> long) and their addresses in `ptrs` (at least one entry; a null
+  !> pointer when there are no strings), for the C calls that take an array
+  !> of strings. The caller's `buf` must have the target attribute and
+  !> outlive the call.
+  subroutine to_c_strings(strings, buf, ptrs)
+    character(len=*), intent(in) :: strings(:)
+    character(kind=c_char, len=*), target, intent(out) :: buf(:)
+    type(c_ptr), intent(out) :: ptrs(:)
+    integer :: k
+    ptrs = c_null_ptr
+    do k = 1, size(strings)
+       buf(k) = trim(strings(k)) // c_null_char
+       ptrs(k) = c_loc(buf(k))
+    end do
+  end subroutine to_c_strings
+
   !> The message of the last failed call on `h` (c_null_ptr: of the last
   !> failed octmesh_create_f on this thread).
   function octmesh_error(h) result(msg)
@@ -776,15 +793,9 @@ contains
     type(c_ptr), intent(in) :: h
     character(len=*), intent(in) :: specs(:)
     integer(c_int) :: status
-    character(kind=c_char, len=len(specs) + 1), allocatable, target :: cspecs(:)
-    type(c_ptr), allocatable :: ps(:)
-    integer :: k
-    allocate(cspecs(size(specs)), ps(max(size(specs), 1)))
-    ps = c_null_ptr
-    do k = 1, size(specs)
-       cspecs(k) = trim(specs(k)) // c_null_char
-       ps(k) = c_loc(cspecs(k))
-    end do
+    character(kind=c_char, len=len(specs) + 1), target :: cspecs(size(specs))
+    type(c_ptr) :: ps(max(size(specs), 1))
+    call to_c_strings(specs, cspecs, ps)
     status = c_octmesh_surface_from_files(h, int(size(specs), c_int32_t), ps)
   end function octmesh_surface_from_files_f
 
@@ -816,16 +827,14 @@ contains
     character(len=*), intent(in) :: names(:)
     real(c_double), intent(in), target, contiguous :: values(:, :)
     integer(c_int) :: status
-    character(kind=c_char, len=len(names) + 1), allocatable, target :: cnames(:)
-    type(c_ptr), allocatable :: pn(:), pv(:)
+    character(kind=c_char, len=len(names) + 1), target :: cnames(size(names))
+    type(c_ptr) :: pn(max(size(names), 1)), pv(max(size(names), 1))
     integer :: k, n
     integer(c_int32_t) :: nfields
     n = size(names)
-    allocate(cnames(n), pn(n), pv(n))
+    call to_c_strings(names, cnames, pn)
+    pv = c_null_ptr
     do k = 1, n
-       cnames(k) = trim(names(k)) // c_null_char
-       pn(k) = c_loc(cnames(k))
-       pv(k) = c_null_ptr
        if (k <= size(values, 2) .and. size(values, 1) > 0) pv(k) = c_loc(values(1, k))
     end do
     ! A shape mismatch is passed on as an invalid count, so that every rank
@@ -884,17 +893,11 @@ contains
     real(c_double), intent(in) :: distances(:)
     integer(c_int32_t), intent(in) :: levels(:)
     integer(c_int) :: status
-    character(kind=c_char, len=len(regions) + 1), allocatable, target :: cregions(:)
-    type(c_ptr), allocatable :: pr(:)
+    character(kind=c_char, len=len(regions) + 1), target :: cregions(size(regions))
+    type(c_ptr) :: pr(max(size(regions), 1))
     real(c_double) :: d(max(size(distances), 1))
     integer(c_int32_t) :: l(max(size(levels), 1)), nbands
-    integer :: k
-    allocate(cregions(size(regions)), pr(max(size(regions), 1)))
-    pr = c_null_ptr
-    do k = 1, size(regions)
-       cregions(k) = trim(regions(k)) // c_null_char
-       pr(k) = c_loc(cregions(k))
-    end do
+    call to_c_strings(regions, cregions, pr)
     d = 0
     l = 0
     d(1:size(distances)) = distances

@@ -1560,8 +1560,9 @@ octmesh_status_t octmesh_mesh_write_vtu_fields(octmesh_t *h,
  * Measures the current mesh's quality and writes it to `*out`: the scaled
  * Jacobian of each element from its node coordinates, and `checkMesh`'s
  * non-orthogonality and skewness over the finite-volume faces (those of
- * `octmesh_mesh_build_faces`, measured without storing them). Needs a
- * mesh. Collective.
+ * `octmesh_mesh_build_faces`; after `octmesh_mesh_snap`, measured on the
+ * moved points as `checkMesh` measures the written OpenFOAM case). Needs
+ * a mesh. Collective.
  *
  * \param[in]  h    the handle
  * \param[out] out  the figures, the same on every rank

@@ -4,7 +4,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
@@ -12,6 +12,16 @@ use common::{
     compile_c_test as compile, deps_dir, mpirun, python_with_meshio, repo, run_with_limit, scratch,
     stage_library,
 };
+
+/// Compiles `tests/c/NAME.c` against this build's library, staged in the
+/// scratch directory `c_api_NAME`: (that directory, the program).
+fn c_program(name: &str) -> (PathBuf, PathBuf) {
+    let dir = scratch(&format!("c_api_{name}"));
+    let lib = dir.join("lib");
+    stage_library(&deps_dir(), &lib);
+    let exe = compile(name, &lib, &dir);
+    (dir, exe)
+}
 
 fn run_ok(np: usize, exe: &Path, args: &[&str]) -> String {
     let out = mpirun(np, exe, args, Duration::from_secs(300));
@@ -77,10 +87,7 @@ fn check_fields(pvtu: &Path, line: &str) {
 
 #[test]
 fn pipeline_from_c_on_1_and_2_ranks() {
-    let dir = scratch("c_api_pipeline");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("pipeline", &lib, &dir);
+    let (dir, exe) = c_program("pipeline");
     let mut sphere = Vec::new();
     let mut callback = Vec::new();
     for np in [1, 2] {
@@ -133,10 +140,7 @@ fn pipeline_from_c_on_1_and_2_ranks() {
 /// global counts it prints must not depend on the number of ranks.
 #[test]
 fn faces_from_c_on_1_2_and_3_ranks() {
-    let dir = scratch("c_api_faces");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("faces", &lib, &dir);
+    let (dir, exe) = c_program("faces");
     let mut lines = Vec::new();
     for np in [1, 2, 3] {
         let case = dir.join(format!("case_np{np}"));
@@ -155,10 +159,7 @@ fn faces_from_c_on_1_2_and_3_ranks() {
 #[test]
 fn memory_budget_from_c_on_1_and_2_ranks() {
     use octmesh::budget::{BASE_BYTES, BYTES_PER_OCTANT_MESH, BYTES_PER_TRIANGLE};
-    let dir = scratch("c_api_budget");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("budget", &lib, &dir);
+    let (dir, exe) = c_program("budget");
     for np in [1, 2] {
         let stats = dir.join(format!("s{np}.json"));
         common::octmesh_ok(
@@ -191,10 +192,7 @@ fn memory_budget_from_c_on_1_and_2_ranks() {
 
 #[test]
 fn misuse_from_c_on_1_and_2_ranks() {
-    let dir = scratch("c_api_misuse");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("misuse", &lib, &dir);
+    let (dir, exe) = c_program("misuse");
     let good = dir.join("sphere.stl");
     octmesh::geometry::stl::write_stl_binary(&good, &octmesh::geometry::shapes::default_sphere())
         .unwrap();
@@ -245,10 +243,7 @@ fn panic_becomes_a_status() {
 
 #[test]
 fn leak_check_from_c_on_1_and_2_ranks() {
-    let dir = scratch("c_api_leak");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("leak", &lib, &dir);
+    let (_, exe) = c_program("leak");
     for np in [1, 2] {
         let out = run_ok(np, &exe, &[]);
         assert_eq!(out.matches("LEAK OK").count(), np, "{out}");
@@ -259,10 +254,7 @@ fn leak_check_from_c_on_1_and_2_ranks() {
 /// answers on 1 and 2 ranks.
 #[test]
 fn point_location_from_c_on_1_and_2_ranks() {
-    let dir = scratch("c_api_search");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("search", &lib, &dir);
+    let (_, exe) = c_program("search");
     let mut sums = Vec::new();
     for np in [1, 2] {
         let out = run_ok(np, &exe, &[]);
@@ -289,10 +281,7 @@ const BOX: &str = "box:-1.5,-0.5,-0.5,1.5,0.5,0.5:3,1,1";
 /// the same settings give the same global counts.
 #[test]
 fn the_c_api_and_the_command_agree_on_the_same_settings() {
-    let dir = scratch("c_api_settings");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("settings", &lib, &dir);
+    let (dir, exe) = c_program("settings");
     // (surface, level, keep, cut rule, inside rule, balance, fit) as the
     // command's words and as the C constants' values.
     // The sphere as two solids, `top` and `bottom`.
@@ -441,10 +430,7 @@ fn the_c_api_and_the_command_agree_on_the_same_settings() {
 /// settings.
 #[test]
 fn snap_from_c_equals_the_command() {
-    let dir = scratch("c_api_snap");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("snap", &lib, &dir);
+    let (dir, exe) = c_program("snap");
     let stats = dir.join("stats.json");
     common::octmesh_ok(
         1,
@@ -495,10 +481,7 @@ fn snap_from_c_equals_the_command() {
 /// same settings.
 #[test]
 fn quality_from_c_equals_the_command() {
-    let dir = scratch("c_api_quality");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("quality", &lib, &dir);
+    let (dir, exe) = c_program("quality");
     let stats = dir.join("stats.json");
     common::octmesh_ok(
         1,
@@ -570,10 +553,7 @@ fn quality_from_c_equals_the_command() {
 /// after every step.
 #[test]
 fn adaptation_from_c_equals_p4est_on_1_to_3_ranks() {
-    let dir = scratch("c_api_adapt");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("adapt", &lib, &dir);
+    let (dir, exe) = c_program("adapt");
     common::p4est_ref();
     let reference = repo().join("tools/p4est_ref/octmesh_p4est_adapt");
     let counts = |d: &Path| -> Vec<String> {
@@ -617,10 +597,7 @@ fn adaptation_from_c_equals_p4est_on_1_to_3_ranks() {
 /// failing on one rank fails every rank with the leaves and data as before.
 #[test]
 fn leaf_data_from_c_on_1_to_3_ranks() {
-    let dir = scratch("c_api_leaf_data");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("leaf_data", &lib, &dir);
+    let (_, exe) = c_program("leaf_data");
     for np in [1, 2, 3] {
         let out = run_ok(np, &exe, &[]);
         assert_eq!(out.matches("LEAF DATA OK").count(), np, "{out}");
@@ -634,10 +611,7 @@ fn leaf_data_from_c_on_1_to_3_ranks() {
 /// bad calls fail on every rank.
 #[test]
 fn field_transfer_from_c_on_1_to_3_ranks() {
-    let dir = scratch("c_api_transfer");
-    let lib = dir.join("lib");
-    stage_library(&deps_dir(), &lib);
-    let exe = compile("transfer", &lib, &dir);
+    let (_, exe) = c_program("transfer");
     for np in [1, 2, 3] {
         let out = run_ok(np, &exe, &[]);
         assert_eq!(out.matches("TRANSFER OK").count(), np, "{out}");

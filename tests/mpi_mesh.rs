@@ -68,7 +68,7 @@ fn flatten(m: &Mesh) -> Vec<u64> {
         let deps = m.hanging_deps(k);
         let x = lattice[m.num_independent() + k];
         v.extend([x[0] as u64, x[1] as u64, x[2] as u64, deps.len() as u64]);
-        for &d in deps {
+        for &d in deps.iter() {
             let y = lattice[d as usize];
             v.extend([y[0] as u64, y[1] as u64, y[2] as u64]);
         }

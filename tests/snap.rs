@@ -14,11 +14,17 @@
 //!   and torus, inside and outside, and the real models when
 //!   `../shared/data` has them);
 //! - the volume error of the snapped sphere and torus against the volume
-//!   the surface encloses, level by level, against the staircase's;
+//!   the surface encloses, level by level, against the staircase's: for
+//!   the solid sphere (levels 4 to 6) and the solid torus (5 to 7) it
+//!   falls more than 3 times per level (second order);
 //! - sharp models (fandisk, flange) put nodes on their feature edges;
 //!
-//! and then `checkMesh -allTopology` on the snapped fluid sphere written as
-//! an OpenFOAM case on 1 and 2 ranks must say `Mesh OK.`.
+//! and then `checkMesh -allTopology` on the snapped fluid sphere written
+//! as an OpenFOAM case on 1 and 2 ranks must say `Mesh OK.`, and octmesh's
+//! quality figures of the same run (`--quality`: the largest and average
+//! non-orthogonality and the largest skewness, measured on the moved
+//! points) must equal what `checkMesh -allGeometry` prints, to 1e-6
+//! relative.
 
 mod common;
 
@@ -52,7 +58,10 @@ fn main() {
 }
 
 /// `checkMesh -allTopology` says `Mesh OK.` on the snapped fluid sphere
-/// written as an OpenFOAM case, on 1 and on 2 ranks (`-parallel`).
+/// written as an OpenFOAM case, on 1 and on 2 ranks (`-parallel`), and
+/// `checkMesh -allGeometry` prints the face figures octmesh's `--quality`
+/// gives for the same run: checkMesh is the judge of the figures on the
+/// moved points.
 fn check_mesh_on_the_fluid_sphere() {
     let Some(rc) = common::openfoam() else {
         return;
@@ -61,6 +70,7 @@ fn check_mesh_on_the_fluid_sphere() {
         let case = common::scratch(&format!("snap_foam_{np}"));
         let _ = std::fs::remove_dir_all(&case);
         let dir = case.to_str().unwrap();
+        let stats = case.with_file_name(format!("snap_foam_{np}_stats.json"));
         let args = [
             "mesh",
             "sphere",
@@ -71,6 +81,9 @@ fn check_mesh_on_the_fluid_sphere() {
             "--snap",
             "--openfoam",
             dir,
+            "--quality",
+            "--stats",
+            stats.to_str().unwrap(),
             "--quiet",
         ];
         let out = common::mpirun(np, &common::octmesh_bin(), &args, Duration::from_secs(600));
@@ -79,24 +92,53 @@ fn check_mesh_on_the_fluid_sphere() {
             "octmesh {args:?} on {np} ranks failed:\n{}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let run = if np > 1 {
-            format!("mpirun --oversubscribe -np {np} checkMesh -parallel -allTopology")
-        } else {
-            "checkMesh -allTopology".to_string()
+        let parallel = |opts: &str| {
+            if np > 1 {
+                format!("mpirun --oversubscribe -np {np} checkMesh -parallel {opts}")
+            } else {
+                format!("checkMesh {opts}")
+            }
         };
-        let text = common::foam(&rc, &case, &run);
+        let text = common::foam(&rc, &case, &parallel("-allTopology"));
         assert!(
             text.contains("\nMesh OK."),
             "snapped fluid sphere on {np} ranks: checkMesh -allTopology:\n{text}"
         );
-        let skew = text
-            .lines()
-            .find(|l| l.contains("Max skewness"))
-            .unwrap_or("")
-            .trim()
-            .to_string();
-        println!("snapped fluid sphere, level 6, {np} rank(s): checkMesh Mesh OK ({skew})");
+        // -allGeometry fails the mesh for its concave cells (the snapped
+        // cells next to the surface; with -parallel the exit status says
+        // so too); its figures are the ones compared.
+        let text = common::foam(&rc, &case, &(parallel("-allGeometry") + " || true"));
+        let q = common::json_file(&stats)["quality"].clone();
+        let figures = &text[text.find("Mesh non-orthogonality").unwrap_or(0)..];
+        for (label, key) in [
+            ("Mesh non-orthogonality Max:", "non_orthogonality_max"),
+            ("average:", "non_orthogonality_average"),
+            ("Max skewness =", "skewness_max"),
+        ] {
+            let printed = printed_after(figures, label);
+            let mine = q[key].as_f64().unwrap_or_else(|| panic!("no {key} in {q}"));
+            assert!(
+                (mine - printed).abs() <= 1e-6 * printed.abs(),
+                "snapped fluid sphere on {np} ranks: {key} {mine}, checkMesh printed {printed}"
+            );
+            println!(
+                "snapped fluid sphere, level 6, {np} rank(s): checkMesh {label} {printed}, octmesh {mine}"
+            );
+        }
+        println!("snapped fluid sphere, level 6, {np} rank(s): checkMesh Mesh OK");
     }
+}
+
+/// The number printed right after `label` in checkMesh's output.
+fn printed_after(text: &str, label: &str) -> f64 {
+    let at = text
+        .find(label)
+        .unwrap_or_else(|| panic!("no '{label}' in:\n{text}"));
+    text[at + label.len()..]
+        .split_whitespace()
+        .next()
+        .and_then(|w| w.trim_end_matches([',', ';']).parse().ok())
+        .unwrap_or_else(|| panic!("no number after '{label}' in:\n{text}"))
 }
 
 /// The snapped mesh of the built-in or shared surface `name` at `level`
@@ -339,8 +381,10 @@ fn serial_checks() {
             for w in errors.windows(2) {
                 let (rate, rate0) = (w[0].0 / w[1].0, w[0].1 / w[1].1);
                 println!("{name} {keep:?}: error ratio per level snapped {rate:.2}, staircase {rate0:.2}");
-                // Second order where the nodes reach the surface.
-                if keep == Keep::Inside && name == "sphere" {
+                // Second order where the nodes reach the surface: the
+                // solids (the torus's first ratio, 5 to 6, is 3.19; 92 of
+                // its 1,280 surface nodes stay partly snapped at level 5).
+                if keep == Keep::Inside {
                     assert!(
                         rate > 3.0,
                         "{name} {keep:?}: volume error ratio {rate:.2} per level"

@@ -72,10 +72,10 @@ impl Bvh {
         let mut work = vec![(0usize, 0usize, n)];
         while let Some((ni, start, end)) = work.pop() {
             let range = &mut order[start..end];
-            let bbox = range
-                .iter()
-                .fold(Aabb::empty(), |b, &i| b.union(&boxes[i as usize]));
             if range.len() <= LEAF_SIZE {
+                let bbox = range
+                    .iter()
+                    .fold(Aabb::empty(), |b, &i| b.union(&boxes[i as usize]));
                 nodes[ni] = Node {
                     bbox,
                     first: start as u32,
@@ -100,12 +100,21 @@ impl Bvh {
             nodes.push(placeholder);
             nodes.push(placeholder);
             nodes[ni] = Node {
-                bbox,
+                bbox: Aabb::empty(),
                 first: left as u32,
                 count: 0,
             };
             work.push((left, start, start + half));
             work.push((left + 1, start + half, end));
+        }
+        // Internal boxes bottom-up (children come after their parent): one
+        // union per node instead of one per triangle on every level.
+        for i in (0..nodes.len()).rev() {
+            let Node { first, count, .. } = nodes[i];
+            if count == 0 {
+                let (l, r) = (first as usize, first as usize + 1);
+                nodes[i].bbox = nodes[l].bbox.union(&nodes[r].bbox);
+            }
         }
         let boxes = order.iter().map(|&i| boxes[i as usize]).collect();
         Bvh {

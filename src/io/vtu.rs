@@ -581,7 +581,7 @@ pub fn write_mesh(
     let hanging: Vec<u8> = (0..mesh.num_nodes())
         .map(|i| match i.checked_sub(ni) {
             None => 0,
-            Some(k) if k < mesh.face_hanging().len() => 2,
+            Some(k) if k < mesh.num_face_hanging() => 2,
             Some(_) => 1,
         })
         .collect();

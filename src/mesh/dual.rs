@@ -181,6 +181,74 @@ impl Ranks {
     }
 }
 
+/// The hanging nodes of one kind (face or edge) the traversal found, 5
+/// bytes each: the coarse leaf the node hangs on, and a code byte with the
+/// node's flags in its top 3 bits and, below, which face (normal axis `n`
+/// and side: `n | side << 2`) or edge (axis `e` and the Morton corner
+/// `base` at its low end: `e | base << 2`) of the leaf it lies on.
+pub(crate) struct Entries {
+    pub leaf: Vec<u32>,
+    pub code: Vec<u8>,
+    face: bool,
+}
+
+impl Entries {
+    fn new(face: bool, capacity: usize) -> Entries {
+        Entries {
+            leaf: Vec::with_capacity(capacity),
+            code: Vec::with_capacity(capacity),
+            face,
+        }
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.leaf.len()
+    }
+
+    fn push(&mut self, q: u32, shape: u8, flags: u8) {
+        debug_assert!(shape < 32 && flags < 8);
+        grow(&mut self.leaf);
+        grow(&mut self.code);
+        self.leaf.push(q);
+        self.code.push(shape | flags << 5);
+    }
+
+    /// Entry `k`: (coarse leaf, mask of the leaf's Morton corners it
+    /// depends on, flags).
+    #[inline]
+    pub fn get(&self, k: usize) -> (u32, u8, u8) {
+        let c = self.code[k];
+        (self.leaf[k], self.mask_of(c), c >> 5)
+    }
+
+    /// Every entry, as [`Entries::get`].
+    pub fn iter(&self) -> impl Iterator<Item = (u32, u8, u8)> + '_ {
+        (0..self.len()).map(|k| self.get(k))
+    }
+
+    /// The dependency mask of a code byte.
+    #[inline]
+    pub fn mask_of(&self, code: u8) -> u8 {
+        let shape = (code & 31) as u32;
+        if self.face {
+            let (n, side) = (shape & 3, shape >> 2 & 1);
+            (0..8u32)
+                .filter(|c| (c >> n) & 1 != side)
+                .fold(0, |m, c| m | 1 << c)
+        } else {
+            let (e, base) = (shape & 3, shape >> 2);
+            (1u8 << base) | (1u8 << (base | 1 << e))
+        }
+    }
+
+    /// Gives back unused capacity.
+    fn shrink_to_fit(&mut self) {
+        self.leaf.shrink_to_fit();
+        self.code.shrink_to_fit();
+    }
+}
+
 /// What the traversal produced for the merged (ghost + local) leaves.
 pub(crate) struct DualNodes {
     /// Flags ([`CORNER`], [`DEP`], [`BOUNDARY`]) per independent node, in
@@ -192,13 +260,10 @@ pub(crate) struct DualNodes {
     /// ([`UNSET`] for leaves that are not kept): an independent node's
     /// index, or [`FACE`] / [`EDGE`] with a hanging node's index.
     pub corners: Vec<[u32; 8]>,
-    /// Face-hanging nodes, two words each: the coarse leaf and
-    /// `mask | flags << 8`, where the mask has a bit for each of the leaf's
-    /// Morton corners the node depends on. Flat, so that it can grow in
-    /// place into the 4 dependencies per node.
-    pub face: Vec<u32>,
-    /// Edge-hanging nodes, in the same form.
-    pub edge: Vec<u32>,
+    /// Face-hanging nodes (see [`Entries`]).
+    pub face: Entries,
+    /// Edge-hanging nodes.
+    pub edge: Entries,
     /// Independent nodes with a kept ghost leaf around them, and their
     /// lattice points, in node order (few: partition boundaries only).
     pub boundary_points: Vec<(u32, [u32; 3])>,
@@ -226,8 +291,8 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
         out: DualNodes {
             flags: Vec::with_capacity(n),
             corners: vec![[UNSET; 8]; n],
-            face: Vec::with_capacity(n / 2),
-            edge: Vec::with_capacity(n),
+            face: Entries::new(true, n / 4),
+            edge: Entries::new(false, n / 2),
             boundary_points: Vec::new(),
         },
     };
@@ -246,7 +311,11 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
         }
     }
     let Walker { overflow, out, .. } = w;
+    // The walk's end is the mesh's peak; what comes next should not add to
+    // it, so the tree's pages go back rather than stay free in the heap.
+    let tree_bytes = std::mem::size_of_val(&tree[..]);
     drop(tree);
+    crate::report::trim_heap_above(tree_bytes / 2);
     if overflow {
         return Err(Error::new(
             ErrorKind::Limit,
@@ -268,31 +337,18 @@ pub(crate) fn corner_coords(a: [u32; 3], s: u32, c: usize) -> [u32; 3] {
     std::array::from_fn(|d| a[d] + if c >> d & 1 == 1 { s } else { 0 })
 }
 
-/// The dependencies of a hanging-node entry `word` on leaf `o`, whose row
-/// of the corner table is `row`: (node, its lattice point), in Morton corner
-/// order. The leaf's anchor is decoded once.
+/// The dependencies of a hanging node on the corners `mask` of leaf `o`,
+/// whose row of the corner table is `row`: (node, its lattice point), in
+/// Morton corner order. The leaf's anchor is decoded once.
 pub(crate) fn entry_deps(
     o: Octant,
     row: &[u32; 8],
-    word: u32,
+    mask: u8,
 ) -> impl Iterator<Item = (u32, [u32; 3])> + '_ {
     let (a, s) = (o.coords(), o.side());
-    let mask = entry_mask(word);
     (row.iter().enumerate())
         .filter(move |&(c, _)| mask >> c & 1 == 1)
         .map(move |(c, &n)| (n, corner_coords(a, s, c)))
-}
-
-/// The flags byte of a hanging-node entry.
-#[inline]
-pub(crate) fn entry_flags(word: u32) -> u8 {
-    (word >> 8) as u8
-}
-
-/// The dependency mask of a hanging-node entry.
-#[inline]
-pub(crate) fn entry_mask(word: u32) -> u8 {
-    word as u8
 }
 
 impl DualNodes {
@@ -301,15 +357,11 @@ impl DualNodes {
     fn propagate(&mut self) -> Result<()> {
         let corners = &self.corners;
         let flags = &mut self.flags;
-        let entries = self.face.chunks_exact(2).chain(self.edge.chunks_exact(2));
-        for e in entries {
-            let (q, word) = (e[0], e[1]);
-            let f = entry_flags(word);
+        for (q, mask, f) in self.face.iter().chain(self.edge.iter()) {
             let add = (if f & USED != 0 { DEP } else { 0 }) | (f & BOUNDARY);
             if add == 0 {
                 continue;
             }
-            let mask = entry_mask(word);
             for (c, &dep) in corners[q as usize].iter().enumerate() {
                 if mask >> c & 1 == 1 {
                     if dep & TAG != 0 {
@@ -519,13 +571,12 @@ impl Walker<'_> {
         if !corner {
             return;
         }
-        // Face and edge nodes take two words each.
         let most = self
             .out
             .flags
             .len()
-            .max(self.out.face.len() / 2)
-            .max(self.out.edge.len() / 2);
+            .max(self.out.face.len())
+            .max(self.out.edge.len());
         if most >= 1 << 30 {
             // The tag bits leave 30 bits for the index.
             self.overflow = true;
@@ -541,16 +592,8 @@ impl Walker<'_> {
                 .find(|&d| refs[p ^ (1 << d)] != q)
                 .expect("a face leaf lies on one side of the point");
             let side = (p >> n) & 1;
-            let mut mask = 0u32;
-            for c in 0..8 {
-                if (c >> n) & 1 != side {
-                    mask |= 1 << c;
-                }
-            }
-            id = FACE | (self.out.face.len() / 2) as u32;
-            grow(&mut self.out.face);
-            self.out.face.push(q & !LEAF);
-            self.out.face.push(mask | (flags as u32) << 8);
+            id = FACE | self.out.face.len() as u32;
+            self.out.face.push(q & !LEAF, (n | side << 2) as u8, flags);
         } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
             let q = refs[p];
             let e = (0..3)
@@ -559,11 +602,8 @@ impl Walker<'_> {
             // The edge of the coarse leaf through the point: opposite side
             // of the point on the two other axes, both ends along `e`.
             let base = !p & 7 & !(1 << e);
-            let mask = (1u32 << base) | (1u32 << (base | (1 << e)));
-            id = EDGE | (self.out.edge.len() / 2) as u32;
-            grow(&mut self.out.edge);
-            self.out.edge.push(q & !LEAF);
-            self.out.edge.push(mask | (flags as u32) << 8);
+            id = EDGE | self.out.edge.len() as u32;
+            self.out.edge.push(q & !LEAF, (e | base << 2) as u8, flags);
         } else {
             id = self.out.flags.len() as u32;
             grow(&mut self.out.flags);
@@ -650,7 +690,7 @@ mod tests {
         let kept = Bits::from_fn(leaves.len(), |_| true);
         let d = extract_nodes(whole(&leaves), &kept).unwrap();
         assert_eq!(d.flags.len(), 125);
-        assert!(d.face.is_empty() && d.edge.is_empty());
+        assert!(d.face.len() == 0 && d.edge.len() == 0);
         let at = points(&d, &leaves);
         assert_eq!(at.len(), 125);
         let distinct: std::collections::BTreeSet<_> = at.values().collect();
@@ -676,18 +716,17 @@ mod tests {
         assert_eq!(at.len(), 27 + 27 - 8);
         // Child 0's faces towards its siblings: 3 centres; its edges inside
         // the root: 3 whole edges, and halves of 6 face-boundary edges.
-        assert_eq!(d.face.len(), 2 * 3);
-        assert_eq!(d.edge.len(), 2 * (3 + 6));
+        assert_eq!(d.face.len(), 3);
+        assert_eq!(d.edge.len(), 3 + 6);
         assert_eq!(d.flags.len(), 27 + 8 - 1);
-        let entries = d.face.chunks_exact(2).map(|e| (FACE, e[0], e[1]));
-        let entries = entries.chain(d.edge.chunks_exact(2).map(|e| (EDGE, e[0], e[1])));
+        let entries = d.face.iter().map(|(q, m, f)| (FACE, q, m, f));
+        let entries = entries.chain(d.edge.iter().map(|(q, m, f)| (EDGE, q, m, f)));
         let mut k = [0u32; 2];
-        for (tag, q, word) in entries {
+        for (tag, q, mask, flags) in entries {
             let id = tag | k[(tag == EDGE) as usize];
             k[(tag == EDGE) as usize] += 1;
-            let mask = entry_mask(word);
             assert_eq!(mask.count_ones(), if tag == FACE { 4 } else { 2 });
-            assert_eq!(entry_flags(word), CORNER);
+            assert_eq!(flags, CORNER);
             let deps: Vec<[u32; 3]> = (0..8)
                 .filter(|c| mask >> c & 1 == 1)
                 .map(|c| {
@@ -746,9 +785,8 @@ mod tests {
             .map(|(&n, _)| n)
             .unwrap();
         assert_eq!(d.flags[far as usize] & USED, DEP);
-        let used =
-            (d.face.chunks_exact(2).map(|e| e[1])).chain(d.edge.chunks_exact(2).map(|e| e[1]));
-        assert!(used.clone().any(|w| entry_flags(w) == CORNER | BOUNDARY));
-        assert!(used.clone().all(|w| entry_flags(w) & BOUNDARY != 0));
+        let used: Vec<u8> = (d.face.iter()).chain(d.edge.iter()).map(|e| e.2).collect();
+        assert!(used.contains(&(CORNER | BOUNDARY)));
+        assert!(used.iter().all(|&f| f & BOUNDARY != 0));
     }
 }

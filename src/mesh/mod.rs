@@ -35,9 +35,10 @@
 //!
 //! # Memory
 //!
-//! A mesh stores the connectivity (32 bytes per element), the hanging
-//! nodes' dependencies (16 bytes per face-hanging, 8 per edge-hanging
-//! node), a class byte per element, and the numbers and sharers of the
+//! A mesh stores the connectivity (32 bytes per element), each hanging
+//! node's coarse element and which of its corners it depends on (5 bytes,
+//! see `hanging`; the explicit lists are made on request), a class byte
+//! per element, and the numbers and sharers of the
 //! nodes on partition boundaries. The elements are the octree's own leaves
 //! when all are kept (shared, not copied). Node coordinates are not stored:
 //! [`Mesh::node_lattice`] and [`Mesh::coordinates`] compute them from the
@@ -55,6 +56,7 @@
 pub mod boundary;
 pub(crate) mod dual;
 pub mod faces;
+pub(crate) mod hanging;
 pub mod manifold;
 pub(crate) mod numbering;
 pub mod patches;
@@ -77,9 +79,11 @@ use std::sync::Arc;
 
 pub use boundary::{Boundary, BoundaryFace};
 pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, SURFACE_PATCH};
+pub use hanging::HangingDeps;
 pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
 
 use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
+use hanging::{Hanging, GHOST};
 
 /// VTK hexahedron corner `v` is Morton corner `VTK_TO_MORTON[v]`
 /// (Morton corner bits: x, y, z). The permutation is its own inverse.
@@ -166,9 +170,8 @@ pub struct Mesh {
     other_global: Vec<u64>,
     /// Owners of the independent nodes this rank does not own.
     other_owner: Vec<u32>,
-    // Dependencies, 4 per face-hanging node, 2 per edge-hanging node.
-    face_hanging: Vec<u32>,
-    edge_hanging: Vec<u32>,
+    /// The hanging nodes' dependencies, by their coarse elements.
+    hanging: Hanging,
     // Independent nodes that are no local element's corner (only a
     // dependency of a hanging corner), with their lattice points, by node.
     dep_only: Vec<(u32, [u32; 3])>,
@@ -448,32 +451,37 @@ impl Mesh {
     /// Number of hanging local nodes: the face-hanging ones, then the
     /// edge-hanging ones.
     pub fn num_hanging(&self) -> usize {
-        self.face_hanging.len() / 4 + self.edge_hanging.len() / 2
+        self.hanging.len()
+    }
+
+    /// Number of face-hanging local nodes (the first hanging ones).
+    pub fn num_face_hanging(&self) -> usize {
+        self.hanging.num_face()
     }
 
     /// Face-hanging nodes: entry `k` is local node `num_independent() + k`,
-    /// the mean of the 4 independent local nodes given (weights 1/4).
+    /// the mean of the 4 independent local nodes given (weights 1/4). The
+    /// mesh stores each hanging node by its coarse element; this list (16
+    /// bytes per node) is made on the first call.
     pub fn face_hanging(&self) -> &[[u32; 4]] {
-        self.face_hanging.as_chunks().0
+        self.hanging.face_lists(&self.connectivity)
     }
 
     /// Edge-hanging nodes: entry `k` is local node `num_independent() +
-    /// face_hanging().len() + k`, the mean of the 2 independent local nodes
-    /// given (weights 1/2).
+    /// num_face_hanging() + k`, the mean of the 2 independent local nodes
+    /// given (weights 1/2). Made on the first call, like
+    /// [`Mesh::face_hanging`].
     pub fn edge_hanging(&self) -> &[[u32; 2]] {
-        self.edge_hanging.as_chunks().0
+        self.hanging.edge_lists(&self.connectivity)
     }
 
     /// The independent local nodes hanging node `k` (local node
     /// `num_independent() + k`) is the mean of: 4 for a face-hanging node,
-    /// 2 for an edge-hanging one.
-    pub fn hanging_deps(&self, k: usize) -> &[u32] {
-        let f = self.face_hanging.len() / 4;
-        if k < f {
-            &self.face_hanging[4 * k..4 * k + 4]
-        } else {
-            &self.edge_hanging[2 * (k - f)..2 * (k - f) + 2]
-        }
+    /// 2 for an edge-hanging one, in the Morton order of the coarse
+    /// element's corners. Read from the coarse element's connectivity, not
+    /// stored.
+    pub fn hanging_deps(&self, k: usize) -> HangingDeps {
+        self.hanging.deps(k, &self.connectivity)
     }
 
     /// Lattice coordinates of each local node (a new vector: they are not
@@ -639,17 +647,17 @@ fn count_hanging(
     d: &dual::DualNodes,
     leaves: Merged,
 ) -> (u64, u64) {
-    let (nf, ne) = ((d.face.len() / 2) as u64, (d.edge.len() / 2) as u64);
+    let (nf, ne) = (d.face.len() as u64, d.edge.len() as u64);
     if comm.size() == 1 {
         return (nf, ne);
     }
     let me = comm.rank();
-    let mine = |e: &&[u32]| {
-        let x = dual::DualNodes::hanging_coords(leaves.get(e[0] as usize), dual::entry_mask(e[1]));
+    let mine = |e: &(u32, u8, u8)| {
+        let x = dual::DualNodes::hanging_coords(leaves.get(e.0 as usize), e.1);
         numbering::directory_rank(first_cell, x) == me
     };
-    let face = d.face.chunks_exact(2).filter(mine).count();
-    let edge = d.edge.chunks_exact(2).filter(mine).count();
+    let face = d.face.iter().filter(mine).count();
+    let edge = d.edge.iter().filter(mine).count();
     (face as u64, edge as u64)
 }
 
@@ -696,12 +704,12 @@ fn number_independent(
     for &(n, x) in &d.boundary_points {
         put(n, x);
     }
-    for e in d.face.chunks_exact(2).chain(d.edge.chunks_exact(2)) {
-        if dual::entry_flags(e[1]) & dual::BOUNDARY == 0 {
+    for (q, mask, flags) in d.face.iter().chain(d.edge.iter()) {
+        if flags & dual::BOUNDARY == 0 {
             continue;
         }
-        let q = e[0] as usize;
-        for (n, x) in dual::entry_deps(leaves.get(q), &d.corners[q], e[1]) {
+        let q = q as usize;
+        for (n, x) in dual::entry_deps(leaves.get(q), &d.corners[q], mask) {
             put(n, x);
         }
     }
@@ -803,9 +811,9 @@ fn assemble(
                 .map_or(UNSET, |k| other_of[k].1)
         }
     };
-    let used = |word: u32| dual::entry_flags(word) & CORNER != 0;
-    let face_used = Ranks::from_fn(face.len() / 2, |k| used(face[2 * k + 1]));
-    let edge_used = Ranks::from_fn(edge.len() / 2, |k| used(edge[2 * k + 1]));
+    let used = |list: &dual::Entries, k: usize| list.get(k).2 & CORNER != 0;
+    let face_used = Ranks::from_fn(face.len(), |k| used(&face, k));
+    let edge_used = Ranks::from_fn(edge.len(), |k| used(&edge, k));
     let nf = face_used.count() as usize;
     let ne = edge_used.count() as usize;
     let total = num_independent + nf + ne;
@@ -824,29 +832,25 @@ fn assemble(
         }
     };
 
-    // Hanging entries become their dependencies, in place, before the
-    // corner table they read is overwritten: used entries move to the
-    // front, the list grows to 4 (face) or stays at 2 (edge) words per
-    // node, and is filled from the back so nothing unread is overwritten.
+    // Each used hanging entry keeps its coarse leaf, and its code byte
+    // becomes its dependency mask, in place; its dependencies are checked
+    // and the ones no local element has as a corner keep their lattice
+    // points.
     let mut dep_only = Vec::new();
-    let mut convert = |list: &mut Vec<u32>, per: usize, count: usize| -> Result<()> {
+    let mut compact = |list: &mut dual::Entries| -> Result<hanging::Refs> {
         let mut w = 0;
-        for k in 0..list.len() / 2 {
-            if used(list[2 * k + 1]) {
-                list.copy_within(2 * k..2 * k + 2, 2 * w);
-                w += 1;
+        for k in 0..list.len() {
+            let (q, mask, entry_flags) = list.get(k);
+            if entry_flags & CORNER == 0 {
+                continue;
             }
-        }
-        debug_assert_eq!(w, count);
-        list.truncate(2 * count);
-        list.resize(per * count, 0);
-        for k in (0..count).rev() {
-            let (q, word) = (list[2 * k], list[2 * k + 1]);
             let row = &corners[q as usize];
-            debug_assert_eq!(dual::entry_mask(word).count_ones() as usize, per);
-            let deps = dual::entry_deps(leaves.get(q as usize), row, word);
-            for (at, (raw, x)) in (per * k..per * (k + 1)).zip(deps) {
-                let dep = independent(raw);
+            for (raw, x) in dual::entry_deps(leaves.get(q as usize), row, mask) {
+                let dep = if raw & TAG == 0 {
+                    independent(raw)
+                } else {
+                    UNSET
+                };
                 if dep == UNSET || dep as usize >= num_independent {
                     return Err(Error::new(
                         ErrorKind::Internal,
@@ -856,20 +860,53 @@ fn assemble(
                 if flags[raw as usize] & CORNER == 0 {
                     dep_only.push((dep, x));
                 }
-                list[at] = dep;
             }
+            list.leaf[w] = q;
+            list.code[w] = mask;
+            w += 1;
         }
-        Ok(())
+        let mut coarse = std::mem::take(&mut list.leaf);
+        let mut mask = std::mem::take(&mut list.code);
+        // Not shrunk: the unused capacity was never touched, so it is not
+        // resident.
+        coarse.truncate(w);
+        mask.truncate(w);
+        Ok(hanging::Refs { coarse, mask })
     };
-    convert(&mut face, 4, nf)?;
-    convert(&mut edge, 2, ne)?;
+    let mut face = compact(&mut face)?;
+    let mut edge = compact(&mut edge)?;
+    debug_assert_eq!((face.coarse.len(), edge.coarse.len()), (nf, ne));
     dep_only.sort_unstable();
     dep_only.dedup();
     drop(flags);
 
+    // Coarse leaves of other ranks keep their row of independent nodes;
+    // local ones become element indices.
+    let local_range = leaves.local_range();
+    let mut ghost_leaves: Vec<u32> = (face.coarse.iter().chain(&edge.coarse).copied())
+        .filter(|&q| !local_range.contains(&(q as usize)))
+        .collect();
+    ghost_leaves.sort_unstable();
+    ghost_leaves.dedup();
+    let ghost_rows: Vec<[u32; 8]> = (ghost_leaves.iter())
+        .map(|&q| corners[q as usize].map(|n| if n & TAG == 0 { independent(n) } else { UNSET }))
+        .collect();
+    let all_kept = local_range.clone().all(|i| kept.get(i));
+    let kept_local = Ranks::from_fn(if all_kept { 0 } else { local_range.len() }, |j| {
+        kept.get(local_range.start + j)
+    });
+    for q in face.coarse.iter_mut().chain(edge.coarse.iter_mut()) {
+        *q = match (*q as usize).checked_sub(local_range.start) {
+            Some(j) if j < local_range.len() && all_kept => j as u32,
+            Some(j) if j < local_range.len() => kept_local.rank(j),
+            _ => GHOST | ghost_leaves.binary_search(q).unwrap_or(0) as u32,
+        };
+    }
+    drop(kept_local);
+    let hanging = Hanging::new(face, edge, ghost_rows);
+
     // The corner table becomes the connectivity in place: local kept leaves
     // move to the front (never past their own slot), renumbered.
-    let local_range = leaves.local_range();
     let nkept = local_range.clone().filter(|&i| kept.get(i)).count();
     // One class for all is kept as one byte until asked for.
     let uniform = match local_class {
@@ -936,8 +973,7 @@ fn assemble(
         num_independent,
         other_global: num.others.iter().map(|o| o.0).collect(),
         other_owner: num.others.iter().map(|o| o.1).collect(),
-        face_hanging: face,
-        edge_hanging: edge,
+        hanging,
         dep_only,
         shared_nodes,
         shared_offsets,

@@ -49,15 +49,36 @@
 //!   distance from `P` to the plane. `checkMesh` prints the maximum over
 //!   all faces.
 //!
-//! Faces are the planar, convex polygons of [`crate::mesh::faces`]: their
-//! centroid and area are exact, the extent is reached at one of the four
-//! corners (a hanging midpoint on an edge lies between two of them), and
-//! cell centres are the elements' centres. OpenFOAM computes a cell centre
-//! from the faces (pyramids from the mean of the face centres to each face,
-//! weighted by volume): for a closed polyhedron with planar faces that is
-//! the exact centroid, so the coarse cell of a 2:1 interface, a polyhedron
-//! of up to 24 faces there, has the centre of its cube (checked in this
-//! module's tests).
+//! On an unsnapped mesh, faces are the planar, convex polygons of
+//! [`crate::mesh::faces`]: their centroid and area are exact, the extent is
+//! reached at one of the four corners (a hanging midpoint on an edge lies
+//! between two of them), and cell centres are the elements' centres.
+//! OpenFOAM computes a cell centre from the faces (pyramids from the mean
+//! of the face centres to each face, weighted by volume): for a closed
+//! polyhedron with planar faces that is the exact centroid, so the coarse
+//! cell of a 2:1 interface, a polyhedron of up to 24 faces there, has the
+//! centre of its cube (checked in this module's tests).
+//!
+//! # Snapped meshes
+//!
+//! After [`Mesh::snap`] the faces are measured on the moved points, as
+//! `checkMesh` measures the OpenFOAM case octmesh writes: each face is the
+//! polygon of its corners and the mesh points on its edges (hanging points,
+//! on the straight edge between two corners), in one order on every rank
+//! (from its lowest lattice point, turning as seen from the element with
+//! the lower global number). Its area vector and centre are OpenFOAM
+//! v1912's (`primitiveMesh`): triangles from the mean of its points to
+//! each edge, the area vector half the sum of their cross products, the
+//! centre their centroids' mean weighted by their areas
+//! ([`polygon_area_centre`]). A cell's centre comes from all its faces (a
+//! coarse element's split face as its fine faces) by the pyramid rule above
+//! ([`cell_centre`]), the faces taken in the order of their corners' lattice
+//! sums; the halo elements' centres are sent by their ranks through the cell
+//! halo. Faces are no longer planar nor cells cubes, so these are not the
+//! octree's figures: on the snapped fluid sphere at level 6 (`--openfoam`)
+//! the largest non-orthogonality is 37.7 degrees against the octree's 25.2,
+//! the largest skewness 3.86 against 1, both equal to what `checkMesh`
+//! prints (tests/snap.rs).
 //!
 //! # Rank counts
 //!
@@ -72,10 +93,11 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::comm::Comm;
+use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
-use crate::mesh::faces::{FaceKind, Kept, Other};
+use crate::mesh::faces::{FaceKind, Faces, Kept, Other};
+use crate::mesh::points::{face_polygon, point_key, PointFilter, PointIndex};
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
@@ -97,6 +119,10 @@ pub const HISTOGRAM_BINS: usize = 20;
 /// Keeps a division by a zero projection finite, as OpenFOAM's `ROOTVSMALL`
 /// does.
 const TINY: f64 = 1e-150;
+
+/// OpenFOAM's `VSMALL`: a cell with less volume has its estimate as the
+/// centre.
+const VERY_SMALL: f64 = 1e-300;
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -204,6 +230,91 @@ fn skew_ratio(miss: [f64; 3], centre: [f64; 3], points: &[[f64; 3]], floor: f64)
     m / extent
 }
 
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+/// The area vector and centre of the polygon `p` (points in order, area
+/// vector by the right-hand rule), as OpenFOAM v1912's `primitiveMesh`
+/// computes them (see the module documentation): a triangle directly;
+/// otherwise the triangles from the mean of the points to each edge, the
+/// area vector half the sum of their cross products, the centre the mean
+/// of their centroids weighted by their areas. A polygon of (almost) no
+/// area has its mean as the centre and a zero area vector.
+pub fn polygon_area_centre(p: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    if p.len() == 3 {
+        let s = scale(cross(sub(p[1], p[0]), sub(p[2], p[0])), 0.5);
+        let c = scale(add(add(p[0], p[1]), p[2]), 1.0 / 3.0);
+        return (s, c);
+    }
+    let m = scale(
+        p.iter().fold([0.0; 3], |a, &q| add(a, q)),
+        1.0 / p.len() as f64,
+    );
+    let (mut sum_n, mut sum_a, mut sum_ac) = ([0.0; 3], 0.0, [0.0; 3]);
+    for (k, &a) in p.iter().enumerate() {
+        let b = p[(k + 1) % p.len()];
+        let n = cross(sub(b, a), sub(m, a));
+        let w = norm(n);
+        sum_n = add(sum_n, n);
+        sum_a += w;
+        sum_ac = add(sum_ac, scale(add(add(a, b), m), w));
+    }
+    if sum_a < TINY {
+        return ([0.0; 3], m);
+    }
+    (scale(sum_n, 0.5), scale(sum_ac, 1.0 / (3.0 * sum_a)))
+}
+
+/// The centre of a cell from its faces, each `(centre, area vector out of
+/// the cell)`, as OpenFOAM's `primitiveMesh` computes it: the pyramids
+/// from the mean of the face centres to each face, their centroids
+/// weighted by their volumes (the mean itself when the volume is
+/// (almost) zero).
+pub fn cell_centre(faces: &[([f64; 3], [f64; 3])]) -> [f64; 3] {
+    let est = scale(
+        faces.iter().fold([0.0; 3], |a, f| add(a, f.0)),
+        1.0 / faces.len().max(1) as f64,
+    );
+    let (mut volume, mut moment) = (0.0, [0.0; 3]);
+    for &(c, s) in faces {
+        // Three times the pyramid's volume, and its centroid.
+        let v = dot(s, sub(c, est));
+        let pc = add(scale(c, 0.75), scale(est, 0.25));
+        volume += v;
+        moment = add(moment, scale(pc, v));
+    }
+    if volume.abs() > VERY_SMALL {
+        scale(moment, 1.0 / volume)
+    } else {
+        est
+    }
+}
+
+/// What one face of a snapped mesh looks like to the figures: its polygon
+/// (corners and the mesh points on its edges), area vector and centre, all
+/// oriented from the element with the lower global number (a boundary
+/// face: out of the domain).
+struct MovedFaces {
+    /// Per face, where its points start in `points`; one more at the end.
+    start: Vec<usize>,
+    /// The faces' points, user units.
+    points: Vec<[f64; 3]>,
+    /// Per face, its area vector and centre.
+    geometry: Vec<([f64; 3], [f64; 3])>,
+    /// Per face, whether its orientation is the reverse of the list's
+    /// (a halo face whose other element has the lower global number).
+    flipped: Vec<bool>,
+}
+
 /// The scaled-Jacobian histogram: bin edges and counts (see the module
 /// documentation).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -290,10 +401,11 @@ impl Mesh {
 
     /// The quality of this mesh: the scaled Jacobians from the corners of
     /// [`Mesh::element_corners`] with `coords`, and the face figures over
-    /// the faces of [`Mesh::faces`] with the octree geometry, measured as
-    /// they are made, element by element (nothing is stored per face).
-    /// Collective: the figures are reduced over the ranks. Returns the
-    /// figures and the local scaled Jacobians.
+    /// the faces of [`Mesh::faces`]: with the octree geometry, measured as
+    /// they are made, element by element (nothing is stored per face), or
+    /// on a snapped mesh with the moved points (see the module
+    /// documentation). Collective: the figures are reduced over the ranks.
+    /// Returns the figures and the local scaled Jacobians.
     pub fn quality(
         &self,
         comm: &dyn Comm,
@@ -317,42 +429,10 @@ impl Mesh {
         for &j in &jac {
             max[0] = max[0].max(-j);
         }
-        let me = comm.rank() as u32;
-        let kept = Kept {
-            local: self.elements(),
-            halo: self.halo(),
-        };
-        // The figures are ratios and angles, unchanged by the map from the
-        // lattice to user units (a scaling and a shift): they are computed
-        // on the lattice, where the coordinates are exact.
-        let centre = |o: Other| self.centre_of(o);
-        for i in 0..local {
-            self.element_faces(&kept, i, |kind, f| {
-                let c = f.lattice_centre();
-                let s = scale(f.unit_normal(), f.lattice_area());
-                let corners = f.corners().map(|q| q.map(|x| x as f64));
-                let own = centre(Other::Element(f.owner));
-                // Seen from the element with the lower global number: the
-                // owner on one rank, and the same bits on any number.
-                let (p, n, s) = match (kind, f.other) {
-                    (FaceKind::Boundary, _) => {
-                        max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
-                        return;
-                    }
-                    (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
-                        return;
-                    }
-                    (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
-                    (_, other) => (own, centre(other), s),
-                };
-                let cos = face_orthogonality(p, n, s);
-                sums[2] += 1;
-                let w = cosine_words(cos);
-                sums[3 + HISTOGRAM_BINS] += w[0];
-                sums[4 + HISTOGRAM_BINS] += w[1];
-                max[1] = max[1].max(-cos);
-                max[2] = max[2].max(face_skewness(c, s, &corners, p, n));
-            });
+        if self.moved().is_some() {
+            self.moved_face_figures(comm, &mut sums, &mut max)?;
+        } else {
+            self.octree_face_figures(comm, &mut sums, &mut max);
         }
         comm.sum_u64(&mut sums);
         comm.max_f64(&mut max);
@@ -382,6 +462,268 @@ impl Mesh {
             skewness_max: max[2],
         };
         Ok((q, jac))
+    }
+    /// Adds one face's figures: the cosine to the sums, the angle and the
+    /// skewness to the maxima.
+    fn add_face(sums: &mut [u64], max: &mut [f64; 3], cos: f64, skew: f64) {
+        sums[2] += 1;
+        let w = cosine_words(cos);
+        sums[3 + HISTOGRAM_BINS] += w[0];
+        sums[4 + HISTOGRAM_BINS] += w[1];
+        max[1] = max[1].max(-cos);
+        max[2] = max[2].max(skew);
+    }
+
+    /// The face figures of an unsnapped mesh, from the octree's geometry:
+    /// measured as the faces are made, element by element (nothing is
+    /// stored per face). Local work.
+    fn octree_face_figures(&self, comm: &dyn Comm, sums: &mut [u64], max: &mut [f64; 3]) {
+        let me = comm.rank() as u32;
+        let kept = Kept {
+            local: self.elements(),
+            halo: self.halo(),
+        };
+        // The figures are ratios and angles, unchanged by the map from the
+        // lattice to user units (a scaling and a shift): they are computed
+        // on the lattice, where the coordinates are exact.
+        let centre = |o: Other| self.centre_of(o);
+        for i in 0..self.elements().len() {
+            self.element_faces(&kept, i, |kind, f| {
+                let c = f.lattice_centre();
+                let s = scale(f.unit_normal(), f.lattice_area());
+                let corners = f.corners().map(|q| q.map(|x| x as f64));
+                let own = centre(Other::Element(f.owner));
+                // Seen from the element with the lower global number: the
+                // owner on one rank, and the same bits on any number.
+                let (p, n, s) = match (kind, f.other) {
+                    (FaceKind::Boundary, _) => {
+                        max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
+                        return;
+                    }
+                    (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
+                        return;
+                    }
+                    (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
+                    (_, other) => (own, centre(other), s),
+                };
+                let cos = face_orthogonality(p, n, s);
+                let skew = face_skewness(c, s, &corners, p, n);
+                Self::add_face(sums, max, cos, skew);
+            });
+        }
+    }
+
+    /// The faces of `faces` on the moved points of a snapped mesh (see
+    /// [`MovedFaces`]). Local work.
+    fn moved_faces(&self, faces: &Faces) -> Result<MovedFaces> {
+        // The mesh points near this rank: every corner of a local or halo
+        // element (the points the OpenFOAM writer puts on the faces' edges).
+        let mut keys: Vec<u64> = self.node_lattice().iter().map(|&p| point_key(p)).collect();
+        for h in &self.halo().leaves {
+            let (c, s) = (h.coords(), h.side());
+            for m in 0..8 {
+                keys.push(point_key(
+                    [0, 1, 2].map(|a| c[a] + if m >> a & 1 == 1 { s } else { 0 }),
+                ));
+            }
+        }
+        let filter = PointFilter::new(&keys);
+        let mut index = PointIndex::new(keys);
+        let (elements, conn) = (self.elements(), self.connectivity());
+        let moved = self.moved().unwrap_or(&[]);
+        // The node at lattice point `p` if it is a corner of local element
+        // `e` (most face points are): no search.
+        let corner_node = |e: u32, p: [u32; 3]| -> Option<usize> {
+            let (c, s) = (elements[e as usize].coords(), elements[e as usize].side());
+            let mut m = 0;
+            for a in 0..3 {
+                if p[a] == c[a] + s {
+                    m |= 1 << a;
+                } else if p[a] != c[a] {
+                    return None;
+                }
+            }
+            Some(conn[e as usize][VTK_TO_MORTON[m]] as usize)
+        };
+        let list = faces.faces();
+        let mut start = Vec::with_capacity(list.len() + 1);
+        start.push(0);
+        let mut points: Vec<[f64; 3]> = Vec::with_capacity(4 * list.len());
+        // The other points (hanging points of other ranks' elements, the
+        // centres of split faces), found by their lattice points.
+        let mut rest: Vec<[u32; 3]> = Vec::new();
+        let mut rest_at: Vec<usize> = Vec::new();
+        let mut flipped = Vec::with_capacity(list.len());
+        let mut poly: Vec<(u64, [u32; 3])> = Vec::with_capacity(8);
+        for f in list {
+            poly.clear();
+            face_polygon(
+                &f.corners(),
+                |k| filter.may_hold(k) && index.find(k).is_some(),
+                &mut poly,
+            );
+            let flip = match f.other {
+                Other::Halo(h) => {
+                    self.halo().global[h as usize] < self.global_element(f.owner as usize)
+                }
+                _ => false,
+            };
+            // One order on every rank: from the lowest point, turning as
+            // seen from the element with the lower global number.
+            let first = (0..poly.len()).min_by_key(|&k| poly[k].0).unwrap_or(0);
+            poly.rotate_left(first);
+            if flip {
+                poly[1..].reverse();
+            }
+            for &(_, p) in &poly {
+                let node = corner_node(f.owner, p).or(match f.other {
+                    Other::Element(j) => corner_node(j, p),
+                    _ => None,
+                });
+                match node {
+                    Some(n) if n < moved.len() => points.push(moved[n]),
+                    _ => {
+                        rest_at.push(points.len());
+                        rest.push(p);
+                        points.push([f64::NAN; 3]);
+                    }
+                }
+            }
+            start.push(points.len());
+            flipped.push(flip);
+        }
+        for (k, x) in rest_at.into_iter().zip(self.point_positions(&rest)?) {
+            points[k] = x;
+        }
+        let geometry = start
+            .windows(2)
+            .map(|w| polygon_area_centre(&points[w[0]..w[1]]))
+            .collect();
+        Ok(MovedFaces {
+            start,
+            points,
+            geometry,
+            flipped,
+        })
+    }
+
+    /// The face figures of a snapped mesh from its moved points, the way
+    /// `checkMesh` computes them: each face's polygon with the mesh points
+    /// on its edges, its area vector and centre by
+    /// [`polygon_area_centre`], each cell's centre by [`cell_centre`] over
+    /// all its faces (a coarse element's split face as its fine faces),
+    /// taken in the order of their corners' lattice sums so that the bits
+    /// do not depend on the rank count; the centres of the halo elements
+    /// come from their ranks. Collective.
+    fn moved_face_figures(
+        &self,
+        comm: &dyn Comm,
+        sums: &mut [u64],
+        max: &mut [f64; 3],
+    ) -> Result<()> {
+        let local = (|| -> Result<(Faces, MovedFaces, Vec<[f64; 3]>)> {
+            let faces = self.faces()?;
+            let moved = self.moved_faces(&faces)?;
+            // Each element's faces with their area vectors out of it, in the
+            // order of the faces' corner sums (unique among one element's
+            // faces, the same on any rank).
+            let list = faces.faces();
+            let n = self.elements().len();
+            // Bucketed by element (a counting sort), then each element's few
+            // faces sorted by key.
+            let mut offset = vec![0usize; n + 1];
+            for f in list {
+                offset[f.owner as usize + 1] += 1;
+                if let Other::Element(j) = f.other {
+                    offset[j as usize + 1] += 1;
+                }
+            }
+            for e in 0..n {
+                offset[e + 1] += offset[e];
+            }
+            let mut next = offset.clone();
+            let mut sides = vec![([0u64; 3], 0u32, false); offset[n]];
+            for (k, f) in list.iter().enumerate() {
+                let mut key = [0u64; 3];
+                for c in f.corners() {
+                    for a in 0..3 {
+                        key[a] += c[a] as u64;
+                    }
+                }
+                sides[next[f.owner as usize]] = (key, k as u32, moved.flipped[k]);
+                next[f.owner as usize] += 1;
+                if let Other::Element(j) = f.other {
+                    sides[next[j as usize]] = (key, k as u32, true);
+                    next[j as usize] += 1;
+                }
+            }
+            let mut centres = vec![[0.0; 3]; n];
+            let mut cell: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(32);
+            for (e, centre) in centres.iter_mut().enumerate() {
+                let mine = &mut sides[offset[e]..offset[e + 1]];
+                mine.sort_unstable_by_key(|x| x.0);
+                cell.clear();
+                for &(_, k, negate) in mine.iter() {
+                    let (s, c) = moved.geometry[k as usize];
+                    cell.push((c, if negate { scale(s, -1.0) } else { s }));
+                }
+                *centre = cell_centre(&cell);
+            }
+            Ok((faces, moved, centres))
+        })();
+        let (faces, moved, centres) = agree(comm, local)?;
+        let halo_centres = self.exchange_centres(comm, &faces, &centres);
+        for (k, f) in faces.faces().iter().enumerate() {
+            let points = &moved.points[moved.start[k]..moved.start[k + 1]];
+            let (s, c) = moved.geometry[k];
+            let own = centres[f.owner as usize];
+            let n = match f.other {
+                Other::Patch(_) => {
+                    max[2] = max[2].max(boundary_face_skewness(c, s, points, own));
+                    continue;
+                }
+                // The element on the other rank measures it.
+                Other::Halo(_) if moved.flipped[k] => continue,
+                Other::Halo(h) => halo_centres[h as usize],
+                Other::Element(j) => centres[j as usize],
+            };
+            let cos = face_orthogonality(own, n, s);
+            let skew = face_skewness(c, s, points, own, n);
+            Self::add_face(sums, max, cos, skew);
+        }
+        Ok(())
+    }
+
+    /// The halo elements' `centres` (one per local element on each rank),
+    /// through the cell halo of `faces`; elements not in it get zeros.
+    /// Collective.
+    fn exchange_centres(
+        &self,
+        comm: &dyn Comm,
+        faces: &Faces,
+        centres: &[[f64; 3]],
+    ) -> Vec<[f64; 3]> {
+        let cells = self.cell_halo(faces);
+        let mut counts = vec![0usize; comm.size()];
+        let mut send: Vec<u64> = Vec::new();
+        for (r, list) in cells.ranks.iter().zip(&cells.send) {
+            counts[*r as usize] = 3 * list.len();
+            for &e in list {
+                send.extend(centres[e as usize].map(f64::to_bits));
+            }
+        }
+        let (got, _) = comm.alltoallv_u64(&send, &counts);
+        // Received in rank order, each rank's in the order of its send
+        // list, which is the order of this rank's receive list.
+        let mut out = vec![[0.0; 3]; self.halo().leaves.len()];
+        let mut at = 0;
+        for list in &cells.recv {
+            for &h in list {
+                out[h as usize] = std::array::from_fn(|a| f64::from_bits(got[at + a]));
+                at += 3;
+            }
+        }
+        out
     }
 }
 
@@ -705,6 +1047,95 @@ mod tests {
             boundary_face_skewness([0.0, 0.0, 1.0], [0.0, 0.0, 4.0], &whole, p),
             0.0
         );
+    }
+
+    #[test]
+    fn polygons_and_cells_as_openfoam_measures_them() {
+        // A planar quadrilateral, tilted: its area vector is the exact one
+        // (1 x 2 rectangle in the plane z = x), its centre the centroid,
+        // with or without a point in the middle of an edge.
+        let q = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 1.0],
+            [1.0, 2.0, 1.0],
+            [0.0, 2.0, 0.0],
+        ];
+        let (s, c) = polygon_area_centre(&q);
+        let want_s = [-2.0, 0.0, 2.0];
+        for a in 0..3 {
+            assert!(close(s[a], want_s[a]), "{s:?}");
+            assert!(close(c[a], [0.5, 1.0, 0.5][a]), "{c:?}");
+        }
+        let five = [q[0], q[1], [1.0, 1.0, 1.0], q[2], q[3]];
+        let (s5, c5) = polygon_area_centre(&five);
+        for a in 0..3 {
+            assert!(
+                close(s5[a], want_s[a]) && close(c5[a], c[a]),
+                "{s5:?} {c5:?}"
+            );
+        }
+        // A trapezoid's centroid is not its corners' mean.
+        let trapezoid = [
+            [0.0, 0.0, 0.0],
+            [4.0, 0.0, 0.0],
+            [3.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        let (st, ct) = polygon_area_centre(&trapezoid);
+        assert!(
+            close(st[2], 3.0) && close(ct[0], 2.0) && close(ct[1], 4.0 / 9.0),
+            "{ct:?}"
+        );
+        // A triangle, and a polygon of no area.
+        let (s3, c3) = polygon_area_centre(&[[0.0; 3], [3.0, 0.0, 0.0], [0.0, 3.0, 0.0]]);
+        assert!(close(s3[2], 4.5) && close(c3[0], 1.0) && close(c3[1], 1.0));
+        let flat = [[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+        assert_eq!(polygon_area_centre(&flat), ([0.0; 3], [1.0, 0.0, 0.0]));
+        // A sheared box (a parallelepiped: planar faces), its faces with
+        // outward area vectors: the centre is its corners' mean, however
+        // many faces a side is split into.
+        let p = cube(|[x, y, z]| [x + 0.5 * z, y + 0.25 * x, z]);
+        let sides: [[usize; 4]; 6] = [
+            [0, 3, 2, 1],
+            [4, 5, 6, 7],
+            [0, 1, 5, 4],
+            [2, 3, 7, 6],
+            [0, 4, 7, 3],
+            [1, 2, 6, 5],
+        ];
+        let faces: Vec<([f64; 3], [f64; 3])> = sides
+            .iter()
+            .map(|f| {
+                let (s, c) = polygon_area_centre(&f.map(|k| p[k]));
+                (c, s)
+            })
+            .collect();
+        let mean = p
+            .iter()
+            .fold([0.0; 3], |a, x| [0, 1, 2].map(|k| a[k] + x[k] / 8.0));
+        let centre = cell_centre(&faces);
+        for a in 0..3 {
+            assert!(close(centre[a], mean[a]), "{centre:?} {mean:?}");
+        }
+        // The bottom split into its four quarters.
+        let mid = |a: [f64; 3], b: [f64; 3]| [0, 1, 2].map(|k| 0.5 * (a[k] + b[k]));
+        let (b0, b1, b2, b3) = (p[0], p[3], p[2], p[1]);
+        let m = mid(b0, b2);
+        let quarters = [
+            [b0, mid(b0, b1), m, mid(b3, b0)],
+            [mid(b0, b1), b1, mid(b1, b2), m],
+            [m, mid(b1, b2), b2, mid(b2, b3)],
+            [mid(b3, b0), m, mid(b2, b3), b3],
+        ];
+        let mut split: Vec<([f64; 3], [f64; 3])> = faces[1..].to_vec();
+        for q in &quarters {
+            let (s, c) = polygon_area_centre(q);
+            split.push((c, s));
+        }
+        let centre = cell_centre(&split);
+        for a in 0..3 {
+            assert!(close(centre[a], mean[a]), "{centre:?} {mean:?}");
+        }
     }
 
     fn sphere_mesh(level: u8) -> Mesh {

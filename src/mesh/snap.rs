@@ -847,7 +847,7 @@ impl Mesh {
             .map(|k| {
                 let mut d = [0u32; 4];
                 let h = self.hanging_deps(k);
-                d[..h.len()].copy_from_slice(h);
+                d[..h.len()].copy_from_slice(&h);
                 d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
                 (d, h.len() as u8)
             })

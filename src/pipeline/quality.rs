@@ -10,7 +10,8 @@ use super::*;
 impl Session {
     /// Measures the current mesh's quality: the scaled Jacobian of each
     /// element from its nodes, and `checkMesh`'s non-orthogonality and
-    /// skewness over the faces (measured as they are made, not stored);
+    /// skewness over the faces (measured as they are made, not stored; on
+    /// a snapped mesh, on the moved points);
     /// with `output.quality_out` also writes the worst elements
     /// there (rank 0). Collective; the figures are the same on every rank.
     /// Phase `quality`.

@@ -40,7 +40,8 @@
 #include <p8est_lnodes.h>
 #include <p8est_nodes.h>
 
-#define BIN_MAGIC "OCTLEAF1"
+#include "leaf_file.h"
+
 /* Gathering hanging nodes to rank 0 does not scale; skip beyond this. */
 #define DEDUP_MAX_LEAVES 5000000LL
 
@@ -93,13 +94,6 @@ usage_error (const char *msg)
   finish (1);
 }
 
-static int
-ends_with (const char *s, const char *suffix)
-{
-  size_t              ls = strlen (s), lx = strlen (suffix);
-  return ls >= lx && strcmp (s + ls - lx, suffix) == 0;
-}
-
 static void
 leaf_to_quad (const leaf_t * l, p8est_quadrant_t * q)
 {
@@ -132,26 +126,10 @@ get_le32 (const unsigned char *p)
     (uint32_t) p[2] << 16 | (uint32_t) p[3] << 24;
 }
 
-static void
-put_le32 (unsigned char *p, uint32_t v)
-{
-  p[0] = (unsigned char) v;
-  p[1] = (unsigned char) (v >> 8);
-  p[2] = (unsigned char) (v >> 16);
-  p[3] = (unsigned char) (v >> 24);
-}
-
 static uint64_t
 get_le64 (const unsigned char *p)
 {
   return (uint64_t) get_le32 (p) | (uint64_t) get_le32 (p + 4) << 32;
-}
-
-static void
-put_le64 (unsigned char *p, uint64_t v)
-{
-  put_le32 (p, (uint32_t) v);
-  put_le32 (p + 4, (uint32_t) (v >> 32));
 }
 
 static int
@@ -518,117 +496,12 @@ count_unique_nodes (MPI_Comm comm, sc_array_t * arr)
   return uniq;
 }
 
-static char        *
-fmt_int (char *p, long v)
-{
-  char                tmp[24];
-  int                 k = 0;
-  if (v < 0) {
-    *p++ = '-';
-    v = -v;
-  }
-  do {
-    tmp[k++] = (char) ('0' + v % 10);
-    v /= 10;
-  } while (v);
-  while (k)
-    *p++ = tmp[--k];
-  return p;
-}
-
-static int
-write_local (FILE * f, p8est_t * p8est, int binary)
-{
-  size_t              i, used = 0;
-  const size_t        bufsize = 1 << 20;
-  char               *buf = malloc (bufsize);
-  p4est_topidx_t      tt;
-
-  if (buf == NULL)
-    return -1;
-  for (tt = p8est->first_local_tree; tt <= p8est->last_local_tree; ++tt) {
-  p8est_tree_t       *tree = p8est_tree_array_index (p8est->trees, tt);
-  sc_array_t         *qs = &tree->quadrants;
-  for (i = 0; i < qs->elem_count; ++i) {
-    const p8est_quadrant_t *q = p8est_quadrant_array_index (qs, i);
-    if (used + 64 > bufsize) {
-      if (fwrite (buf, 1, used, f) != used) {
-        free (buf);
-        return -1;
-      }
-      used = 0;
-    }
-    if (binary) {
-      unsigned char      *p = (unsigned char *) buf + used;
-      put_le32 (p, (uint32_t) q->x);
-      put_le32 (p + 4, (uint32_t) q->y);
-      put_le32 (p + 8, (uint32_t) q->z);
-      put_le32 (p + 12, (uint32_t) q->level);
-      used += 16;
-    }
-    else {
-      char               *p = buf + used;
-      if (g_brick[0]) {
-        p = fmt_int (p, (long) tt);
-        *p++ = ' ';
-      }
-      p = fmt_int (p, q->x);
-      *p++ = ' ';
-      p = fmt_int (p, q->y);
-      *p++ = ' ';
-      p = fmt_int (p, q->z);
-      *p++ = ' ';
-      p = fmt_int (p, q->level);
-      *p++ = '\n';
-      used = (size_t) (p - buf);
-    }
-  }
-  }
-  if (used > 0 && fwrite (buf, 1, used, f) != used) {
-    free (buf);
-    return -1;
-  }
-  free (buf);
-  return 0;
-}
-
 /* Ranks append in rank order; a partitioned single-tree forest is then
  * in global Morton order. */
 static void
 write_leaves (MPI_Comm comm, p8est_t * p8est, const char *path)
 {
-  int                 binary = ends_with (path, ".bin"), r, bad = 0, anybad;
-
-  for (r = 0; r < g_size; ++r) {
-    if (r == g_rank) {
-      FILE               *f = fopen (path, r == 0 ? "wb" : "ab");
-      if (f == NULL)
-        bad = 1;
-      else {
-        if (r == 0) {
-          long long           n = (long long) p8est->global_num_quadrants;
-          if (binary) {
-            unsigned char       hdr[16];
-            memcpy (hdr, BIN_MAGIC, 8);
-            put_le64 (hdr + 8, (uint64_t) n);
-            bad |= fwrite (hdr, 1, 16, f) != 16;
-          }
-          else {
-            bad |= fprintf (f, "# octmesh_p4est balanced leaves\n"
-                            "# count %lld\n", n) < 0;
-            if (g_brick[0])
-              bad |= fprintf (f, "# brick %d %d %d\n", g_brick[0],
-                              g_brick[1], g_brick[2]) < 0;
-          }
-        }
-        bad |= write_local (f, p8est, binary) != 0;
-        bad |= fclose (f) != 0;
-      }
-    }
-    MPI_Barrier (comm);
-  }
-  MPI_Allreduce (&bad, &anybad, 1, MPI_INT, MPI_MAX, comm);
-  if (anybad) {
+  if (leaf_file_write (comm, p8est, path, g_brick)) {
     if (g_rank == 0)
       fprintf (stderr, "octmesh_p4est: failed writing %s\n", path);
     finish (1);

@@ -38,6 +38,7 @@
 #include <p8est_bits.h>
 #include <p8est_extended.h>
 
+#include "leaf_file.h"
 #include "moving_sphere.h"
 
 #define STEP_X 20972
@@ -92,53 +93,11 @@ coarsen_fn (p8est_t * p8est, p4est_topidx_t which_tree,
   return 1;
 }
 
-static void
-put_le32 (unsigned char *p, uint32_t v)
-{
-  p[0] = (unsigned char) v;
-  p[1] = (unsigned char) (v >> 8);
-  p[2] = (unsigned char) (v >> 16);
-  p[3] = (unsigned char) (v >> 24);
-}
-
 /* Ranks append their leaves in rank order: the global Morton order. */
 static void
 write_leaves (MPI_Comm comm, p8est_t * p8est, const char *path)
 {
-  int                 r, bad = 0, anybad;
-  size_t              i;
-
-  for (r = 0; r < g_size; ++r) {
-    if (r == g_rank) {
-      FILE               *f = fopen (path, r == 0 ? "wb" : "ab");
-      sc_array_t         *qs =
-        &p8est_tree_array_index (p8est->trees, 0)->quadrants;
-      if (f == NULL)
-        bad = 1;
-      else {
-        unsigned char       b[16];
-        if (r == 0) {
-          uint64_t            n = (uint64_t) p8est->global_num_quadrants;
-          memcpy (b, "OCTLEAF1", 8);
-          put_le32 (b + 8, (uint32_t) n);
-          put_le32 (b + 12, (uint32_t) (n >> 32));
-          bad |= fwrite (b, 1, 16, f) != 16;
-        }
-        for (i = 0; i < qs->elem_count; ++i) {
-          const p8est_quadrant_t *q = p8est_quadrant_array_index (qs, i);
-          put_le32 (b, (uint32_t) q->x);
-          put_le32 (b + 4, (uint32_t) q->y);
-          put_le32 (b + 8, (uint32_t) q->z);
-          put_le32 (b + 12, (uint32_t) q->level);
-          bad |= fwrite (b, 1, 16, f) != 16;
-        }
-        bad |= fclose (f) != 0;
-      }
-    }
-    MPI_Barrier (comm);
-  }
-  MPI_Allreduce (&bad, &anybad, 1, MPI_INT, MPI_MAX, comm);
-  if (anybad) {
+  if (leaf_file_write (comm, p8est, path, NULL)) {
     if (g_rank == 0)
       fprintf (stderr, "octmesh_p4est_adapt: failed writing %s\n", path);
     finish (1);
