@@ -210,10 +210,51 @@ struct Target {
     /// Feature corners as degenerate triangles `p p p`.
     corners: Vec<Triangle>,
     corner_bvh: Bvh,
+    /// The cells of a coarse grid near a feature (see [`FeatureCells`]).
+    near_features: FeatureCells,
+}
+
+/// The cells of a grid of side `side` (lattice units) that some feature
+/// edge or corner's bounding box, grown by `side`, overlaps: a point in no
+/// such cell has no feature within `side`, which spares most surface nodes
+/// their two tree queries (most are far from any feature).
+struct FeatureCells {
+    side: f64,
+    cells: std::collections::HashSet<[i64; 3]>,
+}
+
+impl FeatureCells {
+    fn new(items: &[Triangle], side: f64) -> FeatureCells {
+        let mut cells = std::collections::HashSet::new();
+        let cell = |x: f64| (x / side).floor() as i64;
+        for t in items {
+            let b = t.aabb();
+            let lo = b.min.map(|x| cell(x - side));
+            let hi = b.max.map(|x| cell(x + side));
+            for i in lo[0]..=hi[0] {
+                for j in lo[1]..=hi[1] {
+                    for k in lo[2]..=hi[2] {
+                        cells.insert([i, j, k]);
+                    }
+                }
+            }
+        }
+        FeatureCells { side, cells }
+    }
+
+    /// Whether a feature may lie within `side` of `x`.
+    fn near(&self, x: [f64; 3]) -> bool {
+        !self.cells.is_empty()
+            && self
+                .cells
+                .contains(&x.map(|v| (v / self.side).floor() as i64))
+    }
 }
 
 impl Target {
-    fn new(surface: &Surface, mesh: &Mesh, feature_angle_deg: f64) -> Target {
+    /// `reach` is the largest feature reach any query will use
+    /// ([`FEATURE_REACH`] times the largest cell).
+    fn new(surface: &Surface, mesh: &Mesh, feature_angle_deg: f64, reach: f64) -> Target {
         let d = mesh.domain();
         let tris: Vec<Triangle> = surface
             .triangles()
@@ -228,7 +269,9 @@ impl Target {
         } else {
             (Vec::new(), Vec::new())
         };
+        let items: Vec<Triangle> = edges.iter().chain(&corners).copied().collect();
         Target {
+            near_features: FeatureCells::new(&items, reach.max(1.0)),
             bvh,
             edge_bvh: Bvh::new(&edges),
             corner_bvh: Bvh::new(&corners),
@@ -241,23 +284,33 @@ impl Target {
     /// Where a surface node at `x` goes, for cells of side `h` around it
     /// (lattice units): a feature corner, a feature edge's or the surface's
     /// closest point, and whether it is a feature.
-    fn of(&self, x: [f64; 3], h: f64) -> Option<([f64; 3], bool)> {
+    /// `hint` is a triangle near `x` (the previous node's), or none; it
+    /// becomes the answer's triangle when the surface's closest point is
+    /// the answer.
+    fn of(&self, x: [f64; 3], h: f64, hint: &mut Option<u32>) -> Option<([f64; 3], bool)> {
         let reach2 = (FEATURE_REACH * h) * (FEATURE_REACH * h);
-        if let Some((i, _)) = self.corner_bvh.nearest(&self.corners, x, reach2) {
-            return Some((self.corners[i as usize].v[0], true));
+        if self.near_features.near(x) {
+            if let Some((i, _)) = self.corner_bvh.nearest(&self.corners, x, reach2) {
+                return Some((self.corners[i as usize].v[0], true));
+            }
+            if let Some((i, _)) = self.edge_bvh.nearest(&self.edges, x, reach2) {
+                let [a, b, c] = self.edges[i as usize].v;
+                return Some((closest_point_triangle(x, a, b, c), true));
+            }
         }
-        if let Some((i, _)) = self.edge_bvh.nearest(&self.edges, x, reach2) {
-            let [a, b, c] = self.edges[i as usize].v;
-            return Some((closest_point_triangle(x, a, b, c), true));
-        }
-        // Most surface nodes lie within a cell of the surface: a tight
-        // first bound prunes most of the tree (the answer is the same).
-        let near = 1.5 * h;
+        // Most surface nodes lie within a cell of the surface, and the
+        // previous node's triangle is near: a tight first bound prunes
+        // most of the tree (the answer is the same).
         let far = SURFACE_REACH * h;
-        let (i, _) = self
-            .bvh
-            .nearest(&self.tris, x, near * near)
-            .or_else(|| self.bvh.nearest(&self.tris, x, far * far))?;
+        let (i, _) = if hint.is_some() {
+            self.bvh.nearest_from(&self.tris, x, far * far, *hint)
+        } else {
+            let near = 1.5 * h;
+            self.bvh
+                .nearest(&self.tris, x, near * near)
+                .or_else(|| self.bvh.nearest(&self.tris, x, far * far))
+        }?;
+        *hint = Some(i);
         let [a, b, c] = self.tris[i as usize].v;
         Some((closest_point_triangle(x, a, b, c), false))
     }
@@ -852,7 +905,6 @@ impl Mesh {
                 (d, h.len() as u8)
             })
             .collect();
-        let target_surface = Target::new(surface, self, opts.feature_angle_deg);
         let mut s = Snapper {
             mesh: self,
             comm,
@@ -890,13 +942,18 @@ impl Mesh {
             }
         }
         s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
+        let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
+        let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
+        let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
+        let target_surface = Target::new(surface, self, opts.feature_angle_deg, reach);
 
         let mut feature = vec![false; ni];
+        let mut hint = None;
         for n in 0..ni {
-            if !on_surface(n) || masks[n] & sides != 0 || side[n] == u64::MAX {
+            if !queried(n) {
                 continue;
             }
-            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64) {
+            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64, &mut hint) {
                 s.snap[n] = true;
                 s.target[n] = t;
                 s.step[n] = 0;
