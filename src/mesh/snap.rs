@@ -430,7 +430,14 @@ impl<'a> Snapper<'a> {
     /// each corner below the least scaled Jacobian the corner's node (through its
     /// dependencies when it hangs), else its three neighbours along the
     /// edges, else every eligible node of the element.
-    fn blame(&self, e: usize, eligible: impl Fn(usize) -> bool, flags: &mut [u64]) {
+    /// Newly flagged nodes are appended to `flagged`.
+    fn blame(
+        &self,
+        e: usize,
+        eligible: impl Fn(usize) -> bool,
+        flags: &mut [u64],
+        flagged: &mut Vec<u32>,
+    ) {
         let c = &self.mesh.connectivity()[e];
         let p = c.map(|n| self.pos[n as usize]);
         let j = corner_scaled_jacobians(&p);
@@ -439,7 +446,10 @@ impl<'a> Snapper<'a> {
             let node = node as usize;
             let mut visit = |n: usize| {
                 if eligible(n) {
-                    flags[n] = 1;
+                    if flags[n] == 0 {
+                        flags[n] = 1;
+                        flagged.push(n as u32);
+                    }
                     *any = true;
                 }
             };
@@ -506,18 +516,6 @@ impl<'a> Snapper<'a> {
         }
     }
 
-    /// Ors flags over the sharing ranks; returns how many flags are set on
-    /// owned nodes, summed over the ranks.
-    fn agree_flags(&self, flags: &mut [u64]) -> u64 {
-        self.exchange(flags, 1, |a, b| *a |= b);
-        let mut n = [flags[..self.mesh.num_owned()]
-            .iter()
-            .filter(|&&f| f != 0)
-            .count() as u64];
-        self.comm.sum_u64(&mut n);
-        n[0]
-    }
-
     /// The position of surface node `n` after its steps back.
     fn snapped_position(&self, n: usize) -> [f64; 3] {
         let (x, t, k) = (self.lattice[n], self.target[n], self.step[n]);
@@ -547,29 +545,37 @@ impl<'a> Snapper<'a> {
     }
 
     /// The elements of `cands` with a corner below the least scaled
-    /// Jacobian.
-    fn bad_among(&self, cands: &[u32]) -> Vec<usize> {
+    /// Jacobian. Their hanging corners are placed from their dependencies
+    /// first: every hanging node depending on a changed node is a corner of
+    /// an element around it.
+    fn bad_among(&mut self, cands: &[u32]) -> Vec<usize> {
         let conn = self.mesh.connectivity();
         let j2 = self.min_jacobian * self.min_jacobian;
-        cands
-            .iter()
-            .map(|&e| e as usize)
-            .filter(|&e| {
-                let p = conn[e].map(|n| self.pos[n as usize]);
-                !corners_valid(&p, j2)
-            })
-            .collect()
+        let mut bad = Vec::new();
+        for &e in cands {
+            let c = &conn[e as usize];
+            let mut p = [[0.0; 3]; 8];
+            for (q, &n) in p.iter_mut().zip(c) {
+                let n = n as usize;
+                if n >= self.ni {
+                    self.pos[n] = mean(&self.pos, self.deps[n - self.ni]);
+                }
+                *q = self.pos[n];
+            }
+            if !corners_valid(&p, j2) {
+                bad.push(e as usize);
+            }
+        }
+        bad
     }
 
-    /// The active elements depending on a node with `flags[n]` set, once
-    /// each: only they can have changed.
-    fn around(&self, flags: impl Fn(usize) -> bool) -> Vec<u32> {
-        let mut seen = vec![false; self.mesh.elements().len()];
+    /// The active elements depending on the nodes `nodes`, once each:
+    /// only they can have changed. `seen` (one flag per element, all
+    /// false) is left all false.
+    fn around(&self, nodes: &[u32], seen: &mut [bool]) -> Vec<u32> {
         let mut out = Vec::new();
-        for n in 0..self.ni {
-            if !flags(n) {
-                continue;
-            }
+        for &n in nodes {
+            let n = n as usize;
             let (a, b) = (self.adj_start[n] as usize, self.adj_start[n + 1] as usize);
             for &e in &self.adj[a..b] {
                 if !seen[e as usize] {
@@ -577,6 +583,9 @@ impl<'a> Snapper<'a> {
                     out.push(e);
                 }
             }
+        }
+        for &e in &out {
+            seen[e as usize] = false;
         }
         out
     }
@@ -607,35 +616,38 @@ impl<'a> Snapper<'a> {
         blamable: impl Fn(&Self, usize) -> bool,
         mut step_back: impl FnMut(&mut Self, usize),
     ) {
+        // Allocated once: the rounds after the first are small.
+        let mut flags = vec![0u64; self.ni];
+        let mut flagged: Vec<u32> = Vec::new();
+        let mut seen = vec![false; self.mesh.elements().len()];
         loop {
-            self.refresh_hanging(&cands);
             let bad = self.bad_among(&cands);
-            let mut flags = vec![0u64; self.ni];
+            flagged.clear();
             for e in bad {
-                self.blame(e, |n| blamable(self, n), &mut flags);
+                self.blame(e, |n| blamable(self, n), &mut flags, &mut flagged);
             }
             // The owner of a flagged node has its flag after the exchange.
-            if self.agree_flags(&mut flags) == 0 {
+            self.exchange(&mut flags, 1, |a, b| *a |= b);
+            if self.comm.size() > 1 {
+                // Flags other ranks set on shared nodes.
+                for (_, nodes) in &self.lists {
+                    flagged.extend(nodes.iter().filter(|&&n| flags[n as usize] != 0));
+                }
+                flagged.sort_unstable();
+                flagged.dedup();
+            }
+            let owned = self.mesh.num_owned() as u32;
+            let mut count = [flagged.iter().filter(|&&n| n < owned).count() as u64];
+            self.comm.sum_u64(&mut count);
+            if count[0] == 0 {
                 break;
             }
-            for (n, _) in flags.iter().enumerate().filter(|f| *f.1 != 0) {
-                step_back(self, n);
+            for &n in &flagged {
+                step_back(self, n as usize);
             }
-            cands = self.around(|n| flags[n] != 0);
-        }
-    }
-
-    /// The hanging corners of elements `cands` from their dependencies:
-    /// every hanging node depending on a changed node is a corner of an
-    /// element around it.
-    fn refresh_hanging(&mut self, cands: &[u32]) {
-        let conn = self.mesh.connectivity();
-        for &e in cands {
-            for &c in &conn[e as usize] {
-                let c = c as usize;
-                if c >= self.ni {
-                    self.pos[c] = mean(&self.pos, self.deps[c - self.ni]);
-                }
+            cands = self.around(&flagged, &mut seen);
+            for &n in &flagged {
+                flags[n as usize] = 0;
             }
         }
     }
@@ -645,7 +657,8 @@ impl<'a> Snapper<'a> {
     /// valid or nothing is left to undo. Only elements around moved nodes
     /// are measured: the others were valid (or beyond help) before.
     fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
-        let cands = self.around(|n| moved[n]);
+        let nodes: Vec<u32> = (0..self.ni as u32).filter(|&n| moved[n as usize]).collect();
+        let cands = self.around(&nodes, &mut vec![false; self.mesh.elements().len()]);
         let moved = std::cell::Cell::from_mut(moved).as_slice_of_cells();
         self.settle(
             cands,
