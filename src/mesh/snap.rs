@@ -59,9 +59,12 @@ use serde::Serialize;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::geometry::bvh::Bvh;
-use crate::geometry::diagnostics::weld;
 use crate::geometry::distance::closest_point_triangle;
 use crate::geometry::{Surface, Triangle};
+use crate::refine::SurfaceIndex;
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 use super::faces::SURFACE_PATCH;
 use super::quality::{corner_scaled_jacobians, CORNER_EDGES};
@@ -201,9 +204,11 @@ pub struct FvGeometry {
 }
 
 /// The surface in lattice units with its trees, and its features.
-struct Target {
-    tris: Vec<Triangle>,
-    bvh: Bvh,
+struct Target<'s> {
+    /// The surface's triangles and their tree: the classification's index
+    /// when it was built for the mesh's domain, else made here.
+    tris: Cow<'s, [Triangle]>,
+    bvh: Cow<'s, Bvh>,
     /// Feature edges as degenerate triangles `a b b`.
     edges: Vec<Triangle>,
     edge_bvh: Bvh,
@@ -251,19 +256,32 @@ impl FeatureCells {
     }
 }
 
-impl Target {
+impl<'s> Target<'s> {
     /// `reach` is the largest feature reach any query will use
-    /// ([`FEATURE_REACH`] times the largest cell).
-    fn new(surface: &Surface, mesh: &Mesh, feature_angle_deg: f64, reach: f64) -> Target {
-        let d = mesh.domain();
-        let tris: Vec<Triangle> = surface
-            .triangles()
-            .iter()
-            .map(|t| Triangle {
-                v: t.v.map(|p| d.to_lattice(p)),
-            })
-            .collect();
-        let bvh = Bvh::new(&tris);
+    /// ([`FEATURE_REACH`] times the largest cell). `index`, if given, is
+    /// `surface` in the lattice units of `mesh`'s domain.
+    fn new(
+        surface: &Surface,
+        index: Option<&'s SurfaceIndex>,
+        mesh: &Mesh,
+        feature_angle_deg: f64,
+        reach: f64,
+    ) -> Target<'s> {
+        let (tris, bvh) = match index {
+            Some(ix) => (Cow::Borrowed(&ix.tris[..]), Cow::Borrowed(&ix.bvh)),
+            None => {
+                let d = mesh.domain();
+                let tris: Vec<Triangle> = surface
+                    .triangles()
+                    .iter()
+                    .map(|t| Triangle {
+                        v: t.v.map(|p| d.to_lattice(p)),
+                    })
+                    .collect();
+                let bvh = Bvh::new(&tris);
+                (Cow::Owned(tris), Cow::Owned(bvh))
+            }
+        };
         let (edges, corners) = if feature_angle_deg < 180.0 {
             features(&tris, feature_angle_deg)
         } else {
@@ -316,28 +334,73 @@ impl Target {
     }
 }
 
+/// A fast, fixed hash for the welding maps (their order never shows: the
+/// outputs follow the triangles' order).
+#[derive(Default)]
+struct FoldHasher(u64);
+
+impl std::hash::Hasher for FoldHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for c in bytes.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..c.len()].copy_from_slice(c);
+            self.write_u64(u64::from_le_bytes(w));
+        }
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(26) ^ x).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+}
+
+type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
+
 /// The feature edges (as triangles `a b b`) and corners (`p p p`) of
 /// `tris` for a feature angle in degrees: edges between facets whose
 /// normals differ by more, and edges without exactly two facets; corners
-/// where not exactly two feature edges meet.
+/// where not exactly two feature edges meet. Vertices with the same bits
+/// are one (-0 and 0 too); edges come in the order of their first facet,
+/// corners in the order their vertices first appear.
 fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>) {
-    let (ids, nv) = weld(tris);
-    let mut point = vec![[0.0; 3]; nv];
-    // (low vertex, high vertex, facet)
-    let mut uses: Vec<(u64, u64, u32)> = Vec::with_capacity(3 * tris.len());
+    let bits = |c: f64| if c == 0.0 { 0 } else { c.to_bits() };
+    let mut vertex: FoldMap<[u64; 3], u32> = FoldMap::default();
+    vertex.reserve(tris.len() / 2 + 16);
+    let mut point: Vec<[f64; 3]> = Vec::with_capacity(tris.len() / 2 + 16);
+    let ids: Vec<[u32; 3]> = tris
+        .iter()
+        .map(|t| {
+            t.v.map(|p| {
+                *vertex.entry(p.map(bits)).or_insert_with(|| {
+                    point.push(p);
+                    (point.len() - 1) as u32
+                })
+            })
+        })
+        .collect();
+    drop(vertex);
+    let nv = point.len();
+    let flat = |v: &[u32; 3]| v[0] == v[1] || v[1] == v[2] || v[0] == v[2];
+    // Per edge (low, high vertex): its first facet, the second, and how
+    // many use it.
+    let mut uses: FoldMap<(u32, u32), (u32, u32, u32)> = FoldMap::default();
+    uses.reserve(3 * tris.len() / 2 + 16);
     for (t, v) in ids.iter().enumerate() {
-        for k in 0..3 {
-            point[v[k] as usize] = tris[t].v[k];
-        }
-        if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+        if flat(v) {
             continue;
         }
         for k in 0..3 {
             let (a, b) = (v[k], v[(k + 1) % 3]);
-            uses.push((a.min(b), a.max(b), t as u32));
+            let u = uses
+                .entry((a.min(b), a.max(b)))
+                .or_insert((t as u32, u32::MAX, 0));
+            if u.2 == 1 {
+                u.1 = t as u32;
+            }
+            u.2 += 1;
         }
     }
-    uses.sort_unstable();
     let cos_limit = angle_deg.to_radians().cos();
     let unit = |t: u32| {
         let n = tris[t as usize].normal();
@@ -350,25 +413,29 @@ fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>)
     };
     let mut edges = Vec::new();
     let mut degree = vec![0u32; nv];
-    let mut i = 0;
-    while i < uses.len() {
-        let mut j = i + 1;
-        while j < uses.len() && uses[j].0 == uses[i].0 && uses[j].1 == uses[i].1 {
-            j += 1;
+    for (t, v) in ids.iter().enumerate() {
+        if flat(v) {
+            continue;
         }
-        let sharp = if j - i == 2 {
-            let (n, m) = (unit(uses[i].2), unit(uses[i + 1].2));
-            n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_limit
-        } else {
-            true
-        };
-        if sharp {
-            let (a, b) = (uses[i].0 as usize, uses[i].1 as usize);
-            edges.push(Triangle::new(point[a], point[b], point[b]));
-            degree[a] += 1;
-            degree[b] += 1;
+        for k in 0..3 {
+            let (a, b) = (v[k].min(v[(k + 1) % 3]), v[k].max(v[(k + 1) % 3]));
+            let (first, second, count) = uses[&(a, b)];
+            if first != t as u32 {
+                continue;
+            }
+            let sharp = if count == 2 {
+                let (n, m) = (unit(first), unit(second));
+                n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_limit
+            } else {
+                true
+            };
+            if sharp {
+                let (a, b) = (a as usize, b as usize);
+                edges.push(Triangle::new(point[a], point[b], point[b]));
+                degree[a] += 1;
+                degree[b] += 1;
+            }
         }
-        i = j;
     }
     let corners = (0..nv)
         .filter(|&v| degree[v] > 0 && degree[v] != 2)
@@ -902,6 +969,20 @@ impl Mesh {
         surface: &Surface,
         opts: &SnapOptions,
     ) -> Result<SnapReport> {
+        self.snap_indexed(comm, surface, None, opts)
+    }
+
+    /// [`Mesh::snap`] with the surface's index if there is one for this
+    /// mesh's domain (the classification's): its triangles and tree are
+    /// used instead of made again.
+    pub(crate) fn snap_indexed(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        index: Option<&SurfaceIndex>,
+        opts: &SnapOptions,
+    ) -> Result<SnapReport> {
+        let index = index.filter(|ix| ix.tris.len() == surface.len());
         agree(comm, opts.check())?;
         self.moved = None;
         self.moved_lattice = None;
@@ -958,7 +1039,7 @@ impl Mesh {
         let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
         let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
         let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
-        let target_surface = Target::new(surface, self, opts.feature_angle_deg, reach);
+        let target_surface = Target::new(surface, index, self, opts.feature_angle_deg, reach);
 
         let mut feature = vec![false; ni];
         let mut hint = None;
