@@ -59,7 +59,7 @@ use serde::Serialize;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::geometry::bvh::Bvh;
-use crate::geometry::distance::closest_point_triangle;
+use crate::geometry::distance::{closest_point_triangle, point_box2, point_triangle2};
 use crate::geometry::{Surface, Triangle};
 use crate::refine::SurfaceIndex;
 use std::borrow::Cow;
@@ -219,6 +219,70 @@ struct Target<'s> {
     near_features: FeatureCells,
 }
 
+/// The half side (in cells of the node's finest element) of the cube
+/// around a node whose triangles [`NearTriangles`] gathers.
+const NEAR_REACH: f64 = 2.0;
+
+/// The triangles whose bounding boxes meet a cube around a recent surface
+/// node: the nearest of them to a point `x` well inside the cube is the
+/// nearest of all when it is nearer than the cube's side from `x` (every
+/// other triangle lies outside the cube).
+#[derive(Default)]
+struct NearTriangles {
+    centre: [f64; 3],
+    half: f64,
+    /// The triangles and their bounding boxes.
+    ids: Vec<u32>,
+    boxes: Vec<([f64; 3], [f64; 3])>,
+    /// The last answer, a first bound for the tree.
+    last: Option<u32>,
+}
+
+impl NearTriangles {
+    /// Gathers the triangles around the cube of half side `half` at `x`.
+    fn gather(&mut self, tris: &[Triangle], bvh: &Bvh, x: [f64; 3], half: f64) {
+        self.centre = x;
+        self.half = half;
+        self.ids.clear();
+        bvh.query_candidates(x.map(|v| v - half), x.map(|v| v + half), &mut self.ids);
+        self.ids.sort_unstable();
+        self.boxes.clear();
+        self.boxes.extend(self.ids.iter().map(|&t| {
+            let b = tris[t as usize].aabb();
+            (b.min, b.max)
+        }));
+    }
+
+    /// The triangle nearest `x` (ties to the lowest index) if the gathered
+    /// ones prove it: nearer than any point outside the cube, with a
+    /// margin for rounding.
+    fn nearest(&self, tris: &[Triangle], x: [f64; 3]) -> Option<u32> {
+        let dx = (0..3)
+            .map(|a| (x[a] - self.centre[a]).abs())
+            .fold(0.0, f64::max);
+        let room = self.half - dx;
+        if room <= 0.0 {
+            return None;
+        }
+        let limit = 0.98 * room * room;
+        let mut best: Option<(u32, f64)> = None;
+        let mut bound = limit;
+        for (&t, b) in self.ids.iter().zip(&self.boxes) {
+            if point_box2(x, b.0, b.1) > bound {
+                continue;
+            }
+            let [p, q, r] = tris[t as usize].v;
+            let d = point_triangle2(x, p, q, r);
+            // Ascending indices: a tie keeps the first.
+            if d < bound || (d == bound && best.is_none()) {
+                best = Some((t, d));
+                bound = d;
+            }
+        }
+        best.filter(|b| b.1 < limit).map(|b| b.0)
+    }
+}
+
 /// The cells of a grid of side `side` (lattice units) that some feature
 /// edge or corner's bounding box, grown by `side`, overlaps: a point in no
 /// such cell has no feature within `side`, which spares most surface nodes
@@ -302,10 +366,9 @@ impl<'s> Target<'s> {
     /// Where a surface node at `x` goes, for cells of side `h` around it
     /// (lattice units): a feature corner, a feature edge's or the surface's
     /// closest point, and whether it is a feature.
-    /// `hint` is a triangle near `x` (the previous node's), or none; it
-    /// becomes the answer's triangle when the surface's closest point is
-    /// the answer.
-    fn of(&self, x: [f64; 3], h: f64, hint: &mut Option<u32>) -> Option<([f64; 3], bool)> {
+    /// `near` holds the triangles around the previous queries (nodes come
+    /// in traversal order, so the next is usually close).
+    fn of(&self, x: [f64; 3], h: f64, near: &mut NearTriangles) -> Option<([f64; 3], bool)> {
         let reach2 = (FEATURE_REACH * h) * (FEATURE_REACH * h);
         if self.near_features.near(x) {
             if let Some((i, _)) = self.corner_bvh.nearest(&self.corners, x, reach2) {
@@ -316,19 +379,25 @@ impl<'s> Target<'s> {
                 return Some((closest_point_triangle(x, a, b, c), true));
             }
         }
-        // Most surface nodes lie within a cell of the surface, and the
-        // previous node's triangle is near: a tight first bound prunes
-        // most of the tree (the answer is the same).
-        let far = SURFACE_REACH * h;
-        let (i, _) = if hint.is_some() {
-            self.bvh.nearest_from(&self.tris, x, far * far, *hint)
-        } else {
-            let near = 1.5 * h;
-            self.bvh
-                .nearest(&self.tris, x, near * near)
-                .or_else(|| self.bvh.nearest(&self.tris, x, far * far))
-        }?;
-        *hint = Some(i);
+        // Most surface nodes lie within a cell of the surface: the
+        // triangles gathered around a recent node usually hold the answer,
+        // provably; else the tree, bounded by the previous answer from
+        // the start (the answer is the same).
+        let i = match near.nearest(&self.tris, x) {
+            Some(i) => i,
+            None => {
+                near.gather(&self.tris, &self.bvh, x, NEAR_REACH * h);
+                match near.nearest(&self.tris, x) {
+                    Some(i) => i,
+                    None => {
+                        let far = SURFACE_REACH * h;
+                        let hint = near.last;
+                        self.bvh.nearest_from(&self.tris, x, far * far, hint)?.0
+                    }
+                }
+            }
+        };
+        near.last = Some(i);
         let [a, b, c] = self.tris[i as usize].v;
         Some((closest_point_triangle(x, a, b, c), false))
     }
@@ -1042,12 +1111,12 @@ impl Mesh {
         let target_surface = Target::new(surface, index, self, opts.feature_angle_deg, reach);
 
         let mut feature = vec![false; ni];
-        let mut hint = None;
+        let mut near_tris = NearTriangles::default();
         for n in 0..ni {
             if !queried(n) {
                 continue;
             }
-            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64, &mut hint) {
+            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64, &mut near_tris) {
                 s.snap[n] = true;
                 s.target[n] = t;
                 s.step[n] = 0;
