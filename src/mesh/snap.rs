@@ -723,6 +723,9 @@ impl<'a> Snapper<'a> {
         for &e in &out {
             seen[e as usize] = false;
         }
+        // In storage order: the measurements then read the connectivity
+        // and the positions near where they read last.
+        out.sort_unstable();
         out
     }
 
