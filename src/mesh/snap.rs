@@ -797,7 +797,23 @@ impl<'a> Snapper<'a> {
     /// are measured: the others were valid (or beyond help) before.
     fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
         let nodes: Vec<u32> = (0..self.ni as u32).filter(|&n| moved[n as usize]).collect();
-        let cands = self.around(&nodes, &mut vec![false; self.mesh.elements().len()]);
+        // When many nodes moved, one pass over the active elements finds
+        // the same set sooner than the nodes' adjacency lists.
+        let cands = if nodes.len() * 8 > self.ni {
+            let moved = &*moved;
+            let touches = |e: u32| {
+                let mut any = false;
+                self.support(e as usize, |n| any |= moved[n]);
+                any
+            };
+            self.active
+                .iter()
+                .copied()
+                .filter(|&e| touches(e))
+                .collect()
+        } else {
+            self.around(&nodes, &mut vec![false; self.mesh.elements().len()])
+        };
         let moved = std::cell::Cell::from_mut(moved).as_slice_of_cells();
         self.settle(
             cands,
