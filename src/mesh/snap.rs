@@ -29,7 +29,8 @@
 //! the mean displacement of the elements around them (the surface and
 //! everything further in fixed), each move kept only where every element
 //! around stays valid, and every partly snapped node tries a step up again
-//! under the same rule; the relaxed layers make room for it.
+//! at the same time under the same rule (one check of the elements serves
+//! both); the relaxed layers make room for it.
 //!
 //! # Limits
 //!
@@ -826,8 +827,9 @@ impl<'a> Snapper<'a> {
     }
 
     /// One relaxation step of the layer nodes, each moving only by more
-    /// than [`RELAX_TOLERANCE`] of its cell; returns how many moved (over
-    /// all ranks, owned nodes).
+    /// than [`RELAX_TOLERANCE`] of its cell, and one step up of every
+    /// partly snapped node, the moves kept where the elements stay valid;
+    /// returns how many moved (over all ranks, owned nodes).
     fn relax(&mut self) -> u64 {
         self.update_hanging();
         let ni = self.ni;
@@ -880,31 +882,23 @@ impl<'a> Snapper<'a> {
                 moved[n] = true;
             }
         }
-        self.refuse_invalid(&mut moved, |s, n| {
-            let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
-            s.pos[n] = old[k].1;
-        });
-        let mut count = [moved[..self.mesh.num_owned()]
-            .iter()
-            .filter(|&&m| m)
-            .count() as u64];
-        self.comm.sum_u64(&mut count);
-        count[0]
-    }
-
-    /// Moves every partly snapped node one step up where the elements stay
-    /// valid; returns how many advanced (over all ranks).
-    fn advance(&mut self) -> u64 {
-        let mut moved: Vec<bool> = (0..self.ni)
-            .map(|n| self.snap[n] && self.step[n] > 0)
-            .collect();
-        for (n, _) in moved.iter().enumerate().filter(|m| *m.1) {
-            self.step[n] -= 1;
-            self.pos[n] = self.snapped_position(n);
+        // The partly snapped nodes step up at the same time: one check of
+        // the elements around serves both moves.
+        for (n, m) in moved.iter_mut().enumerate() {
+            if self.snap[n] && self.step[n] > 0 {
+                self.step[n] -= 1;
+                self.pos[n] = self.snapped_position(n);
+                *m = true;
+            }
         }
         self.refuse_invalid(&mut moved, |s, n| {
-            s.step[n] += 1;
-            s.pos[n] = s.snapped_position(n);
+            if s.snap[n] {
+                s.step[n] += 1;
+                s.pos[n] = s.snapped_position(n);
+            } else {
+                let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
+                s.pos[n] = old[k].1;
+            }
         });
         let mut count = [moved[..self.mesh.num_owned()]
             .iter()
@@ -1197,8 +1191,7 @@ impl Mesh {
         for _ in 0..opts.iterations {
             iterations += 1;
             let moved = s.relax();
-            let advanced = s.advance();
-            if moved + advanced == 0 {
+            if moved == 0 {
                 break;
             }
         }
