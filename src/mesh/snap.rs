@@ -268,6 +268,15 @@ impl NearTriangles {
         let limit = 0.98 * room * room;
         let mut best: Option<(u32, f64)> = None;
         let mut bound = limit;
+        // The last answer first: usually near, it prunes the rest.
+        if let Some(t) = self.last {
+            let [p, q, r] = tris[t as usize].v;
+            let d = point_triangle2(x, p, q, r);
+            if d < bound {
+                best = Some((t, d));
+                bound = d;
+            }
+        }
         for (&t, b) in self.ids.iter().zip(&self.boxes) {
             if point_box2(x, b.0, b.1) > bound {
                 continue;
