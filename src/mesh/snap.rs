@@ -283,13 +283,17 @@ impl NearTriangles {
             }
             let [p, q, r] = tris[t as usize].v;
             let d = point_triangle2(x, p, q, r);
-            // Ascending indices: a tie keeps the first.
-            if d < bound || (d == bound && best.is_none()) {
+            // A tie goes to the lower index.
+            let better = match best {
+                None => d < bound,
+                Some((bt, bd)) => d < bd || (d == bd && t < bt),
+            };
+            if better {
                 best = Some((t, d));
                 bound = d;
             }
         }
-        best.filter(|b| b.1 < limit).map(|b| b.0)
+        best.map(|b| b.0)
     }
 }
 
@@ -932,6 +936,29 @@ fn corners_valid(p: &[[f64; 3]; 8], j2: f64) -> bool {
     })
 }
 
+/// The least over the corners of the hexahedron `p` (VTK order) of the
+/// scaled Jacobian times its absolute value, without roots: the same
+/// order as the scaled Jacobians (0 where an edge has no length).
+fn min_squared_jacobian(p: &[[f64; 3]; 8]) -> f64 {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+    CORNER_EDGES
+        .iter()
+        .enumerate()
+        .map(|(k, nb)| {
+            let [a, b, c] = nb.map(|j| sub(p[j], p[k]));
+            let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]);
+            let product = dot(a) * dot(b) * dot(c);
+            if product == 0.0 {
+                0.0
+            } else {
+                det * det.abs() / product
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// The volume of the trilinear hexahedron with corners `p` in VTK order:
 /// its Jacobian determinant integrated by 2 x 2 x 2 Gauss points, which is
 /// exact (the determinant has degree 2 in each reference coordinate). The
@@ -1237,14 +1264,26 @@ impl Mesh {
         let domain = *self.domain();
         let active = std::mem::take(&mut s.active);
         let pos = s.pos;
+        // The minimum in user units, as the quality measures it. The
+        // lattice positions' squared figures (no roots) pick the elements
+        // that may hold it: the two differ by rounding only, far inside the
+        // margin.
+        let conn = self.connectivity();
+        let squared: Vec<f64> = active
+            .iter()
+            .map(|&e| min_squared_jacobian(&conn[e as usize].map(|n| pos[n as usize])))
+            .collect();
+        let least = squared.iter().copied().fold(f64::INFINITY, f64::min);
+        let near = least + 1e-9 * least.abs() + 1e-12;
         self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
         self.moved_lattice = Some(pos);
-        // The minimum in user units, as the quality measures it.
         let mut min_j = 1.0f64;
-        for &e in &active {
-            let p = self.element_corners(e as usize, None);
-            for j in corner_scaled_jacobians(&p) {
-                min_j = min_j.min(j);
+        for (&e, &q) in active.iter().zip(&squared) {
+            if q <= near {
+                let p = self.element_corners(e as usize, None);
+                for j in corner_scaled_jacobians(&p) {
+                    min_j = min_j.min(j);
+                }
             }
         }
         let mut worst = [-min_j];
