@@ -206,12 +206,34 @@ impl Bvh {
     /// the lowest index, so the answer depends on `p` and the triangles
     /// only. `tris` must be the slice the tree was built from.
     pub fn nearest(&self, tris: &[Triangle], p: [f64; 3], limit2: f64) -> Option<(u32, f64)> {
+        self.nearest_from(tris, p, limit2, None)
+    }
+
+    /// [`Bvh::nearest`] with a guess: triangle `hint` (if any) is measured
+    /// first, and its distance bounds the search from the start. A guess
+    /// near the answer (the previous query's, for a nearby point) prunes
+    /// most of the tree; the answer is the same with any guess or none.
+    pub fn nearest_from(
+        &self,
+        tris: &[Triangle],
+        p: [f64; 3],
+        limit2: f64,
+        hint: Option<u32>,
+    ) -> Option<(u32, f64)> {
         debug_assert_eq!(tris.len(), self.order.len());
         if self.nodes.is_empty() {
             return None;
         }
         let mut best: Option<(u32, f64)> = None;
         let mut bound = limit2;
+        if let Some(t) = hint.filter(|&t| (t as usize) < tris.len()) {
+            let [a, b, c] = tris[t as usize].v;
+            let d = point_triangle2(p, a, b, c);
+            if d <= bound {
+                best = Some((t, d));
+                bound = d;
+            }
+        }
         let node_d2 = |i: u32| {
             let b = &self.nodes[i as usize].bbox;
             point_box2(p, b.min, b.max)
@@ -443,6 +465,15 @@ mod tests {
                     .unwrap();
                 let got = bvh.nearest(tris, p, f64::INFINITY).unwrap();
                 assert_eq!((got.1, got.0), brute);
+                // Any guess, near or far, gives the same answer; one past
+                // the limit is ignored.
+                let n = tris.len() as u32;
+                for hint in [got.0, (got.0 + 1) % n, rng.next_f64().to_bits() as u32 % n] {
+                    let from = bvh.nearest_from(tris, p, f64::INFINITY, Some(hint));
+                    assert_eq!(from, Some(got));
+                    let limited = bvh.nearest_from(tris, p, 0.5 * brute.0, Some(hint));
+                    assert!(limited.is_none() || brute.0 == 0.0);
+                }
                 // A limit below the distance finds nothing.
                 assert!(bvh.nearest(tris, p, 0.5 * brute.0).is_none() || brute.0 == 0.0);
             }

@@ -29,7 +29,8 @@
 //! the mean displacement of the elements around them (the surface and
 //! everything further in fixed), each move kept only where every element
 //! around stays valid, and every partly snapped node tries a step up again
-//! under the same rule; the relaxed layers make room for it.
+//! at the same time under the same rule (one check of the elements serves
+//! both); the relaxed layers make room for it.
 //!
 //! # Limits
 //!
@@ -59,9 +60,12 @@ use serde::Serialize;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::geometry::bvh::Bvh;
-use crate::geometry::diagnostics::weld;
-use crate::geometry::distance::closest_point_triangle;
+use crate::geometry::distance::{closest_point_triangle, point_box2, point_triangle2};
 use crate::geometry::{Surface, Triangle};
+use crate::refine::SurfaceIndex;
+use std::borrow::Cow;
+use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 use super::faces::SURFACE_PATCH;
 use super::quality::{corner_scaled_jacobians, CORNER_EDGES};
@@ -201,34 +205,169 @@ pub struct FvGeometry {
 }
 
 /// The surface in lattice units with its trees, and its features.
-struct Target {
-    tris: Vec<Triangle>,
-    bvh: Bvh,
+struct Target<'s> {
+    /// The surface's triangles and their tree: the classification's index
+    /// when it was built for the mesh's domain, else made here.
+    tris: Cow<'s, [Triangle]>,
+    bvh: Cow<'s, Bvh>,
     /// Feature edges as degenerate triangles `a b b`.
     edges: Vec<Triangle>,
     edge_bvh: Bvh,
     /// Feature corners as degenerate triangles `p p p`.
     corners: Vec<Triangle>,
     corner_bvh: Bvh,
+    /// The cells of a coarse grid near a feature (see [`FeatureCells`]).
+    near_features: FeatureCells,
 }
 
-impl Target {
-    fn new(surface: &Surface, mesh: &Mesh, feature_angle_deg: f64) -> Target {
-        let d = mesh.domain();
-        let tris: Vec<Triangle> = surface
-            .triangles()
-            .iter()
-            .map(|t| Triangle {
-                v: t.v.map(|p| d.to_lattice(p)),
-            })
-            .collect();
-        let bvh = Bvh::new(&tris);
+/// The half side (in cells of the node's finest element) of the cube
+/// around a node whose triangles [`NearTriangles`] gathers.
+const NEAR_REACH: f64 = 2.0;
+
+/// The triangles whose bounding boxes meet a cube around a recent surface
+/// node: the nearest of them to a point `x` well inside the cube is the
+/// nearest of all when it is nearer than the cube's side from `x` (every
+/// other triangle lies outside the cube).
+#[derive(Default)]
+struct NearTriangles {
+    centre: [f64; 3],
+    half: f64,
+    /// The triangles and their bounding boxes.
+    ids: Vec<u32>,
+    boxes: Vec<([f64; 3], [f64; 3])>,
+    /// The last answer, a first bound for the tree.
+    last: Option<u32>,
+}
+
+impl NearTriangles {
+    /// Gathers the triangles around the cube of half side `half` at `x`.
+    fn gather(&mut self, tris: &[Triangle], bvh: &Bvh, x: [f64; 3], half: f64) {
+        self.centre = x;
+        self.half = half;
+        self.ids.clear();
+        bvh.query_candidates(x.map(|v| v - half), x.map(|v| v + half), &mut self.ids);
+        self.ids.sort_unstable();
+        self.boxes.clear();
+        self.boxes.extend(self.ids.iter().map(|&t| {
+            let b = tris[t as usize].aabb();
+            (b.min, b.max)
+        }));
+    }
+
+    /// The triangle nearest `x` (ties to the lowest index) if the gathered
+    /// ones prove it: nearer than any point outside the cube, with a
+    /// margin for rounding.
+    fn nearest(&self, tris: &[Triangle], x: [f64; 3]) -> Option<u32> {
+        let dx = (0..3)
+            .map(|a| (x[a] - self.centre[a]).abs())
+            .fold(0.0, f64::max);
+        let room = self.half - dx;
+        if room <= 0.0 {
+            return None;
+        }
+        let limit = 0.98 * room * room;
+        let mut best: Option<(u32, f64)> = None;
+        let mut bound = limit;
+        // The last answer first: usually near, it prunes the rest.
+        if let Some(t) = self.last {
+            let [p, q, r] = tris[t as usize].v;
+            let d = point_triangle2(x, p, q, r);
+            if d < bound {
+                best = Some((t, d));
+                bound = d;
+            }
+        }
+        for (&t, b) in self.ids.iter().zip(&self.boxes) {
+            if point_box2(x, b.0, b.1) > bound {
+                continue;
+            }
+            let [p, q, r] = tris[t as usize].v;
+            let d = point_triangle2(x, p, q, r);
+            // A tie goes to the lower index.
+            let better = match best {
+                None => d < bound,
+                Some((bt, bd)) => d < bd || (d == bd && t < bt),
+            };
+            if better {
+                best = Some((t, d));
+                bound = d;
+            }
+        }
+        best.map(|b| b.0)
+    }
+}
+
+/// The cells of a grid of side `side` (lattice units) that some feature
+/// edge or corner's bounding box, grown by `side`, overlaps: a point in no
+/// such cell has no feature within `side`, which spares most surface nodes
+/// their two tree queries (most are far from any feature).
+struct FeatureCells {
+    side: f64,
+    cells: std::collections::HashSet<[i64; 3]>,
+}
+
+impl FeatureCells {
+    fn new(items: &[Triangle], side: f64) -> FeatureCells {
+        let mut cells = std::collections::HashSet::new();
+        let cell = |x: f64| (x / side).floor() as i64;
+        for t in items {
+            let b = t.aabb();
+            let lo = b.min.map(|x| cell(x - side));
+            let hi = b.max.map(|x| cell(x + side));
+            for i in lo[0]..=hi[0] {
+                for j in lo[1]..=hi[1] {
+                    for k in lo[2]..=hi[2] {
+                        cells.insert([i, j, k]);
+                    }
+                }
+            }
+        }
+        FeatureCells { side, cells }
+    }
+
+    /// Whether a feature may lie within `side` of `x`.
+    fn near(&self, x: [f64; 3]) -> bool {
+        !self.cells.is_empty()
+            && self
+                .cells
+                .contains(&x.map(|v| (v / self.side).floor() as i64))
+    }
+}
+
+impl<'s> Target<'s> {
+    /// `reach` is the largest feature reach any query will use
+    /// ([`FEATURE_REACH`] times the largest cell). `index`, if given, is
+    /// `surface` in the lattice units of `mesh`'s domain.
+    fn new(
+        surface: &Surface,
+        index: Option<&'s SurfaceIndex>,
+        mesh: &Mesh,
+        feature_angle_deg: f64,
+        reach: f64,
+    ) -> Target<'s> {
+        let (tris, bvh) = match index {
+            Some(ix) => (Cow::Borrowed(&ix.tris[..]), Cow::Borrowed(&ix.bvh)),
+            None => {
+                let d = mesh.domain();
+                let tris: Vec<Triangle> = surface
+                    .triangles()
+                    .iter()
+                    .map(|t| Triangle {
+                        v: t.v.map(|p| d.to_lattice(p)),
+                    })
+                    .collect();
+                let bvh = Bvh::new(&tris);
+                (Cow::Owned(tris), Cow::Owned(bvh))
+            }
+        };
         let (edges, corners) = if feature_angle_deg < 180.0 {
             features(&tris, feature_angle_deg)
         } else {
             (Vec::new(), Vec::new())
         };
+        let items: Vec<Triangle> = edges.iter().chain(&corners).copied().collect();
         Target {
+            near_features: FeatureCells::new(&items, reach.max(1.0)),
             bvh,
             edge_bvh: Bvh::new(&edges),
             corner_bvh: Bvh::new(&corners),
@@ -241,50 +380,110 @@ impl Target {
     /// Where a surface node at `x` goes, for cells of side `h` around it
     /// (lattice units): a feature corner, a feature edge's or the surface's
     /// closest point, and whether it is a feature.
-    fn of(&self, x: [f64; 3], h: f64) -> Option<([f64; 3], bool)> {
+    /// `near` holds the triangles around the previous queries (nodes come
+    /// in traversal order, so the next is usually close).
+    fn of(&self, x: [f64; 3], h: f64, near: &mut NearTriangles) -> Option<([f64; 3], bool)> {
         let reach2 = (FEATURE_REACH * h) * (FEATURE_REACH * h);
-        if let Some((i, _)) = self.corner_bvh.nearest(&self.corners, x, reach2) {
-            return Some((self.corners[i as usize].v[0], true));
+        if self.near_features.near(x) {
+            if let Some((i, _)) = self.corner_bvh.nearest(&self.corners, x, reach2) {
+                return Some((self.corners[i as usize].v[0], true));
+            }
+            if let Some((i, _)) = self.edge_bvh.nearest(&self.edges, x, reach2) {
+                let [a, b, c] = self.edges[i as usize].v;
+                return Some((closest_point_triangle(x, a, b, c), true));
+            }
         }
-        if let Some((i, _)) = self.edge_bvh.nearest(&self.edges, x, reach2) {
-            let [a, b, c] = self.edges[i as usize].v;
-            return Some((closest_point_triangle(x, a, b, c), true));
-        }
-        // Most surface nodes lie within a cell of the surface: a tight
-        // first bound prunes most of the tree (the answer is the same).
-        let near = 1.5 * h;
-        let far = SURFACE_REACH * h;
-        let (i, _) = self
-            .bvh
-            .nearest(&self.tris, x, near * near)
-            .or_else(|| self.bvh.nearest(&self.tris, x, far * far))?;
+        // Most surface nodes lie within a cell of the surface: the
+        // triangles gathered around a recent node usually hold the answer,
+        // provably; else the tree, bounded by the previous answer from
+        // the start (the answer is the same).
+        let i = match near.nearest(&self.tris, x) {
+            Some(i) => i,
+            None => {
+                near.gather(&self.tris, &self.bvh, x, NEAR_REACH * h);
+                match near.nearest(&self.tris, x) {
+                    Some(i) => i,
+                    None => {
+                        let far = SURFACE_REACH * h;
+                        let hint = near.last;
+                        self.bvh.nearest_from(&self.tris, x, far * far, hint)?.0
+                    }
+                }
+            }
+        };
+        near.last = Some(i);
         let [a, b, c] = self.tris[i as usize].v;
         Some((closest_point_triangle(x, a, b, c), false))
     }
 }
 
+/// A fast, fixed hash for the welding maps (their order never shows: the
+/// outputs follow the triangles' order).
+#[derive(Default)]
+struct FoldHasher(u64);
+
+impl std::hash::Hasher for FoldHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for c in bytes.chunks(8) {
+            let mut w = [0u8; 8];
+            w[..c.len()].copy_from_slice(c);
+            self.write_u64(u64::from_le_bytes(w));
+        }
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(26) ^ x).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+}
+
+type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
+
 /// The feature edges (as triangles `a b b`) and corners (`p p p`) of
 /// `tris` for a feature angle in degrees: edges between facets whose
 /// normals differ by more, and edges without exactly two facets; corners
-/// where not exactly two feature edges meet.
+/// where not exactly two feature edges meet. Vertices with the same bits
+/// are one (-0 and 0 too); edges come in the order of their first facet,
+/// corners in the order their vertices first appear.
 fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>) {
-    let (ids, nv) = weld(tris);
-    let mut point = vec![[0.0; 3]; nv];
-    // (low vertex, high vertex, facet)
-    let mut uses: Vec<(u64, u64, u32)> = Vec::with_capacity(3 * tris.len());
+    let bits = |c: f64| if c == 0.0 { 0 } else { c.to_bits() };
+    let mut vertex: FoldMap<[u64; 3], u32> = FoldMap::default();
+    vertex.reserve(tris.len() / 2 + 16);
+    let mut point: Vec<[f64; 3]> = Vec::with_capacity(tris.len() / 2 + 16);
+    let ids: Vec<[u32; 3]> = tris
+        .iter()
+        .map(|t| {
+            t.v.map(|p| {
+                *vertex.entry(p.map(bits)).or_insert_with(|| {
+                    point.push(p);
+                    (point.len() - 1) as u32
+                })
+            })
+        })
+        .collect();
+    drop(vertex);
+    let nv = point.len();
+    let flat = |v: &[u32; 3]| v[0] == v[1] || v[1] == v[2] || v[0] == v[2];
+    // Per edge (low, high vertex): its first facet, the second, and how
+    // many use it.
+    let mut uses: FoldMap<(u32, u32), (u32, u32, u32)> = FoldMap::default();
+    uses.reserve(3 * tris.len() / 2 + 16);
     for (t, v) in ids.iter().enumerate() {
-        for k in 0..3 {
-            point[v[k] as usize] = tris[t].v[k];
-        }
-        if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+        if flat(v) {
             continue;
         }
         for k in 0..3 {
             let (a, b) = (v[k], v[(k + 1) % 3]);
-            uses.push((a.min(b), a.max(b), t as u32));
+            let u = uses
+                .entry((a.min(b), a.max(b)))
+                .or_insert((t as u32, u32::MAX, 0));
+            if u.2 == 1 {
+                u.1 = t as u32;
+            }
+            u.2 += 1;
         }
     }
-    uses.sort_unstable();
     let cos_limit = angle_deg.to_radians().cos();
     let unit = |t: u32| {
         let n = tris[t as usize].normal();
@@ -297,25 +496,29 @@ fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>)
     };
     let mut edges = Vec::new();
     let mut degree = vec![0u32; nv];
-    let mut i = 0;
-    while i < uses.len() {
-        let mut j = i + 1;
-        while j < uses.len() && uses[j].0 == uses[i].0 && uses[j].1 == uses[i].1 {
-            j += 1;
+    for (t, v) in ids.iter().enumerate() {
+        if flat(v) {
+            continue;
         }
-        let sharp = if j - i == 2 {
-            let (n, m) = (unit(uses[i].2), unit(uses[i + 1].2));
-            n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_limit
-        } else {
-            true
-        };
-        if sharp {
-            let (a, b) = (uses[i].0 as usize, uses[i].1 as usize);
-            edges.push(Triangle::new(point[a], point[b], point[b]));
-            degree[a] += 1;
-            degree[b] += 1;
+        for k in 0..3 {
+            let (a, b) = (v[k].min(v[(k + 1) % 3]), v[k].max(v[(k + 1) % 3]));
+            let (first, second, count) = uses[&(a, b)];
+            if first != t as u32 {
+                continue;
+            }
+            let sharp = if count == 2 {
+                let (n, m) = (unit(first), unit(second));
+                n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_limit
+            } else {
+                true
+            };
+            if sharp {
+                let (a, b) = (a as usize, b as usize);
+                edges.push(Triangle::new(point[a], point[b], point[b]));
+                degree[a] += 1;
+                degree[b] += 1;
+            }
         }
-        i = j;
     }
     let corners = (0..nv)
         .filter(|&v| degree[v] > 0 && degree[v] != 2)
@@ -377,7 +580,14 @@ impl<'a> Snapper<'a> {
     /// each corner below the least scaled Jacobian the corner's node (through its
     /// dependencies when it hangs), else its three neighbours along the
     /// edges, else every eligible node of the element.
-    fn blame(&self, e: usize, eligible: impl Fn(usize) -> bool, flags: &mut [u64]) {
+    /// Newly flagged nodes are appended to `flagged`.
+    fn blame(
+        &self,
+        e: usize,
+        eligible: impl Fn(usize) -> bool,
+        flags: &mut [u64],
+        flagged: &mut Vec<u32>,
+    ) {
         let c = &self.mesh.connectivity()[e];
         let p = c.map(|n| self.pos[n as usize]);
         let j = corner_scaled_jacobians(&p);
@@ -386,7 +596,10 @@ impl<'a> Snapper<'a> {
             let node = node as usize;
             let mut visit = |n: usize| {
                 if eligible(n) {
-                    flags[n] = 1;
+                    if flags[n] == 0 {
+                        flags[n] = 1;
+                        flagged.push(n as u32);
+                    }
                     *any = true;
                 }
             };
@@ -453,18 +666,6 @@ impl<'a> Snapper<'a> {
         }
     }
 
-    /// Ors flags over the sharing ranks; returns how many flags are set on
-    /// owned nodes, summed over the ranks.
-    fn agree_flags(&self, flags: &mut [u64]) -> u64 {
-        self.exchange(flags, 1, |a, b| *a |= b);
-        let mut n = [flags[..self.mesh.num_owned()]
-            .iter()
-            .filter(|&&f| f != 0)
-            .count() as u64];
-        self.comm.sum_u64(&mut n);
-        n[0]
-    }
-
     /// The position of surface node `n` after its steps back.
     fn snapped_position(&self, n: usize) -> [f64; 3] {
         let (x, t, k) = (self.lattice[n], self.target[n], self.step[n]);
@@ -494,29 +695,37 @@ impl<'a> Snapper<'a> {
     }
 
     /// The elements of `cands` with a corner below the least scaled
-    /// Jacobian.
-    fn bad_among(&self, cands: &[u32]) -> Vec<usize> {
+    /// Jacobian. Their hanging corners are placed from their dependencies
+    /// first: every hanging node depending on a changed node is a corner of
+    /// an element around it.
+    fn bad_among(&mut self, cands: &[u32]) -> Vec<usize> {
         let conn = self.mesh.connectivity();
         let j2 = self.min_jacobian * self.min_jacobian;
-        cands
-            .iter()
-            .map(|&e| e as usize)
-            .filter(|&e| {
-                let p = conn[e].map(|n| self.pos[n as usize]);
-                !corners_valid(&p, j2)
-            })
-            .collect()
+        let mut bad = Vec::new();
+        for &e in cands {
+            let c = &conn[e as usize];
+            let mut p = [[0.0; 3]; 8];
+            for (q, &n) in p.iter_mut().zip(c) {
+                let n = n as usize;
+                if n >= self.ni {
+                    self.pos[n] = mean(&self.pos, self.deps[n - self.ni]);
+                }
+                *q = self.pos[n];
+            }
+            if !corners_valid(&p, j2) {
+                bad.push(e as usize);
+            }
+        }
+        bad
     }
 
-    /// The active elements depending on a node with `flags[n]` set, once
-    /// each: only they can have changed.
-    fn around(&self, flags: impl Fn(usize) -> bool) -> Vec<u32> {
-        let mut seen = vec![false; self.mesh.elements().len()];
+    /// The active elements depending on the nodes `nodes`, once each:
+    /// only they can have changed. `seen` (one flag per element, all
+    /// false) is left all false.
+    fn around(&self, nodes: &[u32], seen: &mut [bool]) -> Vec<u32> {
         let mut out = Vec::new();
-        for n in 0..self.ni {
-            if !flags(n) {
-                continue;
-            }
+        for &n in nodes {
+            let n = n as usize;
             let (a, b) = (self.adj_start[n] as usize, self.adj_start[n + 1] as usize);
             for &e in &self.adj[a..b] {
                 if !seen[e as usize] {
@@ -525,6 +734,12 @@ impl<'a> Snapper<'a> {
                 }
             }
         }
+        for &e in &out {
+            seen[e as usize] = false;
+        }
+        // In storage order: the measurements then read the connectivity
+        // and the positions near where they read last.
+        out.sort_unstable();
         out
     }
 
@@ -554,35 +769,38 @@ impl<'a> Snapper<'a> {
         blamable: impl Fn(&Self, usize) -> bool,
         mut step_back: impl FnMut(&mut Self, usize),
     ) {
+        // Allocated once: the rounds after the first are small.
+        let mut flags = vec![0u64; self.ni];
+        let mut flagged: Vec<u32> = Vec::new();
+        let mut seen = vec![false; self.mesh.elements().len()];
         loop {
-            self.refresh_hanging(&cands);
             let bad = self.bad_among(&cands);
-            let mut flags = vec![0u64; self.ni];
+            flagged.clear();
             for e in bad {
-                self.blame(e, |n| blamable(self, n), &mut flags);
+                self.blame(e, |n| blamable(self, n), &mut flags, &mut flagged);
             }
             // The owner of a flagged node has its flag after the exchange.
-            if self.agree_flags(&mut flags) == 0 {
+            self.exchange(&mut flags, 1, |a, b| *a |= b);
+            if self.comm.size() > 1 {
+                // Flags other ranks set on shared nodes.
+                for (_, nodes) in &self.lists {
+                    flagged.extend(nodes.iter().filter(|&&n| flags[n as usize] != 0));
+                }
+                flagged.sort_unstable();
+                flagged.dedup();
+            }
+            let owned = self.mesh.num_owned() as u32;
+            let mut count = [flagged.iter().filter(|&&n| n < owned).count() as u64];
+            self.comm.sum_u64(&mut count);
+            if count[0] == 0 {
                 break;
             }
-            for (n, _) in flags.iter().enumerate().filter(|f| *f.1 != 0) {
-                step_back(self, n);
+            for &n in &flagged {
+                step_back(self, n as usize);
             }
-            cands = self.around(|n| flags[n] != 0);
-        }
-    }
-
-    /// The hanging corners of elements `cands` from their dependencies:
-    /// every hanging node depending on a changed node is a corner of an
-    /// element around it.
-    fn refresh_hanging(&mut self, cands: &[u32]) {
-        let conn = self.mesh.connectivity();
-        for &e in cands {
-            for &c in &conn[e as usize] {
-                let c = c as usize;
-                if c >= self.ni {
-                    self.pos[c] = mean(&self.pos, self.deps[c - self.ni]);
-                }
+            cands = self.around(&flagged, &mut seen);
+            for &n in &flagged {
+                flags[n as usize] = 0;
             }
         }
     }
@@ -592,7 +810,24 @@ impl<'a> Snapper<'a> {
     /// valid or nothing is left to undo. Only elements around moved nodes
     /// are measured: the others were valid (or beyond help) before.
     fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
-        let cands = self.around(|n| moved[n]);
+        let nodes: Vec<u32> = (0..self.ni as u32).filter(|&n| moved[n as usize]).collect();
+        // When many nodes moved, one pass over the active elements finds
+        // the same set sooner than the nodes' adjacency lists.
+        let cands = if nodes.len() * 8 > self.ni {
+            let moved = &*moved;
+            let touches = |e: u32| {
+                let mut any = false;
+                self.support(e as usize, |n| any |= moved[n]);
+                any
+            };
+            self.active
+                .iter()
+                .copied()
+                .filter(|&e| touches(e))
+                .collect()
+        } else {
+            self.around(&nodes, &mut vec![false; self.mesh.elements().len()])
+        };
         let moved = std::cell::Cell::from_mut(moved).as_slice_of_cells();
         self.settle(
             cands,
@@ -605,8 +840,9 @@ impl<'a> Snapper<'a> {
     }
 
     /// One relaxation step of the layer nodes, each moving only by more
-    /// than [`RELAX_TOLERANCE`] of its cell; returns how many moved (over
-    /// all ranks, owned nodes).
+    /// than [`RELAX_TOLERANCE`] of its cell, and one step up of every
+    /// partly snapped node, the moves kept where the elements stay valid;
+    /// returns how many moved (over all ranks, owned nodes).
     fn relax(&mut self) -> u64 {
         self.update_hanging();
         let ni = self.ni;
@@ -659,31 +895,23 @@ impl<'a> Snapper<'a> {
                 moved[n] = true;
             }
         }
-        self.refuse_invalid(&mut moved, |s, n| {
-            let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
-            s.pos[n] = old[k].1;
-        });
-        let mut count = [moved[..self.mesh.num_owned()]
-            .iter()
-            .filter(|&&m| m)
-            .count() as u64];
-        self.comm.sum_u64(&mut count);
-        count[0]
-    }
-
-    /// Moves every partly snapped node one step up where the elements stay
-    /// valid; returns how many advanced (over all ranks).
-    fn advance(&mut self) -> u64 {
-        let mut moved: Vec<bool> = (0..self.ni)
-            .map(|n| self.snap[n] && self.step[n] > 0)
-            .collect();
-        for (n, _) in moved.iter().enumerate().filter(|m| *m.1) {
-            self.step[n] -= 1;
-            self.pos[n] = self.snapped_position(n);
+        // The partly snapped nodes step up at the same time: one check of
+        // the elements around serves both moves.
+        for (n, m) in moved.iter_mut().enumerate() {
+            if self.snap[n] && self.step[n] > 0 {
+                self.step[n] -= 1;
+                self.pos[n] = self.snapped_position(n);
+                *m = true;
+            }
         }
         self.refuse_invalid(&mut moved, |s, n| {
-            s.step[n] += 1;
-            s.pos[n] = s.snapped_position(n);
+            if s.snap[n] {
+                s.step[n] += 1;
+                s.pos[n] = s.snapped_position(n);
+            } else {
+                let k = old.binary_search_by_key(&(n as u32), |o| o.0).unwrap_or(0);
+                s.pos[n] = old[k].1;
+            }
         });
         let mut count = [moved[..self.mesh.num_owned()]
             .iter()
@@ -706,6 +934,29 @@ fn corners_valid(p: &[[f64; 3]; 8], j2: f64) -> bool {
             + a[2] * (b[0] * c[1] - b[1] * c[0]);
         det > 0.0 && det * det >= j2 * (dot(a) * dot(b) * dot(c))
     })
+}
+
+/// The least over the corners of the hexahedron `p` (VTK order) of the
+/// scaled Jacobian times its absolute value, without roots: the same
+/// order as the scaled Jacobians (0 where an edge has no length).
+fn min_squared_jacobian(p: &[[f64; 3]; 8]) -> f64 {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+    CORNER_EDGES
+        .iter()
+        .enumerate()
+        .map(|(k, nb)| {
+            let [a, b, c] = nb.map(|j| sub(p[j], p[k]));
+            let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]);
+            let product = dot(a) * dot(b) * dot(c);
+            if product == 0.0 {
+                0.0
+            } else {
+                det * det.abs() / product
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// The volume of the trilinear hexahedron with corners `p` in VTK order:
@@ -836,6 +1087,20 @@ impl Mesh {
         surface: &Surface,
         opts: &SnapOptions,
     ) -> Result<SnapReport> {
+        self.snap_indexed(comm, surface, None, opts)
+    }
+
+    /// [`Mesh::snap`] with the surface's index if there is one for this
+    /// mesh's domain (the classification's): its triangles and tree are
+    /// used instead of made again.
+    pub(crate) fn snap_indexed(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        index: Option<&SurfaceIndex>,
+        opts: &SnapOptions,
+    ) -> Result<SnapReport> {
+        let index = index.filter(|ix| ix.tris.len() == surface.len());
         agree(comm, opts.check())?;
         self.moved = None;
         self.moved_lattice = None;
@@ -852,7 +1117,6 @@ impl Mesh {
                 (d, h.len() as u8)
             })
             .collect();
-        let target_surface = Target::new(surface, self, opts.feature_angle_deg);
         let mut s = Snapper {
             mesh: self,
             comm,
@@ -890,13 +1154,18 @@ impl Mesh {
             }
         }
         s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
+        let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
+        let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
+        let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
+        let target_surface = Target::new(surface, index, self, opts.feature_angle_deg, reach);
 
         let mut feature = vec![false; ni];
+        let mut near_tris = NearTriangles::default();
         for n in 0..ni {
-            if !on_surface(n) || masks[n] & sides != 0 || side[n] == u64::MAX {
+            if !queried(n) {
                 continue;
             }
-            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64) {
+            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64, &mut near_tris) {
                 s.snap[n] = true;
                 s.target[n] = t;
                 s.step[n] = 0;
@@ -958,8 +1227,7 @@ impl Mesh {
         for _ in 0..opts.iterations {
             iterations += 1;
             let moved = s.relax();
-            let advanced = s.advance();
-            if moved + advanced == 0 {
+            if moved == 0 {
                 break;
             }
         }
@@ -996,14 +1264,26 @@ impl Mesh {
         let domain = *self.domain();
         let active = std::mem::take(&mut s.active);
         let pos = s.pos;
+        // The minimum in user units, as the quality measures it. The
+        // lattice positions' squared figures (no roots) pick the elements
+        // that may hold it: the two differ by rounding only, far inside the
+        // margin.
+        let conn = self.connectivity();
+        let squared: Vec<f64> = active
+            .iter()
+            .map(|&e| min_squared_jacobian(&conn[e as usize].map(|n| pos[n as usize])))
+            .collect();
+        let least = squared.iter().copied().fold(f64::INFINITY, f64::min);
+        let near = least + 1e-9 * least.abs() + 1e-12;
         self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
         self.moved_lattice = Some(pos);
-        // The minimum in user units, as the quality measures it.
         let mut min_j = 1.0f64;
-        for &e in &active {
-            let p = self.element_corners(e as usize, None);
-            for j in corner_scaled_jacobians(&p) {
-                min_j = min_j.min(j);
+        for (&e, &q) in active.iter().zip(&squared) {
+            if q <= near {
+                let p = self.element_corners(e as usize, None);
+                for j in corner_scaled_jacobians(&p) {
+                    min_j = min_j.min(j);
+                }
             }
         }
         let mut worst = [-min_j];

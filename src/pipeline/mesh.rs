@@ -95,7 +95,11 @@ impl Session {
         let comm = self.comm.clone();
         let (mesh, surface) = (&mut self.mesh, &self.surface);
         let report = self.timer.time(&*comm, "snap", || match (mesh, surface) {
-            (Some(m), Some(s)) => m.snap(&*comm, &s.surface, opts),
+            (Some(m), Some(s)) => {
+                // The classification's index, if it was made for this cube.
+                let index = (s.index_domain == *m.domain()).then_some(&s.index);
+                m.snap_indexed(&*comm, &s.surface, index, opts)
+            }
             _ => Ok(SnapReport::default()),
         });
         let report = agree(&*comm, report)?;
