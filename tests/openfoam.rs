@@ -62,17 +62,6 @@ fn octmesh(np: usize, args: &[&str], stats: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(stats).unwrap()).unwrap()
 }
 
-fn number_after(text: &str, label: &str) -> f64 {
-    let at = text
-        .find(label)
-        .unwrap_or_else(|| panic!("no '{label}' in:\n{text}"));
-    text[at + label.len()..]
-        .split_whitespace()
-        .next()
-        .and_then(|w| w.trim_end_matches(['.', ';']).parse().ok())
-        .unwrap_or_else(|| panic!("no number after '{label}'"))
-}
-
 /// checkMesh's verdict on `case`, asserted as the module says.
 fn judge(rc: &Path, case: &Path, np: usize, stats: &serde_json::Value, tag: &str) {
     let par = if np > 1 {
@@ -95,13 +84,13 @@ fn judge(rc: &Path, case: &Path, np: usize, stats: &serde_json::Value, tag: &str
             "{tag}: checkMesh failed a check: {line}\n{all}"
         );
     }
-    let cells = number_after(&all, "cells:");
+    let cells = common::number_after(&all, "cells:");
     assert_eq!(
         cells as u64,
         stats["elements"].as_u64().unwrap(),
         "{tag}: cells"
     );
-    let volume = number_after(&all, "Total volume =");
+    let volume = common::number_after(&all, "Total volume =");
     let kept = stats["kept_volume"].as_f64().unwrap();
     assert!(
         ((volume - kept) / kept).abs() < 1e-6,
@@ -454,14 +443,7 @@ fn ascii_files_read_back_close_every_cell() {
     );
     let mesh = case.join("constant/polyMesh");
     let (points, faces) = read_points_and_faces(&mesh);
-    let owner: Vec<usize> = list_lines(&mesh.join("owner"))
-        .iter()
-        .map(|l| l.parse().unwrap())
-        .collect();
-    let neighbour: Vec<usize> = list_lines(&mesh.join("neighbour"))
-        .iter()
-        .map(|l| l.parse().unwrap())
-        .collect();
+    let (owner, neighbour) = owner_and_neighbour(&mesh);
     assert_eq!(owner.len(), faces.len());
     let cells = owner.iter().chain(&neighbour).max().unwrap() + 1;
     assert_eq!(cells as u64, s["elements"].as_u64().unwrap());
@@ -505,8 +487,8 @@ fn ascii_files_read_back_close_every_cell() {
     let side = s["domain_side"].as_f64().unwrap();
     for name in ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"] {
         let at = boundary.find(&format!("    {name}\n")).unwrap();
-        let n = number_after(&boundary[at..], "nFaces") as usize;
-        let start = number_after(&boundary[at..], "startFace") as usize;
+        let n = common::number_after(&boundary[at..], "nFaces") as usize;
+        let start = common::number_after(&boundary[at..], "startFace") as usize;
         let a: f64 = faces[start..start + n]
             .iter()
             .map(|f| {
@@ -534,8 +516,8 @@ fn patches_of(boundary: &Path) -> Vec<(String, usize, usize)> {
     for (i, l) in lines.iter().enumerate() {
         if lines.get(i + 1).is_some_and(|n| n.trim() == "{") && l.starts_with("    ") {
             let rest = lines[i..].join("\n");
-            let n = number_after(&rest, "nFaces") as usize;
-            let start = number_after(&rest, "startFace") as usize;
+            let n = common::number_after(&rest, "nFaces") as usize;
+            let start = common::number_after(&rest, "startFace") as usize;
             out.push((l.trim().to_string(), n, start));
         }
     }
@@ -902,6 +884,16 @@ fn read_face_scalars(path: &Path, patches: &[(String, usize, usize)]) -> Vec<f64
     out
 }
 
+/// The `owner` and `neighbour` lists of an ASCII polyMesh.
+fn owner_and_neighbour(mesh: &Path) -> (Vec<usize>, Vec<usize>) {
+    let read = |name: &str| -> Vec<usize> {
+        (list_lines(&mesh.join(name)).iter())
+            .map(|l| l.parse().unwrap())
+            .collect()
+    };
+    (read("owner"), read("neighbour"))
+}
+
 /// Cell velocities reconstructed from face fluxes as OpenFOAM's
 /// `fvc::reconstruct` defines them: in each cell, `U` solves
 /// `(sum S S^T / |S|) U = sum (S / |S|) phi` over its faces (area vectors
@@ -911,14 +903,7 @@ fn read_face_scalars(path: &Path, patches: &[(String, usize, usize)]) -> Vec<f64
 fn reconstruct(case: &Path, phi_file: &Path) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
     let mesh = case.join("constant/polyMesh");
     let (points, faces) = read_points_and_faces(&mesh);
-    let owner: Vec<usize> = list_lines(&mesh.join("owner"))
-        .iter()
-        .map(|l| l.parse().unwrap())
-        .collect();
-    let neighbour: Vec<usize> = list_lines(&mesh.join("neighbour"))
-        .iter()
-        .map(|l| l.parse().unwrap())
-        .collect();
+    let (owner, neighbour) = owner_and_neighbour(&mesh);
     let patches = patches_of(&mesh.join("boundary"));
     let phi = read_face_scalars(phi_file, &patches);
     assert_eq!(phi.len(), faces.len());

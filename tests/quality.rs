@@ -21,18 +21,6 @@ use std::time::Duration;
 
 use common::{foam, json_file, octmesh_bin, octmesh_ok, openfoam, scratch, shared_model};
 
-/// The number printed right after `label`, as text.
-fn printed_after<'a>(text: &'a str, label: &str) -> &'a str {
-    let at = text
-        .find(label)
-        .unwrap_or_else(|| panic!("no '{label}' in:\n{text}"));
-    text[at + label.len()..]
-        .split_whitespace()
-        .next()
-        .map(|w| w.trim_end_matches([',', ';']))
-        .unwrap_or_else(|| panic!("nothing after '{label}'"))
-}
-
 /// Significant digits of a printed number (`25.239402` has 8).
 fn significant_digits(s: &str) -> usize {
     let mantissa = s.split(['e', 'E']).next().unwrap_or(s);
@@ -98,9 +86,9 @@ fn compare_with_checkmesh(
         "checkMesh -allGeometry".to_string()
     };
     let text = foam(rc, &case, &run);
-    let max = printed_after(&text, "Mesh non-orthogonality Max:");
-    let average = printed_after(&text, "average:");
-    let skew = printed_after(&text, "Max skewness =");
+    let max = common::word_after(&text, "Mesh non-orthogonality Max:");
+    let average = common::word_after(&text, "average:");
+    let skew = common::word_after(&text, "Max skewness =");
     let digits = [max, average, skew]
         .iter()
         .map(|s| significant_digits(s))

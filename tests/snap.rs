@@ -115,7 +115,7 @@ fn check_mesh_on_the_fluid_sphere() {
             ("average:", "non_orthogonality_average"),
             ("Max skewness =", "skewness_max"),
         ] {
-            let printed = printed_after(figures, label);
+            let printed = common::number_after(figures, label);
             let mine = q[key].as_f64().unwrap_or_else(|| panic!("no {key} in {q}"));
             assert!(
                 (mine - printed).abs() <= 1e-6 * printed.abs(),
@@ -127,18 +127,6 @@ fn check_mesh_on_the_fluid_sphere() {
         }
         println!("snapped fluid sphere, level 6, {np} rank(s): checkMesh Mesh OK");
     }
-}
-
-/// The number printed right after `label` in checkMesh's output.
-fn printed_after(text: &str, label: &str) -> f64 {
-    let at = text
-        .find(label)
-        .unwrap_or_else(|| panic!("no '{label}' in:\n{text}"));
-    text[at + label.len()..]
-        .split_whitespace()
-        .next()
-        .and_then(|w| w.trim_end_matches([',', ';']).parse().ok())
-        .unwrap_or_else(|| panic!("no number after '{label}' in:\n{text}"))
 }
 
 /// The snapped mesh of the built-in or shared surface `name` at `level`

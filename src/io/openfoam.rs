@@ -43,7 +43,9 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
-use crate::mesh::points::{edge_midpoint, point_key, PointFilter, PointIndex};
+use crate::mesh::points::{
+    corner_at, edge_midpoint, near_point_keys, point_key, PointFilter, PointIndex,
+};
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
 
@@ -96,15 +98,7 @@ struct PolyMesh {
 fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
     let lattice = mesh.node_lattice();
-    let mut keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
-    for h in &mesh.halo().leaves {
-        let (c, s) = (h.coords(), h.side());
-        for k in 0..8 {
-            keys.push(point_key(
-                [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 }),
-            ));
-        }
-    }
+    let keys = near_point_keys(mesh);
     let filter = PointFilter::new(&keys);
     let mut set = PointIndex::new(keys);
     let missing = |x: [u32; 3]| {
@@ -122,15 +116,7 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     let (elements, conn) = (mesh.elements(), mesh.connectivity());
     // Element `e`'s corner at `p`, if `p` is one: (lowest corner, side).
     let corner_of = |e: u32, (c, s): ([u32; 3], u32), p: [u32; 3]| -> Option<usize> {
-        let mut m = 0;
-        for a in 0..3 {
-            if p[a] == c[a] + s {
-                m |= 1 << a;
-            } else if p[a] != c[a] {
-                return None;
-            }
-        }
-        Some(node_at[conn[e as usize][VTK_TO_MORTON[m]] as usize] as usize)
+        corner_at(c, s, p).map(|m| node_at[conn[e as usize][VTK_TO_MORTON[m]] as usize] as usize)
     };
     let cube = |e: u32| (elements[e as usize].coords(), elements[e as usize].side());
     let mut label = vec![UNUSED; set.len()];

@@ -14,6 +14,37 @@ pub fn point_key(p: [u32; 3]) -> u64 {
     morton_encode(p[0], p[1], p[2])
 }
 
+/// The Morton corner of the cube with lowest corner `c` and side `s` that
+/// lies at lattice point `p`, if one does.
+#[inline]
+pub fn corner_at(c: [u32; 3], s: u32, p: [u32; 3]) -> Option<usize> {
+    let mut m = 0;
+    for a in 0..3 {
+        if p[a] == c[a] + s {
+            m |= 1 << a;
+        } else if p[a] != c[a] {
+            return None;
+        }
+    }
+    Some(m)
+}
+
+/// The keys of the mesh points near this rank: every corner of a local
+/// element (local nodes first, in node order) or of a halo element, the
+/// points a face's edges may carry. Duplicates are left in.
+pub fn near_point_keys(mesh: &super::Mesh) -> Vec<u64> {
+    let mut keys: Vec<u64> = mesh.node_lattice().iter().map(|&p| point_key(p)).collect();
+    for h in &mesh.halo().leaves {
+        let (c, s) = (h.coords(), h.side());
+        for k in 0..8 {
+            keys.push(point_key(
+                [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 }),
+            ));
+        }
+    }
+    keys
+}
+
 /// A set of lattice points, sorted by [`point_key`], each known by its
 /// position in the set.
 #[derive(Clone, Debug, Default)]

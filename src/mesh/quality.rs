@@ -97,7 +97,7 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{FaceKind, Faces, Kept, Other};
-use crate::mesh::points::{face_polygon, point_key, PointFilter, PointIndex};
+use crate::mesh::points::{corner_at, face_polygon, near_point_keys, PointFilter, PointIndex};
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
@@ -518,15 +518,7 @@ impl Mesh {
     fn moved_faces(&self, faces: &Faces) -> Result<MovedFaces> {
         // The mesh points near this rank: every corner of a local or halo
         // element (the points the OpenFOAM writer puts on the faces' edges).
-        let mut keys: Vec<u64> = self.node_lattice().iter().map(|&p| point_key(p)).collect();
-        for h in &self.halo().leaves {
-            let (c, s) = (h.coords(), h.side());
-            for m in 0..8 {
-                keys.push(point_key(
-                    [0, 1, 2].map(|a| c[a] + if m >> a & 1 == 1 { s } else { 0 }),
-                ));
-            }
-        }
+        let keys = near_point_keys(self);
         let filter = PointFilter::new(&keys);
         let mut index = PointIndex::new(keys);
         let (elements, conn) = (self.elements(), self.connectivity());
@@ -535,15 +527,7 @@ impl Mesh {
         // `e` (most face points are): no search.
         let corner_node = |e: u32, p: [u32; 3]| -> Option<usize> {
             let (c, s) = (elements[e as usize].coords(), elements[e as usize].side());
-            let mut m = 0;
-            for a in 0..3 {
-                if p[a] == c[a] + s {
-                    m |= 1 << a;
-                } else if p[a] != c[a] {
-                    return None;
-                }
-            }
-            Some(conn[e as usize][VTK_TO_MORTON[m]] as usize)
+            corner_at(c, s, p).map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize)
         };
         let list = faces.faces();
         let mut start = Vec::with_capacity(list.len() + 1);

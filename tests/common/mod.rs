@@ -14,6 +14,26 @@ pub fn octmesh_bin() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_octmesh"))
 }
 
+/// The word printed right after `label` in a program's output (checkMesh's
+/// figures, for example), without a trailing `,`, `;` or `.`.
+pub fn word_after<'a>(text: &'a str, label: &str) -> &'a str {
+    let at = text
+        .find(label)
+        .unwrap_or_else(|| panic!("no '{label}' in:\n{text}"));
+    text[at + label.len()..]
+        .split_whitespace()
+        .next()
+        .map(|w| w.trim_end_matches([',', ';', '.']))
+        .unwrap_or_else(|| panic!("nothing after '{label}' in:\n{text}"))
+}
+
+/// The number printed right after `label` (see [`word_after`]).
+pub fn number_after(text: &str, label: &str) -> f64 {
+    let w = word_after(text, label);
+    w.parse()
+        .unwrap_or_else(|_| panic!("'{w}' after '{label}' is not a number"))
+}
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
