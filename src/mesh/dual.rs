@@ -181,6 +181,40 @@ impl Ranks {
     }
 }
 
+/// The corners of a leaf's face by its shape `n | side << 2` (normal axis,
+/// side): those whose bit `n` is not `side`.
+const FACE_MASKS: [u8; 32] = {
+    let mut t = [0u8; 32];
+    let mut shape = 0;
+    while shape < 8 {
+        let (n, side) = (shape & 3, shape >> 2 & 1);
+        let mut c = 0;
+        while c < 8 && n < 3 {
+            if (c >> n) & 1 != side {
+                t[shape] |= 1 << c;
+            }
+            c += 1;
+        }
+        shape += 1;
+    }
+    t
+};
+
+/// The two ends of a leaf's edge by its shape `e | base << 2` (axis, the
+/// Morton corner at its low end).
+const EDGE_MASKS: [u8; 32] = {
+    let mut t = [0u8; 32];
+    let mut shape = 0;
+    while shape < 32 {
+        let (e, base) = (shape & 3, shape >> 2);
+        if e < 3 {
+            t[shape] = (1 << base) | (1 << (base | 1 << e));
+        }
+        shape += 1;
+    }
+    t
+};
+
 /// The hanging nodes of one kind (face or edge) the traversal found, 5
 /// bytes each: the coarse leaf the node hangs on, and a code byte with the
 /// node's flags in its top 3 bits and, below, which face (normal axis `n`
@@ -230,16 +264,8 @@ impl Entries {
     /// The dependency mask of a code byte.
     #[inline]
     pub fn mask_of(&self, code: u8) -> u8 {
-        let shape = (code & 31) as u32;
-        if self.face {
-            let (n, side) = (shape & 3, shape >> 2 & 1);
-            (0..8u32)
-                .filter(|c| (c >> n) & 1 != side)
-                .fold(0, |m, c| m | 1 << c)
-        } else {
-            let (e, base) = (shape & 3, shape >> 2);
-            (1u8 << base) | (1u8 << (base | 1 << e))
-        }
+        let table = if self.face { &FACE_MASKS } else { &EDGE_MASKS };
+        table[(code & 31) as usize]
     }
 
     /// Gives back unused capacity.

@@ -8,6 +8,7 @@
 #include <string.h>
 #include <mpi.h>
 #include "octmesh.h"
+#include "sphere_cut.h"
 
 #define CHECK(cond, h)                                                            \
   do {                                                                            \
@@ -39,23 +40,21 @@
 #define OK(call, h) CHECK_STATUS(call, OCTMESH_STATUS_OK, h)
 
 /* The moving sphere of the adaptation tests (tools/p4est_ref's
- * octmesh_p4est_adapt): whether the closed box of o meets the surface of
- * the sphere of radius 131072 centred at (157286 + 20972 step, 262144,
- * 262144), lattice units, in exact integers. */
+ * octmesh_p4est_adapt, sphere_cut.h): whether the closed box of o meets
+ * its surface at step `step`, in exact integers. */
 static inline int check_sphere_cuts(const octmesh_octant_t *o, int step) {
-  const int64_t c[3] = {157286 + (int64_t)20972 * step, 262144, 262144};
-  const int64_t r2 = (int64_t)131072 * 131072;
-  const int64_t len = (int64_t)1 << (19 - o->level);
-  const int64_t lo[3] = {o->x, o->y, o->z};
-  int64_t near = 0, far = 0;
-  for (int k = 0; k < 3; k++) {
-    int64_t hi = lo[k] + len;
-    int64_t a = c[k] < lo[k] ? lo[k] - c[k] : (c[k] > hi ? c[k] - hi : 0);
-    int64_t b = c[k] - lo[k] > hi - c[k] ? c[k] - lo[k] : hi - c[k];
-    near += a * a;
-    far += b * b;
-  }
-  return near <= r2 && r2 <= far;
+  return sphere_cuts_cube(o->x, o->y, o->z, (int64_t)1 << (19 - o->level),
+                          START_X + (int64_t)STEP_X * step, ROOT_HALF);
+}
+
+/* The built-in sphere refined at `level`, partitioned, balanced (corner)
+ * and partitioned again: the octree the mesh tests start from. */
+static inline void check_balanced_sphere(octmesh_t *h, int level) {
+  OK(octmesh_surface_builtin(h, "sphere"), h);
+  OK(octmesh_octree_refine_surface(h, level), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
+  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
+  OK(octmesh_octree_partition(h, NULL, NULL), h);
 }
 
 #endif

@@ -19,11 +19,7 @@ int main(int argc, char **argv) {
 
   octmesh_t *h = NULL;
   OK(octmesh_create(MPI_COMM_WORLD, NULL, &h), NULL);
-  OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_octree_refine_surface(h, 5), h);
-  OK(octmesh_octree_partition(h, NULL, NULL), h);
-  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
-  OK(octmesh_octree_partition(h, NULL, NULL), h);
+  check_balanced_sphere(h, 5);
 
   octmesh_mesh_quality_t q;
   CHECK_STATUS(octmesh_mesh_get_quality(h, &q), OCTMESH_STATUS_STATE, h);

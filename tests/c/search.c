@@ -37,11 +37,7 @@ int main(int argc, char **argv) {
   int32_t r1;
   int64_t g1;
   CHECK_STATUS(octmesh_octree_locate_points(h, 1, one, &r1, &g1), OCTMESH_STATUS_STATE, h);
-  OK(octmesh_surface_builtin(h, "sphere"), h);
-  OK(octmesh_octree_refine_surface(h, 4), h);
-  OK(octmesh_octree_partition(h, NULL, NULL), h);
-  OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
-  OK(octmesh_octree_partition(h, NULL, NULL), h);
+  check_balanced_sphere(h, 4);
   CHECK_STATUS(octmesh_mesh_locate_points(h, 1, one, &r1, &g1), OCTMESH_STATUS_STATE, h);
   /* A bad argument on one rank fails the call on every rank. */
   CHECK_STATUS(octmesh_octree_locate_points(h, rank == 0 ? -1 : 1, one, &r1, &g1),

@@ -375,6 +375,9 @@ pub fn compile_c_test(name: &str, lib: &Path, out_dir: &Path) -> PathBuf {
         .arg(root.join("include"))
         .arg("-I")
         .arg(root.join("tests/c"))
+        // The adaptation oracle's sphere (check.h includes sphere_cut.h).
+        .arg("-I")
+        .arg(root.join("tools/p4est_ref"))
         .arg(root.join("tests/c").join(format!("{name}.c")))
         .arg("-o")
         .arg(&exe)

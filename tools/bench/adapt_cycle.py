@@ -107,7 +107,7 @@ def build(env, no_build):
         for name in ("liboctmesh.so", "liboctmesh.so.0"):
             shutil.copyfile(so, LIB / name)
         run(["mpicc", "-O2", "-std=c11", "-Wall", "-Wextra", "-Werror",
-             "-I", ROOT / "include", SOURCE, "-o", OCTMESH_CYCLE,
+             "-I", ROOT / "include", "-I", P4EST_DIR, SOURCE, "-o", OCTMESH_CYCLE,
              "-L", LIB, "-Wl,-rpath,%s" % LIB, "-loctmesh", "-lm"], env)
     except (RunError, OSError) as e:
         sys.exit("build failed: %s" % e)

@@ -47,11 +47,8 @@
 
 #include <mpi.h>
 #include "octmesh.h"
+#include "sphere_cut.h" /* tools/p4est_ref: the oracle's sphere */
 
-#define ROOT_HALF 262144
-#define RADIUS 131072
-#define START_X 157286
-#define STEP_X 20972
 #define ROOT_LEN 524288.0
 
 typedef struct {
@@ -95,19 +92,8 @@ static void usage_error(const char *msg) {
 
 /* The oracle's cut test: the closed box meets the sphere's surface. */
 static int cut(const octmesh_octant_t *o) {
-  const int64_t c[3] = {START_X + g_dx * g_step, ROOT_HALF, g_z};
-  const int64_t r2 = (int64_t)RADIUS * RADIUS;
-  const int64_t len = (int64_t)1 << (19 - o->level);
-  const int64_t lo[3] = {o->x, o->y, o->z};
-  int64_t near = 0, far = 0;
-  for (int k = 0; k < 3; k++) {
-    const int64_t hi = lo[k] + len;
-    const int64_t a = c[k] < lo[k] ? lo[k] - c[k] : (c[k] > hi ? c[k] - hi : 0);
-    const int64_t b = c[k] - lo[k] > hi - c[k] ? c[k] - lo[k] : hi - c[k];
-    near += a * a;
-    far += b * b;
-  }
-  return near <= r2 && r2 <= far;
+  return sphere_cuts_cube(o->x, o->y, o->z, (int64_t)1 << (19 - o->level),
+                          START_X + g_dx * g_step, g_z);
 }
 
 static int32_t everything(void *ctx, const octmesh_octant_t *o) {

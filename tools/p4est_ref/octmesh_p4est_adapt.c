@@ -41,7 +41,6 @@
 #include "leaf_file.h"
 #include "moving_sphere.h"
 
-#define STEP_X 20972
 
 static int          g_rank, g_size;
 static int          g_step, g_max_level;

@@ -58,7 +58,6 @@
 
 #include "moving_sphere.h"
 
-#define STEP_X 20972
 #define ROOT_LEN 524288.0
 
 typedef struct {
