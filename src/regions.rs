@@ -29,7 +29,7 @@ use crate::brick::Brick;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::octant::{Octant, MAX_LEVEL};
-use crate::refine::SurfaceIndex;
+use crate::refine::{scatter_by_child, SurfaceIndex};
 
 /// A refinement region with its level, user units.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -339,6 +339,7 @@ pub struct RegionRules<'a> {
 #[derive(Default)]
 pub struct BandScratch {
     stack: Vec<u32>,
+    masks: Vec<u8>,
 }
 
 /// A region's shape in lattice units.
@@ -478,6 +479,156 @@ impl<'a> RegionRules<'a> {
         self.walk(s, o, (0, n), out, stack, limit)
     }
 
+    /// Appends to `out` the leaves that replace `leaves` (this rank's, in
+    /// Morton order) under every rule: [`RegionRules::refine_leaf`] for each,
+    /// with the bands' candidates found by one walk down the octree the
+    /// leaves belong to instead of one search of the bounding-box tree per
+    /// leaf. From the common ancestor of the leaves down, each octant's
+    /// candidates (triangles whose boxes come within its band's distance,
+    /// per axis: a superset) are split among its eight children, as surface
+    /// refinement splits its own; octants without candidates, or below the
+    /// bands' levels, hand their leaves to the walk with none. Fails (the
+    /// octant limit's error) once `out` holds more than `limit` leaves.
+    pub fn refine_leaves(
+        &self,
+        leaves: &[Octant],
+        out: &mut Vec<Octant>,
+        scratch: &mut BandScratch,
+        limit: u64,
+    ) -> Result<()> {
+        let (Some(s), Some(&first), Some(&last)) = (self.surface, leaves.first(), leaves.last())
+        else {
+            return leaves
+                .iter()
+                .try_for_each(|&o| self.refine_leaf(o, out, scratch, limit));
+        };
+        let top = first.nearest_common_ancestor(last);
+        let top = if top.contains(first) {
+            top
+        } else {
+            top.parent()
+        };
+        scratch.stack.clear();
+        self.split_leaves(s, top, leaves, out, scratch, limit)
+    }
+
+    /// [`RegionRules::refine_leaves`] for the `leaves` inside `o`, above
+    /// the level where the candidates are searched.
+    fn split_leaves(
+        &self,
+        s: &SurfaceIndex,
+        o: Octant,
+        leaves: &[Octant],
+        out: &mut Vec<Octant>,
+        scratch: &mut BandScratch,
+        limit: u64,
+    ) -> Result<()> {
+        if leaves.is_empty() {
+            return Ok(());
+        }
+        if leaves[0] == o || o.level() + SEARCH_ABOVE >= self.max_level() {
+            let w = self.widest(o.level());
+            let stack = &mut scratch.stack;
+            let a = stack.len();
+            if w >= 0.0 {
+                let (lo, hi) = o.bounds_f64();
+                s.bvh
+                    .query_candidates(lo.map(|x| x - w), hi.map(|x| x + w), stack);
+            }
+            let b = stack.len();
+            self.descend(s, o, leaves, (a, b), out, scratch, limit)?;
+            scratch.stack.truncate(a);
+            return Ok(());
+        }
+        let mut rest = leaves;
+        for c in o.children() {
+            let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
+            let (mine, after) = rest.split_at(k);
+            rest = after;
+            self.split_leaves(s, c, mine, out, scratch, limit)?;
+        }
+        Ok(())
+    }
+
+    /// [`RegionRules::refine_leaves`] for the `leaves` inside `o`, whose
+    /// candidates are `stack[a..b]`.
+    #[allow(clippy::too_many_arguments)]
+    fn descend(
+        &self,
+        s: &SurfaceIndex,
+        o: Octant,
+        leaves: &[Octant],
+        (a, b): (usize, usize),
+        out: &mut Vec<Octant>,
+        scratch: &mut BandScratch,
+        limit: u64,
+    ) -> Result<()> {
+        if leaves.is_empty() {
+            return Ok(());
+        }
+        let w = self.widest(o.level() + 1);
+        if leaves[0] == o || a == b || w < 0.0 {
+            // A leaf, or no candidate for any leaf inside `o`: the
+            // candidates (none, or `o`'s own when it is the leaf) are final.
+            let range = if leaves[0] == o { (a, b) } else { (a, a) };
+            for &l in leaves {
+                if self.brick.is_void(l) {
+                    out.push(l);
+                    if out.len() as u64 > limit {
+                        return Err(crate::refine::limit_error(limit, "refining"));
+                    }
+                } else {
+                    self.walk(s, l, range, out, &mut scratch.stack, limit)?;
+                }
+            }
+            return Ok(());
+        }
+        // The leaves of each child, and the children with a leaf some band
+        // may split: only those get candidates.
+        let children = o.children();
+        let mut slices: [&[Octant]; 8] = [&[]; 8];
+        let mut need = 0u8;
+        let mut rest = leaves;
+        for (i, c) in children.iter().enumerate() {
+            let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
+            (slices[i], rest) = rest.split_at(k);
+            if slices[i].iter().any(|l| self.widest(l.level()) >= 0.0) {
+                need |= 1 << i;
+            }
+        }
+        // Per axis, the children (bit set: high half) whose slab the
+        // triangle's box grown by `w` meets.
+        let (lo, hi) = o.bounds_f64();
+        let mid: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+        let boxes = s.boxes();
+        let child_mask = |t: u32| -> u8 {
+            let bx = &boxes[t as usize];
+            let mut m = need;
+            for k in 0..3 {
+                let (tl, th) = (bx.min[k] - w, bx.max[k] + w);
+                let low = (tl <= mid[k]) & (th >= lo[k]);
+                let high = (tl <= hi[k]) & (th >= mid[k]);
+                m &= (low as u8).wrapping_neg() & LOW_HALF[k]
+                    | (high as u8).wrapping_neg() & !LOW_HALF[k];
+            }
+            m
+        };
+        let BandScratch { stack, masks } = scratch;
+        let bounds = if need == 0 {
+            [stack.len(); 9]
+        } else {
+            masks.clear();
+            masks.extend(stack[a..b].iter().map(|&t| child_mask(t)));
+            scatter_by_child(stack, a, b, |j| masks[j - a])
+        };
+        for (i, c) in children.into_iter().enumerate() {
+            let range = (bounds[i], bounds[i + 1]);
+            self.descend(s, c, slices[i], range, out, scratch, limit)?;
+        }
+        scratch.stack.truncate(bounds[0]);
+        Ok(())
+    }
+
     /// [`RegionRules::refine_leaf`] below `o`, whose candidates are
     /// `stack[a..b]`.
     fn walk(
@@ -543,6 +694,14 @@ impl<'a> RegionRules<'a> {
         })
     }
 }
+
+/// How many levels above the finest rule the band's candidates are
+/// searched in the bounding-box tree (and split among children below): a
+/// search per leaf costs more, and splitting from the root more still.
+const SEARCH_ABOVE: u8 = 4;
+
+/// The children in the low half along each axis (child bit `k` clear).
+const LOW_HALF: [u8; 3] = [0b0101_0101, 0b0011_0011, 0b0000_1111];
 
 /// Squared distance between a triangle's box and the box `lo..hi`.
 fn box_gap2(b: &crate::geometry::Aabb, lo: [f64; 3], hi: [f64; 3]) -> f64 {

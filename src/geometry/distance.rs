@@ -191,6 +191,11 @@ fn box_within_quick(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> Option<
     // Rounding margins keep both tests on the safe side of `d`; the inner
     // box holds the box itself, so it also accepts an overlap.
     let margin = 1e-9 * (d + (hi[0] - lo[0]));
+    // The triangle's plane first: it rejects most of the triangles near a
+    // box that is not within `d`, before either separating-axis test.
+    if crate::geometry::intersect::plane_apart(t, lo, hi, d + margin) {
+        return Some(false);
+    }
     let inner = (d / 3f64.sqrt() - margin).max(0.0);
     if triangle_box_overlap(t, lo.map(|x| x - inner), hi.map(|x| x + inner)) {
         return Some(true);

@@ -93,6 +93,17 @@ pub fn triangle_box_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], 
         .any(|edge| AXES.iter().any(|axis| apart(cross(*edge, *axis))))
 }
 
+/// Whether the triangle's plane puts it more than `d` away from the closed
+/// box (the first axis [`triangle_box_apart`] would try after the box's).
+#[inline]
+pub fn plane_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], d: f64) -> bool {
+    let [p, q, r] = tri.v;
+    let v = [sub(p, box_min), sub(q, box_min), sub(r, box_min)];
+    let n = cross(sub(v[1], v[0]), sub(v[2], v[1]));
+    let len = dot(n, n).sqrt();
+    len > 0.0 && gap(n, &v, sub(box_max, box_min)) > d * len
+}
+
 /// The gap between the projections of the triangle `v` and the box `[0, h]`
 /// on `axis` (negative when they overlap), in units of the axis's length.
 #[inline]

@@ -245,8 +245,8 @@ impl Session {
             let Some(tree) = tree else { return Ok(()) };
             check_level(rules.max_level())?;
             let mut scratch = crate::regions::BandScratch::default();
-            tree.refine_with(
-                |o, out| rules.refine_leaf(o, out, &mut scratch, limit),
+            tree.refine_all(
+                |leaves, out| rules.refine_leaves(leaves, out, &mut scratch, limit),
                 limit,
             )
         });

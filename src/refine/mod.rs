@@ -209,14 +209,23 @@ impl LinearOctree {
         mut expand: impl FnMut(Octant, &mut Vec<Octant>) -> Result<()>,
         limit: u64,
     ) -> Result<()> {
+        self.refine_all(
+            |leaves, out| leaves.iter().try_for_each(|&o| expand(o, out)),
+            limit,
+        )
+    }
+
+    /// Replaces the local leaves by those `expand` appends for all of them
+    /// at once (in Morton order, covering exactly the same cells), for
+    /// refinements that share work between neighbouring leaves; the limit
+    /// as in [`LinearOctree::refine_with`]. Collective.
+    pub fn refine_all(
+        &mut self,
+        expand: impl FnOnce(&[Octant], &mut Vec<Octant>) -> Result<()>,
+        limit: u64,
+    ) -> Result<()> {
         let mut out = Vec::with_capacity(self.local_len());
-        let mut result = Ok(());
-        for &o in self.leaves() {
-            if let Err(e) = expand(o, &mut out) {
-                result = Err(e);
-                break;
-            }
-        }
+        let result = expand(self.leaves(), &mut out);
         let comm = self.comm().clone();
         let global = global_limit(&comm, out.len(), limit);
         agree(&*comm, result.and(global))?;
