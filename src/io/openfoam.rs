@@ -44,7 +44,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
-    corner_at, edge_midpoint, near_point_keys, point_key, PointFilter, PointIndex,
+    corner_at, edge_midpoint, edge_point_keys, near_point_keys, point_key, PointFilter, PointIndex,
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
@@ -99,7 +99,7 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
     let lattice = mesh.node_lattice();
     let keys = near_point_keys(mesh);
-    let filter = PointFilter::new(&keys);
+    let filter = PointFilter::new(edge_point_keys(mesh, &keys));
     let mut set = PointIndex::new(keys);
     let missing = |x: [u32; 3]| {
         Error::new(
@@ -312,11 +312,9 @@ fn write_labels(out: &mut impl Write, format: FoamFormat, v: &[u32]) -> std::io:
     write!(out, "{}\n(", v.len())?;
     match format {
         FoamFormat::Binary => {
-            let mut buf = Vec::with_capacity(4 * v.len());
-            for &x in v {
-                buf.extend_from_slice(&(x as i32).to_le_bytes());
-            }
-            out.write_all(&buf)?;
+            write_raw(out, v, |x, b| {
+                b.extend_from_slice(&(*x as i32).to_le_bytes())
+            })?;
             writeln!(out, ")")
         }
         FoamFormat::Ascii => {
@@ -327,6 +325,26 @@ fn write_labels(out: &mut impl Write, format: FoamFormat, v: &[u32]) -> std::io:
             writeln!(out, ")")
         }
     }
+}
+
+/// Writes `items` as raw bytes, `encode` appending each one's, through a
+/// small buffer reused for every chunk: no copy of the whole list (tens of
+/// megabytes, all of it fresh pages to fault in).
+fn write_raw<T>(
+    out: &mut impl Write,
+    items: &[T],
+    encode: impl Fn(&T, &mut Vec<u8>),
+) -> std::io::Result<()> {
+    const CHUNK: usize = 1 << 18;
+    let mut buf = Vec::with_capacity(CHUNK + 64);
+    for x in items {
+        encode(x, &mut buf);
+        if buf.len() >= CHUNK {
+            out.write_all(&buf)?;
+            buf.clear();
+        }
+    }
+    out.write_all(&buf)
 }
 
 fn create(path: &Path) -> Result<BufWriter<fs::File>> {
@@ -373,13 +391,11 @@ fn write_polymesh(
         write!(w, "{}\n(", poly.points.len())?;
         match fmt {
             FoamFormat::Binary => {
-                let mut buf = Vec::with_capacity(24 * poly.points.len());
-                for q in &positions {
-                    for &x in q {
-                        buf.extend_from_slice(&x.to_le_bytes());
+                write_raw(&mut w, &positions, |q, b| {
+                    for x in q {
+                        b.extend_from_slice(&x.to_le_bytes());
                     }
-                }
-                w.write_all(&buf)?;
+                })?;
                 writeln!(w, ")")?;
             }
             FoamFormat::Ascii => {

@@ -45,6 +45,15 @@ pub fn near_point_keys(mesh: &super::Mesh) -> Vec<u64> {
     keys
 }
 
+/// The part of [`near_point_keys`] (`keys`) a face's edge can carry between
+/// its corners: the hanging local nodes and the halo elements' corners. A
+/// mesh point in the middle of an edge of a local element's face hangs on
+/// that element, so the independent nodes never do; leaving them out keeps
+/// a [`PointFilter`] of these small enough to stay in cache.
+pub fn edge_point_keys<'k>(mesh: &super::Mesh, keys: &'k [u64]) -> &'k [u64] {
+    &keys[mesh.num_independent()..]
+}
+
 /// A set of lattice points, sorted by [`point_key`], each known by its
 /// position in the set.
 #[derive(Clone, Debug, Default)]

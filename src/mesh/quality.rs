@@ -97,7 +97,9 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{FaceKind, Faces, Kept, Other};
-use crate::mesh::points::{corner_at, face_polygon, near_point_keys, PointFilter, PointIndex};
+use crate::mesh::points::{
+    corner_at, edge_point_keys, face_polygon, near_point_keys, PointFilter, PointIndex,
+};
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
@@ -519,7 +521,7 @@ impl Mesh {
         // The mesh points near this rank: every corner of a local or halo
         // element (the points the OpenFOAM writer puts on the faces' edges).
         let keys = near_point_keys(self);
-        let filter = PointFilter::new(&keys);
+        let filter = PointFilter::new(edge_point_keys(self, &keys));
         let mut index = PointIndex::new(keys);
         let (elements, conn) = (self.elements(), self.connectivity());
         let moved = self.moved().unwrap_or(&[]);
