@@ -306,41 +306,20 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
             format!("{n} leaves and ghosts on one rank: at most 2^31 - 1 can be meshed"),
         ));
     }
-    let mut tree = Vec::with_capacity(n / 24 + 1);
-    let root = build(&leaves, Octant::ROOT, 0, n, &mut tree);
-    let mut w = Walker {
-        tree: &tree,
-        kept,
-        leaves,
-        local: leaves.local_range(),
-        overflow: false,
-        out: DualNodes {
-            flags: Vec::with_capacity(n),
-            corners: vec![[UNSET; 8]; n],
-            face: Entries::new(true, n / 4),
-            edge: Entries::new(false, n / 2),
-            boundary_points: Vec::new(),
-        },
+    let local = leaves.local_range();
+    let mut overflow = false;
+    let mut out = DualNodes {
+        flags: Vec::with_capacity(n),
+        corners: vec![[UNSET; 8]; n],
+        face: Entries::new(true, n / 4),
+        edge: Entries::new(false, n / 2),
+        boundary_points: Vec::new(),
     };
-    w.start(0, [root; 8]);
-    // The root's faces, edges and corners against the outside.
-    for m in 1u32..8 {
-        let mut b = m;
-        loop {
-            let mut refs = [VOID; 8];
-            refs[(!b & m) as usize] = root;
-            w.start(m, refs);
-            if b == 0 {
-                break;
-            }
-            b = (b - 1) & m;
-        }
-    }
-    let Walker { overflow, out, .. } = w;
+    let tree_bytes = walk_points(&leaves, |refs| {
+        record_point(&leaves, kept, &local, &mut overflow, &mut out, refs)
+    });
     // The walk's end is the mesh's peak; what comes next should not add to
     // it, so the tree's pages go back rather than stay free in the heap.
-    let tree_bytes = std::mem::size_of_val(&tree[..]);
-    drop(tree);
     crate::report::trim_heap_above(tree_bytes / 2);
     if overflow {
         return Err(Error::new(
@@ -348,7 +327,6 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
             "more than 2^30 - 1 nodes of one kind on one rank",
         ));
     }
-    let mut out = out;
     out.flags.shrink_to_fit();
     out.face.shrink_to_fit();
     out.edge.shrink_to_fit();
@@ -465,13 +443,43 @@ fn grow<T>(v: &mut Vec<T>) {
     }
 }
 
-struct Walker<'a> {
+/// Visits every lattice point that is a corner of some leaf of `leaves`
+/// (sorted, disjoint, possibly with gaps) exactly once, calling `visit` with
+/// the 8 leaves around it: `refs[p]` is `LEAF | i` for merged leaf `i`
+/// holding the finest cell on side `p` of the point (bit `a` of `p` set: the
+/// high side along axis `a`), or [`VOID`] (see [`leaf_at`]). Returns the
+/// bytes the pointer tree took (freed on return).
+pub(crate) fn walk_points(leaves: &Merged, visit: impl FnMut(&[u32; 8])) -> usize {
+    let n = leaves.len();
+    let mut tree = Vec::with_capacity(n / 24 + 1);
+    let root = build(leaves, Octant::ROOT, 0, n, &mut tree);
+    let mut w = Walker { tree: &tree, visit };
+    w.start(0, [root; 8]);
+    // The root's faces, edges and corners against the outside.
+    for m in 1u32..8 {
+        let mut b = m;
+        loop {
+            let mut refs = [VOID; 8];
+            refs[(!b & m) as usize] = root;
+            w.start(m, refs);
+            if b == 0 {
+                break;
+            }
+            b = (b - 1) & m;
+        }
+    }
+    std::mem::size_of_val(&tree[..])
+}
+
+/// The merged leaf a [`walk_points`] reference names, if any.
+#[inline]
+pub(crate) fn leaf_at(r: u32) -> Option<usize> {
+    (r != VOID).then_some((r & !LEAF) as usize)
+}
+
+struct Walker<'a, F> {
     tree: &'a [[u32; 8]],
-    kept: &'a Bits,
-    leaves: Merged<'a>,
-    local: std::ops::Range<usize>,
-    overflow: bool,
-    out: DualNodes,
+    visit: F,
 }
 
 /// Calls `f` for every subset of `mask` (including 0 and `mask`).
@@ -528,7 +536,7 @@ fn split_table() -> &'static [Vec<Sub>; 7] {
     })
 }
 
-impl Walker<'_> {
+impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
     #[inline]
     fn child(&self, r: u32, c: u32) -> u32 {
         if r & LEAF != 0 {
@@ -571,81 +579,88 @@ impl Walker<'_> {
     }
 
     /// A lattice point with the octants on its 8 sides: descend to the
-    /// leaves touching it, then record it.
+    /// leaves touching it, then visit it.
     fn point(&mut self, mut refs: [u32; 8]) {
         while refs.iter().any(|&r| r & LEAF == 0) {
             for (p, r) in refs.iter_mut().enumerate() {
                 *r = self.child(*r, !(p as u32) & 7);
             }
         }
-        let kept = |r: u32| r != VOID && self.kept.get((r & !LEAF) as usize);
-        let local = |r: u32| self.local.contains(&((r & !LEAF) as usize));
-        let mut count = [0u8; 8];
-        let mut corner = false;
-        let mut flags = 0u8;
-        for p in 0..8 {
-            if kept(refs[p]) {
-                count[p] = refs.iter().filter(|&&q| q == refs[p]).count() as u8;
-                corner |= count[p] == 1;
-                if !local(refs[p]) {
-                    flags |= BOUNDARY;
-                } else if count[p] == 1 {
-                    flags |= CORNER;
-                }
+        (self.visit)(&refs);
+    }
+}
+
+/// Node extraction at one point of the walk (see [`walk_points`]).
+fn record_point(
+    leaves: &Merged,
+    kept: &Bits,
+    local: &std::ops::Range<usize>,
+    overflow: &mut bool,
+    out: &mut DualNodes,
+    refs: &[u32; 8],
+) {
+    let kept = |r: u32| r != VOID && kept.get((r & !LEAF) as usize);
+    let local = |r: u32| local.contains(&((r & !LEAF) as usize));
+    let mut count = [0u8; 8];
+    let mut corner = false;
+    let mut flags = 0u8;
+    for p in 0..8 {
+        if kept(refs[p]) {
+            count[p] = refs.iter().filter(|&&q| q == refs[p]).count() as u8;
+            corner |= count[p] == 1;
+            if !local(refs[p]) {
+                flags |= BOUNDARY;
+            } else if count[p] == 1 {
+                flags |= CORNER;
             }
         }
-        if !corner {
-            return;
+    }
+    if !corner {
+        return;
+    }
+    let most = out.flags.len().max(out.face.len()).max(out.edge.len());
+    if most >= 1 << 30 {
+        // The tag bits leave 30 bits for the index.
+        *overflow = true;
+        return;
+    }
+    let id;
+    if let Some(p) = (0..8).find(|&p| count[p] == 4) {
+        // Face interior of the coarse leaf: its 4 positions span two
+        // axes; the third, across which it does not extend, is the
+        // face normal.
+        let q = refs[p];
+        let n = (0..3)
+            .find(|&d| refs[p ^ (1 << d)] != q)
+            .expect("a face leaf lies on one side of the point");
+        let side = (p >> n) & 1;
+        id = FACE | out.face.len() as u32;
+        out.face.push(q & !LEAF, (n | side << 2) as u8, flags);
+    } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
+        let q = refs[p];
+        let e = (0..3)
+            .find(|&d| refs[p ^ (1 << d)] == q)
+            .expect("an edge leaf spans the point along one axis");
+        // The edge of the coarse leaf through the point: opposite side
+        // of the point on the two other axes, both ends along `e`.
+        let base = !p & 7 & !(1 << e);
+        id = EDGE | out.edge.len() as u32;
+        out.edge.push(q & !LEAF, (e | base << 2) as u8, flags);
+    } else {
+        id = out.flags.len() as u32;
+        grow(&mut out.flags);
+        out.flags.push(flags);
+        if flags & BOUNDARY != 0 {
+            let p = (0..8).find(|&p| count[p] == 1).unwrap_or(0);
+            let o = leaves.get((refs[p] & !LEAF) as usize);
+            let x = corner_coords(o.coords(), o.side(), !p & 7);
+            out.boundary_points.push((id, x));
         }
-        let most = self
-            .out
-            .flags
-            .len()
-            .max(self.out.face.len())
-            .max(self.out.edge.len());
-        if most >= 1 << 30 {
-            // The tag bits leave 30 bits for the index.
-            self.overflow = true;
-            return;
-        }
-        let id;
-        if let Some(p) = (0..8).find(|&p| count[p] == 4) {
-            // Face interior of the coarse leaf: its 4 positions span two
-            // axes; the third, across which it does not extend, is the
-            // face normal.
-            let q = refs[p];
-            let n = (0..3)
-                .find(|&d| refs[p ^ (1 << d)] != q)
-                .expect("a face leaf lies on one side of the point");
-            let side = (p >> n) & 1;
-            id = FACE | self.out.face.len() as u32;
-            self.out.face.push(q & !LEAF, (n | side << 2) as u8, flags);
-        } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
-            let q = refs[p];
-            let e = (0..3)
-                .find(|&d| refs[p ^ (1 << d)] == q)
-                .expect("an edge leaf spans the point along one axis");
-            // The edge of the coarse leaf through the point: opposite side
-            // of the point on the two other axes, both ends along `e`.
-            let base = !p & 7 & !(1 << e);
-            id = EDGE | self.out.edge.len() as u32;
-            self.out.edge.push(q & !LEAF, (e | base << 2) as u8, flags);
-        } else {
-            id = self.out.flags.len() as u32;
-            grow(&mut self.out.flags);
-            self.out.flags.push(flags);
-            if flags & BOUNDARY != 0 {
-                let p = (0..8).find(|&p| count[p] == 1).unwrap_or(0);
-                let o = self.leaves.get((refs[p] & !LEAF) as usize);
-                let x = corner_coords(o.coords(), o.side(), !p & 7);
-                self.out.boundary_points.push((id, x));
-            }
-        }
-        for p in 0..8 {
-            if count[p] == 1 {
-                let leaf = (refs[p] & !LEAF) as usize;
-                self.out.corners[leaf][!p & 7] = id;
-            }
+    }
+    for p in 0..8 {
+        if count[p] == 1 {
+            let leaf = (refs[p] & !LEAF) as usize;
+            out.corners[leaf][!p & 7] = id;
         }
     }
 }

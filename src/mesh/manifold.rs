@@ -25,10 +25,14 @@
 //!
 //! Every rank decides for its own leaves from the statuses of the previous
 //! sweep (its own and its ghosts'), so the result does not depend on the
-//! partition. Sweeps repeat around the leaves dropped last until none is.
+//! partition. The first sweep looks at every kept leaf in one dual walk of
+//! the leaves ([`crate::mesh::dual::walk_points`], which hands each corner
+//! its block); sweeps then repeat around the leaves dropped last, looking
+//! their neighbours up, until none is.
 
 use crate::comm::Comm;
 use crate::ghost::build_ghost_layer;
+use crate::mesh::dual::{leaf_at, walk_points, Merged};
 use crate::octant::{morton_encode, Octant, ROOT_LEN};
 use crate::octree::LinearOctree;
 
@@ -67,18 +71,12 @@ pub(crate) fn clean_walls(
             kept: &kept,
         };
         let local = b..b + nl;
-        // Candidates: kept local leaves with a face neighbour that is not
-        // kept (first sweep; no other kept leaf can go, see the module
-        // documentation), then the kept local leaves around those dropped
-        // in the last sweep.
-        let mut candidates: Vec<usize> = Vec::new();
-        if first {
-            for i in local.clone() {
-                if kept(class[i]) && view.open_face(i) {
-                    candidates.push(i);
-                }
-            }
+        // Every kept local leaf in the first sweep; then the kept local
+        // leaves around those dropped in the last sweep.
+        let drop: Vec<usize> = if first {
+            first_sweep(&leaves, &class, local.clone(), kept)
         } else {
+            let mut candidates: Vec<usize> = Vec::new();
             for j in 0..leaves.len() {
                 if class[j] & JUST_REMOVED != 0 {
                     view.ring(j, |k| {
@@ -90,12 +88,12 @@ pub(crate) fn clean_walls(
             }
             candidates.sort_unstable();
             candidates.dedup();
-        }
-        let drop: Vec<usize> = candidates
-            .into_iter()
-            .filter(|&i| view.must_go(i))
-            .map(|i| i - b)
-            .collect();
+            candidates
+                .into_iter()
+                .filter(|&i| view.must_go(i))
+                .map(|i| i - b)
+                .collect()
+        };
         for c in classes.iter_mut() {
             *c &= !JUST_REMOVED;
         }
@@ -116,6 +114,62 @@ pub(crate) fn clean_walls(
     total
 }
 
+/// The first sweep over every kept local leaf at once (positions in
+/// `local`, counted from its start): one dual walk reaches every leaf
+/// corner with the 8 leaves around it, which are the corner's block, and
+/// the cells across each face at its corners, which are its face
+/// neighbours under 2:1 balance; no search. The later sweeps, around a few
+/// dropped leaves, look their rings up instead ([`View::must_go`], the same
+/// rules).
+fn first_sweep(
+    leaves: &[Octant],
+    class: &[u8],
+    local: std::ops::Range<usize>,
+    kept: impl Fn(u8) -> bool,
+) -> Vec<usize> {
+    let merged = Merged {
+        before: &leaves[..local.start],
+        local: &leaves[local.clone()],
+        after: &leaves[local.end..],
+    };
+    // Per local leaf: bit `2a + h` when a kept cell lies across its face
+    // on side `h` (1: high) of axis `a` at some corner; GOES when a corner
+    // block drops it.
+    const GOES: u8 = 0x80;
+    let mut seen = vec![0u8; local.len()];
+    walk_points(&merged, |refs| {
+        let status: [bool; 8] =
+            std::array::from_fn(|p| leaf_at(refs[p]).is_some_and(|j| kept(class[j])));
+        let drops = block_drop_masks()[status_byte(&status)];
+        for p in 0..8 {
+            let Some(j) = leaf_at(refs[p]) else { continue };
+            // Kept, local, and the point one of its corners (it fills
+            // side `p` alone).
+            if !status[p] || !local.contains(&j) || (0..8).any(|q| q != p && refs[q] == refs[p]) {
+                continue;
+            }
+            let mine = &mut seen[j - local.start];
+            for a in 0..3 {
+                // On the high side of the point along `a`, the leaf has the
+                // point on its low face.
+                let high = (p >> a) & 1 == 0;
+                if status[p ^ (1 << a)] {
+                    *mine |= 1 << (2 * a + high as usize);
+                }
+            }
+            if drops >> p & 1 == 1 {
+                *mine |= GOES;
+            }
+        }
+    });
+    (0..local.len())
+        .filter(|&i| {
+            let m = seen[i];
+            kept(class[local.start + i]) && (m & GOES != 0 || (0..3).any(|a| m >> (2 * a) & 3 == 0))
+        })
+        .collect()
+}
+
 /// Local and ghost leaves in Morton order with their class bytes.
 struct View<'a, K: Fn(u8) -> bool> {
     leaves: &'a [Octant],
@@ -134,44 +188,6 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
         let leaves = self.leaves;
         let j = crate::sort::gallop_last_le(leaves.len(), hint, m, |k| leaves[k].cell_begin())?;
         (self.leaves[j].cell_end() > m).then_some(j)
-    }
-
-    fn kept_at(&self, x: [i64; 3], hint: usize) -> bool {
-        self.at(x, hint).is_some_and(|j| (self.kept)(self.class[j]))
-    }
-
-    /// Whether some face neighbour of leaf `i` is not kept (or outside).
-    fn open_face(&self, i: usize) -> bool {
-        let l = self.leaves[i];
-        let (c, s) = (l.coords().map(|v| v as i64), l.side() as i64);
-        let h = (s / 2).max(1);
-        for axis in 0..3 {
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            for plus in [false, true] {
-                let mut p = c;
-                p[axis] += if plus { s } else { -1 };
-                // One leaf covering the whole neighbour region settles it.
-                let Some(j) = self.at(p, i) else {
-                    return true;
-                };
-                let n = self.leaves[j];
-                if n.side() as i64 >= s {
-                    if !(self.kept)(self.class[j]) {
-                        return true;
-                    }
-                    continue;
-                }
-                for (a, b) in [(0, 0), (h, 0), (0, h), (h, h)] {
-                    let mut q = p;
-                    q[u] += a;
-                    q[v] += b;
-                    if !self.kept_at(q, j) {
-                        return true;
-                    }
-                }
-            }
-        }
-        false
     }
 
     /// Calls `f` with every leaf touching leaf `i` (some more than once):
@@ -272,7 +288,7 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
                 }))
             });
             let own = (0..3).fold(0usize, |k, a| k | (((corner >> a) & 1) ^ 1) << a);
-            if block_drops(&kept, own) {
+            if block_drop_masks()[status_byte(&kept)] >> own & 1 == 1 {
                 return true;
             }
         }
@@ -335,6 +351,25 @@ fn groups(member: &[bool; 8]) -> ([u8; 8], usize) {
         n += 1;
     }
     (label, n)
+}
+
+/// The block's statuses as a byte (bit `k`: cell `k` kept).
+fn status_byte(kept: &[bool; 8]) -> usize {
+    (0..8).fold(0, |b, k| b | (kept[k] as usize) << k)
+}
+
+/// For each block ([`status_byte`]), the cells that must go
+/// ([`block_drops`]) as a bit mask: 256 blocks, computed once.
+fn block_drop_masks() -> &'static [u8; 256] {
+    static TABLE: std::sync::OnceLock<[u8; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|b| {
+            let kept: [bool; 8] = std::array::from_fn(|k| b >> k & 1 == 1);
+            (0..8)
+                .filter(|&k| kept[k] && block_drops(&kept, k))
+                .fold(0u8, |m, k| m | 1 << k)
+        })
+    })
 }
 
 /// Whether block cell `own` (kept) must go, by the block rules.
