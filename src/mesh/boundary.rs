@@ -171,10 +171,7 @@ impl Mesh {
         self.or_shared_masks(comm, &mut masks);
         // A hanging node can only be on the boundary where one of its
         // dependencies is: the others are not looked up.
-        let kept = Kept {
-            local: &self.elements,
-            halo: &self.halo,
-        };
+        let kept = Kept::new(&self.elements, &self.halo);
         let hi = self.domain.brick.hi();
         let mut near = vec![u32::MAX; lattice.len() - ni];
         for (e, c) in self.connectivity.iter().enumerate() {
@@ -195,10 +192,7 @@ impl Mesh {
     /// The patches of the local nodes seen from this rank's elements and
     /// halo; 0 for the nodes that are no local element's corner.
     fn local_patch_masks(&self, lattice: &[[u32; 3]]) -> Vec<u64> {
-        let kept = Kept {
-            local: &self.elements,
-            halo: &self.halo,
-        };
+        let kept = Kept::new(&self.elements, &self.halo);
         let hi = self.domain.brick.hi();
         // A local element at each node, as the look-ups' starting point
         // (`lattice` may hold the independent nodes only).

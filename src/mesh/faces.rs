@@ -147,17 +147,20 @@ impl Face {
     /// The four corners in lattice coordinates, counter-clockwise seen from
     /// the side the normal points to.
     pub fn corners(&self) -> [[u32; 3]; 4] {
-        let (u, v) = plane_axes(self.axis());
-        let mut out = [[0u32; 3]; 4];
-        for (k, p) in out.iter_mut().enumerate() {
+        let (axis, h, o) = (self.axis(), self.half, self.origin);
+        std::array::from_fn(|k| {
             // A negative normal sees the (u, v) order clockwise: reverse.
             let j = if self.negative() { (4 - k) % 4 } else { k };
             let (a, b) = self.corner_halves(j);
-            *p = self.origin;
-            p[u] += a * self.half;
-            p[v] += b * self.half;
-        }
-        out
+            let (a, b) = (a * h, b * h);
+            // The (u, v) of `plane_axes` written out: indexing a point by a
+            // variable axis stalls on store forwarding in this hot loop.
+            match axis {
+                0 => [o[0], o[1] + a, o[2] + b],
+                1 => [o[0] + b, o[1], o[2] + a],
+                _ => [o[0] + a, o[1] + b, o[2]],
+            }
+        })
     }
 
     /// Area in lattice units squared.
@@ -380,6 +383,13 @@ pub(super) struct Kept<'a> {
     pub(super) halo: &'a Halo,
 }
 
+impl<'a> Kept<'a> {
+    /// The kept elements of a mesh: `local`, then its `halo`.
+    pub(super) fn new(local: &'a [Octant], halo: &'a Halo) -> Kept<'a> {
+        Kept { local, halo }
+    }
+}
+
 impl Kept<'_> {
     /// The last kept element starting at or before the first cell of `o`;
     /// `hint` is a local element near it.
@@ -511,10 +521,7 @@ impl Mesh {
         if elements.len() > u32::MAX as usize {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
         }
-        let kept = Kept {
-            local: elements,
-            halo: &self.halo,
-        };
+        let kept = Kept::new(elements, &self.halo);
         let mut internal: Vec<Face> = Vec::with_capacity(3 * elements.len());
         let mut boundary: Vec<Face> = Vec::new();
         let mut halo: Vec<Face> = Vec::new();

@@ -481,10 +481,7 @@ impl Mesh {
     /// stored per face). Local work.
     fn octree_face_figures(&self, comm: &dyn Comm, sums: &mut [u64], max: &mut [f64; 3]) {
         let me = comm.rank() as u32;
-        let kept = Kept {
-            local: self.elements(),
-            halo: self.halo(),
-        };
+        let kept = Kept::new(self.elements(), self.halo());
         // The figures are ratios and angles, unchanged by the map from the
         // lattice to user units (a scaling and a shift): they are computed
         // on the lattice, where the coordinates are exact.
