@@ -476,7 +476,7 @@ impl<'a> RegionRules<'a> {
         s.bvh
             .query_candidates(lo.map(|x| x - w), hi.map(|x| x + w), stack);
         let n = stack.len();
-        self.walk(s, o, (0, n), out, stack, limit)
+        self.walk(s, o, (0, n), out, scratch, limit)
     }
 
     /// Appends to `out` the leaves that replace `leaves` (this rank's, in
@@ -578,7 +578,7 @@ impl<'a> RegionRules<'a> {
                         return Err(crate::refine::limit_error(limit, "refining"));
                     }
                 } else {
-                    self.walk(s, l, range, out, &mut scratch.stack, limit)?;
+                    self.walk(s, l, range, out, scratch, limit)?;
                 }
             }
             return Ok(());
@@ -589,10 +589,12 @@ impl<'a> RegionRules<'a> {
         let mut slices: [&[Octant]; 8] = [&[]; 8];
         let mut need = 0u8;
         let mut rest = leaves;
+        // Bands split leaves below the deepest band's level only.
+        let deepest = self.bands.iter().map(|b| b.1).max().unwrap_or(0);
         for (i, c) in children.iter().enumerate() {
             let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
             (slices[i], rest) = rest.split_at(k);
-            if slices[i].iter().any(|l| self.widest(l.level()) >= 0.0) {
+            if slices[i].iter().any(|l| l.level() < deepest) {
                 need |= 1 << i;
             }
         }
@@ -637,7 +639,7 @@ impl<'a> RegionRules<'a> {
         o: Octant,
         (a, b): (usize, usize),
         out: &mut Vec<Octant>,
-        stack: &mut Vec<u32>,
+        scratch: &mut BandScratch,
         limit: u64,
     ) -> Result<()> {
         let level = o.level();
@@ -646,7 +648,7 @@ impl<'a> RegionRules<'a> {
             let w = self.widest(level);
             let (lo, hi) = o.bounds_f64();
             let mut undecided = Vec::new();
-            let tris = stack[a..b].iter().map(|&t| &s.tris[t as usize]);
+            let tris = scratch.stack[a..b].iter().map(|&t| &s.tris[t as usize]);
             (w >= 0.0 && crate::geometry::distance::any_box_within(tris, lo, hi, w, &mut undecided))
                 || self.shapes_split(o)
         };
@@ -658,23 +660,28 @@ impl<'a> RegionRules<'a> {
             return Ok(());
         }
         let w = self.widest(level + 1);
-        let boxes = s.boxes();
-        for c in o.children() {
-            // Children at the finest level are leaves: no candidates needed.
-            let start = stack.len();
-            if w >= 0.0 && level + 1 < max {
-                let (lo, hi) = c.bounds_f64();
-                for i in a..b {
-                    let t = stack[i];
-                    if box_gap2(&boxes[t as usize], lo, hi) <= w * w {
-                        stack.push(t);
-                    }
-                }
+        // Children at the finest level are leaves: no candidates needed.
+        if w < 0.0 || level + 1 >= max {
+            for c in o.children() {
+                self.walk(s, c, (0, 0), out, scratch, limit)?;
             }
-            let end = stack.len();
-            self.walk(s, c, (start, end), out, stack, limit)?;
-            stack.truncate(start);
+            return Ok(());
         }
+        let (lo, hi) = o.bounds_f64();
+        let mid: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
+        let (boxes, w2) = (s.boxes(), w * w);
+        let BandScratch { stack, masks } = scratch;
+        masks.clear();
+        masks.extend(
+            stack[a..b]
+                .iter()
+                .map(|&t| child_gap_mask(&boxes[t as usize], lo, mid, hi, w2)),
+        );
+        let bounds = scatter_by_child(stack, a, b, |j| masks[j - a]);
+        for (i, c) in o.children().into_iter().enumerate() {
+            self.walk(s, c, (bounds[i], bounds[i + 1]), out, scratch, limit)?;
+        }
+        scratch.stack.truncate(bounds[0]);
         Ok(())
     }
 
@@ -703,14 +710,29 @@ const SEARCH_ABOVE: u8 = 4;
 /// The children in the low half along each axis (child bit `k` clear).
 const LOW_HALF: [u8; 3] = [0b0101_0101, 0b0011_0011, 0b0000_1111];
 
-/// Squared distance between a triangle's box and the box `lo..hi`.
-fn box_gap2(b: &crate::geometry::Aabb, lo: [f64; 3], hi: [f64; 3]) -> f64 {
-    (0..3)
-        .map(|k| {
-            let g = (lo[k] - b.max[k]).max(0.0).max(b.min[k] - hi[k]);
-            g * g
-        })
-        .sum()
+/// The children of the octant `lo..hi` (halves split at `mid`; bit `k` of
+/// a child set: the high half along `k`) whose closed boxes come within
+/// `sqrt(w2)` of the box `b`, exactly: the squared gaps per axis to either
+/// half, summed per child.
+fn child_gap_mask(
+    b: &crate::geometry::Aabb,
+    lo: [f64; 3],
+    mid: [f64; 3],
+    hi: [f64; 3],
+    w2: f64,
+) -> u8 {
+    let gap2 = |k: usize, l: f64, h: f64| {
+        let g = (l - b.max[k]).max(0.0).max(b.min[k] - h);
+        g * g
+    };
+    let low: [f64; 3] = std::array::from_fn(|k| gap2(k, lo[k], mid[k]));
+    let high: [f64; 3] = std::array::from_fn(|k| gap2(k, mid[k], hi[k]));
+    let mut m = 0u8;
+    for c in 0..8 {
+        let pick = |k: usize| if c >> k & 1 == 1 { high[k] } else { low[k] };
+        m |= ((pick(0) + pick(1) + pick(2) <= w2) as u8) << c;
+    }
+    m
 }
 
 /// Squared distance from point `p` to the box `lo..hi`.

@@ -10,8 +10,9 @@ For each rank count (default 1 and 2), in a scratch directory under target/bench
 
   snappyHexMesh  blockMesh, [decomposePar,] snappyHexMesh -overwrite [-parallel] (castellated
                  only: snap and addLayers false, nCellsBetweenLevels 1, resolveFeatureAngle 180);
-  octmesh        mpirun -np N octmesh mesh SURFACE --box ... --roots ... --level L
+  octmesh        [mpirun -np N] octmesh mesh SURFACE --box ... --roots ... --level L
                  --region box:...:LBOX --distance D:LBAND --keep outside --openfoam DIR
+                 (alone on one rank, as snappyHexMesh runs serially)
 
 and measures the wall time of the whole command (reading the STL to the written case; for
 snappyHexMesh the sum of blockMesh, decomposePar and snappyHexMesh), the peak RSS and the user +
@@ -282,11 +283,14 @@ def run_octmesh(np_, spec, runs, env, logs):
         if case.exists():
             shutil.rmtree(case)
         prefix = logs / "rss_octmesh"
-        cmd = with_rss(np_, [bl.OCTMESH] + octmesh_args(spec, case, stats_path), prefix)
+        # One rank runs alone, as snappyHexMesh's serial run does (no mpirun,
+        # and octmesh then does not start MPI).
+        mpi = np_ if np_ > 1 else 0
+        cmd = with_rss(mpi, [bl.OCTMESH] + octmesh_args(spec, case, stats_path), prefix)
         t = timed(cmd, env, bl.ROOT, logs / ("octmesh_np%d_%d.log" % (np_, i)))
         walls.append(t)
         loads.append(os.getloadavg()[0])
-        r, c = read_rss(prefix, np_)
+        r, c = read_rss(prefix, mpi)
         rss.append(r)
         cpus.append(sum(c))
         with open(stats_path) as fh:
@@ -349,7 +353,7 @@ def main():
           " band %.6g level %d" % (spec["name"], a.box, "x".join(map(str, spec["roots"])), sides[0],
                                    spec["level"], a.wake, spec["wake_level"], spec["band"],
                                    spec["band_level"]), flush=True)
-    print("  octmesh: mpirun -np N %s %s" % (bl.OCTMESH.relative_to(bl.ROOT), " ".join(
+    print("  octmesh: [mpirun -np N] %s %s" % (bl.OCTMESH.relative_to(bl.ROOT), " ".join(
         octmesh_args(spec, "CASE", "STATS.json"))), flush=True)
 
     results = []
