@@ -471,6 +471,71 @@ pub(crate) fn walk_points(leaves: &Merged, visit: impl FnMut(&[u32; 8])) -> usiz
     std::mem::size_of_val(&tree[..])
 }
 
+/// Visits every pair of leaves of `leaves` that share a face (the whole face
+/// of the smaller, or either when they are the same size) exactly once,
+/// calling `visit(axis, low, high)` with the leaf on the low and the high
+/// side along `axis` (merged indices). Leaves facing a gap (no leaf, or
+/// outside the root) are not visited. Returns the bytes the pointer tree
+/// took (freed on return). The walk of [`walk_points`] without its edges
+/// and points.
+pub(crate) fn walk_faces(leaves: &Merged, visit: impl FnMut(usize, usize, usize)) -> usize {
+    let n = leaves.len();
+    let mut tree = Vec::with_capacity(n / 24 + 1);
+    let root = build(leaves, Octant::ROOT, 0, n, &mut tree);
+    let mut w = FaceWalker { tree: &tree, visit };
+    if root & LEAF == 0 {
+        w.cell(0, [root; 8]);
+    }
+    std::mem::size_of_val(&tree[..])
+}
+
+/// See [`walk_faces`].
+struct FaceWalker<'a, F> {
+    tree: &'a [[u32; 8]],
+    visit: F,
+}
+
+impl<F: FnMut(usize, usize, usize)> FaceWalker<'_, F> {
+    #[inline]
+    fn child(&self, r: u32, c: u32) -> u32 {
+        if r & LEAF != 0 {
+            r
+        } else if r & FAMILY != 0 {
+            LEAF | ((r & !FAMILY) + c)
+        } else {
+            self.tree[r as usize][c as usize]
+        }
+    }
+
+    /// [`Walker::cell`] for cells and faces only: a face whose two sides
+    /// are leaves is visited.
+    fn cell(&mut self, m: u32, refs: [u32; 8]) {
+        for sub in &split_table()[m as usize] {
+            if sub.m.count_ones() > 1 {
+                continue;
+            }
+            // As in `Walker::cell`; the face walk is a separate type so that
+            // the node walk's code stays as it was measured.
+            let mut nr = [VOID; 8];
+            let mut internal = false;
+            for &(p2, p, c) in &sub.pos[..sub.n as usize] {
+                let r = self.child(refs[p as usize], c as u32);
+                internal |= r & LEAF == 0;
+                nr[p2 as usize] = r;
+            }
+            if internal {
+                self.cell(sub.m as u32, nr);
+            } else if sub.m != 0 {
+                let (low, high) = (nr[0], nr[sub.m as usize]);
+                if low != VOID && high != VOID {
+                    let axis = sub.m.trailing_zeros() as usize;
+                    (self.visit)(axis, (low & !LEAF) as usize, (high & !LEAF) as usize);
+                }
+            }
+        }
+    }
+}
+
 /// The merged leaf a [`walk_points`] reference names, if any.
 #[inline]
 pub(crate) fn leaf_at(r: u32) -> Option<usize> {

@@ -51,6 +51,7 @@ use std::ops::Range;
 use crate::error::{Error, ErrorKind, Result};
 use crate::octant::Octant;
 
+use super::dual::{walk_faces, Merged};
 use super::Mesh;
 
 /// Names of the six domain-side patches, in patch-id order.
@@ -521,17 +522,7 @@ impl Mesh {
         if elements.len() > u32::MAX as usize {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
         }
-        let kept = Kept::new(elements, &self.halo);
-        let mut internal: Vec<Face> = Vec::with_capacity(3 * elements.len());
-        let mut boundary: Vec<Face> = Vec::new();
-        let mut halo: Vec<Face> = Vec::new();
-        for i in 0..elements.len() {
-            self.element_faces(&kept, i, |kind, face| match kind {
-                FaceKind::Internal => internal.push(face),
-                FaceKind::Boundary => boundary.push(face),
-                FaceKind::Halo => halo.push(face),
-            });
-        }
+        let (mut internal, mut boundary, mut halo) = self.faces_by_walk();
         // Internal faces: the owner is the lower element.
         for face in internal.iter_mut() {
             if let Other::Element(j) = face.other {
@@ -588,6 +579,140 @@ impl Mesh {
             patch_start,
             halo_ranges,
         })
+    }
+
+    /// The faces of [`Mesh::faces`] before sorting: internal (not yet
+    /// oriented from the lower element), boundary (in element order, then
+    /// face, then piece) and halo faces. One dual walk of the local and
+    /// halo elements ([`walk_faces`]) meets every pair of kept elements
+    /// sharing a face once, at the finer face, with no search; it lists the
+    /// face as [`Mesh::element_faces`] would (by the finer side, the lower
+    /// element of two equal ones, the local side of a halo face) and marks
+    /// the quarters of each element face that face a kept element. The
+    /// faces' unmarked parts are then the boundary, pieced as there.
+    fn faces_by_walk(&self) -> (Vec<Face>, Vec<Face>, Vec<Face>) {
+        let elements: &[Octant] = &self.elements;
+        let (nl, hb) = (elements.len(), self.halo.before);
+        let merged = Merged {
+            before: &self.halo.leaves[..hb],
+            local: elements,
+            after: &self.halo.leaves[hb..],
+        };
+        let at = |k: usize| -> At {
+            if k < hb {
+                At::Halo(k as u32)
+            } else if k < hb + nl {
+                At::Local((k - hb) as u32)
+            } else {
+                At::Halo((k - nl) as u32)
+            }
+        };
+        // The face of `e` (owner `i`) on side `plus` of `axis`, `shape` in
+        // halves of it.
+        let face = |i: u32, e: Octant, axis: usize, plus: bool, shape: u16, other: Other| {
+            let (mut origin, s) = (e.coords(), e.side());
+            if plus {
+                origin[axis] += s;
+            }
+            Face {
+                owner: i,
+                other,
+                origin,
+                half: s / 2,
+                normal: axis as u8 | if plus { 0 } else { 4 },
+                shape,
+            }
+        };
+        let whole = pack(WHOLE);
+        // Per element, bit `4 f + q`: quarter `q` of its face `f` faces a
+        // kept element.
+        let mut covered = vec![0u32; nl];
+        let mut internal: Vec<Face> = Vec::with_capacity(3 * nl);
+        let mut halo: Vec<Face> = Vec::new();
+        walk_faces(&merged, |axis, low, high| {
+            let (a, b) = (at(low), at(high));
+            let (la, lb) = (merged.get(low), merged.get(high));
+            let put = |f: Face, internal: &mut Vec<Face>, halo: &mut Vec<Face>| match f.other {
+                Other::Halo(_) => halo.push(f),
+                _ => internal.push(f),
+            };
+            // `fine` (local or not) against the coarser `coarse`: the fine
+            // side lists a local fine face; a halo fine face is a quarter
+            // listed by the local coarse side.
+            let mut finer = |fine: At, lf: Octant, coarse: At, lc: Octant, fine_low: bool| {
+                let (u, v) = plane_axes(axis);
+                let q = ((lf.coords()[u] - lc.coords()[u]) / lf.side())
+                    | ((lf.coords()[v] - lc.coords()[v]) / lf.side()) << 1;
+                if let At::Local(c) = coarse {
+                    covered[c as usize] |= 1 << (4 * (2 * axis + !fine_low as usize) + q as usize);
+                }
+                match (fine, coarse) {
+                    (At::Local(i), _) => {
+                        covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
+                        let f = face(i, lf, axis, fine_low, whole, other_of(coarse));
+                        put(f, &mut internal, &mut halo);
+                    }
+                    (At::Halo(_), At::Local(c)) => {
+                        let (qa, qb) = ((q & 1) as u8, (q >> 1) as u8);
+                        let shape = pack([(qa, qb), (qa + 1, qb), (qa + 1, qb + 1), (qa, qb + 1)]);
+                        halo.push(face(c, lc, axis, !fine_low, shape, other_of(fine)));
+                    }
+                    _ => {}
+                }
+            };
+            if la.level() > lb.level() {
+                finer(a, la, b, lb, true);
+            } else if lb.level() > la.level() {
+                finer(b, lb, a, la, false);
+            } else {
+                // Equal: the lower local element lists it.
+                if let At::Local(i) = a {
+                    covered[i as usize] |= 15 << (4 * (2 * axis + 1));
+                }
+                if let At::Local(j) = b {
+                    covered[j as usize] |= 15 << (4 * (2 * axis));
+                }
+                match (a, b) {
+                    (At::Local(i), At::Local(j)) if i < j => {
+                        internal.push(face(i, la, axis, true, whole, Other::Element(j)));
+                    }
+                    (At::Local(i), At::Local(j)) => {
+                        internal.push(face(j, lb, axis, false, whole, Other::Element(i)));
+                    }
+                    (At::Local(i), At::Halo(_)) => {
+                        halo.push(face(i, la, axis, true, whole, other_of(b)));
+                    }
+                    (At::Halo(_), At::Local(j)) => {
+                        halo.push(face(j, lb, axis, false, whole, other_of(a)));
+                    }
+                    _ => {}
+                }
+            }
+        });
+        let mut boundary: Vec<Face> = Vec::new();
+        for (i, &e) in elements.iter().enumerate() {
+            if covered[i] == u32::MAX >> 8 {
+                continue;
+            }
+            let outside = self.domain.brick.face_neighbors(e);
+            for (f, n) in outside.into_iter().enumerate() {
+                let (axis, plus) = (f / 2, f % 2 == 1);
+                let mask = (covered[i] >> (4 * f) & 15) as u8;
+                if n.is_none() {
+                    // Outside the cube or a brick's box: a side patch.
+                    boundary.push(face(i as u32, e, axis, plus, whole, Other::Patch(f as u16)));
+                } else if mask == 0 {
+                    let other = Other::Patch(SURFACE_PATCH);
+                    boundary.push(face(i as u32, e, axis, plus, whole, other));
+                } else {
+                    for shape in dropped_pieces(mask) {
+                        let other = Other::Patch(SURFACE_PATCH);
+                        boundary.push(face(i as u32, e, axis, plus, pack(shape), other));
+                    }
+                }
+            }
+        }
+        (internal, boundary, halo)
     }
 
     /// Emits the faces of local element `i` that this element lists (see

@@ -26,7 +26,7 @@
 //! Every rank decides for its own leaves from the statuses of the previous
 //! sweep (its own and its ghosts'), so the result does not depend on the
 //! partition. The first sweep looks at every kept leaf in one dual walk of
-//! the leaves ([`crate::mesh::dual::walk_points`], which hands each corner
+//! the leaves (`mesh::dual::walk_points`, which hands each corner
 //! its block); sweeps then repeat around the leaves dropped last, looking
 //! their neighbours up, until none is.
 
