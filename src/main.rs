@@ -286,14 +286,17 @@ fn run(comm: &CommRef, args: &[String]) -> Result<()> {
 
 /// Keeps freed memory in the process: the pipeline frees and reallocates
 /// arrays of several GB, and returning them to the kernel makes every
-/// reuse pay for zeroing fresh pages again.
+/// reuse pay for zeroing fresh pages again. No mmap for large blocks, and
+/// no automatic trim at all (-1; `i32::MAX` still trimmed once more than 2
+/// GB lay free at the top); the library's own `trim_heap` calls, placed
+/// where a phase's peak is behind it, still return pages.
 fn keep_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only changes allocator tuning; called before any
     // threads exist.
     unsafe {
         libc::mallopt(libc::M_MMAP_MAX, 0);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, -1);
     }
 }
 

@@ -487,31 +487,75 @@ fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
     }
 }
 
-/// `faces` sorted by owner, then other side: a counting sort by owner
-/// (most faces already come in owner order), then each owner's few faces
-/// in place.
-fn sort_by_owner(faces: Vec<Face>, owners: usize) -> Vec<Face> {
-    let mut start = vec![0u32; owners + 1];
-    for f in &faces {
-        start[f.owner as usize + 1] += 1;
-    }
-    for e in 0..owners {
-        start[e + 1] += start[e];
-    }
-    let mut next = start.clone();
+/// `faces` sorted by owner, then other side, in place. A counting sort into
+/// a second array scatters the faces all over it when they do not come
+/// roughly in owner order (the dual walk lists the faces across its big
+/// planes last), and on tens of millions of faces the fresh pages alone
+/// cost seconds. So: the faces are permuted in place into blocks of owners
+/// (at most about 1024 blocks, American flag sort), each block is sorted by
+/// owner through a buffer the size of the largest block, and each owner's
+/// few faces by their other side. The order of equal keys does not matter:
+/// an owner never has two faces with the same other side.
+fn sort_by_owner(mut faces: Vec<Face>, owners: usize) -> Vec<Face> {
     let Some(&first) = faces.first() else {
         return faces;
     };
-    let mut out = vec![first; faces.len()];
-    for f in faces {
-        let at = &mut next[f.owner as usize];
-        out[*at as usize] = f;
-        *at += 1;
+    let shift = (usize::BITS - (owners >> 10).leading_zeros()).min(31);
+    let block = |f: &Face| (f.owner >> shift) as usize;
+    let nb = (owners >> shift) + 1;
+    let mut bstart = vec![0usize; nb + 1];
+    for f in &faces {
+        bstart[block(f) + 1] += 1;
     }
-    for e in 0..owners {
-        out[start[e] as usize..start[e + 1] as usize].sort_unstable_by_key(|f| f.other);
+    for b in 0..nb {
+        bstart[b + 1] += bstart[b];
     }
-    out
+    // Each face is moved once into the next free slot of its block.
+    let mut head = bstart[..nb].to_vec();
+    for b in 0..nb {
+        while head[b] < bstart[b + 1] {
+            let mut f = faces[head[b]];
+            let mut k = block(&f);
+            while k != b {
+                std::mem::swap(&mut f, &mut faces[head[k]]);
+                head[k] += 1;
+                k = block(&f);
+            }
+            faces[head[b]] = f;
+            head[b] += 1;
+        }
+    }
+    let widest = (0..nb)
+        .map(|b| bstart[b + 1] - bstart[b])
+        .max()
+        .unwrap_or(0);
+    let mut tmp = vec![first; widest];
+    let mut start = vec![0usize; (1 << shift) + 1];
+    for b in 0..nb {
+        let (lo, hi) = (bstart[b], bstart[b + 1]);
+        let base = (b << shift) as u32;
+        tmp[..hi - lo].copy_from_slice(&faces[lo..hi]);
+        start.iter_mut().for_each(|c| *c = 0);
+        for f in &tmp[..hi - lo] {
+            start[(f.owner - base) as usize + 1] += 1;
+        }
+        for k in 0..1 << shift {
+            start[k + 1] += start[k];
+        }
+        let mut fill = start.clone();
+        for f in &tmp[..hi - lo] {
+            let at = &mut fill[(f.owner - base) as usize];
+            faces[lo + *at] = *f;
+            *at += 1;
+        }
+        for k in 0..1 << shift {
+            let (a, z) = (lo + start[k], lo + start[k + 1]);
+            if z - a > 1 {
+                faces[a..z].sort_unstable_by_key(|f| f.other);
+            }
+        }
+    }
+    faces
 }
 
 impl Mesh {
@@ -627,7 +671,10 @@ impl Mesh {
         // Per element, bit `4 f + q`: quarter `q` of its face `f` faces a
         // kept element.
         let mut covered = vec![0u32; nl];
-        let mut internal: Vec<Face> = Vec::with_capacity(3 * nl);
+        // Room for the boundary and halo faces too, appended to this list in
+        // the end: growing a list of tens of millions of faces copies it to
+        // fresh pages, and room never written costs no memory.
+        let mut internal: Vec<Face> = Vec::with_capacity(4 * nl);
         let mut halo: Vec<Face> = Vec::new();
         walk_faces(&merged, |axis, low, high| {
             let (a, b) = (at(low), at(high));
