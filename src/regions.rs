@@ -540,11 +540,8 @@ impl<'a> RegionRules<'a> {
             scratch.stack.truncate(a);
             return Ok(());
         }
-        let mut rest = leaves;
-        for c in o.children() {
-            let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
-            let (mine, after) = rest.split_at(k);
-            rest = after;
+        let slices = child_slices(o, leaves);
+        for (c, mine) in o.children().into_iter().zip(slices) {
             self.split_leaves(s, c, mine, out, scratch, limit)?;
         }
         Ok(())
@@ -586,18 +583,12 @@ impl<'a> RegionRules<'a> {
         // The leaves of each child, and the children with a leaf some band
         // may split: only those get candidates.
         let children = o.children();
-        let mut slices: [&[Octant]; 8] = [&[]; 8];
-        let mut need = 0u8;
-        let mut rest = leaves;
+        let slices = child_slices(o, leaves);
         // Bands split leaves below the deepest band's level only.
         let deepest = self.bands.iter().map(|b| b.1).max().unwrap_or(0);
-        for (i, c) in children.iter().enumerate() {
-            let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
-            (slices[i], rest) = rest.split_at(k);
-            if slices[i].iter().any(|l| l.level() < deepest) {
-                need |= 1 << i;
-            }
-        }
+        let need = (0..8)
+            .filter(|&i| slices[i].iter().any(|l| l.level() < deepest))
+            .fold(0u8, |m, i| m | 1 << i);
         // Per axis, the children (bit set: high half) whose slab the
         // triangle's box grown by `w` meets.
         let (lo, hi) = o.bounds_f64();
@@ -700,6 +691,17 @@ impl<'a> RegionRules<'a> {
                 }
         })
     }
+}
+
+/// The leaves (sorted, all inside `o`) inside each child of `o`.
+fn child_slices(o: Octant, leaves: &[Octant]) -> [&[Octant]; 8] {
+    let mut rest = leaves;
+    o.children().map(|c| {
+        let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
+        let (mine, after) = rest.split_at(k);
+        rest = after;
+        mine
+    })
 }
 
 /// How many levels above the finest rule the band's candidates are

@@ -98,7 +98,7 @@ struct PolyMesh {
 fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
     let lattice = mesh.node_lattice();
-    let keys = near_point_keys(mesh);
+    let keys = near_point_keys(mesh, &lattice);
     let filter = PointFilter::new(edge_point_keys(mesh, &keys));
     let mut set = PointIndex::new(keys);
     let missing = |x: [u32; 3]| {

@@ -359,7 +359,7 @@ impl Faces {
     }
 }
 
-/// Which list a face emitted by [`Mesh::element_faces`] belongs to.
+/// Which list a face emitted by [`Mesh::for_each_face`] belongs to.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(super) enum FaceKind {
     /// Between two local elements.
@@ -389,14 +389,6 @@ impl<'a> Kept<'a> {
     pub(super) fn new(local: &'a [Octant], halo: &'a Halo) -> Kept<'a> {
         Kept { local, halo }
     }
-}
-
-impl Kept<'_> {
-    /// The last kept element starting at or before the first cell of `o`;
-    /// `hint` is a local element near it.
-    fn last_at_or_before(&self, o: Octant, hint: usize) -> Option<(At, Octant)> {
-        self.last_at_or_before_cell(o.cell_begin(), hint)
-    }
 
     /// The last kept element starting at or before finest cell `c` (a
     /// Morton cell index).
@@ -417,26 +409,10 @@ impl Kept<'_> {
         find(before).map(|j| (At::Halo(j as u32), before[j]))
     }
 
-    /// The kept element containing `o`, if one does.
-    fn containing(&self, o: Octant, hint: usize) -> Option<(At, Octant)> {
-        self.last_at_or_before(o, hint)
-            .filter(|(_, l)| l.cell_begin() <= o.cell_begin() && o.cell_end() <= l.cell_end())
-    }
-
     /// The kept element holding finest cell `c`, if one does.
     pub(super) fn holding_cell(&self, c: u64, hint: usize) -> Option<(At, Octant)> {
         self.last_at_or_before_cell(c, hint)
             .filter(|(_, l)| c < l.cell_end())
-    }
-
-    /// Whether `o` itself is a kept element.
-    fn exact(&self, o: Octant, hint: usize) -> Option<At> {
-        // Matched, not filtered: the optimiser then never compares the
-        // leaf of a `None` (which memcheck reports as uninitialised).
-        match self.last_at_or_before(o, hint) {
-            Some((a, l)) => (l == o).then_some(a),
-            None => None,
-        }
     }
 }
 
@@ -566,7 +542,17 @@ impl Mesh {
         if elements.len() > u32::MAX as usize {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
         }
-        let (mut internal, mut boundary, mut halo) = self.faces_by_walk();
+        // Room for the boundary and halo faces too, appended to this list in
+        // the end: growing a list of tens of millions of faces copies it to
+        // fresh pages, and room never written costs no memory.
+        let mut internal: Vec<Face> = Vec::with_capacity(4 * elements.len());
+        let mut boundary: Vec<Face> = Vec::new();
+        let mut halo: Vec<Face> = Vec::new();
+        self.for_each_face(|kind, face| match kind {
+            FaceKind::Internal => internal.push(face),
+            FaceKind::Boundary => boundary.push(face),
+            FaceKind::Halo => halo.push(face),
+        });
         // Internal faces: the owner is the lower element.
         for face in internal.iter_mut() {
             if let Other::Element(j) = face.other {
@@ -625,16 +611,18 @@ impl Mesh {
         })
     }
 
-    /// The faces of [`Mesh::faces`] before sorting: internal (not yet
-    /// oriented from the lower element), boundary (in element order, then
-    /// face, then piece) and halo faces. One dual walk of the local and
+    /// Emits every face of [`Mesh::faces`] once, with its kind, to `put`,
+    /// before sorting: each internal face by the finer side or, between two
+    /// equal elements, by the lower one (not yet oriented from the lower
+    /// element), a halo face by the local side, then the boundary faces in
+    /// element order, then face, then piece. One dual walk of the local and
     /// halo elements ([`walk_faces`]) meets every pair of kept elements
-    /// sharing a face once, at the finer face, with no search; it lists the
-    /// face as [`Mesh::element_faces`] would (by the finer side, the lower
-    /// element of two equal ones, the local side of a halo face) and marks
-    /// the quarters of each element face that face a kept element. The
-    /// faces' unmarked parts are then the boundary, pieced as there.
-    fn faces_by_walk(&self) -> (Vec<Face>, Vec<Face>, Vec<Face>) {
+    /// sharing a face once, at the finer face, with no search, and marks the
+    /// quarters of each element face that face a kept element; the faces'
+    /// unmarked parts are the boundary: a side patch outside the domain,
+    /// else the surface, a coarse face partly covered by finer kept
+    /// elements in the pieces of [`dropped_pieces`].
+    pub(super) fn for_each_face(&self, mut put: impl FnMut(FaceKind, Face)) {
         let elements: &[Octant] = &self.elements;
         let (nl, hb) = (elements.len(), self.halo.before);
         let merged = Merged {
@@ -671,18 +659,13 @@ impl Mesh {
         // Per element, bit `4 f + q`: quarter `q` of its face `f` faces a
         // kept element.
         let mut covered = vec![0u32; nl];
-        // Room for the boundary and halo faces too, appended to this list in
-        // the end: growing a list of tens of millions of faces copies it to
-        // fresh pages, and room never written costs no memory.
-        let mut internal: Vec<Face> = Vec::with_capacity(4 * nl);
-        let mut halo: Vec<Face> = Vec::new();
+        let kind = |other: Other| match other {
+            Other::Halo(_) => FaceKind::Halo,
+            _ => FaceKind::Internal,
+        };
         walk_faces(&merged, |axis, low, high| {
             let (a, b) = (at(low), at(high));
             let (la, lb) = (merged.get(low), merged.get(high));
-            let put = |f: Face, internal: &mut Vec<Face>, halo: &mut Vec<Face>| match f.other {
-                Other::Halo(_) => halo.push(f),
-                _ => internal.push(f),
-            };
             // `fine` (local or not) against the coarser `coarse`: the fine
             // side lists a local fine face; a halo fine face is a quarter
             // listed by the local coarse side.
@@ -696,13 +679,14 @@ impl Mesh {
                 match (fine, coarse) {
                     (At::Local(i), _) => {
                         covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
-                        let f = face(i, lf, axis, fine_low, whole, other_of(coarse));
-                        put(f, &mut internal, &mut halo);
+                        let other = other_of(coarse);
+                        put(kind(other), face(i, lf, axis, fine_low, whole, other));
                     }
                     (At::Halo(_), At::Local(c)) => {
                         let (qa, qb) = ((q & 1) as u8, (q >> 1) as u8);
                         let shape = pack([(qa, qb), (qa + 1, qb), (qa + 1, qb + 1), (qa, qb + 1)]);
-                        halo.push(face(c, lc, axis, !fine_low, shape, other_of(fine)));
+                        let f = face(c, lc, axis, !fine_low, shape, other_of(fine));
+                        put(FaceKind::Halo, f);
                     }
                     _ => {}
                 }
@@ -719,24 +703,20 @@ impl Mesh {
                 if let At::Local(j) = b {
                     covered[j as usize] |= 15 << (4 * (2 * axis));
                 }
-                match (a, b) {
+                let f = match (a, b) {
                     (At::Local(i), At::Local(j)) if i < j => {
-                        internal.push(face(i, la, axis, true, whole, Other::Element(j)));
+                        face(i, la, axis, true, whole, Other::Element(j))
                     }
                     (At::Local(i), At::Local(j)) => {
-                        internal.push(face(j, lb, axis, false, whole, Other::Element(i)));
+                        face(j, lb, axis, false, whole, Other::Element(i))
                     }
-                    (At::Local(i), At::Halo(_)) => {
-                        halo.push(face(i, la, axis, true, whole, other_of(b)));
-                    }
-                    (At::Halo(_), At::Local(j)) => {
-                        halo.push(face(j, lb, axis, false, whole, other_of(a)));
-                    }
-                    _ => {}
-                }
+                    (At::Local(i), At::Halo(_)) => face(i, la, axis, true, whole, other_of(b)),
+                    (At::Halo(_), At::Local(j)) => face(j, lb, axis, false, whole, other_of(a)),
+                    _ => return,
+                };
+                put(kind(f.other), f);
             }
         });
-        let mut boundary: Vec<Face> = Vec::new();
         for (i, &e) in elements.iter().enumerate() {
             if covered[i] == u32::MAX >> 8 {
                 continue;
@@ -745,110 +725,21 @@ impl Mesh {
             for (f, n) in outside.into_iter().enumerate() {
                 let (axis, plus) = (f / 2, f % 2 == 1);
                 let mask = (covered[i] >> (4 * f) & 15) as u8;
-                if n.is_none() {
-                    // Outside the cube or a brick's box: a side patch.
-                    boundary.push(face(i as u32, e, axis, plus, whole, Other::Patch(f as u16)));
-                } else if mask == 0 {
-                    let other = Other::Patch(SURFACE_PATCH);
-                    boundary.push(face(i as u32, e, axis, plus, whole, other));
-                } else {
-                    for shape in dropped_pieces(mask) {
-                        let other = Other::Patch(SURFACE_PATCH);
-                        boundary.push(face(i as u32, e, axis, plus, pack(shape), other));
-                    }
-                }
-            }
-        }
-        (internal, boundary, halo)
-    }
-
-    /// Emits the faces of local element `i` that this element lists (see
-    /// [`Mesh::faces`]: each internal face once, by the finer side or the
-    /// lower element; internal faces not yet oriented from the lower
-    /// element), with their kind, to `put`.
-    pub(super) fn element_faces(&self, kept: &Kept, i: usize, mut put: impl FnMut(FaceKind, Face)) {
-        let e = self.elements[i];
-        let i = i as u32;
-        let (c, s) = (e.coords(), e.side());
-        // Outside the cube or a brick's box: a side patch.
-        for (f, n) in self.domain.brick.face_neighbors(e).into_iter().enumerate() {
-            let (axis, plus) = (f / 2, f % 2 == 1);
-            let mut origin = c;
-            if plus {
-                origin[axis] += s;
-            }
-            let face = |shape: [(u8, u8); 4], half: u32, origin: [u32; 3], other| Face {
-                owner: i,
-                other,
-                origin,
-                half,
-                normal: axis as u8 | if plus { 0 } else { 4 },
-                shape: pack(shape),
-            };
-            let Some(n) = n else {
-                put(
-                    FaceKind::Boundary,
-                    face(WHOLE, s / 2, origin, Other::Patch(f as u16)),
-                );
-                continue;
-            };
-            if let Some((at, l)) = kept.containing(n, i as usize) {
-                if l.level() < e.level() || matches!(at, At::Halo(_)) {
-                    // Coarser (this fine side emits) or another rank's.
-                    let kind = if matches!(at, At::Halo(_)) {
-                        FaceKind::Halo
-                    } else {
-                        FaceKind::Internal
-                    };
-                    put(kind, face(WHOLE, s / 2, origin, other_of(at)));
-                } else if let At::Local(j) = at {
-                    if i < j {
-                        put(
-                            FaceKind::Internal,
-                            face(WHOLE, s / 2, origin, Other::Element(j)),
-                        );
-                    }
-                }
-                continue;
-            }
-            // Finer neighbours or none: the four children of `n` facing
-            // this element.
-            let mut mask = 0u8;
-            let (u, v) = plane_axes(axis);
-            for q in 0..4u8 {
-                let mut child = 0u32;
-                if !plus {
-                    child |= 1 << axis;
-                }
-                child |= ((q & 1) as u32) << u;
-                child |= ((q >> 1) as u32) << v;
-                let fine = n.child(child);
-                if let Some(at) = kept.exact(fine, i as usize) {
-                    mask |= 1 << q;
-                    if let At::Halo(_) = at {
-                        // The fine side is remote: this side lists the
-                        // quarter.
-                        let shape = [
-                            (q & 1, q >> 1),
-                            ((q & 1) + 1, q >> 1),
-                            ((q & 1) + 1, (q >> 1) + 1),
-                            (q & 1, (q >> 1) + 1),
-                        ];
-                        put(FaceKind::Halo, face(shape, s / 2, origin, other_of(at)));
-                    }
-                }
-            }
-            if mask == 0 {
-                put(
-                    FaceKind::Boundary,
-                    face(WHOLE, s / 2, origin, Other::Patch(SURFACE_PATCH)),
-                );
-            } else {
-                for shape in dropped_pieces(mask) {
+                let mut side = |shape: u16, other: Other| {
                     put(
                         FaceKind::Boundary,
-                        face(shape, s / 2, origin, Other::Patch(SURFACE_PATCH)),
+                        face(i as u32, e, axis, plus, shape, other),
                     );
+                };
+                if n.is_none() {
+                    // Outside the cube or a brick's box: a side patch.
+                    side(whole, Other::Patch(f as u16));
+                } else if mask == 0 {
+                    side(whole, Other::Patch(SURFACE_PATCH));
+                } else {
+                    for shape in dropped_pieces(mask) {
+                        side(pack(shape), Other::Patch(SURFACE_PATCH));
+                    }
                 }
             }
         }

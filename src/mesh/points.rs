@@ -30,17 +30,14 @@ pub fn corner_at(c: [u32; 3], s: u32, p: [u32; 3]) -> Option<usize> {
 }
 
 /// The keys of the mesh points near this rank: every corner of a local
-/// element (local nodes first, in node order) or of a halo element, the
-/// points a face's edges may carry. Duplicates are left in.
-pub fn near_point_keys(mesh: &super::Mesh) -> Vec<u64> {
-    let mut keys: Vec<u64> = mesh.node_lattice().iter().map(|&p| point_key(p)).collect();
+/// element (the local nodes first, in node order, from `lattice`, the
+/// mesh's [`super::Mesh::node_lattice`]) or of a halo element, the points a
+/// face's edges may carry. Duplicates are left in.
+pub fn near_point_keys(mesh: &super::Mesh, lattice: &[[u32; 3]]) -> Vec<u64> {
+    let mut keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
     for h in &mesh.halo().leaves {
         let (c, s) = (h.coords(), h.side());
-        for k in 0..8 {
-            keys.push(point_key(
-                [0, 1, 2].map(|a| c[a] + if k >> a & 1 == 1 { s } else { 0 }),
-            ));
-        }
+        keys.extend((0..8).map(|k| point_key(super::dual::corner_coords(c, s, k))));
     }
     keys
 }

@@ -96,7 +96,7 @@ use serde::Serialize;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
-use crate::mesh::faces::{FaceKind, Faces, Kept, Other};
+use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
     corner_at, edge_point_keys, face_polygon, near_point_keys, PointFilter, PointIndex,
 };
@@ -477,39 +477,36 @@ impl Mesh {
     }
 
     /// The face figures of an unsnapped mesh, from the octree's geometry:
-    /// measured as the faces are made, element by element (nothing is
+    /// measured as [`Mesh::for_each_face`] makes the faces (nothing is
     /// stored per face). Local work.
     fn octree_face_figures(&self, comm: &dyn Comm, sums: &mut [u64], max: &mut [f64; 3]) {
         let me = comm.rank() as u32;
-        let kept = Kept::new(self.elements(), self.halo());
         // The figures are ratios and angles, unchanged by the map from the
         // lattice to user units (a scaling and a shift): they are computed
         // on the lattice, where the coordinates are exact.
         let centre = |o: Other| self.centre_of(o);
-        for i in 0..self.elements().len() {
-            self.element_faces(&kept, i, |kind, f| {
-                let c = f.lattice_centre();
-                let s = scale(f.unit_normal(), f.lattice_area());
-                let corners = f.corners().map(|q| q.map(|x| x as f64));
-                let own = centre(Other::Element(f.owner));
-                // Seen from the element with the lower global number: the
-                // owner on one rank, and the same bits on any number.
-                let (p, n, s) = match (kind, f.other) {
-                    (FaceKind::Boundary, _) => {
-                        max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
-                        return;
-                    }
-                    (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
-                        return;
-                    }
-                    (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
-                    (_, other) => (own, centre(other), s),
-                };
-                let cos = face_orthogonality(p, n, s);
-                let skew = face_skewness(c, s, &corners, p, n);
-                Self::add_face(sums, max, cos, skew);
-            });
-        }
+        self.for_each_face(|kind, f| {
+            let c = f.lattice_centre();
+            let s = scale(f.unit_normal(), f.lattice_area());
+            let corners = f.corners().map(|q| q.map(|x| x as f64));
+            let own = centre(Other::Element(f.owner));
+            // Seen from the element with the lower global number: the
+            // owner on one rank, and the same bits on any number.
+            let (p, n, s) = match (kind, f.other) {
+                (FaceKind::Boundary, _) => {
+                    max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
+                    return;
+                }
+                (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
+                    return;
+                }
+                (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
+                (_, other) => (own, centre(other), s),
+            };
+            let cos = face_orthogonality(p, n, s);
+            let skew = face_skewness(c, s, &corners, p, n);
+            Self::add_face(sums, max, cos, skew);
+        });
     }
 
     /// The faces of `faces` on the moved points of a snapped mesh (see
@@ -517,7 +514,7 @@ impl Mesh {
     fn moved_faces(&self, faces: &Faces) -> Result<MovedFaces> {
         // The mesh points near this rank: every corner of a local or halo
         // element (the points the OpenFOAM writer puts on the faces' edges).
-        let keys = near_point_keys(self);
+        let keys = near_point_keys(self, &self.node_lattice());
         let filter = PointFilter::new(edge_point_keys(self, &keys));
         let mut index = PointIndex::new(keys);
         let (elements, conn) = (self.elements(), self.connectivity());
