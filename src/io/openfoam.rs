@@ -44,7 +44,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
-    corner_at, edge_midpoint, edge_point_keys, near_point_keys, point_key, PointFilter, PointIndex,
+    corner_at, edge_midpoint, halo_corners, near_point_keys, point_key, PointFilter, PointIndex,
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
@@ -99,8 +99,19 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     // Every corner of a kept element near this rank is a mesh point.
     let lattice = mesh.node_lattice();
     let keys = near_point_keys(mesh, &lattice);
-    let filter = PointFilter::new(edge_point_keys(mesh, &keys));
     let mut set = PointIndex::new(keys);
+    // A face edge carries a point in its middle only where a local
+    // edge-hanging node hangs on it, whose dependencies are the edge's
+    // ends (a face-hanging node is no edge's midpoint), or where a halo
+    // element has a corner. So an edge between local nodes that are not
+    // both an edge-hanging node's ends is looked up only in a filter of
+    // the halo's corners (empty on one rank).
+    let mut hanging_end = vec![false; lattice.len()];
+    for d in mesh.edge_hanging() {
+        hanging_end[d[0] as usize] = true;
+        hanging_end[d[1] as usize] = true;
+    }
+    let halo_corners = PointFilter::new(halo_corners(mesh));
     let missing = |x: [u32; 3]| {
         Error::new(
             ErrorKind::Internal,
@@ -114,9 +125,10 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
         node_at.push(set.find(point_key(p)).ok_or_else(|| missing(p))? as u32);
     }
     let (elements, conn) = (mesh.elements(), mesh.connectivity());
-    // Element `e`'s corner at `p`, if `p` is one: (lowest corner, side).
+    // Element `e`'s node at `p`, if `p` is one of its corners: (lowest
+    // corner, side).
     let corner_of = |e: u32, (c, s): ([u32; 3], u32), p: [u32; 3]| -> Option<usize> {
-        corner_at(c, s, p).map(|m| node_at[conn[e as usize][VTK_TO_MORTON[m]] as usize] as usize)
+        corner_at(c, s, p).map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize)
     };
     let cube = |e: u32| (elements[e as usize].coords(), elements[e as usize].side());
     let mut label = vec![UNUSED; set.len()];
@@ -138,16 +150,22 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
                 emitter = (j, cube(j));
             }
         }
+        let nodes = c.map(|x| corner_of(emitter.0, emitter.1, x));
         for k in 0..4 {
-            let j = match corner_of(emitter.0, emitter.1, c[k]) {
-                Some(j) => j,
+            let j = match nodes[k] {
+                Some(n) => node_at[n] as usize,
                 None => set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?,
             };
             poly.push((j, c[k]));
             if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
-                let km = point_key(m);
-                if filter.may_hold(km) {
-                    if let Some(j) = set.find(km) {
+                let may = match (nodes[k], nodes[(k + 1) % 4]) {
+                    (Some(a), Some(b)) => {
+                        (hanging_end[a] && hanging_end[b]) || halo_corners.may_hold(m)
+                    }
+                    _ => true,
+                };
+                if may {
+                    if let Some(j) = set.find(point_key(m)) {
                         poly.push((j, m));
                     }
                 }

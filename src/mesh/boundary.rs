@@ -183,7 +183,8 @@ impl Mesh {
         }
         for k in 0..near.len() {
             if near[k] != u32::MAX && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0) {
-                masks[ni + k] = node_patch_mask(&kept, lattice[ni + k], near[k] as usize, hi, 0);
+                let holds = |cell: u64| kept.holding_cell(cell, near[k] as usize).is_some();
+                masks[ni + k] = node_patch_mask(lattice[ni + k], hi, 0, holds);
             }
         }
         masks
@@ -210,15 +211,27 @@ impl Mesh {
         // their corner (bit b: the cell on the positive side of axis a
         // when bit a of b is set). A node all eight cover is inside: no
         // look-up needed.
+        // No local element holds a cell around an independent node
+        // without having the node as a corner (the node would hang on
+        // it), so those cells are looked up in the halo only.
+        let ni = self.num_independent;
         let mut masks: Vec<u64> = lattice
             .iter()
             .zip(&near)
             .zip(&covered)
-            .map(|((&p, &e), &c)| {
+            .enumerate()
+            .map(|(n, ((&p, &e), &c))| {
                 if c == 0xff {
                     0
                 } else {
-                    node_patch_mask(&kept, p, e as usize, hi, c)
+                    let holds = |cell: u64| {
+                        if n < ni {
+                            kept.halo_holds(cell)
+                        } else {
+                            kept.holding_cell(cell, e as usize).is_some()
+                        }
+                    };
+                    node_patch_mask(p, hi, c, holds)
                 }
             })
             .collect();
@@ -277,7 +290,12 @@ impl Mesh {
         for p in surface..faces.num_patches() {
             for f in &faces.faces()[faces.patch_range(p)] {
                 poly.clear();
-                face_polygon(&f.corners(), |k| index.find(k).is_some(), &mut poly);
+                face_polygon(
+                    &f.corners(),
+                    |_| true,
+                    |k| index.find(k).is_some(),
+                    &mut poly,
+                );
                 for &(k, _) in &poly {
                     if let Some(j) = index.find(k) {
                         parts[node_at[j] as usize] |= 1 << p;
@@ -304,8 +322,9 @@ impl Mesh {
 /// lattice point `p`.
 /// `hi`: the upper lattice bounds of the domain (the cube's or a brick's);
 /// `covered`: the cells known to be kept (bit `b` for cell `b`), which
-/// need no look-up.
-fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3], covered: u8) -> u64 {
+/// need no look-up; `holds`: whether a kept element holds a finest cell
+/// (a Morton cell index) inside the domain.
+fn node_patch_mask(p: [u32; 3], hi: [u32; 3], covered: u8, holds: impl Fn(u64) -> bool) -> u64 {
     // Cell `b` (bit `a` of `b` set: on the positive side of axis `a`),
     // kept or not; `outside[b]` when it leaves the domain.
     let mut inside = [false; 8];
@@ -326,7 +345,7 @@ fn node_patch_mask(kept: &Kept, p: [u32; 3], hint: usize, hi: [u32; 3], covered:
             inside[b] = true;
         } else if !outside[b] {
             let cell = crate::octant::morton_encode(q[0], q[1], q[2]);
-            inside[b] = kept.holding_cell(cell, hint).is_some();
+            inside[b] = holds(cell);
         }
     }
     let mut mask = 0u64;

@@ -409,6 +409,15 @@ impl<'a> Kept<'a> {
         find(before).map(|j| (At::Halo(j as u32), before[j]))
     }
 
+    /// Whether a halo element holds finest cell `c`.
+    pub(super) fn halo_holds(&self, c: u64) -> bool {
+        // The halo's leaves are in Morton order (those before the local
+        // ones, then those after).
+        let h = &self.halo.leaves;
+        let k = h.partition_point(|l| l.cell_begin() <= c);
+        k > 0 && c < h[k - 1].cell_end()
+    }
+
     /// The kept element holding finest cell `c`, if one does.
     pub(super) fn holding_cell(&self, c: u64, hint: usize) -> Option<(At, Octant)> {
         self.last_at_or_before_cell(c, hint)

@@ -35,20 +35,32 @@ pub fn corner_at(c: [u32; 3], s: u32, p: [u32; 3]) -> Option<usize> {
 /// face's edges may carry. Duplicates are left in.
 pub fn near_point_keys(mesh: &super::Mesh, lattice: &[[u32; 3]]) -> Vec<u64> {
     let mut keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
-    for h in &mesh.halo().leaves {
-        let (c, s) = (h.coords(), h.side());
-        keys.extend((0..8).map(|k| point_key(super::dual::corner_coords(c, s, k))));
-    }
+    keys.extend(halo_corners(mesh).map(point_key));
     keys
 }
 
-/// The part of [`near_point_keys`] (`keys`) a face's edge can carry between
-/// its corners: the hanging local nodes and the halo elements' corners. A
-/// mesh point in the middle of an edge of a local element's face hangs on
-/// that element, so the independent nodes never do; leaving them out keeps
-/// a [`PointFilter`] of these small enough to stay in cache.
-pub fn edge_point_keys<'k>(mesh: &super::Mesh, keys: &'k [u64]) -> &'k [u64] {
-    &keys[mesh.num_independent()..]
+/// The mesh points near this rank a face's edge can carry between its
+/// corners: the hanging local nodes (from `lattice`, the mesh's
+/// [`super::Mesh::node_lattice`]) and the halo elements' corners. A mesh
+/// point in the middle of an edge of a local element's face hangs on that
+/// element, so the independent nodes never do; leaving them out keeps a
+/// [`PointFilter`] of these small enough to stay in cache.
+pub fn edge_points<'m>(
+    mesh: &'m super::Mesh,
+    lattice: &'m [[u32; 3]],
+) -> impl Iterator<Item = [u32; 3]> + Clone + 'm {
+    lattice[mesh.num_independent()..]
+        .iter()
+        .copied()
+        .chain(halo_corners(mesh))
+}
+
+/// The corners of the halo elements (repeats included).
+pub fn halo_corners(mesh: &super::Mesh) -> impl Iterator<Item = [u32; 3]> + Clone + '_ {
+    mesh.halo().leaves.iter().flat_map(|h| {
+        let (c, s) = (h.coords(), h.side());
+        (0..8).map(move |k| super::dual::corner_coords(c, s, k))
+    })
 }
 
 /// A set of lattice points, sorted by [`point_key`], each known by its
@@ -87,9 +99,10 @@ impl PointIndex {
     }
 }
 
-/// A one-hash bit filter over a set of point keys: `false` means the point
-/// is surely absent. Most face edges carry no hanging point, and the
-/// filter (a few bits per point, in cache) answers those without a search.
+/// A one-hash bit filter over a set of lattice points: `false` means the
+/// point is surely absent. Most face edges carry no hanging point, and the
+/// filter (a few bits per point, in cache) answers those without a search,
+/// from the coordinates (no Morton code to make).
 #[derive(Clone, Debug)]
 pub struct PointFilter {
     bits: Vec<u64>,
@@ -97,64 +110,74 @@ pub struct PointFilter {
 }
 
 impl PointFilter {
-    /// The filter of `keys`.
-    pub fn new(keys: &[u64]) -> PointFilter {
+    /// The filter of `points`.
+    pub fn new(points: impl Iterator<Item = [u32; 3]> + Clone) -> PointFilter {
         // About 16 bits per point: a false positive costs one search.
-        let n = (16 * keys.len().max(1)).next_power_of_two().max(64);
+        let n = (16 * points.clone().count().max(1))
+            .next_power_of_two()
+            .max(64);
         let mut f = PointFilter {
             bits: vec![0; n / 64],
             shift: 64 - n.trailing_zeros(),
         };
-        for &k in keys {
-            let h = f.slot(k);
+        for p in points {
+            let h = f.slot(p);
             f.bits[h >> 6] |= 1 << (h & 63);
         }
         f
     }
 
-    fn slot(&self, k: u64) -> usize {
+    fn slot(&self, p: [u32; 3]) -> usize {
+        // Coordinates past 21 bits only fold onto others: more false
+        // positives, never a miss.
+        let k = p[0] as u64 ^ (p[1] as u64) << 21 ^ (p[2] as u64) << 42;
         (k.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> self.shift) as usize
     }
 
-    /// Whether the point with key `k` may be in the set.
-    pub fn may_hold(&self, k: u64) -> bool {
-        let h = self.slot(k);
+    /// Whether the lattice point `p` may be in the set.
+    pub fn may_hold(&self, p: [u32; 3]) -> bool {
+        let h = self.slot(p);
         self.bits[h >> 6] >> (h & 63) & 1 == 1
     }
 }
 
 /// The midpoint of `a`-`b` when they differ along one axis by an even
 /// length (an edge that may carry a hanging point).
+#[inline]
 pub fn edge_midpoint(a: [u32; 3], b: [u32; 3]) -> Option<[u32; 3]> {
-    let differ = [a[0] != b[0], a[1] != b[1], a[2] != b[2]];
-    if differ.iter().filter(|&&d| d).count() != 1 {
+    let differ = (a[0] != b[0]) as u32 + (a[1] != b[1]) as u32 + (a[2] != b[2]) as u32;
+    // The sums are even on every axis exactly when the one differing
+    // length is (equal coordinates sum to an even number).
+    let sum = [
+        a[0] as u64 + b[0] as u64,
+        a[1] as u64 + b[1] as u64,
+        a[2] as u64 + b[2] as u64,
+    ];
+    if differ != 1 || (sum[0] | sum[1] | sum[2]) & 1 != 0 {
         return None;
     }
-    let k = differ.iter().position(|&d| d)?;
-    let (lo, hi) = (a[k].min(b[k]), a[k].max(b[k]));
-    if (hi - lo) % 2 != 0 {
-        return None;
-    }
-    let mut m = a;
-    m[k] = lo + (hi - lo) / 2;
-    Some(m)
+    Some(sum.map(|v| (v / 2) as u32))
 }
 
 /// The polygon of a quadrilateral face as mesh points: its corners in
-/// order with, between two corners, their midpoint when `exists` says the
-/// mesh has a point there (a hanging point on the edge). Appends
-/// `(key, point)` pairs to `out`.
+/// order with, between two corners, their midpoint when the mesh has a
+/// point there (a hanging point on the edge): when `may_hold` allows it
+/// and `exists` says so from its key. Appends `(key, point)` pairs to
+/// `out`.
 pub fn face_polygon(
     corners: &[[u32; 3]; 4],
+    may_hold: impl Fn([u32; 3]) -> bool,
     mut exists: impl FnMut(u64) -> bool,
     out: &mut Vec<(u64, [u32; 3])>,
 ) {
     for k in 0..4 {
         out.push((point_key(corners[k]), corners[k]));
         if let Some(m) = edge_midpoint(corners[k], corners[(k + 1) % 4]) {
-            let km = point_key(m);
-            if exists(km) {
-                out.push((km, m));
+            if may_hold(m) {
+                let km = point_key(m);
+                if exists(km) {
+                    out.push((km, m));
+                }
             }
         }
     }
@@ -171,6 +194,8 @@ mod tests {
         assert_eq!(edge_midpoint([0, 0, 0], [3, 0, 0]), None);
         assert_eq!(edge_midpoint([0, 0, 0], [2, 2, 0]), None);
         assert_eq!(edge_midpoint([1, 1, 1], [1, 1, 1]), None);
+        assert_eq!(edge_midpoint([3, 1, 5], [3, 1, 9]), Some([3, 1, 7]));
+        assert_eq!(edge_midpoint([3, 1, 5], [3, 1, 8]), None);
     }
 
     #[test]
@@ -188,11 +213,11 @@ mod tests {
 
     #[test]
     fn filter_never_misses() {
-        let keys: Vec<u64> = (0..1000u32).map(|i| point_key([i, 2 * i, 3 * i])).collect();
-        let f = PointFilter::new(&keys);
-        assert!(keys.iter().all(|&k| f.may_hold(k)));
+        let points = (0..1000u32).map(|i| [i, 2 * i, 3 * i]);
+        let f = PointFilter::new(points.clone());
+        assert!(points.clone().all(|p| f.may_hold(p)));
         let false_hits = (0..1000u32)
-            .filter(|&i| f.may_hold(point_key([i + 1, 2 * i, 3 * i])))
+            .filter(|&i| f.may_hold([i + 1, 2 * i, 3 * i]))
             .count();
         assert!(false_hits < 100, "{false_hits} false positives");
     }
@@ -201,7 +226,7 @@ mod tests {
     fn polygon_takes_existing_midpoints() {
         let c = [[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]];
         let mut out = Vec::new();
-        face_polygon(&c, |k| k == point_key([4, 2, 0]), &mut out);
+        face_polygon(&c, |_| true, |k| k == point_key([4, 2, 0]), &mut out);
         let pts: Vec<[u32; 3]> = out.iter().map(|p| p.1).collect();
         assert_eq!(
             pts,

@@ -98,7 +98,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
-    corner_at, edge_point_keys, face_polygon, near_point_keys, PointFilter, PointIndex,
+    corner_at, edge_points, face_polygon, near_point_keys, PointFilter, PointIndex,
 };
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
@@ -514,8 +514,9 @@ impl Mesh {
     fn moved_faces(&self, faces: &Faces) -> Result<MovedFaces> {
         // The mesh points near this rank: every corner of a local or halo
         // element (the points the OpenFOAM writer puts on the faces' edges).
-        let keys = near_point_keys(self, &self.node_lattice());
-        let filter = PointFilter::new(edge_point_keys(self, &keys));
+        let lattice = self.node_lattice();
+        let keys = near_point_keys(self, &lattice);
+        let filter = PointFilter::new(edge_points(self, &lattice));
         let mut index = PointIndex::new(keys);
         let (elements, conn) = (self.elements(), self.connectivity());
         let moved = self.moved().unwrap_or(&[]);
@@ -539,7 +540,8 @@ impl Mesh {
             poly.clear();
             face_polygon(
                 &f.corners(),
-                |k| filter.may_hold(k) && index.find(k).is_some(),
+                |p| filter.may_hold(p),
+                |k| index.find(k).is_some(),
                 &mut poly,
             );
             let flip = match f.other {
