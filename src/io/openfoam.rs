@@ -88,14 +88,15 @@ pub struct FoamCounts {
 /// A point that exists but no face used yet.
 const UNUSED: u32 = u32::MAX;
 
-/// This rank's polyMesh in memory: points and faces as point labels.
-struct PolyMesh {
-    points: Vec<[u32; 3]>,
-    offsets: Vec<u32>,
-    labels: Vec<u32>,
-}
-
-fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
+/// Turns each face of `faces`, in order, into its polygon of point
+/// labels and hands it to `emit`; returns this rank's points in label
+/// order (labels follow the order in which the faces first use the
+/// points). No list of every label is kept: the caller streams them.
+fn face_polygons(
+    mesh: &Mesh,
+    faces: &Faces,
+    mut emit: impl FnMut(&[u32]) -> Result<()>,
+) -> Result<Vec<[u32; 3]>> {
     // Every corner of a kept element near this rank is a mesh point.
     let lattice = mesh.node_lattice();
     let keys = near_point_keys(mesh, &lattice);
@@ -134,10 +135,8 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
     let mut label = vec![UNUSED; set.len()];
     let halo_start = faces.halo_range().start;
     let mut points: Vec<[u32; 3]> = Vec::new();
-    let mut offsets = Vec::with_capacity(faces.faces().len() + 1);
-    offsets.push(0u32);
-    let mut labels: Vec<u32> =
-        Vec::with_capacity(4 * faces.faces().len() + faces.faces().len() / 2);
+    let mut total = 0usize;
+    let mut labels: Vec<u32> = Vec::with_capacity(8);
     let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
@@ -178,6 +177,7 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
                 .unwrap_or(0);
             poly.rotate_left(at);
         }
+        labels.clear();
         for &(j, x) in &poly {
             if label[j] == UNUSED {
                 label[j] = points.len() as u32;
@@ -185,19 +185,16 @@ fn build_polymesh(mesh: &Mesh, faces: &Faces) -> Result<PolyMesh> {
             }
             labels.push(label[j]);
         }
-        if labels.len() > i32::MAX as usize {
+        total += labels.len();
+        if total > i32::MAX as usize {
             return Err(Error::new(
                 ErrorKind::Limit,
                 "more than 2^31 face labels on one rank",
             ));
         }
-        offsets.push(labels.len() as u32);
+        emit(&labels)?;
     }
-    Ok(PolyMesh {
-        points,
-        offsets,
-        labels,
-    })
+    Ok(points)
 }
 
 /// The directory of this rank's mesh.
@@ -246,8 +243,7 @@ pub fn write_case(
     let written = (|| -> Result<FoamCounts> {
         let _ = fs::remove_dir_all(&scratch);
         fs::create_dir_all(&scratch).map_err(|e| io_err(&scratch, e))?;
-        let poly = build_polymesh(mesh, faces)?;
-        write_polymesh(&scratch, mesh, faces, &poly, opts, me, p)
+        write_polymesh(&scratch, mesh, faces, opts, me, p)
     })();
     if written.is_err() {
         let _ = fs::remove_dir_all(&scratch);
@@ -326,18 +322,33 @@ fn header(
     writeln!(out, "}}\n")
 }
 
-fn write_labels(out: &mut impl Write, format: FoamFormat, v: &[u32]) -> std::io::Result<()> {
-    write!(out, "{}\n(", v.len())?;
+/// Writes the `n` labels of `v` as a labelList body.
+fn write_label_iter(
+    out: &mut impl Write,
+    format: FoamFormat,
+    n: usize,
+    v: impl Iterator<Item = u32>,
+) -> std::io::Result<()> {
+    write!(out, "{n}\n(")?;
     match format {
         FoamFormat::Binary => {
-            write_raw(out, v, |x, b| {
-                b.extend_from_slice(&(*x as i32).to_le_bytes())
-            })?;
+            // Through one small buffer, reused: no copy of the whole list
+            // (tens of megabytes, all of it fresh pages to fault in).
+            const CHUNK: usize = 1 << 16;
+            let mut buf = Vec::with_capacity(CHUNK);
+            for x in v {
+                buf.push(x);
+                if buf.len() == CHUNK {
+                    write_u32s(out, &buf)?;
+                    buf.clear();
+                }
+            }
+            write_u32s(out, &buf)?;
             writeln!(out, ")")
         }
         FoamFormat::Ascii => {
             writeln!(out)?;
-            for &x in v {
+            for x in v {
                 writeln!(out, "{x}")?;
             }
             writeln!(out, ")")
@@ -345,24 +356,102 @@ fn write_labels(out: &mut impl Write, format: FoamFormat, v: &[u32]) -> std::io:
     }
 }
 
-/// Writes `items` as raw bytes, `encode` appending each one's, through a
-/// small buffer reused for every chunk: no copy of the whole list (tens of
-/// megabytes, all of it fresh pages to fault in).
-fn write_raw<T>(
-    out: &mut impl Write,
-    items: &[T],
-    encode: impl Fn(&T, &mut Vec<u8>),
-) -> std::io::Result<()> {
-    const CHUNK: usize = 1 << 18;
-    let mut buf = Vec::with_capacity(CHUNK + 64);
-    for x in items {
-        encode(x, &mut buf);
-        if buf.len() >= CHUNK {
-            out.write_all(&buf)?;
-            buf.clear();
+/// Writes `v` as raw little-endian 32-bit labels (labels below 2^31 have
+/// the same bits as OpenFOAM's signed ones).
+fn write_u32s(out: &mut impl Write, v: &[u32]) -> std::io::Result<()> {
+    if cfg!(target_endian = "little") {
+        // SAFETY: `u32` has no padding and any alignment suits `u8`; the
+        // bytes are those of `v`, which outlives the borrow.
+        let bytes = unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), 4 * v.len()) };
+        out.write_all(bytes)
+    } else {
+        v.iter().try_for_each(|x| out.write_all(&x.to_le_bytes()))
+    }
+}
+
+/// Writes `v` as raw little-endian 64-bit scalars.
+fn write_f64s(out: &mut impl Write, v: &[[f64; 3]]) -> std::io::Result<()> {
+    if cfg!(target_endian = "little") {
+        // SAFETY: `[f64; 3]` has no padding and any alignment suits `u8`;
+        // the bytes are those of `v`, which outlives the borrow.
+        let bytes = unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), 24 * v.len()) };
+        out.write_all(bytes)
+    } else {
+        v.iter()
+            .flatten()
+            .try_for_each(|x| out.write_all(&x.to_le_bytes()))
+    }
+}
+
+/// Width of the label count of a binary `faces` file: the labels are
+/// streamed before their number is known, and the count written over room
+/// left for it (OpenFOAM skips the trailing blanks).
+const LABEL_COUNT_WIDTH: usize = 20;
+
+/// Writes the `faces` file of this rank, the face polygons streamed from
+/// [`face_polygons`], and returns the points in label order.
+fn write_faces(
+    path: &Path,
+    fmt: FoamFormat,
+    loc: &str,
+    mesh: &Mesh,
+    faces: &Faces,
+) -> Result<Vec<[u32; 3]>> {
+    use std::io::{Seek, SeekFrom};
+    let io = |e: std::io::Error| io_err(path, e);
+    let nf = faces.faces().len();
+    match fmt {
+        FoamFormat::Binary => {
+            // A faceCompactList: the offsets, then the labels. The labels
+            // go to the file as they come, after room for the offsets,
+            // which are written last.
+            let mut head = Vec::new();
+            header(&mut head, fmt, "faceCompactList", loc, "faces", None).map_err(io)?;
+            write!(head, "{}\n(", nf + 1).map_err(io)?;
+            let data_at = head.len() + 4 * (nf + 1) + ")\n\n".len() + LABEL_COUNT_WIDTH + 2;
+            let mut file = fs::File::create(path).map_err(io)?;
+            file.seek(SeekFrom::Start(data_at as u64)).map_err(io)?;
+            let mut w = BufWriter::with_capacity(1 << 20, file);
+            let mut offsets = Vec::with_capacity(nf + 1);
+            offsets.push(0u32);
+            let mut total = 0u32;
+            let points = face_polygons(mesh, faces, |l| {
+                total += l.len() as u32;
+                offsets.push(total);
+                write_u32s(&mut w, l).map_err(io)
+            })?;
+            w.write_all(b")\n").map_err(io)?;
+            let mut file = w.into_inner().map_err(|e| io(e.into_error()))?;
+            file.seek(SeekFrom::Start(0)).map_err(io)?;
+            let mut w = BufWriter::with_capacity(1 << 20, file);
+            w.write_all(&head).map_err(io)?;
+            write_u32s(&mut w, &offsets).map_err(io)?;
+            write!(w, ")\n\n{total:<LABEL_COUNT_WIDTH$}\n(").map_err(io)?;
+            w.flush().map_err(io)?;
+            Ok(points)
+        }
+        FoamFormat::Ascii => {
+            let mut w = create(path)?;
+            header(&mut w, fmt, "faceList", loc, "faces", None).map_err(io)?;
+            writeln!(w, "{nf}\n(").map_err(io)?;
+            let points = face_polygons(mesh, faces, |l| {
+                (|| -> std::io::Result<()> {
+                    write!(w, "{}(", l.len())?;
+                    for (k, x) in l.iter().enumerate() {
+                        if k > 0 {
+                            write!(w, " ")?;
+                        }
+                        write!(w, "{x}")?;
+                    }
+                    writeln!(w, ")")
+                })()
+                .map_err(io)
+            })?;
+            writeln!(w, ")").map_err(io)?;
+            w.flush().map_err(io)?;
+            Ok(points)
         }
     }
-    out.write_all(&buf)
 }
 
 fn create(path: &Path) -> Result<BufWriter<fs::File>> {
@@ -376,7 +465,6 @@ fn write_polymesh(
     dir: &Path,
     mesh: &Mesh,
     faces: &Faces,
-    poly: &PolyMesh,
     opts: &FoamOptions,
     me: usize,
     p: usize,
@@ -388,12 +476,14 @@ fn write_polymesh(
         format!("processor{me}/constant/polyMesh")
     };
     let loc = location.as_str();
+    let points = write_faces(&dir.join("faces"), fmt, loc, mesh, faces)?;
     // The moved positions on a snapped mesh, the lattice's otherwise.
-    let positions = mesh.point_positions(&poly.points)?;
+    let positions = mesh.point_positions(&points)?;
+    drop(points);
     let nf = faces.faces().len();
     let ni = faces.num_internal();
     let counts = FoamCounts {
-        points: poly.points.len() as u64,
+        points: positions.len() as u64,
         faces: nf as u64,
         internal_faces: ni as u64,
         cells: mesh.elements().len() as u64,
@@ -406,14 +496,10 @@ fn write_polymesh(
     let result = (|| -> std::io::Result<()> {
         let mut w = create(&path).map_err(std::io::Error::other)?;
         header(&mut w, fmt, "vectorField", loc, "points", None)?;
-        write!(w, "{}\n(", poly.points.len())?;
+        write!(w, "{}\n(", positions.len())?;
         match fmt {
             FoamFormat::Binary => {
-                write_raw(&mut w, &positions, |q, b| {
-                    for x in q {
-                        b.extend_from_slice(&x.to_le_bytes());
-                    }
-                })?;
+                write_f64s(&mut w, &positions)?;
                 writeln!(w, ")")?;
             }
             FoamFormat::Ascii => {
@@ -426,52 +512,21 @@ fn write_polymesh(
         }
         w.flush()?;
 
-        let path = dir.join("faces");
-        let mut w = create(&path).map_err(std::io::Error::other)?;
-        match fmt {
-            FoamFormat::Binary => {
-                header(&mut w, fmt, "faceCompactList", loc, "faces", None)?;
-                write_labels(&mut w, fmt, &poly.offsets)?;
-                writeln!(w)?;
-                write_labels(&mut w, fmt, &poly.labels)?;
-            }
-            FoamFormat::Ascii => {
-                header(&mut w, fmt, "faceList", loc, "faces", None)?;
-                writeln!(w, "{nf}\n(")?;
-                for f in poly.offsets.windows(2) {
-                    let l = &poly.labels[f[0] as usize..f[1] as usize];
-                    write!(w, "{}(", l.len())?;
-                    for (k, x) in l.iter().enumerate() {
-                        if k > 0 {
-                            write!(w, " ")?;
-                        }
-                        write!(w, "{x}")?;
-                    }
-                    writeln!(w, ")")?;
-                }
-                writeln!(w, ")")?;
-            }
-        }
-        w.flush()?;
-
-        let owner: Vec<u32> = faces.faces().iter().map(|f| f.owner).collect();
+        let owners = faces.faces().iter().map(|f| f.owner);
         let path = dir.join("owner");
         let mut w = create(&path).map_err(std::io::Error::other)?;
         header(&mut w, fmt, "labelList", loc, "owner", Some(&note))?;
-        write_labels(&mut w, fmt, &owner)?;
+        write_label_iter(&mut w, fmt, nf, owners)?;
         w.flush()?;
 
-        let neighbour: Vec<u32> = faces.faces()[..ni]
-            .iter()
-            .map(|f| match f.other {
-                Other::Element(j) => j,
-                _ => 0,
-            })
-            .collect();
+        let neighbours = faces.faces()[..ni].iter().map(|f| match f.other {
+            Other::Element(j) => j,
+            _ => 0,
+        });
         let path = dir.join("neighbour");
         let mut w = create(&path).map_err(std::io::Error::other)?;
         header(&mut w, fmt, "labelList", loc, "neighbour", Some(&note))?;
-        write_labels(&mut w, fmt, &neighbour)?;
+        write_label_iter(&mut w, fmt, ni, neighbours)?;
         w.flush()?;
 
         let path = dir.join("boundary");
