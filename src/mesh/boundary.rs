@@ -215,6 +215,7 @@ impl Mesh {
         // without having the node as a corner (the node would hang on
         // it), so those cells are looked up in the halo only.
         let ni = self.num_independent;
+        let hint = std::cell::Cell::new(0);
         let mut masks: Vec<u64> = lattice
             .iter()
             .zip(&near)
@@ -226,7 +227,7 @@ impl Mesh {
                 } else {
                     let holds = |cell: u64| {
                         if n < ni {
-                            kept.halo_holds(cell)
+                            kept.halo_holds(cell, &hint)
                         } else {
                             kept.holding_cell(cell, e as usize).is_some()
                         }

@@ -409,13 +409,20 @@ impl<'a> Kept<'a> {
         find(before).map(|j| (At::Halo(j as u32), before[j]))
     }
 
-    /// Whether a halo element holds finest cell `c`.
-    pub(super) fn halo_holds(&self, c: u64) -> bool {
+    /// Whether a halo element holds finest cell `c`, searched from the
+    /// halo leaf `hint` (left at the answer's place: look-ups in Morton
+    /// order stay short).
+    pub(super) fn halo_holds(&self, c: u64, hint: &std::cell::Cell<usize>) -> bool {
         // The halo's leaves are in Morton order (those before the local
         // ones, then those after).
         let h = &self.halo.leaves;
-        let k = h.partition_point(|l| l.cell_begin() <= c);
-        k > 0 && c < h[k - 1].cell_end()
+        match crate::sort::gallop_last_le(h.len(), hint.get(), c, |k| h[k].cell_begin()) {
+            Some(k) => {
+                hint.set(k);
+                c < h[k].cell_end()
+            }
+            None => false,
+        }
     }
 
     /// The kept element holding finest cell `c`, if one does.
