@@ -6,9 +6,11 @@
 //! # What is written
 //!
 //! Per mesh: `points` (vectorField), `faces` (faceList, or faceCompactList
-//! in binary: offsets, then point labels), `owner`, `neighbour`
-//! (labelList), `boundary` (polyBoundaryMesh). Labels are 32-bit and
-//! scalars 64-bit (`arch "LSB;label=32;scalar=64"`, Debian's build).
+//! in binary: offsets, then point labels, whose count is padded with
+//! blanks to a fixed width as it is written after them), `owner`,
+//! `neighbour` (labelList), `boundary` (polyBoundaryMesh). Labels are
+//! 32-bit and scalars 64-bit (`arch "LSB;label=32;scalar=64"`, Debian's
+//! build).
 //!
 //! - Cells are the local elements in Morton order.
 //! - Faces are [`crate::mesh::Faces`] in their order: internal faces
