@@ -46,7 +46,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
-    corner_at, edge_midpoint, halo_corners, near_point_keys, point_key, PointFilter, PointIndex,
+    corner_at, edge_midpoint, near_point_keys, point_key, EdgeMidpoints, PointIndex,
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
@@ -103,18 +103,8 @@ fn face_polygons(
     let lattice = mesh.node_lattice();
     let keys = near_point_keys(mesh, &lattice);
     let mut set = PointIndex::new(keys);
-    // A face edge carries a point in its middle only where a local
-    // edge-hanging node hangs on it, whose dependencies are the edge's
-    // ends (a face-hanging node is no edge's midpoint), or where a halo
-    // element has a corner. So an edge between local nodes that are not
-    // both an edge-hanging node's ends is looked up only in a filter of
-    // the halo's corners (empty on one rank).
-    let mut hanging_end = vec![false; lattice.len()];
-    for d in mesh.edge_hanging() {
-        hanging_end[d[0] as usize] = true;
-        hanging_end[d[1] as usize] = true;
-    }
-    let halo_corners = PointFilter::new(halo_corners(mesh));
+    // Whether an edge between two local nodes may carry a point.
+    let midpoints = EdgeMidpoints::new(mesh);
     let missing = |x: [u32; 3]| {
         Error::new(
             ErrorKind::Internal,
@@ -160,9 +150,7 @@ fn face_polygons(
             poly.push((j, c[k]));
             if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
                 let may = match (nodes[k], nodes[(k + 1) % 4]) {
-                    (Some(a), Some(b)) => {
-                        (hanging_end[a] && hanging_end[b]) || halo_corners.may_hold(m)
-                    }
+                    (Some(a), Some(b)) => midpoints.may_hold(a, b, m),
                     _ => true,
                 };
                 if may {
@@ -341,11 +329,11 @@ fn write_label_iter(
             for x in v {
                 buf.push(x);
                 if buf.len() == CHUNK {
-                    write_u32s(out, &buf)?;
+                    write_raw(out, &buf)?;
                     buf.clear();
                 }
             }
-            write_u32s(out, &buf)?;
+            write_raw(out, &buf)?;
             writeln!(out, ")")
         }
         FoamFormat::Ascii => {
@@ -358,30 +346,42 @@ fn write_label_iter(
     }
 }
 
-/// Writes `v` as raw little-endian 32-bit labels (labels below 2^31 have
-/// the same bits as OpenFOAM's signed ones).
-fn write_u32s(out: &mut impl Write, v: &[u32]) -> std::io::Result<()> {
-    if cfg!(target_endian = "little") {
-        // SAFETY: `u32` has no padding and any alignment suits `u8`; the
-        // bytes are those of `v`, which outlives the borrow.
-        let bytes = unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), 4 * v.len()) };
-        out.write_all(bytes)
-    } else {
-        v.iter().try_for_each(|x| out.write_all(&x.to_le_bytes()))
+/// Numbers written to binary lists as their raw little-endian bytes:
+/// 32-bit labels (below 2^31 they have the bits of OpenFOAM's signed ones)
+/// and points of three 64-bit scalars. Both are plain numbers without
+/// padding.
+trait Raw: Copy {
+    /// Appends the little-endian bytes (for big-endian machines).
+    fn put_le(&self, out: &mut Vec<u8>);
+}
+
+impl Raw for u32 {
+    fn put_le(&self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
     }
 }
 
-/// Writes `v` as raw little-endian 64-bit scalars.
-fn write_f64s(out: &mut impl Write, v: &[[f64; 3]]) -> std::io::Result<()> {
+impl Raw for [f64; 3] {
+    fn put_le(&self, out: &mut Vec<u8>) {
+        self.iter()
+            .for_each(|x| out.extend_from_slice(&x.to_le_bytes()));
+    }
+}
+
+/// Writes `v` as raw little-endian bytes.
+fn write_raw<T: Raw>(out: &mut impl Write, v: &[T]) -> std::io::Result<()> {
     if cfg!(target_endian = "little") {
-        // SAFETY: `[f64; 3]` has no padding and any alignment suits `u8`;
-        // the bytes are those of `v`, which outlives the borrow.
-        let bytes = unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), 24 * v.len()) };
+        // SAFETY: `T` is `u32` or `[f64; 3]` (no padding, every bit
+        // pattern a value) and any alignment suits `u8`; the bytes are
+        // those of `v`, which outlives the borrow.
+        let bytes = unsafe {
+            std::slice::from_raw_parts(v.as_ptr().cast::<u8>(), std::mem::size_of_val(v))
+        };
         out.write_all(bytes)
     } else {
-        v.iter()
-            .flatten()
-            .try_for_each(|x| out.write_all(&x.to_le_bytes()))
+        let mut buf = Vec::with_capacity(std::mem::size_of_val(v));
+        v.iter().for_each(|x| x.put_le(&mut buf));
+        out.write_all(&buf)
     }
 }
 
@@ -410,7 +410,10 @@ fn write_faces(
             let mut head = Vec::new();
             header(&mut head, fmt, "faceCompactList", loc, "faces", None).map_err(io)?;
             write!(head, "{}\n(", nf + 1).map_err(io)?;
-            let data_at = head.len() + 4 * (nf + 1) + ")\n\n".len() + LABEL_COUNT_WIDTH + 2;
+            // Between the two lists: the end of the offsets, then the
+            // label count (written last, over the same room).
+            let between = |count: u32| format!(")\n\n{count:<LABEL_COUNT_WIDTH$}\n(");
+            let data_at = head.len() + 4 * (nf + 1) + between(0).len();
             let mut file = fs::File::create(path).map_err(io)?;
             file.seek(SeekFrom::Start(data_at as u64)).map_err(io)?;
             let mut w = BufWriter::with_capacity(1 << 20, file);
@@ -420,15 +423,15 @@ fn write_faces(
             let points = face_polygons(mesh, faces, |l| {
                 total += l.len() as u32;
                 offsets.push(total);
-                write_u32s(&mut w, l).map_err(io)
+                write_raw(&mut w, l).map_err(io)
             })?;
             w.write_all(b")\n").map_err(io)?;
             let mut file = w.into_inner().map_err(|e| io(e.into_error()))?;
             file.seek(SeekFrom::Start(0)).map_err(io)?;
             let mut w = BufWriter::with_capacity(1 << 20, file);
             w.write_all(&head).map_err(io)?;
-            write_u32s(&mut w, &offsets).map_err(io)?;
-            write!(w, ")\n\n{total:<LABEL_COUNT_WIDTH$}\n(").map_err(io)?;
+            write_raw(&mut w, &offsets).map_err(io)?;
+            w.write_all(between(total).as_bytes()).map_err(io)?;
             w.flush().map_err(io)?;
             Ok(points)
         }
@@ -501,7 +504,7 @@ fn write_polymesh(
         write!(w, "{}\n(", positions.len())?;
         match fmt {
             FoamFormat::Binary => {
-                write_f64s(&mut w, &positions)?;
+                write_raw(&mut w, &positions)?;
                 writeln!(w, ")")?;
             }
             FoamFormat::Ascii => {

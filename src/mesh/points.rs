@@ -141,6 +141,40 @@ impl PointFilter {
     }
 }
 
+/// Which face edges between two local nodes may carry a mesh point in
+/// their middle. One can only where a local edge-hanging node hangs on the
+/// edge, and that node's dependencies are the edge's ends (a face-hanging
+/// node is the middle of no face edge), or where a halo element has a
+/// corner. So the ends of every edge-hanging node are marked, and the
+/// halo's corners go into a [`PointFilter`] (empty on one rank): most
+/// edges are answered from two flags, with no search and no hashing.
+#[derive(Clone, Debug)]
+pub struct EdgeMidpoints {
+    hanging_end: Vec<bool>,
+    halo: PointFilter,
+}
+
+impl EdgeMidpoints {
+    /// The marks of `mesh`'s local nodes and its halo's corners.
+    pub fn new(mesh: &super::Mesh) -> EdgeMidpoints {
+        let mut hanging_end = vec![false; mesh.num_nodes()];
+        for d in mesh.edge_hanging() {
+            hanging_end[d[0] as usize] = true;
+            hanging_end[d[1] as usize] = true;
+        }
+        EdgeMidpoints {
+            hanging_end,
+            halo: PointFilter::new(halo_corners(mesh)),
+        }
+    }
+
+    /// Whether the edge between local nodes `a` and `b`, with midpoint
+    /// `m`, may carry a mesh point at `m` (`false`: surely not).
+    pub fn may_hold(&self, a: usize, b: usize, m: [u32; 3]) -> bool {
+        (self.hanging_end[a] && self.hanging_end[b]) || self.halo.may_hold(m)
+    }
+}
+
 /// The midpoint of `a`-`b` when they differ along one axis by an even
 /// length (an edge that may carry a hanging point).
 #[inline]

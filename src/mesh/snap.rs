@@ -613,7 +613,7 @@ impl<'a> Snapper<'a> {
     ) {
         let c = &self.mesh.connectivity()[e];
         let p = c.map(|n| self.pos[n as usize]);
-        let ok = corners_above(&p, self.min_jacobian * self.min_jacobian);
+        let ok = corner_checks(&p, self.min_jacobian * self.min_jacobian).map(|c| c.0);
         let mut any = false;
         let mut flag = |node: u32, any: &mut bool| {
             let node = node as usize;
@@ -948,43 +948,37 @@ impl<'a> Snapper<'a> {
     }
 }
 
-/// The hexahedron `p`'s (VTK order) corner figures: whether every corner
-/// has a scaled Jacobian of at least `sqrt(j2)` (positive), tested as
-/// `det >= j |e0| |e1| |e2|` squared, without roots or divisions; and the
-/// least over the corners of the scaled Jacobian times its absolute value
-/// (0 where an edge has no length), in the same order as the scaled
-/// Jacobians.
-fn corner_figures(p: &[[f64; 3]; 8], j2: f64) -> (bool, f64) {
-    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
-    let mut valid = true;
-    let mut least = f64::INFINITY;
-    for (k, nb) in CORNER_EDGES.iter().enumerate() {
-        let [a, b, c] = nb.map(|j| sub(p[j], p[k]));
-        let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-            + a[2] * (b[0] * c[1] - b[1] * c[0]);
-        let product = dot(a) * dot(b) * dot(c);
-        valid &= det > 0.0 && det * det >= j2 * product;
-        least = least.min(if product == 0.0 {
-            0.0
-        } else {
-            det * det.abs() / product
-        });
-    }
-    (valid, least)
-}
-
-/// Per corner of the hexahedron `p` (VTK order), whether its scaled
-/// Jacobian is at least `sqrt(j2)`, by the test of [`corner_figures`].
-fn corners_above(p: &[[f64; 3]; 8], j2: f64) -> [bool; 8] {
+/// Per corner of the hexahedron `p` (VTK order): whether its scaled
+/// Jacobian is at least `sqrt(j2)` (positive), tested as
+/// `det >= j |e0| |e1| |e2|` squared, without roots or divisions; and its
+/// scaled Jacobian times its absolute value (0 where an edge has no
+/// length), in the same order as the scaled Jacobians.
+#[inline]
+fn corner_checks(p: &[[f64; 3]; 8], j2: f64) -> [(bool, f64); 8] {
     let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
     let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
     std::array::from_fn(|k| {
         let [a, b, c] = CORNER_EDGES[k].map(|j| sub(p[j], p[k]));
         let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
             + a[2] * (b[0] * c[1] - b[1] * c[0]);
-        det > 0.0 && det * det >= j2 * (dot(a) * dot(b) * dot(c))
+        let product = dot(a) * dot(b) * dot(c);
+        let figure = if product == 0.0 {
+            0.0
+        } else {
+            det * det.abs() / product
+        };
+        (det > 0.0 && det * det >= j2 * product, figure)
     })
+}
+
+/// The hexahedron `p`'s [`corner_checks`] over its corners: whether every
+/// corner passes, and the least figure.
+fn corner_figures(p: &[[f64; 3]; 8], j2: f64) -> (bool, f64) {
+    corner_checks(p, j2)
+        .iter()
+        .fold((true, f64::INFINITY), |(v, l), &(ok, f)| {
+            (v && ok, l.min(f))
+        })
 }
 
 /// Whether every corner of the hexahedron `p` (VTK order) has a scaled
