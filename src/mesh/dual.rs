@@ -282,9 +282,8 @@ pub(crate) struct DualNodes {
     /// (every node is a corner of a kept leaf), except for the few in
     /// `boundary_points`.
     pub flags: Vec<u8>,
-    /// Node at each Morton corner of each merged leaf that is kept
-    /// ([`UNSET`] for leaves that are not kept): an independent node's
-    /// index, or [`FACE`] / [`EDGE`] with a hanging node's index.
+    /// Node at each Morton corner of each merged leaf: an independent
+    /// node's index, or [`FACE`] / [`EDGE`] with a hanging node's index.
     pub corners: Vec<[u32; 8]>,
     /// Face-hanging nodes (see [`Entries`]).
     pub face: Entries,
@@ -295,10 +294,12 @@ pub(crate) struct DualNodes {
     pub boundary_points: Vec<(u32, [u32; 3])>,
 }
 
-/// Runs the traversal over `leaves` (sorted, disjoint, possibly with gaps),
-/// counting only leaves with `kept[i]`; the leaves in `leaves.local_range()`
-/// are this rank's.
-pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
+/// Runs the traversal over `leaves` (sorted, disjoint, possibly with gaps):
+/// the kept leaves only, the elements in `leaves.local_range()` and the
+/// halo elements around them. A dropped leaf would change no node (a point
+/// is a node by the kept leaves around it alone), so leaving the dropped
+/// ones out as gaps takes their part of the walk away.
+pub(crate) fn extract_nodes(leaves: Merged) -> Result<DualNodes> {
     let n = leaves.len();
     if n >= LEAF as usize {
         return Err(Error::new(
@@ -316,7 +317,7 @@ pub(crate) fn extract_nodes(leaves: Merged, kept: &Bits) -> Result<DualNodes> {
         boundary_points: Vec::new(),
     };
     let tree_bytes = walk_points(&leaves, |refs| {
-        record_point(&leaves, kept, &local, &mut overflow, &mut out, refs)
+        record_point(&leaves, &local, &mut overflow, &mut out, refs)
     });
     // The walk's end is the mesh's peak; what comes next should not add to
     // it, so the tree's pages go back rather than stay free in the heap.
@@ -658,13 +659,13 @@ impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
 /// Node extraction at one point of the walk (see [`walk_points`]).
 fn record_point(
     leaves: &Merged,
-    kept: &Bits,
     local: &std::ops::Range<usize>,
     overflow: &mut bool,
     out: &mut DualNodes,
     refs: &[u32; 8],
 ) {
-    let kept = |r: u32| r != VOID && kept.get((r & !LEAF) as usize);
+    // Every leaf of the walk is kept.
+    let kept = |r: u32| r != VOID;
     let local = |r: u32| local.contains(&((r & !LEAF) as usize));
     let mut count = [0u8; 8];
     let mut corner = false;
@@ -794,7 +795,7 @@ mod tests {
     fn uniform_grid_has_every_lattice_point_once() {
         let leaves = uniform(2);
         let kept = Bits::from_fn(leaves.len(), |_| true);
-        let d = extract_nodes(whole(&leaves), &kept).unwrap();
+        let d = extract_nodes(whole(&leaves)).unwrap();
         assert_eq!(d.flags.len(), 125);
         assert!(d.face.len() == 0 && d.edge.len() == 0);
         let at = points(&d, &leaves);
@@ -815,8 +816,7 @@ mod tests {
         // Root split once, child 0 split again.
         let mut leaves: Vec<Octant> = Octant::ROOT.child(0).children().to_vec();
         leaves.extend((1..8).map(|c| Octant::ROOT.child(c)));
-        let kept = Bits::from_fn(leaves.len(), |_| true);
-        let d = extract_nodes(whole(&leaves), &kept).unwrap();
+        let d = extract_nodes(whole(&leaves)).unwrap();
         let at = points(&d, &leaves);
         // 27 coarse points + 27 fine points of child 0, 8 of them shared.
         assert_eq!(at.len(), 27 + 27 - 8);
@@ -868,8 +868,7 @@ mod tests {
             local: &fine[1..2],
             after: &after,
         };
-        let kept = Bits::from_fn(m.len(), |_| true);
-        let d = extract_nodes(m, &kept).unwrap();
+        let d = extract_nodes(m).unwrap();
         let all: Vec<Octant> = (0..m.len()).map(|i| m.get(i)).collect();
         let at = points(&d, &all);
         let mine = fine[1];

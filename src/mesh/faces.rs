@@ -252,6 +252,16 @@ impl Halo {
         h
     }
 
+    /// The local `elements` between the halo elements of lower and of
+    /// higher ranks: the run the dual walks go over.
+    pub(crate) fn around<'a>(&'a self, elements: &'a [Octant]) -> Merged<'a> {
+        Merged {
+            before: &self.leaves[..self.before],
+            local: elements,
+            after: &self.leaves[self.before..],
+        }
+    }
+
     /// Number of halo elements.
     pub fn len(&self) -> usize {
         self.leaves.len()
@@ -670,11 +680,7 @@ impl Mesh {
     pub(super) fn for_each_face(&self, mut put: impl FnMut(FaceKind, Face)) {
         let elements: &[Octant] = &self.elements;
         let (nl, hb) = (elements.len(), self.halo.before);
-        let merged = Merged {
-            before: &self.halo.leaves[..hb],
-            local: elements,
-            after: &self.halo.leaves[hb..],
-        };
+        let merged = self.halo.around(elements);
         let at = |k: usize| -> At {
             if k < hb {
                 At::Halo(k as u32)

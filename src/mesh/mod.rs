@@ -82,7 +82,7 @@ pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, S
 pub use hanging::HangingDeps;
 pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
 
-use dual::{Bits, Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
+use dual::{Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
 use hanging::{Hanging, GHOST};
 
 /// VTK hexahedron corner `v` is Morton corner `VTK_TO_MORTON[v]`
@@ -274,39 +274,31 @@ impl Mesh {
         });
         drop(element_index);
         let ghost_class: Vec<u8> = ghosts.data.iter().map(|&w| w as u8).collect();
-        let b = ghosts.before;
-        let merged = Merged {
-            before: &ghosts.leaves[..b],
-            local: tree.leaves(),
-            after: &ghosts.leaves[b..],
-        };
+        let halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
+        let num_ghosts = ghosts.len() as u64;
+        drop((ghosts, ghost_class));
 
         let nodes = timer.time(comm, "nodes", || {
-            let nlocal = tree.local_len();
-            let class_of = |i: usize| match i.checked_sub(b) {
-                None => ghost_class[i],
-                Some(j) if j < nlocal => local_class.get(j),
-                Some(j) => ghost_class[b + j - nlocal],
-            };
-            let kept = Bits::from_fn(merged.len(), |i| keep(class_of(i)));
-            let d = dual::extract_nodes(merged, &kept)?;
+            let elements = kept_elements(tree, &local_class, keep, nkept as usize);
+            // The walk goes over the elements and the halo elements only.
+            let merged = halo.around(&elements.leaves);
+            let d = dual::extract_nodes(merged)?;
             let counted = count_hanging(comm, tree.first_cells(), &d, merged);
-            Ok((d, kept, counted))
+            Ok((d, elements, counted))
         });
-        let (d, kept, (face_hanging, edge_hanging)) = crate::comm::agree(comm, nodes)?;
+        let (d, elements, (face_hanging, edge_hanging)) = crate::comm::agree(comm, nodes)?;
 
         let numbering = timer.time(comm, "numbering", || {
-            number_independent(comm, tree.first_cells(), &d, merged)
+            number_independent(comm, tree.first_cells(), &d, halo.around(&elements.leaves))
         });
         let numbering = crate::comm::agree(comm, numbering)?;
 
         let mesh = timer.time(comm, "connectivity", || {
-            assemble(tree, domain, d, merged, &kept, &local_class, numbering)
+            assemble(comm, domain, d, elements, halo, numbering)
         });
         let mut mesh = crate::comm::agree(comm, mesh)?;
         mesh.first_element = first_element;
         mesh.first_cells = tree.first_cells().to_vec();
-        mesh.halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
         let with_hanging = mesh
             .connectivity
             .iter()
@@ -317,7 +309,7 @@ impl Mesh {
             face_hanging,
             edge_hanging,
             with_hanging as u64,
-            ghosts.len() as u64,
+            num_ghosts,
         ];
         comm.sum_u64(&mut sums);
         mesh.counts.elements = sums[0];
@@ -771,19 +763,64 @@ fn number_independent(
     })
 }
 
-/// Turns the traversal's output into the mesh, in place where it can: the
-/// corner table becomes the connectivity, the hanging-node entries their
-/// dependencies.
-fn assemble(
+/// The kept local leaves, which become the elements, and their classes.
+struct KeptElements {
+    leaves: Elements,
+    /// Class per element, or `None` when all leaves have `uniform`.
+    class: Option<Vec<u8>>,
+    uniform: u8,
+}
+
+/// Picks the `nkept` local leaves that `keep` keeps.
+fn kept_elements(
     tree: &LinearOctree,
+    local_class: &ClassBytes,
+    keep: impl Fn(u8) -> bool,
+    nkept: usize,
+) -> KeptElements {
+    // One class for all is kept as one byte until asked for.
+    let (class, uniform) = match local_class {
+        ClassBytes::Uniform(c, _) => (None, LeafClass::from_bits(*c) as u8),
+        ClassBytes::Slice(s) => {
+            let mut class = Vec::with_capacity(nkept);
+            class.extend(
+                (s.iter())
+                    .filter(|&&c| keep(c))
+                    .map(|&c| LeafClass::from_bits(c) as u8),
+            );
+            (Some(class), 0)
+        }
+    };
+    let leaves = if nkept == tree.local_len() {
+        Elements::Shared(tree.shared_leaves())
+    } else {
+        let mut own = Vec::with_capacity(nkept);
+        own.extend(
+            (tree.leaves().iter().enumerate())
+                .filter(|&(i, _)| keep(local_class.get(i)))
+                .map(|(_, &o)| o),
+        );
+        Elements::Own(own)
+    };
+    KeptElements {
+        leaves,
+        class,
+        uniform,
+    }
+}
+
+/// Turns the traversal's output over the elements and the halo into the
+/// mesh, in place where it can: the corner table becomes the connectivity,
+/// the hanging-node entries their dependencies.
+fn assemble(
+    comm: &dyn Comm,
     domain: &Domain,
     d: dual::DualNodes,
-    leaves: Merged,
-    kept: &Bits,
-    local_class: &ClassBytes,
+    elements: KeptElements,
+    halo: Halo,
     num: Independent,
 ) -> Result<Mesh> {
-    let comm: &dyn Comm = &**tree.comm();
+    let leaves = halo.around(&elements.leaves);
     let dual::DualNodes {
         flags,
         corners,
@@ -891,56 +928,25 @@ fn assemble(
     let ghost_rows: Vec<[u32; 8]> = (ghost_leaves.iter())
         .map(|&q| corners[q as usize].map(|n| if n & TAG == 0 { independent(n) } else { UNSET }))
         .collect();
-    let all_kept = local_range.clone().all(|i| kept.get(i));
-    let kept_local = Ranks::from_fn(if all_kept { 0 } else { local_range.len() }, |j| {
-        kept.get(local_range.start + j)
-    });
     for q in face.coarse.iter_mut().chain(edge.coarse.iter_mut()) {
         *q = match (*q as usize).checked_sub(local_range.start) {
-            Some(j) if j < local_range.len() && all_kept => j as u32,
-            Some(j) if j < local_range.len() => kept_local.rank(j),
+            Some(j) if j < local_range.len() => j as u32,
             _ => GHOST | ghost_leaves.binary_search(q).unwrap_or(0) as u32,
         };
     }
-    drop(kept_local);
     let hanging = Hanging::new(face, edge, ghost_rows);
 
-    // The corner table becomes the connectivity in place: local kept leaves
-    // move to the front (never past their own slot), renumbered.
-    let nkept = local_range.clone().filter(|&i| kept.get(i)).count();
-    // One class for all is kept as one byte until asked for.
-    let uniform = match local_class {
-        ClassBytes::Uniform(c, _) => Some(LeafClass::from_bits(*c) as u8),
-        ClassBytes::Slice(_) => None,
-    };
-    let mut element_class = Vec::with_capacity(if uniform.is_some() { 0 } else { nkept });
+    // The corner table becomes the connectivity in place: the elements'
+    // rows move to the front (never past their own slot), renumbered.
     let mut connectivity = corners;
-    let mut w = 0;
-    for (j, i) in local_range.clone().enumerate() {
-        if !kept.get(i) {
-            continue;
-        }
-        if uniform.is_none() {
-            element_class.push(LeafClass::from_bits(local_class.get(j)) as u8);
-        }
+    for (w, i) in local_range.clone().enumerate() {
         let c = connectivity[i];
         connectivity[w] = std::array::from_fn(|v| new_of(c[VTK_TO_MORTON[v]]));
-        w += 1;
     }
-    connectivity.truncate(w);
-    if w < connectivity.capacity() / 2 {
+    connectivity.truncate(local_range.len());
+    if connectivity.len() < connectivity.capacity() / 2 {
         connectivity.shrink_to_fit();
     }
-    let elements = if nkept == leaves.local.len() {
-        Elements::Shared(tree.shared_leaves())
-    } else {
-        Elements::Own(
-            local_range
-                .filter(|&i| kept.get(i))
-                .map(|i| leaves.get(i))
-                .collect(),
-        )
-    };
 
     let sh = &num.sharing;
     let mut order: Vec<(u32, usize)> = sh
@@ -962,12 +968,12 @@ fn assemble(
         rank: comm.rank(),
         size: comm.size(),
         domain: *domain,
-        elements,
-        element_class: match uniform {
-            None => OnceCell::from(element_class),
-            Some(_) => OnceCell::new(),
+        element_class: match elements.class {
+            Some(class) => OnceCell::from(class),
+            None => OnceCell::new(),
         },
-        uniform_class: uniform.unwrap_or(0),
+        uniform_class: elements.uniform,
+        elements: elements.leaves,
         connectivity,
         num_owned,
         num_independent,
@@ -981,7 +987,7 @@ fn assemble(
         first_global: num.first_global,
         first_element: 0,
         first_cells: Vec::new(),
-        halo: Halo::default(),
+        halo,
         counts: MeshCounts {
             independent_nodes: num.global_count,
             ..MeshCounts::default()
