@@ -127,28 +127,40 @@ fn first_sweep(
     local: std::ops::Range<usize>,
     kept: impl Fn(u8) -> bool,
 ) -> Vec<usize> {
+    // The walk goes over the kept leaves only: a dropped leaf is to the
+    // rules what a gap is (not kept), and leaving the dropped ones out takes
+    // their part of the walk away. `at[k]`: kept leaf `k`'s position in
+    // `leaves`.
+    let (mut kl, mut at) = (Vec::new(), Vec::new());
+    for (j, (&o, &c)) in leaves.iter().zip(class).enumerate() {
+        if kept(c) {
+            kl.push(o);
+            at.push(j as u32);
+        }
+    }
+    let lb = at.partition_point(|&j| (j as usize) < local.start);
+    let le = at.partition_point(|&j| (j as usize) < local.end);
     let merged = Merged {
-        before: &leaves[..local.start],
-        local: &leaves[local.clone()],
-        after: &leaves[local.end..],
+        before: &kl[..lb],
+        local: &kl[lb..le],
+        after: &kl[le..],
     };
-    // Per local leaf: bit `2a + h` when a kept cell lies across its face
-    // on side `h` (1: high) of axis `a` at some corner; GOES when a corner
-    // block drops it.
+    // Per kept local leaf: bit `2a + h` when a kept cell lies across its
+    // face on side `h` (1: high) of axis `a` at some corner; GOES when a
+    // corner block drops it.
     const GOES: u8 = 0x80;
-    let mut seen = vec![0u8; local.len()];
+    let mut seen = vec![0u8; le - lb];
     walk_points(&merged, |refs| {
-        let status: [bool; 8] =
-            std::array::from_fn(|p| leaf_at(refs[p]).is_some_and(|j| kept(class[j])));
+        let status: [bool; 8] = std::array::from_fn(|p| leaf_at(refs[p]).is_some());
         let drops = block_drop_masks()[status_byte(&status)];
         for p in 0..8 {
             let Some(j) = leaf_at(refs[p]) else { continue };
-            // Kept, local, and the point one of its corners (it fills
-            // side `p` alone).
-            if !status[p] || !local.contains(&j) || (0..8).any(|q| q != p && refs[q] == refs[p]) {
+            // Local, and the point one of its corners (it fills side `p`
+            // alone).
+            if !(lb..le).contains(&j) || (0..8).any(|q| q != p && refs[q] == refs[p]) {
                 continue;
             }
-            let mine = &mut seen[j - local.start];
+            let mine = &mut seen[j - lb];
             for a in 0..3 {
                 // On the high side of the point along `a`, the leaf has the
                 // point on its low face.
@@ -162,11 +174,12 @@ fn first_sweep(
             }
         }
     });
-    (0..local.len())
+    (0..le - lb)
         .filter(|&i| {
             let m = seen[i];
-            kept(class[local.start + i]) && (m & GOES != 0 || (0..3).any(|a| m >> (2 * a) & 3 == 0))
+            m & GOES != 0 || (0..3).any(|a| m >> (2 * a) & 3 == 0)
         })
+        .map(|i| at[lb + i] as usize - local.start)
         .collect()
 }
 
