@@ -485,7 +485,7 @@ pub(crate) fn walk_faces(leaves: &Merged, visit: impl FnMut(usize, usize, usize)
     let root = build(leaves, Octant::ROOT, 0, n, &mut tree);
     let mut w = FaceWalker { tree: &tree, visit };
     if root & LEAF == 0 {
-        w.cell(0, [root; 8]);
+        w.cell::<0>([root; 8]);
     }
     std::mem::size_of_val(&tree[..])
 }
@@ -510,28 +510,41 @@ impl<F: FnMut(usize, usize, usize)> FaceWalker<'_, F> {
 
     /// [`Walker::cell`] for cells and faces only: a face whose two sides
     /// are leaves is visited.
-    fn cell(&mut self, m: u32, refs: [u32; 8]) {
-        for sub in &split_table()[m as usize] {
-            if sub.m.count_ones() > 1 {
-                continue;
+    fn cell<const M: usize>(&mut self, refs: [u32; 8]) {
+        macro_rules! subs {
+            ($($k:literal)*) => { $( self.sub::<M, $k>(&refs); )* };
+        }
+        subs!(0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26);
+    }
+
+    /// [`Walker::sub`] for cells and faces only.
+    #[inline(always)]
+    fn sub<const M: usize, const K: usize>(&mut self, refs: &[u32; 8]) {
+        if K >= SPLIT.1[M] as usize || SPLIT.0[M][K].m.count_ones() > 1 {
+            return;
+        }
+        // As in `Walker::sub`; the face walk is a separate type so that
+        // the node walk's code stays as it was measured.
+        let sub = &SPLIT.0[M][K];
+        let mut nr = [VOID; 8];
+        let mut internal = false;
+        for &(p2, p, c) in &sub.pos[..sub.n as usize] {
+            let r = self.child(refs[p as usize], c as u32);
+            internal |= r & LEAF == 0;
+            nr[p2 as usize] = r;
+        }
+        if internal {
+            match sub.m {
+                0 => self.cell::<0>(nr),
+                1 => self.cell::<1>(nr),
+                2 => self.cell::<2>(nr),
+                _ => self.cell::<4>(nr),
             }
-            // As in `Walker::cell`; the face walk is a separate type so that
-            // the node walk's code stays as it was measured.
-            let mut nr = [VOID; 8];
-            let mut internal = false;
-            for &(p2, p, c) in &sub.pos[..sub.n as usize] {
-                let r = self.child(refs[p as usize], c as u32);
-                internal |= r & LEAF == 0;
-                nr[p2 as usize] = r;
-            }
-            if internal {
-                self.cell(sub.m as u32, nr);
-            } else if sub.m != 0 {
-                let (low, high) = (nr[0], nr[sub.m as usize]);
-                if low != VOID && high != VOID {
-                    let axis = sub.m.trailing_zeros() as usize;
-                    (self.visit)(axis, (low & !LEAF) as usize, (high & !LEAF) as usize);
-                }
+        } else if sub.m != 0 {
+            let (low, high) = (nr[0], nr[sub.m as usize]);
+            if low != VOID && high != VOID {
+                let axis = sub.m.trailing_zeros() as usize;
+                (self.visit)(axis, (low & !LEAF) as usize, (high & !LEAF) as usize);
             }
         }
     }
@@ -548,18 +561,6 @@ struct Walker<'a, F> {
     visit: F,
 }
 
-/// Calls `f` for every subset of `mask` (including 0 and `mask`).
-fn subsets(mask: u32, mut f: impl FnMut(u32)) {
-    let mut s = mask;
-    loop {
-        f(s);
-        if s == 0 {
-            break;
-        }
-        s = (s - 1) & mask;
-    }
-}
-
 /// One sub-cell of a sub-cell of kind `m` (see [`Walker::cell`]).
 #[derive(Clone, Copy, Default)]
 struct Sub {
@@ -571,36 +572,59 @@ struct Sub {
     pos: [(u8, u8, u8); 8],
 }
 
-/// For each kind `m < 7`, the sub-cells it splits into.
-fn split_table() -> &'static [Vec<Sub>; 7] {
-    static TABLE: std::sync::OnceLock<[Vec<Sub>; 7]> = std::sync::OnceLock::new();
-    TABLE.get_or_init(|| {
-        std::array::from_fn(|m| {
-            let m = m as u32;
-            let free = 7 & !m;
-            let mut subs = Vec::new();
-            subsets(free, |s| {
-                let m2 = m | s;
-                subsets(free & !s, |t| {
-                    let mut sub = Sub {
-                        m: m2 as u8,
-                        ..Sub::default()
-                    };
-                    subsets(m2, |p2| {
-                        // Across `m` take the child facing the sub-cell;
-                        // along `s` the child on side `p2`; along the rest
-                        // the half `t`.
-                        let c = (!p2 & m) | (p2 & s) | t;
-                        sub.pos[sub.n as usize] = (p2 as u8, (p2 & m) as u8, c as u8);
-                        sub.n += 1;
-                    });
-                    subs.push(sub);
-                });
-            });
-            subs
-        })
-    })
-}
+/// For each kind `m < 7`, the sub-cells it splits into: `SPLIT.0[m]`, the
+/// first `SPLIT.1[m]` of them. Across `m` each takes the child facing it;
+/// along the axes `s` it spans, the child on its side `p2`; along the rest
+/// the half `t`. The centre point (all free axes spanned) comes first.
+const SPLIT: ([[Sub; 27]; 7], [u8; 7]) = {
+    const NONE: Sub = Sub {
+        m: 0,
+        n: 0,
+        pos: [(0, 0, 0); 8],
+    };
+    let mut table = [[NONE; 27]; 7];
+    let mut lens = [0u8; 7];
+    let mut m = 0usize;
+    while m < 7 {
+        let mu = m as u32;
+        let free = 7 & !mu;
+        // Subsets of a mask run from the whole mask down to 0.
+        let mut s = free;
+        loop {
+            let m2 = mu | s;
+            let rest = free & !s;
+            let mut t = rest;
+            loop {
+                let mut sub = Sub {
+                    m: m2 as u8,
+                    ..NONE
+                };
+                let mut p2 = m2;
+                loop {
+                    let c = (!p2 & mu) | (p2 & s) | t;
+                    sub.pos[sub.n as usize] = (p2 as u8, (p2 & mu) as u8, c as u8);
+                    sub.n += 1;
+                    if p2 == 0 {
+                        break;
+                    }
+                    p2 = (p2 - 1) & m2;
+                }
+                table[m][lens[m] as usize] = sub;
+                lens[m] += 1;
+                if t == 0 {
+                    break;
+                }
+                t = (t - 1) & rest;
+            }
+            if s == 0 {
+                break;
+            }
+            s = (s - 1) & free;
+        }
+        m += 1;
+    }
+    (table, lens)
+};
 
 impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
     #[inline]
@@ -615,23 +639,51 @@ impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
     }
 
     /// Visits the sub-cell shared by the octants `refs` around it, at least
-    /// one of which is internal: `m` has a bit per axis across which the
+    /// one of which is internal: `M` has a bit per axis across which the
     /// octants sit (0: a cell, 1 bit: a face, 2: an edge, 3: a point),
-    /// `refs[p]` for `p` a subset of `m` is the octant on side `p`.
-    fn cell(&mut self, m: u32, refs: [u32; 8]) {
-        for sub in &split_table()[m as usize] {
-            let mut nr = [VOID; 8];
-            let mut internal = false;
-            for &(p2, p, c) in &sub.pos[..sub.n as usize] {
-                let r = self.child(refs[p as usize], c as u32);
-                internal |= r & LEAF == 0;
-                nr[p2 as usize] = r;
-            }
-            if sub.m == 7 {
-                self.point(nr);
-            } else if internal {
-                self.cell(sub.m as u32, nr);
-            }
+    /// `refs[p]` for `p` a subset of `M` is the octant on side `p`.
+    fn cell<const M: usize>(&mut self, refs: [u32; 8]) {
+        // Written out sub-cell by sub-cell: every loop below has a length
+        // known at compile time.
+        macro_rules! subs {
+            ($($k:literal)*) => { $( self.sub::<M, $k>(&refs); )* };
+        }
+        subs!(0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26);
+    }
+
+    /// Sub-cell `K` of a sub-cell of kind `M` (see [`Walker::cell`]).
+    #[inline(always)]
+    fn sub<const M: usize, const K: usize>(&mut self, refs: &[u32; 8]) {
+        if K >= SPLIT.1[M] as usize {
+            return;
+        }
+        let sub = &SPLIT.0[M][K];
+        let mut nr = [VOID; 8];
+        let mut internal = false;
+        for &(p2, p, c) in &sub.pos[..sub.n as usize] {
+            let r = self.child(refs[p as usize], c as u32);
+            internal |= r & LEAF == 0;
+            nr[p2 as usize] = r;
+        }
+        if sub.m == 7 {
+            self.point(nr);
+        } else if internal {
+            self.descend(sub.m, nr);
+        }
+    }
+
+    /// [`Walker::cell`] for a kind known at run time: one copy of the walk
+    /// per kind, so that each copy's loops have fixed lengths.
+    #[inline(always)]
+    fn descend(&mut self, m: u8, refs: [u32; 8]) {
+        match m {
+            0 => self.cell::<0>(refs),
+            1 => self.cell::<1>(refs),
+            2 => self.cell::<2>(refs),
+            3 => self.cell::<3>(refs),
+            4 => self.cell::<4>(refs),
+            5 => self.cell::<5>(refs),
+            _ => self.cell::<6>(refs),
         }
     }
 
@@ -640,7 +692,7 @@ impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
         if m == 7 {
             self.point(refs);
         } else if refs.iter().any(|&r| r & LEAF == 0) {
-            self.cell(m, refs);
+            self.descend(m as u8, refs);
         }
     }
 
