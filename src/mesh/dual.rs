@@ -716,24 +716,28 @@ fn record_point(
     out: &mut DualNodes,
     refs: &[u32; 8],
 ) {
-    // Every leaf of the walk is kept.
-    let kept = |r: u32| r != VOID;
     let local = |r: u32| local.contains(&((r & !LEAF) as usize));
-    let mut count = [0u8; 8];
-    let mut corner = false;
-    let mut flags = 0u8;
+    // Bit `d` of `along[p]`: the leaf on side `p` (every leaf of the walk
+    // is kept) is also on side `p ^ 1 << d`. A leaf around the point fills
+    // an aligned block of 1, 2 or 4 sides, which holds a neighbour of each
+    // of its sides along every axis it spans: no bit, the point is its
+    // corner; one (its axis), inside its edge; two, inside its face.
+    let mut along = [0u8; 8];
+    let (mut corners, mut flags) = (0u8, 0u8);
     for p in 0..8 {
-        if kept(refs[p]) {
-            count[p] = refs.iter().filter(|&&q| q == refs[p]).count() as u8;
-            corner |= count[p] == 1;
-            if !local(refs[p]) {
-                flags |= BOUNDARY;
-            } else if count[p] == 1 {
-                flags |= CORNER;
-            }
+        let r = refs[p];
+        if r == VOID {
+            continue;
+        }
+        along[p] = (0..3).fold(0, |m, d| m | ((refs[p ^ (1 << d)] == r) as u8) << d);
+        corners |= ((along[p] == 0) as u8) << p;
+        if !local(r) {
+            flags |= BOUNDARY;
+        } else if along[p] == 0 {
+            flags |= CORNER;
         }
     }
-    if !corner {
+    if corners == 0 {
         return;
     }
     let most = out.flags.len().max(out.face.len()).max(out.edge.len());
@@ -743,43 +747,39 @@ fn record_point(
         return;
     }
     let id;
-    if let Some(p) = (0..8).find(|&p| count[p] == 4) {
+    // The number of axes a leaf spans at the point.
+    let spans = |p: usize| along[p].count_ones();
+    if let Some(p) = (0..8).find(|&p| spans(p) == 2) {
         // Face interior of the coarse leaf: its 4 positions span two
         // axes; the third, across which it does not extend, is the
         // face normal.
-        let q = refs[p];
-        let n = (0..3)
-            .find(|&d| refs[p ^ (1 << d)] != q)
-            .expect("a face leaf lies on one side of the point");
+        let n = (!along[p] & 7).trailing_zeros() as usize;
         let side = (p >> n) & 1;
         id = FACE | out.face.len() as u32;
-        out.face.push(q & !LEAF, (n | side << 2) as u8, flags);
-    } else if let Some(p) = (0..8).find(|&p| count[p] == 2) {
-        let q = refs[p];
-        let e = (0..3)
-            .find(|&d| refs[p ^ (1 << d)] == q)
-            .expect("an edge leaf spans the point along one axis");
+        out.face.push(refs[p] & !LEAF, (n | side << 2) as u8, flags);
+    } else if let Some(p) = (0..8).find(|&p| spans(p) == 1) {
+        let e = along[p].trailing_zeros() as usize;
         // The edge of the coarse leaf through the point: opposite side
         // of the point on the two other axes, both ends along `e`.
         let base = !p & 7 & !(1 << e);
         id = EDGE | out.edge.len() as u32;
-        out.edge.push(q & !LEAF, (e | base << 2) as u8, flags);
+        out.edge.push(refs[p] & !LEAF, (e | base << 2) as u8, flags);
     } else {
         id = out.flags.len() as u32;
         grow(&mut out.flags);
         out.flags.push(flags);
         if flags & BOUNDARY != 0 {
-            let p = (0..8).find(|&p| count[p] == 1).unwrap_or(0);
+            let p = corners.trailing_zeros() as usize;
             let o = leaves.get((refs[p] & !LEAF) as usize);
             let x = corner_coords(o.coords(), o.side(), !p & 7);
             out.boundary_points.push((id, x));
         }
     }
-    for p in 0..8 {
-        if count[p] == 1 {
-            let leaf = (refs[p] & !LEAF) as usize;
-            out.corners[leaf][!p & 7] = id;
-        }
+    let mut rest = corners;
+    while rest != 0 {
+        let p = rest.trailing_zeros() as usize;
+        rest &= rest - 1;
+        out.corners[(refs[p] & !LEAF) as usize][!p & 7] = id;
     }
 }
 
