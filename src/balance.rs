@@ -42,7 +42,7 @@ use crate::error::Result;
 use crate::octant::{morton_encode, Connectivity, Octant, MAX_LEVEL};
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
 use crate::refine::{limit_error, NO_LIMIT};
-use crate::sort::radix_sort_bits;
+use crate::sort::{gallop_last_le, radix_sort_bits};
 
 /// What a balance did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -240,9 +240,12 @@ impl Balancer {
             probes.dedup();
             splits.clear();
             let mut i = 0usize;
+            let n = self.leaves.len();
             for &q in &probes {
-                while i + 1 < self.leaves.len() && self.leaves[i + 1].cell_begin() <= q {
-                    i += 1;
+                // Galloping: the coarse levels' few probes skip most leaves.
+                let leaves = &self.leaves;
+                if let Some(j) = gallop_last_le(n, i, q, |k| leaves[k].cell_begin()) {
+                    i = j;
                 }
                 if self.leaves[i].level() <= qlevel {
                     // q is a leaf or inside one: it must be split.
