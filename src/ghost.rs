@@ -30,6 +30,12 @@ pub struct GhostLayer {
     pub before: usize,
     /// Number of (local leaf, rank) pairs this rank sent.
     pub sent: u64,
+    /// The local leaves sent, grouped by destination rank (p4est's
+    /// mirrors), in the order sent, so that new data can follow the same
+    /// way ([`GhostLayer::exchange_data`]).
+    mirrors: Vec<u32>,
+    /// How many of `mirrors` go to each rank.
+    mirror_counts: Vec<usize>,
 }
 
 impl GhostLayer {
@@ -42,6 +48,16 @@ impl GhostLayer {
     pub fn is_empty(&self) -> bool {
         self.leaves.is_empty()
     }
+
+    /// Replaces the ghosts' data words with new ones, `data(i)` for local
+    /// leaf `i`, for the same leaves as when the layer was built: one
+    /// exchange of the words, without finding the ghosts again. Collective.
+    pub fn exchange_data(&mut self, comm: &dyn Comm, data: impl Fn(usize) -> u64) {
+        let send: Vec<u64> = self.mirrors.iter().map(|&i| data(i as usize)).collect();
+        let (recv, _) = comm.alltoallv_u64(&send, &self.mirror_counts);
+        debug_assert_eq!(recv.len(), self.data.len());
+        self.data = recv;
+    }
 }
 
 /// Builds the ghost layer of `tree`. `data(i)` travels with local leaf `i`.
@@ -51,6 +67,7 @@ pub fn build_ghost_layer(tree: &LinearOctree, data: impl Fn(usize) -> u64) -> Gh
     let p = comm.size();
     let me = comm.rank();
     let mut per_rank: Vec<Vec<u64>> = vec![Vec::new(); p];
+    let mut mirrors: Vec<Vec<u32>> = vec![Vec::new(); p];
     let mut sent = 0u64;
     if p > 1 && tree.local_len() > 0 {
         let scan = Scan {
@@ -73,6 +90,7 @@ pub fn build_ghost_layer(tree: &LinearOctree, data: impl Fn(usize) -> u64) -> Gh
                 for &r in &ranks {
                     per_rank[r].push(leaf.key());
                     per_rank[r].push(data(i));
+                    mirrors[r].push(i as u32);
                     sent += 1;
                 }
             });
@@ -84,6 +102,8 @@ pub fn build_ghost_layer(tree: &LinearOctree, data: impl Fn(usize) -> u64) -> Gh
     let (recv, rcounts) = comm.alltoallv_u64(&send, &counts);
     let mut g = GhostLayer {
         sent,
+        mirror_counts: mirrors.iter().map(|m| m.len()).collect(),
+        mirrors: mirrors.concat(),
         ..GhostLayer::default()
     };
     let mut at = 0;

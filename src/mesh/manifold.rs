@@ -31,7 +31,7 @@
 //! their neighbours up, until none is.
 
 use crate::comm::Comm;
-use crate::ghost::build_ghost_layer;
+use crate::ghost::GhostLayer;
 use crate::mesh::dual::{leaf_at, walk_points, Merged};
 use crate::octant::{morton_encode, Octant, ROOT_LEN};
 use crate::octree::LinearOctree;
@@ -42,10 +42,13 @@ pub const REMOVED: u8 = 0x80;
 const JUST_REMOVED: u8 = 0x40;
 
 /// Drops kept leaves (sets [`REMOVED`] in their class byte) as the module
-/// documentation says; `keep` tells which class bytes are kept before. Returns
-/// the number dropped over all ranks. Collective.
+/// documentation says; `keep` tells which class bytes are kept before.
+/// `ghosts` is the ghost layer of `tree` with each leaf's class byte as its
+/// data (its data is stale on return). Returns the number dropped over all
+/// ranks. Collective.
 pub(crate) fn clean_walls(
     tree: &LinearOctree,
+    ghosts: &mut GhostLayer,
     classes: &mut [u8],
     keep: impl Fn(u8) -> bool + Copy,
 ) -> u64 {
@@ -53,15 +56,19 @@ pub(crate) fn clean_walls(
     let kept = move |b: u8| b & REMOVED == 0 && keep(b);
     let mut total = 0u64;
     let mut first = true;
+    let b = ghosts.before;
+    let nl = tree.local_len();
+    let mut leaves: Vec<Octant> = Vec::with_capacity(ghosts.len() + nl);
+    leaves.extend_from_slice(&ghosts.leaves[..b]);
+    leaves.extend_from_slice(tree.leaves());
+    leaves.extend_from_slice(&ghosts.leaves[b..]);
+    let mut class: Vec<u8> = Vec::with_capacity(leaves.len());
     loop {
-        let ghosts = build_ghost_layer(tree, |i| classes[i] as u64);
-        let b = ghosts.before;
-        let nl = tree.local_len();
-        let mut leaves: Vec<Octant> = Vec::with_capacity(ghosts.len() + nl);
-        leaves.extend_from_slice(&ghosts.leaves[..b]);
-        leaves.extend_from_slice(tree.leaves());
-        leaves.extend_from_slice(&ghosts.leaves[b..]);
-        let mut class: Vec<u8> = Vec::with_capacity(leaves.len());
+        // The ghosts stay; only their classes change from sweep to sweep.
+        if !first {
+            ghosts.exchange_data(comm, |i| classes[i] as u64);
+        }
+        class.clear();
         class.extend(ghosts.data[..b].iter().map(|&w| w as u8));
         class.extend_from_slice(classes);
         class.extend(ghosts.data[b..].iter().map(|&w| w as u8));

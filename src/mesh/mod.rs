@@ -238,10 +238,16 @@ impl Mesh {
             |bits: u8| bits & manifold::REMOVED == 0 && keeps(opts.keep, opts.cut_rule, bits);
         let mut cleaned_classes;
         let mut cleaned = 0;
+        // The clean-up's ghost layer serves the mesh too: the same leaves,
+        // new data.
+        let mut clean_ghosts = None;
         let local_class = if opts.clean_walls && opts.keep != Keep::All {
             cleaned_classes = local_class.to_vec();
             cleaned = timer.time(comm, "clean", || {
-                manifold::clean_walls(tree, &mut cleaned_classes, keep)
+                let mut ghosts = build_ghost_layer(tree, |i| cleaned_classes[i] as u64);
+                let n = manifold::clean_walls(tree, &mut ghosts, &mut cleaned_classes, keep);
+                clean_ghosts = Some(ghosts);
+                n
             });
             ClassBytes::Slice(&cleaned_classes)
         } else {
@@ -252,27 +258,31 @@ impl Mesh {
         // element number, so the halo of the finite-volume faces needs no
         // second exchange.
         let nkept = local_class.iter().filter(|&c| keep(c)).count() as u64;
-        // Only leaves sent to other ranks need their number: none on one.
-        let element_index: Vec<u64> = if comm.size() > 1 {
-            local_class
-                .iter()
-                .scan(0u64, |n, c| {
-                    let i = *n;
-                    *n += keep(c) as u64;
-                    Some(i)
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
+        // Element numbers from the kept leaves before: only leaves sent to
+        // other ranks need theirs, none on one rank.
+        let kept_before = Ranks::from_fn(
+            if comm.size() > 1 {
+                local_class.len()
+            } else {
+                0
+            },
+            |i| keep(local_class.get(i)),
+        );
         let kept_counts = comm.allgather_u64(nkept);
         let first_element: u64 = kept_counts[..comm.rank()].iter().sum();
         let ghosts = timer.time(comm, "ghost", || {
-            build_ghost_layer(tree, |i| {
-                local_class.get(i) as u64 | (first_element + element_index[i]) << 8
-            })
+            let data = |i: usize| {
+                local_class.get(i) as u64 | (first_element + kept_before.rank(i) as u64) << 8
+            };
+            match clean_ghosts {
+                Some(mut g) => {
+                    g.exchange_data(comm, data);
+                    g
+                }
+                None => build_ghost_layer(tree, data),
+            }
         });
-        drop(element_index);
+        drop(kept_before);
         let ghost_class: Vec<u8> = ghosts.data.iter().map(|&w| w as u8).collect();
         let halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
         let num_ghosts = ghosts.len() as u64;
@@ -590,12 +600,15 @@ impl ClassBytes<'_> {
         }
     }
 
-    fn iter(&self) -> impl Iterator<Item = u8> + '_ {
-        let n = match self {
+    fn len(&self) -> usize {
+        match self {
             ClassBytes::Slice(s) => s.len(),
             ClassBytes::Uniform(_, n) => *n,
-        };
-        (0..n).map(|i| self.get(i))
+        }
+    }
+
+    fn iter(&self) -> impl Iterator<Item = u8> + '_ {
+        (0..self.len()).map(|i| self.get(i))
     }
 
     fn to_vec(&self) -> Vec<u8> {
