@@ -35,7 +35,10 @@
 //! the octree level of a user level `l` is `l + k`.
 
 use crate::error::{Error, Result};
-use crate::octant::{morton_encode, Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
+use crate::octant::{morton_encode, spread3, Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
+
+/// The bits of a Morton code that hold the x coordinate.
+const DILATED_X: u64 = 0x1249_2492_4924_9249;
 
 /// Root cells per axis above which a brick is refused: beyond `2^9` the
 /// trees would leave less than half the levels to refinement.
@@ -46,6 +49,9 @@ pub const MAX_ROOTS: u32 = 512;
 pub struct Brick {
     roots: [u32; 3],
     level: u8,
+    /// The upper bound [`Brick::hi`] per axis, spread to that axis's bits
+    /// of a Morton code ([`spread3`] shifted by the axis).
+    dilated_hi: [u64; 3],
 }
 
 impl Default for Brick {
@@ -59,6 +65,7 @@ impl Brick {
     pub const CUBE: Brick = Brick {
         roots: [1, 1, 1],
         level: 0,
+        dilated_hi: [1 << (3 * LATTICE_BITS), 2 << (3 * LATTICE_BITS), 4 << (3 * LATTICE_BITS)],
     };
 
     /// A brick of `roots[0] x roots[1] x roots[2]` trees, each at least 1
@@ -72,7 +79,13 @@ impl Brick {
         }
         let most = roots.into_iter().max().unwrap_or(1);
         let level = (32 - (most - 1).leading_zeros()) as u8;
-        Ok(Brick { roots, level })
+        let side = ROOT_LEN >> level;
+        let dilated_hi = std::array::from_fn(|k| spread3(roots[k] * side) << k);
+        Ok(Brick {
+            roots,
+            level,
+            dilated_hi,
+        })
     }
 
     /// Root cells per axis.
@@ -114,8 +127,11 @@ impl Brick {
         if self.is_cube() {
             return false;
         }
-        let (c, hi) = (o.coords(), self.hi());
-        (0..3).any(|k| c[k] >= hi[k])
+        // Dilated integers keep their order: a coordinate is at least the
+        // bound exactly when its bits of the Morton code are at least the
+        // bound's, spread the same way. No decoding.
+        let m = o.morton();
+        (0..3).any(|k| m & (DILATED_X << k) >= self.dilated_hi[k])
     }
 
     /// Whether the lattice point `x` (finest cell anchor) lies in the
@@ -233,6 +249,24 @@ impl TreeMap {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn void_from_the_morton_code_agrees_with_the_coordinates() {
+        for roots in [[3, 1, 1], [4, 2, 3], [5, 7, 2], [16, 8, 8], [2, 2, 2]] {
+            let b = Brick::new(roots).unwrap();
+            let hi = b.hi();
+            let mut seed = 12345u64;
+            for _ in 0..20_000 {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let level = (seed >> 59) as u8 % (MAX_LEVEL + 1);
+                let mask = !((ROOT_LEN >> level) - 1) & (ROOT_LEN - 1);
+                let c = [seed >> 5, seed >> 24, seed >> 43].map(|v| v as u32 & mask);
+                let o = Octant::from_parts(morton_encode(c[0], c[1], c[2]), level);
+                let by_coords = (0..3).any(|k| c[k] >= hi[k]);
+                assert_eq!(b.is_void(o), by_coords, "{roots:?} {o:?}");
+            }
+        }
+    }
 
     #[test]
     fn levels_and_bounds() {
