@@ -65,7 +65,11 @@ impl Brick {
     pub const CUBE: Brick = Brick {
         roots: [1, 1, 1],
         level: 0,
-        dilated_hi: [1 << (3 * LATTICE_BITS), 2 << (3 * LATTICE_BITS), 4 << (3 * LATTICE_BITS)],
+        dilated_hi: [
+            1 << (3 * LATTICE_BITS),
+            2 << (3 * LATTICE_BITS),
+            4 << (3 * LATTICE_BITS),
+        ],
     };
 
     /// A brick of `roots[0] x roots[1] x roots[2]` trees, each at least 1
@@ -257,7 +261,9 @@ mod tests {
             let hi = b.hi();
             let mut seed = 12345u64;
             for _ in 0..20_000 {
-                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 let level = (seed >> 59) as u8 % (MAX_LEVEL + 1);
                 let mask = !((ROOT_LEN >> level) - 1) & (ROOT_LEN - 1);
                 let c = [seed >> 5, seed >> 24, seed >> 43].map(|v| v as u32 & mask);
