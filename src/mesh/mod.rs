@@ -257,23 +257,15 @@ impl Mesh {
         // Each leaf travels with its class and, when kept, its global
         // element number, so the halo of the finite-volume faces needs no
         // second exchange.
-        let nkept = local_class.iter().filter(|&c| keep(c)).count() as u64;
-        // Element numbers from the kept leaves before: only leaves sent to
-        // other ranks need theirs, none on one rank.
-        let kept_before = Ranks::from_fn(
-            if comm.size() > 1 {
-                local_class.len()
-            } else {
-                0
-            },
-            |i| keep(local_class.get(i)),
-        );
+        // The kept leaves, numbered: a leaf's element number is the count
+        // of kept leaves before it.
+        let kept = Ranks::from_fn(local_class.len(), |i| keep(local_class.get(i)));
+        let nkept = kept.count() as u64;
         let kept_counts = comm.allgather_u64(nkept);
         let first_element: u64 = kept_counts[..comm.rank()].iter().sum();
         let ghosts = timer.time(comm, "ghost", || {
-            let data = |i: usize| {
-                local_class.get(i) as u64 | (first_element + kept_before.rank(i) as u64) << 8
-            };
+            let data =
+                |i: usize| local_class.get(i) as u64 | (first_element + kept.rank(i) as u64) << 8;
             match clean_ghosts {
                 Some(mut g) => {
                     g.exchange_data(comm, data);
@@ -282,14 +274,13 @@ impl Mesh {
                 None => build_ghost_layer(tree, data),
             }
         });
-        drop(kept_before);
         let ghost_class: Vec<u8> = ghosts.data.iter().map(|&w| w as u8).collect();
         let halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
         let num_ghosts = ghosts.len() as u64;
         drop((ghosts, ghost_class));
 
         let nodes = timer.time(comm, "nodes", || {
-            let elements = kept_elements(tree, &local_class, keep, nkept as usize);
+            let elements = kept_elements(tree, &local_class, &kept);
             // The walk goes over the elements and the halo elements only.
             let merged = halo.around(&elements.leaves);
             let d = dual::extract_nodes(merged)?;
@@ -309,16 +300,11 @@ impl Mesh {
         let mut mesh = crate::comm::agree(comm, mesh)?;
         mesh.first_element = first_element;
         mesh.first_cells = tree.first_cells().to_vec();
-        let with_hanging = mesh
-            .connectivity
-            .iter()
-            .filter(|c| c.iter().any(|&n| n as usize >= mesh.num_independent))
-            .count();
         let mut sums = [
             mesh.elements.len() as u64,
             face_hanging,
             edge_hanging,
-            with_hanging as u64,
+            mesh.counts.elements_with_hanging,
             num_ghosts,
         ];
         comm.sum_u64(&mut sums);
@@ -657,7 +643,14 @@ fn count_hanging(
         return (nf, ne);
     }
     let me = comm.rank();
+    let local = leaves.local_range();
     let mine = |e: &(u32, u8, u8)| {
+        // A node on a face or edge through its coarse leaf's lowest corner
+        // (Morton corner 0) lies in the leaf's half-open box, and so does
+        // its directory cell: a local leaf's node is this rank's.
+        if e.1 & 1 != 0 && local.contains(&(e.0 as usize)) {
+            return true;
+        }
         let x = dual::DualNodes::hanging_coords(leaves.get(e.0 as usize), e.1);
         numbering::directory_rank(first_cell, x) == me
     };
@@ -784,22 +777,18 @@ struct KeptElements {
     uniform: u8,
 }
 
-/// Picks the `nkept` local leaves that `keep` keeps.
-fn kept_elements(
-    tree: &LinearOctree,
-    local_class: &ClassBytes,
-    keep: impl Fn(u8) -> bool,
-    nkept: usize,
-) -> KeptElements {
+/// Picks the local leaves in `kept`.
+fn kept_elements(tree: &LinearOctree, local_class: &ClassBytes, kept: &Ranks) -> KeptElements {
+    let nkept = kept.count() as usize;
     // One class for all is kept as one byte until asked for.
     let (class, uniform) = match local_class {
         ClassBytes::Uniform(c, _) => (None, LeafClass::from_bits(*c) as u8),
         ClassBytes::Slice(s) => {
             let mut class = Vec::with_capacity(nkept);
             class.extend(
-                (s.iter())
-                    .filter(|&&c| keep(c))
-                    .map(|&c| LeafClass::from_bits(c) as u8),
+                (s.iter().enumerate())
+                    .filter(|&(i, _)| kept.contains(i))
+                    .map(|(_, &c)| LeafClass::from_bits(c) as u8),
             );
             (Some(class), 0)
         }
@@ -810,7 +799,7 @@ fn kept_elements(
         let mut own = Vec::with_capacity(nkept);
         own.extend(
             (tree.leaves().iter().enumerate())
-                .filter(|&(i, _)| keep(local_class.get(i)))
+                .filter(|&(i, _)| kept.contains(i))
                 .map(|(_, &o)| o),
         );
         Elements::Own(own)
@@ -952,8 +941,10 @@ fn assemble(
     // The corner table becomes the connectivity in place: the elements'
     // rows move to the front (never past their own slot), renumbered.
     let mut connectivity = corners;
+    let mut with_hanging = 0u64;
     for (w, i) in local_range.clone().enumerate() {
         let c = connectivity[i];
+        with_hanging += c.iter().any(|&n| n & TAG != 0) as u64;
         connectivity[w] = std::array::from_fn(|v| new_of(c[VTK_TO_MORTON[v]]));
     }
     connectivity.truncate(local_range.len());
@@ -1003,6 +994,8 @@ fn assemble(
         halo,
         counts: MeshCounts {
             independent_nodes: num.global_count,
+            // This rank's, summed by the caller.
+            elements_with_hanging: with_hanging,
             ..MeshCounts::default()
         },
         timer: PhaseTimer::new(),
