@@ -38,7 +38,18 @@ use crate::error::{Error, Result};
 use crate::octant::{morton_encode, spread3, Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
 
 /// The bits of a Morton code that hold the x coordinate.
-const DILATED_X: u64 = 0x1249_2492_4924_9249;
+const DILATED_X: u64 = spread3(u32::MAX);
+
+/// The brick's upper bounds ([`Brick::hi`]), each spread to its axis's bits
+/// of a Morton code.
+const fn dilated_hi(roots: [u32; 3], level: u8) -> [u64; 3] {
+    let side = ROOT_LEN >> level;
+    [
+        spread3(roots[0] * side),
+        spread3(roots[1] * side) << 1,
+        spread3(roots[2] * side) << 2,
+    ]
+}
 
 /// Root cells per axis above which a brick is refused: beyond `2^9` the
 /// trees would leave less than half the levels to refinement.
@@ -49,8 +60,7 @@ pub const MAX_ROOTS: u32 = 512;
 pub struct Brick {
     roots: [u32; 3],
     level: u8,
-    /// The upper bound [`Brick::hi`] per axis, spread to that axis's bits
-    /// of a Morton code ([`spread3`] shifted by the axis).
+    /// [`dilated_hi`]: kept because [`Brick::is_void`] runs per leaf.
     dilated_hi: [u64; 3],
 }
 
@@ -65,11 +75,7 @@ impl Brick {
     pub const CUBE: Brick = Brick {
         roots: [1, 1, 1],
         level: 0,
-        dilated_hi: [
-            1 << (3 * LATTICE_BITS),
-            2 << (3 * LATTICE_BITS),
-            4 << (3 * LATTICE_BITS),
-        ],
+        dilated_hi: dilated_hi([1, 1, 1], 0),
     };
 
     /// A brick of `roots[0] x roots[1] x roots[2]` trees, each at least 1
@@ -83,12 +89,10 @@ impl Brick {
         }
         let most = roots.into_iter().max().unwrap_or(1);
         let level = (32 - (most - 1).leading_zeros()) as u8;
-        let side = ROOT_LEN >> level;
-        let dilated_hi = std::array::from_fn(|k| spread3(roots[k] * side) << k);
         Ok(Brick {
             roots,
             level,
-            dilated_hi,
+            dilated_hi: dilated_hi(roots, level),
         })
     }
 

@@ -40,7 +40,7 @@ const LEVEL_MASK: u64 = (1 << LEVEL_BITS) - 1;
 
 /// Spreads the low 21 bits of `v` so that bit `i` lands on bit `3 i`.
 #[inline]
-pub fn spread3(v: u32) -> u64 {
+pub const fn spread3(v: u32) -> u64 {
     let mut x = (v as u64) & 0x1f_ffff;
     x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
     x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;

@@ -232,7 +232,6 @@ impl Halo {
     /// low byte and its global element number above it.
     pub(crate) fn from_ghosts(
         ghosts: &crate::ghost::GhostLayer,
-        class: &[u8],
         keep: impl Fn(u8) -> bool,
     ) -> Halo {
         let mut h = Halo::default();
@@ -240,7 +239,7 @@ impl Halo {
             if i == ghosts.before {
                 h.before = h.leaves.len();
             }
-            if keep(class[i]) {
+            if keep(ghosts.data[i] as u8) {
                 h.leaves.push(leaf);
                 h.owners.push(ghosts.owners[i]);
                 h.global.push(ghosts.data[i] >> 8);
@@ -489,15 +488,6 @@ fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
     }
 }
 
-/// `faces` sorted by owner, then other side, in place. A counting sort into
-/// a second array scatters the faces all over it when they do not come
-/// roughly in owner order (the dual walk lists the faces across its big
-/// planes last), and on tens of millions of faces the fresh pages alone
-/// cost seconds. So: the faces are permuted in place into blocks of owners
-/// (at most about 1024 blocks, American flag sort), each block is sorted by
-/// owner through a buffer the size of the largest block, and each owner's
-/// few faces by their other side. The order of equal keys does not matter:
-/// an owner never has two faces with the same other side.
 /// Asks the processor to bring `v[i]` into cache (a hint: no effect past
 /// the end, nor on other targets).
 #[inline(always)]
@@ -515,6 +505,15 @@ fn prefetch<T>(v: &[T], i: usize) {
     let _ = (v, i);
 }
 
+/// `faces` sorted by owner, then other side, in place. A counting sort into
+/// a second array scatters the faces all over it when they do not come
+/// roughly in owner order (the dual walk lists the faces across its big
+/// planes last), and on tens of millions of faces the fresh pages alone
+/// cost seconds. So: the faces are permuted in place into blocks of owners
+/// (at most about 1024 blocks, American flag sort), each block is sorted by
+/// owner through a buffer the size of the largest block, and each owner's
+/// few faces by their other side. The order of equal keys does not matter:
+/// an owner never has two faces with the same other side.
 fn sort_by_owner(mut faces: Vec<Face>, owners: usize) -> Vec<Face> {
     let Some(&first) = faces.first() else {
         return faces;

@@ -138,7 +138,11 @@ fn first_sweep(
     // rules what a gap is (not kept), and leaving the dropped ones out takes
     // their part of the walk away. `at[k]`: kept leaf `k`'s position in
     // `leaves`.
-    let (mut kl, mut at) = (Vec::new(), Vec::new());
+    // Room for every leaf: what stays unwritten is never resident.
+    let (mut kl, mut at) = (
+        Vec::with_capacity(leaves.len()),
+        Vec::with_capacity(leaves.len()),
+    );
     for (j, (&o, &c)) in leaves.iter().zip(class).enumerate() {
         if kept(c) {
             kl.push(o);

@@ -274,10 +274,9 @@ impl Mesh {
                 None => build_ghost_layer(tree, data),
             }
         });
-        let ghost_class: Vec<u8> = ghosts.data.iter().map(|&w| w as u8).collect();
-        let halo = Halo::from_ghosts(&ghosts, &ghost_class, keep);
+        let halo = Halo::from_ghosts(&ghosts, keep);
         let num_ghosts = ghosts.len() as u64;
-        drop((ghosts, ghost_class));
+        drop(ghosts);
 
         let nodes = timer.time(comm, "nodes", || {
             let elements = kept_elements(tree, &local_class, &kept);
