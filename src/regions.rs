@@ -28,7 +28,8 @@ use serde::{Deserialize, Serialize};
 use crate::brick::Brick;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::octant::{Octant, MAX_LEVEL};
+use crate::geometry::distance::any_box_within;
+use crate::octant::{Octant, LATTICE_BITS, MAX_LEVEL};
 use crate::refine::{scatter_by_child, SurfaceIndex};
 
 /// A refinement region with its level, user units.
@@ -333,6 +334,10 @@ pub struct RegionRules<'a> {
     /// surface they measure from.
     bands: Vec<(f64, u8)>,
     surface: Option<&'a SurfaceIndex>,
+    /// [`RegionRules::max_level`], and the deepest band's level (0 without
+    /// bands), kept: the walks ask at every octant.
+    max: u8,
+    deepest: u8,
 }
 
 /// Scratch space of [`RegionRules::refine_leaf`]: the candidate stack.
@@ -340,6 +345,8 @@ pub struct RegionRules<'a> {
 pub struct BandScratch {
     stack: Vec<u32>,
     masks: Vec<u8>,
+    /// Candidates the cheap tests left to the exact distances.
+    undecided: Vec<u32>,
 }
 
 /// A region's shape in lattice units.
@@ -377,13 +384,17 @@ impl<'a> RegionRules<'a> {
                 (shape, r.level() + k, r.outside())
             })
             .collect();
-        RegionRules {
+        let mut r = RegionRules {
             min_level: min_level + k,
             brick: domain.brick,
             rules,
             bands: Vec::new(),
             surface: None,
-        }
+            max: 0,
+            deepest: 0,
+        };
+        r.max = r.deepest_rule();
+        r
     }
 
     /// Adds distance bands `(distance in user units, level)` around
@@ -401,6 +412,8 @@ impl<'a> RegionRules<'a> {
             .map(|&(d, l)| (d * domain.scale(), l + domain.brick.level()))
             .collect();
         self.surface = Some(surface);
+        self.deepest = self.bands.iter().map(|b| b.1).max().unwrap_or(0);
+        self.max = self.deepest_rule();
         self
     }
 
@@ -415,6 +428,10 @@ impl<'a> RegionRules<'a> {
 
     /// The finest level any rule asks for.
     pub fn max_level(&self) -> u8 {
+        self.max
+    }
+
+    fn deepest_rule(&self) -> u8 {
         let bands = self.bands.iter().map(|b| b.1);
         self.rules
             .iter()
@@ -585,7 +602,7 @@ impl<'a> RegionRules<'a> {
         let children = o.children();
         let slices = child_slices(o, leaves);
         // Bands split leaves below the deepest band's level only.
-        let deepest = self.bands.iter().map(|b| b.1).max().unwrap_or(0);
+        let deepest = self.deepest;
         let need = (0..8)
             .filter(|&i| slices[i].iter().any(|l| l.level() < deepest))
             .fold(0u8, |m, i| m | 1 << i);
@@ -606,7 +623,7 @@ impl<'a> RegionRules<'a> {
             }
             m
         };
-        let BandScratch { stack, masks } = scratch;
+        let BandScratch { stack, masks, .. } = scratch;
         let bounds = if need == 0 {
             [stack.len(); 9]
         } else {
@@ -638,10 +655,9 @@ impl<'a> RegionRules<'a> {
         let split = level < max && {
             let w = self.widest(level);
             let (lo, hi) = o.bounds_f64();
-            let mut undecided = Vec::new();
-            let tris = scratch.stack[a..b].iter().map(|&t| &s.tris[t as usize]);
-            (w >= 0.0 && crate::geometry::distance::any_box_within(tris, lo, hi, w, &mut undecided))
-                || self.shapes_split(o)
+            let ids = &scratch.stack[a..b];
+            let undecided = &mut scratch.undecided;
+            (w >= 0.0 && any_box_within(&s.tris, ids, lo, hi, w, undecided)) || self.shapes_split(o)
         };
         if !split {
             out.push(o);
@@ -661,7 +677,7 @@ impl<'a> RegionRules<'a> {
         let (lo, hi) = o.bounds_f64();
         let mid: [f64; 3] = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
         let (boxes, w2) = (s.boxes(), w * w);
-        let BandScratch { stack, masks } = scratch;
+        let BandScratch { stack, masks, .. } = scratch;
         masks.clear();
         masks.extend(
             stack[a..b]
@@ -695,6 +711,21 @@ impl<'a> RegionRules<'a> {
 
 /// The leaves (sorted, all inside `o`) inside each child of `o`.
 fn child_slices(o: Octant, leaves: &[Octant]) -> [&[Octant]; 8] {
+    if leaves.len() <= 32 {
+        // Few leaves (most calls, near the bottom): one pass over their
+        // child numbers beats eight searches.
+        let shift = 3 * (LATTICE_BITS - o.level() as u32 - 1);
+        let mut ends = [0usize; 8];
+        for l in leaves {
+            ends[(l.morton() >> shift & 7) as usize] += 1;
+        }
+        let mut at = 0;
+        return std::array::from_fn(|i| {
+            let start = at;
+            at += ends[i];
+            &leaves[start..at]
+        });
+    }
     let mut rest = leaves;
     o.children().map(|c| {
         let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());

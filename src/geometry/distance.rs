@@ -144,65 +144,72 @@ pub fn box_within(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> bool {
     box_within_quick(t, lo, hi, d).unwrap_or_else(|| box_within_rest(t, lo, hi, d))
 }
 
-/// Whether any triangle of `tris` comes within `d` of the closed box
-/// `lo..hi`: the cheap answers of all first, the exact distances of the
-/// undecided ones only when no cheap answer accepts (most boxes near a
-/// surface have some triangle clearly within `d`). `undecided` is scratch.
-pub fn any_box_within<'t>(
-    tris: impl Iterator<Item = &'t Triangle>,
+/// Whether any triangle `tris[i]`, `i` in `ids`, comes within `d` of the
+/// closed box `lo..hi`: the cheap answers of all first, the exact
+/// distances of the undecided ones only when no cheap answer accepts (most
+/// boxes near a surface have some triangle clearly within `d`).
+/// `undecided` is scratch.
+pub fn any_box_within(
+    tris: &[Triangle],
+    ids: &[u32],
     lo: [f64; 3],
     hi: [f64; 3],
     d: f64,
-    undecided: &mut Vec<&'t Triangle>,
+    undecided: &mut Vec<u32>,
 ) -> bool {
     undecided.clear();
-    for t in tris {
-        match box_within_quick(t, lo, hi, d) {
+    for &i in ids {
+        match box_within_quick(&tris[i as usize], lo, hi, d) {
             Some(true) => return true,
             Some(false) => {}
-            None => undecided.push(t),
+            None => undecided.push(i),
         }
     }
-    undecided.iter().any(|t| box_within_rest(t, lo, hi, d))
+    undecided
+        .iter()
+        .any(|&i| box_within_rest(&tris[i as usize], lo, hi, d))
 }
 
 /// The cheap part of [`box_within`]: `Some` answer from the vertices, the
-/// boxes and two separating-axis tests (the box grown by `d / sqrt 3`,
-/// whose points are all within `d`, and by `d`, which holds every point
-/// within `d`), `None` when only the exact distances decide.
+/// boxes, separating axes (a gap of more than `d` along a unit axis) and
+/// one overlap test (with the box grown by `d / sqrt 3`), `None` when only
+/// the exact distances decide.
 fn box_within_quick(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> Option<bool> {
     let d2 = d * d;
     let [a, b, c] = t.v;
-    // Quick accept and reject on the triangle's vertices and box.
-    if [a, b, c].iter().any(|&v| point_box2(v, lo, hi) <= d2) {
+    // Quick accept and reject on the triangle's vertices and box, without
+    // branches on the data (the answers are hard to predict).
+    let near = point_box2(a, lo, hi)
+        .min(point_box2(b, lo, hi))
+        .min(point_box2(c, lo, hi));
+    if near <= d2 {
         return Some(true);
     }
-    let tlo: [f64; 3] = std::array::from_fn(|k| a[k].min(b[k]).min(c[k]));
-    let thi: [f64; 3] = std::array::from_fn(|k| a[k].max(b[k]).max(c[k]));
-    let gap2: f64 = (0..3)
-        .map(|k| {
-            let g = (lo[k] - thi[k]).max(0.0).max(tlo[k] - hi[k]);
-            g * g
-        })
-        .sum();
+    let mut gap2 = 0.0;
+    for k in 0..3 {
+        let (tlo, thi) = (a[k].min(b[k]).min(c[k]), a[k].max(b[k]).max(c[k]));
+        let (below, above) = (lo[k] - thi, tlo - hi[k]);
+        let g = if below > above { below } else { above };
+        gap2 += if g > 0.0 { g * g } else { 0.0 };
+    }
     if gap2 > d2 {
         return Some(false);
     }
-    // Rounding margins keep both tests on the safe side of `d`; the inner
-    // box holds the box itself, so it also accepts an overlap.
+    // Rounding margins keep every test on the safe side of `d`.
     let margin = 1e-9 * (d + (hi[0] - lo[0]));
-    // The triangle's plane first: it rejects most of the triangles near a
-    // box that is not within `d`, before either separating-axis test.
-    if crate::geometry::intersect::plane_apart(t, lo, hi, d + margin) {
+    // Lower bounds first, the plane before the edge axes: most candidates
+    // near a box beside the band are rejected, few accepted.
+    let apart = d + margin;
+    if crate::geometry::intersect::plane_apart(t, lo, hi, apart)
+        || crate::geometry::intersect::edges_apart(t, lo, hi, apart)
+    {
         return Some(false);
     }
+    // Every point of the box grown by `d / sqrt 3` is within `d` of the
+    // box, which it holds: overlapping it, the triangle is within `d`.
     let inner = (d / 3f64.sqrt() - margin).max(0.0);
     if triangle_box_overlap(t, lo.map(|x| x - inner), hi.map(|x| x + inner)) {
         return Some(true);
-    }
-    // Apart by more than d along a separating axis: farther than d.
-    if crate::geometry::intersect::triangle_box_apart(t, lo, hi, d + margin) {
-        return Some(false);
     }
     None
 }
@@ -283,6 +290,76 @@ mod tests {
                 assert!(!box_within(&t, lo, hi, 0.5 * s - 0.1), "{t:?}: sampled {s}");
             }
         }
+    }
+
+    /// Exact distance from the box to the triangle: zero when they overlap,
+    /// else the least of the triangle's vertices to the box, the box's
+    /// corners to the triangle and the edges of either to the other's.
+    fn exact(t: &Triangle, lo: [f64; 3], hi: [f64; 3]) -> f64 {
+        if triangle_box_overlap(t, lo, hi) {
+            return 0.0;
+        }
+        let corner = |i: usize| -> [f64; 3] {
+            std::array::from_fn(|k| if i >> k & 1 == 1 { hi[k] } else { lo[k] })
+        };
+        let [a, b, c] = t.v;
+        let mut best =
+            t.v.iter()
+                .map(|&v| point_box2(v, lo, hi))
+                .fold(f64::MAX, f64::min);
+        for i in 0..8 {
+            best = best.min(point_triangle2(corner(i), a, b, c));
+            for k in 0..3 {
+                if i >> k & 1 == 0 {
+                    let (p, q) = (corner(i), corner(i | 1 << k));
+                    for (u, v) in [(a, b), (b, c), (c, a)] {
+                        best = best.min(segment_segment2(p, q, u, v));
+                    }
+                }
+            }
+        }
+        best.sqrt()
+    }
+
+    /// Every cheap answer, the separating-axis lower bounds and the whole
+    /// test agree with the exact distance on either side of it, for
+    /// triangles near, across and beside a flat box.
+    #[test]
+    fn box_within_agrees_with_the_exact_distance() {
+        let mut seed = 987654321u64;
+        let mut rnd = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 3.0 - 1.0
+        };
+        let (lo, hi) = ([0.0, 0.0, 0.0], [1.0, 0.5, 0.25]);
+        let (mut near, mut apart) = (0, 0);
+        for _ in 0..5000 {
+            let t = Triangle::new(
+                [rnd(), rnd(), rnd()],
+                [rnd(), rnd(), rnd()],
+                [rnd(), rnd(), rnd()],
+            );
+            let e = exact(&t, lo, hi);
+            for (d, within) in [(e * (1.0 + 1e-6) + 1e-12, true), (e * (1.0 - 1e-6), false)] {
+                if d <= 0.0 {
+                    continue;
+                }
+                assert_eq!(box_within(&t, lo, hi, d), within, "{t:?} at {d}, exact {e}");
+                if let Some(q) = box_within_quick(&t, lo, hi, d) {
+                    assert_eq!(q, within, "{t:?} at {d}, exact {e}");
+                }
+                use crate::geometry::intersect::{edges_apart, plane_apart};
+                if plane_apart(&t, lo, hi, d) || edges_apart(&t, lo, hi, d) {
+                    assert!(!within, "{t:?} at {d}, exact {e}");
+                    apart += 1;
+                }
+                near += within as usize;
+            }
+        }
+        // Both sides were exercised, and the lower bounds decided some.
+        assert!(near > 1000 && apart > 1000, "{near} within, {apart} apart");
     }
 
     #[test]

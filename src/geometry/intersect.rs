@@ -65,63 +65,56 @@ pub fn triangle_box_overlap(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3]
     true
 }
 
-/// Whether one of the overlap test's 13 axes puts the triangle more than
-/// `d` away from the closed box (gaps measured along unit axes): then
-/// their distance is more than `d`. A lower bound only: `false` does not
-/// mean they are within `d`.
-pub fn triangle_box_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], d: f64) -> bool {
+/// Whether one of the nine edge axes of the overlap test (a triangle edge
+/// crossed with a box axis) puts the triangle more than `d` away from the
+/// closed box, gaps measured along unit axes: then their distance is more
+/// than `d`. A lower bound only: `false` does not mean they are within `d`.
+/// The box's own axes and the triangle's normal are the callers' cheaper
+/// tests (a box gap, [`plane_apart`]).
+///
+/// Written out per axis, without branches on the data: the axis
+/// `e x u_k` has two non-zero components (`e[l]` at `j`, `-e[j]` at `l`,
+/// `j, k, l` cyclic), the edge's two ends project to one point (the
+/// opposite vertex gives the other end of the triangle's interval), and
+/// the box projects to its centre's projection plus or minus a radius.
+pub fn edges_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], d: f64) -> bool {
     let [p, q, r] = tri.v;
-    for k in 0..3 {
-        let lo = p[k].min(q[k]).min(r[k]);
-        let hi = p[k].max(q[k]).max(r[k]);
-        if lo - box_max[k] > d || box_min[k] - hi > d {
-            return true;
+    let v = [sub(p, box_min), sub(q, box_min), sub(r, box_min)];
+    let c = sub(box_max, box_min).map(|x| 0.5 * x);
+    let d2 = d * d;
+    let mut apart = false;
+    for i in 0..3 {
+        let (a, b) = (v[i], v[(i + 2) % 3]);
+        let e = sub(v[(i + 1) % 3], a);
+        for k in 0..3 {
+            let (j, l) = ((k + 1) % 3, (k + 2) % 3);
+            let (pa, pb) = (a[j] * e[l] - a[l] * e[j], b[j] * e[l] - b[l] * e[j]);
+            let centre = c[j] * e[l] - c[l] * e[j];
+            let radius = e[l].abs() * c[j] + e[j].abs() * c[l];
+            let (t_min, t_max) = if pa < pb { (pa, pb) } else { (pb, pa) };
+            let below = t_min - (centre + radius);
+            let above = (centre - radius) - t_max;
+            let g = if below > above { below } else { above };
+            apart |= g > 0.0 && g * g > d2 * (e[j] * e[j] + e[l] * e[l]);
         }
     }
-    let v = [sub(p, box_min), sub(q, box_min), sub(r, box_min)];
-    let h = sub(box_max, box_min);
-    let e = [sub(v[1], v[0]), sub(v[2], v[1]), sub(v[0], v[2])];
-    let apart = |axis: [f64; 3]| {
-        let len = dot(axis, axis).sqrt();
-        len > 0.0 && gap(axis, &v, h) > d * len
-    };
-    if apart(cross(e[0], e[1])) {
-        return true;
-    }
-    const AXES: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    e.iter()
-        .any(|edge| AXES.iter().any(|axis| apart(cross(*edge, *axis))))
+    apart
 }
 
 /// Whether the triangle's plane puts it more than `d` away from the closed
-/// box (the first axis [`triangle_box_apart`] would try after the box's).
+/// box.
 #[inline]
 pub fn plane_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], d: f64) -> bool {
     let [p, q, r] = tri.v;
     let v = [sub(p, box_min), sub(q, box_min), sub(r, box_min)];
     let n = cross(sub(v[1], v[0]), sub(v[2], v[1]));
-    let len = dot(n, n).sqrt();
-    len > 0.0 && gap(n, &v, sub(box_max, box_min)) > d * len
-}
-
-/// The gap between the projections of the triangle `v` and the box `[0, h]`
-/// on `axis` (negative when they overlap), in units of the axis's length.
-#[inline]
-fn gap(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> f64 {
-    let d0 = dot(axis, v[0]);
-    let d1 = dot(axis, v[1]);
-    let d2 = dot(axis, v[2]);
-    let (t_min, t_max) = (d0.min(d1).min(d2), d0.max(d1).max(d2));
-    let (mut b_min, mut b_max) = (0.0, 0.0);
-    for k in 0..3 {
-        let t = axis[k] * h[k];
-        if t > 0.0 {
-            b_max += t;
-        } else {
-            b_min += t;
-        }
-    }
-    (t_min - b_max).max(b_min - t_max)
+    // All three vertices project to one point; the box, to its centre's
+    // projection plus or minus a radius.
+    let c = sub(box_max, box_min).map(|x| 0.5 * x);
+    let (t, centre) = (dot(n, v[0]), dot(n, c));
+    let radius = n[0].abs() * c[0] + n[1].abs() * c[1] + n[2].abs() * c[2];
+    let g = (t - centre).abs() - radius;
+    g > 0.0 && g * g > d * d * dot(n, n)
 }
 
 /// True if `axis` separates the triangle `v` from the box `[0, h]` with a

@@ -97,8 +97,7 @@ impl SurfaceIndex {
         let (a, b) = (lo.map(|x| x - d), hi.map(|x| x + d));
         buf.clear();
         self.bvh.query_candidates(a, b, buf);
-        let tris = buf.iter().map(|&t| &self.tris[t as usize]);
-        crate::geometry::distance::any_box_within(tris, lo, hi, d, &mut Vec::new())
+        crate::geometry::distance::any_box_within(&self.tris, buf, lo, hi, d, &mut Vec::new())
     }
 
     /// Indices of the triangles touching the closed box of `o`.
