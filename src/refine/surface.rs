@@ -213,12 +213,13 @@ pub(crate) fn scatter_by_child(
     hi: usize,
     mask: impl Fn(usize) -> u8,
 ) -> [usize; 9] {
+    // Counted without branches: how many children an entry goes to is
+    // hard to predict.
     let mut sizes = [0usize; 8];
     for j in lo..hi {
-        let mut x = mask(j);
-        while x != 0 {
-            sizes[x.trailing_zeros() as usize] += 1;
-            x &= x - 1;
+        let x = mask(j);
+        for (i, s) in sizes.iter_mut().enumerate() {
+            *s += (x >> i & 1) as usize;
         }
     }
     let mut b = [buf.len(); 9];
