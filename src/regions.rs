@@ -726,9 +726,14 @@ fn child_slices(o: Octant, leaves: &[Octant]) -> [&[Octant]; 8] {
             &leaves[start..at]
         });
     }
+    // Each child's run found by galloping from its start: the probes stay
+    // near the leaves the walk reads next, where bisecting the whole run
+    // misses the cache.
     let mut rest = leaves;
     o.children().map(|c| {
-        let k = rest.partition_point(|l| l.cell_begin() < c.cell_end());
+        let last = c.cell_end() - 1;
+        let k = crate::sort::gallop_last_le(rest.len(), 0, last, |j| rest[j].cell_begin())
+            .map_or(0, |j| j + 1);
         let (mine, after) = rest.split_at(k);
         rest = after;
         mine
