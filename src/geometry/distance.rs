@@ -249,6 +249,17 @@ fn box_within_rest(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> bool {
 mod tests {
     use super::*;
 
+    /// Pseudo-random numbers in `[lo, hi)` from `seed` (a linear
+    /// congruential generator: the same triangles on every run).
+    fn uniform(mut seed: u64, lo: f64, hi: f64) -> impl FnMut() -> f64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
+        }
+    }
+
     /// Brute-force squared distance from the box to the triangle by dense
     /// sampling of both (an upper bound that converges).
     fn sampled(t: &Triangle, lo: [f64; 3], hi: [f64; 3]) -> f64 {
@@ -268,13 +279,7 @@ mod tests {
 
     #[test]
     fn box_distance_agrees_with_sampling() {
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0
-        };
+        let mut rnd = uniform(12345, -2.0, 2.0);
         let (lo, hi) = ([0.0, 0.0, 0.0], [1.0, 0.5, 0.25]);
         for _ in 0..300 {
             let t = Triangle::new(
@@ -326,13 +331,7 @@ mod tests {
     /// triangles near, across and beside a flat box.
     #[test]
     fn box_within_agrees_with_the_exact_distance() {
-        let mut seed = 987654321u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 3.0 - 1.0
-        };
+        let mut rnd = uniform(987654321, -1.0, 2.0);
         let (lo, hi) = ([0.0, 0.0, 0.0], [1.0, 0.5, 0.25]);
         let (mut near, mut apart) = (0, 0);
         for _ in 0..5000 {
