@@ -52,7 +52,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::octant::Octant;
 
 use super::dual::{walk_faces, Merged};
-use super::Mesh;
+use super::{prefetch, Mesh};
 
 /// Names of the six domain-side patches, in patch-id order.
 pub const SIDE_PATCHES: [&str; 6] = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"];
@@ -486,23 +486,6 @@ fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
         }
         _ => Vec::new(),
     }
-}
-
-/// Asks the processor to bring `v[i]` into cache (a hint: no effect past
-/// the end, nor on other targets).
-#[inline(always)]
-fn prefetch<T>(v: &[T], i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    if i < v.len() {
-        // SAFETY: the pointer is inside `v`; a prefetch reads nothing the
-        // program sees and cannot fault.
-        unsafe {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            _mm_prefetch::<_MM_HINT_T0>(v.as_ptr().add(i).cast::<i8>());
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (v, i);
 }
 
 /// `faces` sorted by owner, then other side, in place. A counting sort into

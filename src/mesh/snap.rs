@@ -725,7 +725,15 @@ impl<'a> Snapper<'a> {
         let conn = self.mesh.connectivity();
         let j2 = self.min_jacobian * self.min_jacobian;
         let mut bad = Vec::new();
-        for &e in cands {
+        for (k, &e) in cands.iter().enumerate() {
+            // The corners' positions a few elements ahead, fetched now:
+            // nodes are numbered apart from elements, so each element's
+            // corners sit all over the position array.
+            if let Some(&ahead) = cands.get(k + 6) {
+                for &n in &conn[ahead as usize] {
+                    super::prefetch(&self.pos, n as usize);
+                }
+            }
             let c = &conn[e as usize];
             let mut p = [[0.0; 3]; 8];
             for (q, &n) in p.iter_mut().zip(c) {
@@ -865,7 +873,13 @@ impl<'a> Snapper<'a> {
         let ni = self.ni;
         let conn = self.mesh.connectivity();
         let mut sums = vec![0u64; 4 * ni];
-        for &e in &self.active {
+        for (k, &e) in self.active.iter().enumerate() {
+            if let Some(&ahead) = self.active.get(k + 6) {
+                for &n in &conn[ahead as usize] {
+                    super::prefetch(&self.pos, n as usize);
+                    super::prefetch(&self.lattice, n as usize);
+                }
+            }
             let c = &conn[e as usize];
             if !c
                 .iter()
