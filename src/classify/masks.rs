@@ -138,7 +138,7 @@ impl Classifier<'_> {
                 s |= ((gap > eta) as u8) << i;
                 un |= ((gap >= -eta) as u8) << i;
                 far |= ((gap > g * l1 + eta) as u8) << i;
-                let same = (s0 > 0.0 && s0 > x) || (s1 < 0.0 && s1 < x);
+                let same = (s0 > 0.0) & (s0 > x) | (s1 < 0.0) & (s1 < x);
                 across |= (!same as u8) << i;
             }
             near &= !far;
@@ -191,12 +191,11 @@ impl Classifier<'_> {
                         m &= m - 1;
                         let x = SX[i] * h[0] + SY[i] * h[1] + SZ[i] * h[2];
                         let gap = (t0 - x - rad).max(x - rad - t1);
-                        if gap > eta && !tiny {
-                            sep |= 1 << i;
-                            open &= !(1 << i);
-                        } else if gap >= -eta {
-                            unsure |= 1 << i;
-                        }
+                        // Without branches: the verdicts are close to random.
+                        let apart = (gap > eta) & !tiny;
+                        sep |= (apart as u8) << i;
+                        open &= !((apart as u8) << i);
+                        unsure |= ((!apart & (gap >= -eta)) as u8) << i;
                     }
                 }
                 if open == 0 {
