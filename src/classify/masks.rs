@@ -4,7 +4,7 @@
 
 use super::walk::*;
 use crate::geometry::predicates::*;
-use crate::geometry::Aabb;
+use crate::geometry::{fmax, fmin, Aabb};
 
 /// Child masks: children whose bit `k` is set (`POS[k]`) or clear (`NEG[k]`).
 pub(crate) const POS: [u8; 3] = [0b1010_1010, 0b1100_1100, 0b1111_0000];
@@ -211,28 +211,6 @@ impl Classifier<'_> {
             plane,
             seg,
         }
-    }
-}
-
-/// The larger of two numbers that are not NaN, as one instruction
-/// (`f64::max` also orders NaNs, which costs a compare and a blend in
-/// these loops).
-#[inline(always)]
-fn fmax(a: f64, b: f64) -> f64 {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
-
-/// The smaller of two numbers that are not NaN ([`fmax`]).
-#[inline(always)]
-fn fmin(a: f64, b: f64) -> f64 {
-    if a < b {
-        a
-    } else {
-        b
     }
 }
 

@@ -8,7 +8,7 @@
 //! to each of the 3 triangle edges; and zero when they overlap.
 
 use super::intersect::triangle_box_overlap;
-use super::Triangle;
+use super::{fmax, Triangle};
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -188,8 +188,7 @@ fn box_within_quick(t: &Triangle, lo: [f64; 3], hi: [f64; 3], d: f64) -> Option<
     let mut gap2 = 0.0;
     for k in 0..3 {
         let (tlo, thi) = (a[k].min(b[k]).min(c[k]), a[k].max(b[k]).max(c[k]));
-        let (below, above) = (lo[k] - thi, tlo - hi[k]);
-        let g = if below > above { below } else { above };
+        let g = fmax(lo[k] - thi, tlo - hi[k]);
         gap2 += if g > 0.0 { g * g } else { 0.0 };
     }
     if gap2 > d2 {

@@ -31,7 +31,7 @@
 //! exact and the result is the exact answer for closed sets. Inputs must be
 //! finite.
 
-use super::{cross, dot, sub, Triangle};
+use super::{cross, dot, fmax, sub, Triangle};
 
 /// True if the closed triangle and the closed box `[box_min, box_max]` share
 /// at least one point (see the module documentation for the touching rule).
@@ -92,9 +92,7 @@ pub fn edges_apart(tri: &Triangle, box_min: [f64; 3], box_max: [f64; 3], d: f64)
             let centre = c[j] * e[l] - c[l] * e[j];
             let radius = e[l].abs() * c[j] + e[j].abs() * c[l];
             let (t_min, t_max) = if pa < pb { (pa, pb) } else { (pb, pa) };
-            let below = t_min - (centre + radius);
-            let above = (centre - radius) - t_max;
-            let g = if below > above { below } else { above };
+            let g = fmax(t_min - (centre + radius), (centre - radius) - t_max);
             apart |= g > 0.0 && g * g > d2 * (e[j] * e[j] + e[l] * e[l]);
         }
     }

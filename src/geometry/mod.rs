@@ -23,6 +23,28 @@ use crate::error::{Error, ErrorKind, Result};
 pub use bvh::Bvh;
 pub use intersect::triangle_box_overlap;
 
+/// The larger of two numbers that are not NaN, as one instruction
+/// (`f64::max` also orders NaNs, which costs a compare and a blend in
+/// the hot loops of the box and triangle tests).
+#[inline(always)]
+pub(crate) fn fmax(a: f64, b: f64) -> f64 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The smaller of two numbers that are not NaN ([`fmax`]).
+#[inline(always)]
+pub(crate) fn fmin(a: f64, b: f64) -> f64 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
 #[inline]
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
