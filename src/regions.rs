@@ -29,7 +29,7 @@ use crate::brick::Brick;
 use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::geometry::distance::any_box_within;
-use crate::octant::{Octant, LATTICE_BITS, MAX_LEVEL};
+use crate::octant::{Octant, MAX_LEVEL};
 use crate::refine::{scatter_by_child, SurfaceIndex};
 
 /// A refinement region with its level, user units.
@@ -393,7 +393,7 @@ impl<'a> RegionRules<'a> {
             max: 0,
             deepest: 0,
         };
-        r.max = r.deepest_rule();
+        r.max = r.finest_rule();
         r
     }
 
@@ -413,7 +413,7 @@ impl<'a> RegionRules<'a> {
             .collect();
         self.surface = Some(surface);
         self.deepest = self.bands.iter().map(|b| b.1).max().unwrap_or(0);
-        self.max = self.deepest_rule();
+        self.max = self.finest_rule();
         self
     }
 
@@ -431,7 +431,7 @@ impl<'a> RegionRules<'a> {
         self.max
     }
 
-    fn deepest_rule(&self) -> u8 {
+    fn finest_rule(&self) -> u8 {
         let bands = self.bands.iter().map(|b| b.1);
         self.rules
             .iter()
@@ -711,21 +711,6 @@ impl<'a> RegionRules<'a> {
 
 /// The leaves (sorted, all inside `o`) inside each child of `o`.
 fn child_slices(o: Octant, leaves: &[Octant]) -> [&[Octant]; 8] {
-    if leaves.len() <= 32 {
-        // Few leaves (most calls, near the bottom): one pass over their
-        // child numbers beats eight searches.
-        let shift = 3 * (LATTICE_BITS - o.level() as u32 - 1);
-        let mut ends = [0usize; 8];
-        for l in leaves {
-            ends[(l.morton() >> shift & 7) as usize] += 1;
-        }
-        let mut at = 0;
-        return std::array::from_fn(|i| {
-            let start = at;
-            at += ends[i];
-            &leaves[start..at]
-        });
-    }
     // Each child's run found by galloping from its start: the probes stay
     // near the leaves the walk reads next, where bisecting the whole run
     // misses the cache.

@@ -599,6 +599,21 @@ impl<'a> Snapper<'a> {
         }
     }
 
+    /// In a pass over the elements `list`, now at `k`: fetches the corners'
+    /// entries of `arrays` for the element a few places ahead. Nodes are
+    /// numbered apart from elements, so an element's corners lie all over
+    /// those arrays, and the passes wait on those loads otherwise.
+    #[inline]
+    fn fetch_ahead(&self, list: &[u32], k: usize, arrays: &[&[[f64; 3]]]) {
+        if let Some(&ahead) = list.get(k + 6) {
+            for &n in &self.mesh.connectivity()[ahead as usize] {
+                for a in arrays {
+                    super::prefetch(a, n as usize);
+                }
+            }
+        }
+    }
+
     /// Flags the `eligible` nodes to blame for invalid element `e`: at
     /// each corner below the least scaled Jacobian the corner's node (through its
     /// dependencies when it hangs), else its three neighbours along the
@@ -726,14 +741,7 @@ impl<'a> Snapper<'a> {
         let j2 = self.min_jacobian * self.min_jacobian;
         let mut bad = Vec::new();
         for (k, &e) in cands.iter().enumerate() {
-            // The corners' positions a few elements ahead, fetched now:
-            // nodes are numbered apart from elements, so each element's
-            // corners sit all over the position array.
-            if let Some(&ahead) = cands.get(k + 6) {
-                for &n in &conn[ahead as usize] {
-                    super::prefetch(&self.pos, n as usize);
-                }
-            }
+            self.fetch_ahead(cands, k, &[&self.pos]);
             let c = &conn[e as usize];
             let mut p = [[0.0; 3]; 8];
             for (q, &n) in p.iter_mut().zip(c) {
@@ -874,12 +882,7 @@ impl<'a> Snapper<'a> {
         let conn = self.mesh.connectivity();
         let mut sums = vec![0u64; 4 * ni];
         for (k, &e) in self.active.iter().enumerate() {
-            if let Some(&ahead) = self.active.get(k + 6) {
-                for &n in &conn[ahead as usize] {
-                    super::prefetch(&self.pos, n as usize);
-                    super::prefetch(&self.lattice, n as usize);
-                }
-            }
+            self.fetch_ahead(&self.active, k, &[&self.pos, &self.lattice]);
             let c = &conn[e as usize];
             if !c
                 .iter()
