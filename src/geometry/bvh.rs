@@ -174,7 +174,7 @@ impl Bvh {
         out: &mut Vec<u32>,
     ) {
         debug_assert_eq!(tris.len(), self.order.len());
-        self.visit(box_min, box_max, |ti| {
+        self.visit(box_min, box_max, |ti, _| {
             if triangle_box_overlap(&tris[ti as usize], box_min, box_max) {
                 out.push(ti);
             }
@@ -186,7 +186,7 @@ impl Bvh {
     /// hit. `tris` must be the slice the tree was built from.
     pub fn any_overlap(&self, tris: &[Triangle], box_min: [f64; 3], box_max: [f64; 3]) -> bool {
         debug_assert_eq!(tris.len(), self.order.len());
-        self.visit(box_min, box_max, |ti| {
+        self.visit(box_min, box_max, |ti, _| {
             triangle_box_overlap(&tris[ti as usize], box_min, box_max)
         })
     }
@@ -194,8 +194,22 @@ impl Bvh {
     /// Appends to `out` the indices of the triangles whose bounding box
     /// overlaps the closed box (a superset of [`Bvh::query_box`]).
     pub fn query_candidates(&self, box_min: [f64; 3], box_max: [f64; 3], out: &mut Vec<u32>) {
-        self.visit(box_min, box_max, |ti| {
+        self.visit(box_min, box_max, |ti, _| {
             out.push(ti);
+            false
+        });
+    }
+
+    /// [`Bvh::query_candidates`] with each triangle's bounding box, as
+    /// the tree holds it.
+    pub fn query_candidate_boxes(
+        &self,
+        box_min: [f64; 3],
+        box_max: [f64; 3],
+        out: &mut Vec<(u32, Aabb)>,
+    ) {
+        self.visit(box_min, box_max, |ti, b| {
+            out.push((ti, *b));
             false
         });
     }
@@ -302,7 +316,7 @@ impl Bvh {
         &self,
         box_min: [f64; 3],
         box_max: [f64; 3],
-        mut hit: impl FnMut(u32) -> bool,
+        mut hit: impl FnMut(u32, &Aabb) -> bool,
     ) -> bool {
         if self.nodes.is_empty() {
             return false;
@@ -334,7 +348,8 @@ impl Bvh {
             }
             let first = node.first as usize;
             for slot in first..first + node.count as usize {
-                if self.boxes[slot].overlaps(&query) && hit(self.order[slot]) {
+                let b = &self.boxes[slot];
+                if b.overlaps(&query) && hit(self.order[slot], b) {
                     return true;
                 }
             }

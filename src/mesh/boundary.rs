@@ -45,6 +45,7 @@
 
 use crate::comm::Comm;
 use crate::error::Result;
+use crate::octant::morton_encode;
 
 use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
 use super::points::{face_polygon, point_key, PointIndex};
@@ -174,17 +175,20 @@ impl Mesh {
         let kept = Kept::new(&self.elements, &self.halo);
         let hi = self.domain.brick.hi();
         let mut near = vec![u32::MAX; lattice.len() - ni];
+        let mut covered = vec![0u8; lattice.len() - ni];
         for (e, c) in self.connectivity.iter().enumerate() {
-            for &n in c {
+            for (v, &n) in c.iter().enumerate() {
                 if n as usize >= ni {
                     near[n as usize - ni] = e as u32;
+                    covered[n as usize - ni] |= 1 << (7 - VTK_TO_MORTON[v]);
                 }
             }
         }
         for k in 0..near.len() {
             if near[k] != u32::MAX && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0) {
-                let holds = |cell: u64| kept.holding_cell(cell, near[k] as usize).is_some();
-                masks[ni + k] = node_patch_mask(lattice[ni + k], hi, 0, holds);
+                let around = self.around_hanging(&kept, k, near[k] as usize);
+                masks[ni + k] =
+                    node_patch_mask(lattice[ni + k], hi, covered[k], |q| around.holds(q));
             }
         }
         masks
@@ -225,14 +229,17 @@ impl Mesh {
                 if c == 0xff {
                     0
                 } else {
-                    let holds = |cell: u64| {
-                        if n < ni {
-                            kept.halo_holds(cell, &hint)
-                        } else {
-                            kept.holding_cell(cell, e as usize).is_some()
-                        }
-                    };
-                    node_patch_mask(p, hi, c, holds)
+                    if n < ni {
+                        // Without a halo (one rank) nothing is looked up.
+                        let holds = |q: [u32; 3]| {
+                            !kept.halo.leaves.is_empty()
+                                && kept.halo_holds(morton_encode(q[0], q[1], q[2]), &hint)
+                        };
+                        node_patch_mask(p, hi, c, holds)
+                    } else {
+                        let around = self.around_hanging(&kept, n - ni, e as usize);
+                        node_patch_mask(p, hi, c, |q| around.holds(q))
+                    }
                 }
             })
             .collect();
@@ -244,6 +251,17 @@ impl Mesh {
             }
         }
         masks
+    }
+
+    /// The look-ups of the kept elements holding the cells around hanging
+    /// node `k`, starting from local element `near`.
+    fn around_hanging<'k>(&self, kept: &'k Kept<'k>, k: usize, near: usize) -> AroundHanging<'k> {
+        let coarse = self.hanging.coarse_element(k).map(|c| self.elements[c]);
+        AroundHanging {
+            kept,
+            near,
+            last: std::cell::Cell::new(coarse.map(|o| (o.coords(), o.side()))),
+        }
     }
 
     /// Ors each shared node's mask with those of the ranks sharing it.
@@ -319,13 +337,48 @@ impl Mesh {
     }
 }
 
+/// Which kept elements hold the cells around a hanging node. The cells its
+/// finer elements do not cover (see `covered`) lie mostly in the coarser
+/// element it hangs on, which answers for them without a search, as does
+/// the last element found.
+struct AroundHanging<'k> {
+    kept: &'k Kept<'k>,
+    near: usize,
+    /// The lowest corner and side of the last element found.
+    last: std::cell::Cell<Option<([u32; 3], u32)>>,
+}
+
+impl AroundHanging<'_> {
+    /// Whether a kept element holds the finest cell whose lowest corner is
+    /// `q`.
+    fn holds(&self, q: [u32; 3]) -> bool {
+        if let Some((a, s)) = self.last.get() {
+            if (0..3).all(|i| a[i] <= q[i] && q[i] - a[i] < s) {
+                return true;
+            }
+        }
+        let found = self
+            .kept
+            .holding_cell(morton_encode(q[0], q[1], q[2]), self.near);
+        if let Some((_, o)) = found {
+            self.last.set(Some((o.coords(), o.side())));
+        }
+        found.is_some()
+    }
+}
+
 /// The patches (bit `p` for patch `p`) of the boundary faces holding
 /// lattice point `p`.
 /// `hi`: the upper lattice bounds of the domain (the cube's or a brick's);
 /// `covered`: the cells known to be kept (bit `b` for cell `b`), which
-/// need no look-up; `holds`: whether a kept element holds a finest cell
-/// (a Morton cell index) inside the domain.
-fn node_patch_mask(p: [u32; 3], hi: [u32; 3], covered: u8, holds: impl Fn(u64) -> bool) -> u64 {
+/// need no look-up; `holds`: whether a kept element holds the finest cell
+/// inside the domain whose lowest corner is the given lattice point.
+fn node_patch_mask(
+    p: [u32; 3],
+    hi: [u32; 3],
+    covered: u8,
+    holds: impl Fn([u32; 3]) -> bool,
+) -> u64 {
     // Cell `b` (bit `a` of `b` set: on the positive side of axis `a`),
     // kept or not; `outside[b]` when it leaves the domain.
     let mut inside = [false; 8];
@@ -345,8 +398,7 @@ fn node_patch_mask(p: [u32; 3], hi: [u32; 3], covered: u8, holds: impl Fn(u64) -
         if covered >> b & 1 == 1 {
             inside[b] = true;
         } else if !outside[b] {
-            let cell = crate::octant::morton_encode(q[0], q[1], q[2]);
-            inside[b] = holds(cell);
+            inside[b] = holds(q);
         }
     }
     let mut mask = 0u64;

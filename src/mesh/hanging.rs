@@ -123,6 +123,19 @@ impl Hanging {
         out
     }
 
+    /// The local element hanging node `k` lies on a face or edge of, if
+    /// it is local (not another rank's).
+    #[inline]
+    pub fn coarse_element(&self, k: usize) -> Option<usize> {
+        let nf = self.num_face();
+        let c = if k < nf {
+            self.face.coarse[k]
+        } else {
+            self.edge.coarse[k - nf]
+        };
+        (c & GHOST == 0).then_some(c as usize)
+    }
+
     /// The face-hanging nodes' dependency lists (made on first request).
     pub fn face_lists(&self, connectivity: &[[u32; 8]]) -> &[[u32; 4]] {
         self.face_lists.get_or_init(|| {

@@ -64,7 +64,7 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::geometry::bvh::Bvh;
 use crate::geometry::distance::{closest_point_triangle, point_box2, point_triangle2};
-use crate::geometry::{Surface, Triangle};
+use crate::geometry::{Aabb, Surface, Triangle};
 use crate::refine::SurfaceIndex;
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -236,25 +236,18 @@ struct NearTriangles {
     centre: [f64; 3],
     half: f64,
     /// The triangles and their bounding boxes.
-    ids: Vec<u32>,
-    boxes: Vec<([f64; 3], [f64; 3])>,
+    found: Vec<(u32, Aabb)>,
     /// The last answer, a first bound for the tree.
     last: Option<u32>,
 }
 
 impl NearTriangles {
     /// Gathers the triangles around the cube of half side `half` at `x`.
-    fn gather(&mut self, tris: &[Triangle], bvh: &Bvh, x: [f64; 3], half: f64) {
+    fn gather(&mut self, bvh: &Bvh, x: [f64; 3], half: f64) {
         self.centre = x;
         self.half = half;
-        self.ids.clear();
-        bvh.query_candidates(x.map(|v| v - half), x.map(|v| v + half), &mut self.ids);
-        self.ids.sort_unstable();
-        self.boxes.clear();
-        self.boxes.extend(self.ids.iter().map(|&t| {
-            let b = tris[t as usize].aabb();
-            (b.min, b.max)
-        }));
+        self.found.clear();
+        bvh.query_candidate_boxes(x.map(|v| v - half), x.map(|v| v + half), &mut self.found);
     }
 
     /// The triangle nearest `x` (ties to the lowest index) if the gathered
@@ -280,8 +273,8 @@ impl NearTriangles {
                 bound = d;
             }
         }
-        for (&t, b) in self.ids.iter().zip(&self.boxes) {
-            if point_box2(x, b.0, b.1) > bound {
+        for &(t, b) in &self.found {
+            if point_box2(x, b.min, b.max) > bound {
                 continue;
             }
             let [p, q, r] = tris[t as usize].v;
@@ -306,12 +299,12 @@ impl NearTriangles {
 /// their two tree queries (most are far from any feature).
 struct FeatureCells {
     side: f64,
-    cells: std::collections::HashSet<[i64; 3]>,
+    cells: std::collections::HashSet<[i64; 3], BuildHasherDefault<FoldHasher>>,
 }
 
 impl FeatureCells {
     fn new(items: &[Triangle], side: f64) -> FeatureCells {
-        let mut cells = std::collections::HashSet::new();
+        let mut cells = std::collections::HashSet::default();
         let cell = |x: f64| (x / side).floor() as i64;
         for t in items {
             let b = t.aabb();
@@ -403,7 +396,7 @@ impl<'s> Target<'s> {
         let i = match near.nearest(&self.tris, x) {
             Some(i) => i,
             None => {
-                near.gather(&self.tris, &self.bvh, x, NEAR_REACH * h);
+                near.gather(&self.bvh, x, NEAR_REACH * h);
                 match near.nearest(&self.tris, x) {
                     Some(i) => i,
                     None => {
@@ -420,8 +413,8 @@ impl<'s> Target<'s> {
     }
 }
 
-/// A fast, fixed hash for the welding maps (their order never shows: the
-/// outputs follow the triangles' order).
+/// A fast, fixed hash for the welding maps and the feature cells (their
+/// order never shows: the outputs follow the triangles' order).
 #[derive(Default)]
 struct FoldHasher(u64);
 
@@ -576,8 +569,8 @@ struct Snapper<'a> {
     side: Vec<u64>,
     /// The least scaled Jacobian allowed.
     min_jacobian: f64,
-    /// Per element, the least squared figure of [`corner_figures`] at its
-    /// last measurement. Every move is followed by the measurement of the
+    /// Per element, the least figure of [`corner_verdict`] at its last
+    /// measurement. Every move is followed by the measurement of the
     /// elements around, so for the active elements it is the current one.
     least: Vec<f64>,
 }
@@ -622,13 +615,12 @@ impl<'a> Snapper<'a> {
     fn blame(
         &self,
         e: usize,
+        failed: u8,
         eligible: impl Fn(usize) -> bool,
         flags: &mut [u64],
         flagged: &mut Vec<u32>,
     ) {
         let c = &self.mesh.connectivity()[e];
-        let p = c.map(|n| self.pos[n as usize]);
-        let ok = corner_checks(&p, self.min_jacobian * self.min_jacobian).map(|c| c.0);
         let mut any = false;
         let mut flag = |node: u32, any: &mut bool| {
             let node = node as usize;
@@ -649,7 +641,7 @@ impl<'a> Snapper<'a> {
             }
         };
         for v in 0..8 {
-            if ok[v] {
+            if failed >> v & 1 == 0 {
                 continue;
             }
             // A hanging corner is where its face or edge puts it: moving
@@ -733,10 +725,11 @@ impl<'a> Snapper<'a> {
     }
 
     /// The elements of `cands` with a corner below the least scaled
-    /// Jacobian; their figures are kept in `least`. Their hanging corners are placed from their dependencies
+    /// Jacobian, and those corners ([`corner_verdict`]); every element's
+    /// figure is kept in `least`. Their hanging corners are placed from their dependencies
     /// first: every hanging node depending on a changed node is a corner of
     /// an element around it.
-    fn bad_among(&mut self, cands: &[u32]) -> Vec<usize> {
+    fn bad_among(&mut self, cands: &[u32]) -> Vec<(u32, u8)> {
         let conn = self.mesh.connectivity();
         let j2 = self.min_jacobian * self.min_jacobian;
         let mut bad = Vec::new();
@@ -751,10 +744,10 @@ impl<'a> Snapper<'a> {
                 }
                 *q = self.pos[n];
             }
-            let (valid, least) = corner_figures(&p, j2);
+            let (failed, least) = corner_verdict(&p, j2);
             self.least[e as usize] = least;
-            if !valid {
-                bad.push(e as usize);
+            if failed != 0 {
+                bad.push((e, failed));
             }
         }
         bad
@@ -817,8 +810,14 @@ impl<'a> Snapper<'a> {
         loop {
             let bad = self.bad_among(&cands);
             flagged.clear();
-            for e in bad {
-                self.blame(e, |n| blamable(self, n), &mut flags, &mut flagged);
+            for (e, failed) in bad {
+                self.blame(
+                    e as usize,
+                    failed,
+                    |n| blamable(self, n),
+                    &mut flags,
+                    &mut flagged,
+                );
             }
             // The owner of a flagged node has its flag after the exchange.
             self.exchange(&mut flags, 1, |a, b| *a |= b);
@@ -957,44 +956,54 @@ impl<'a> Snapper<'a> {
     }
 }
 
-/// Per corner of the hexahedron `p` (VTK order): whether its scaled
-/// Jacobian is at least `sqrt(j2)` (positive), tested as
-/// `det >= j |e0| |e1| |e2|` squared, without roots or divisions; and its
+/// Per corner of the hexahedron `p` (VTK order), the determinant of its
+/// three edges ([`CORNER_EDGES`]) and the product of their squared
+/// lengths. Computed across the corners (one array per coordinate), so
+/// each step is one operation on all eight: the compiler packs them.
+#[inline(always)]
+fn corner_terms(p: &[[f64; 3]; 8]) -> ([f64; 8], [f64; 8]) {
+    let column = |a: usize| -> [f64; 8] { std::array::from_fn(|k| p[k][a]) };
+    let (x, y, z) = (column(0), column(1), column(2));
+    let edge = |c: &[f64; 8], e: usize| -> [f64; 8] {
+        std::array::from_fn(|k| c[CORNER_EDGES[k][e]] - c[k])
+    };
+    let (ax, ay, az) = (edge(&x, 0), edge(&y, 0), edge(&z, 0));
+    let (bx, by, bz) = (edge(&x, 1), edge(&y, 1), edge(&z, 1));
+    let (cx, cy, cz) = (edge(&x, 2), edge(&y, 2), edge(&z, 2));
+    let det = std::array::from_fn(|k| {
+        ax[k] * (by[k] * cz[k] - bz[k] * cy[k]) - ay[k] * (bx[k] * cz[k] - bz[k] * cx[k])
+            + az[k] * (bx[k] * cy[k] - by[k] * cx[k])
+    });
+    let product = std::array::from_fn(|k| {
+        (ax[k] * ax[k] + ay[k] * ay[k] + az[k] * az[k])
+            * (bx[k] * bx[k] + by[k] * by[k] + bz[k] * bz[k])
+            * (cx[k] * cx[k] + cy[k] * cy[k] + cz[k] * cz[k])
+    });
+    (det, product)
+}
+
+/// The corners of the hexahedron `p` (VTK order) whose scaled Jacobian is
+/// below `sqrt(j2)` or not positive, as bits (bit `k`: corner `k`; 0 when
+/// the element is valid), tested as `det >= j |e0| |e1| |e2|` squared
+/// without roots or divisions; and the least over the corners of the
 /// scaled Jacobian times its absolute value (0 where an edge has no
-/// length), in the same order as the scaled Jacobians.
-#[inline]
-fn corner_checks(p: &[[f64; 3]; 8], j2: f64) -> [(bool, f64); 8] {
-    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let dot = |a: [f64; 3]| a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
-    std::array::from_fn(|k| {
-        let [a, b, c] = CORNER_EDGES[k].map(|j| sub(p[j], p[k]));
-        let det = a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-            + a[2] * (b[0] * c[1] - b[1] * c[0]);
-        let product = dot(a) * dot(b) * dot(c);
-        let figure = if product == 0.0 {
+/// length), which orders the elements as their least scaled Jacobians do.
+#[inline(always)]
+fn corner_verdict(p: &[[f64; 3]; 8], j2: f64) -> (u8, f64) {
+    let (det, product) = corner_terms(p);
+    let mut failed = 0u8;
+    for k in 0..8 {
+        let pass = det[k] > 0.0 && det[k] * det[k] >= j2 * product[k];
+        failed |= (!pass as u8) << k;
+    }
+    let figure: [f64; 8] = std::array::from_fn(|k| {
+        if product[k] == 0.0 {
             0.0
         } else {
-            det * det.abs() / product
-        };
-        (det > 0.0 && det * det >= j2 * product, figure)
-    })
-}
-
-/// The hexahedron `p`'s [`corner_checks`] over its corners: whether every
-/// corner passes, and the least figure.
-fn corner_figures(p: &[[f64; 3]; 8], j2: f64) -> (bool, f64) {
-    corner_checks(p, j2)
-        .iter()
-        .fold((true, f64::INFINITY), |(v, l), &(ok, f)| {
-            (v && ok, l.min(f))
-        })
-}
-
-/// Whether every corner of the hexahedron `p` (VTK order) has a scaled
-/// Jacobian of at least `sqrt(j2)` ([`corner_figures`]).
-#[cfg(test)]
-fn corners_valid(p: &[[f64; 3]; 8], j2: f64) -> bool {
-    corner_figures(p, j2).0
+            det[k] * det[k].abs() / product[k]
+        }
+    });
+    (failed, figure.iter().fold(f64::INFINITY, |l, &f| l.min(f)))
 }
 
 /// The volume of the trilinear hexahedron with corners `p` in VTK order:
@@ -1201,10 +1210,15 @@ impl Mesh {
 
         let mut feature = vec![false; ni];
         let mut near_tris = NearTriangles::default();
-        for n in 0..ni {
-            if !queried(n) {
-                continue;
-            }
+        // In the Morton order of their lattice points: each query's
+        // neighbours come next, and the gathered triangles serve more.
+        let mut order: Vec<(u64, u32)> = (0..ni)
+            .filter(|&n| queried(n))
+            .map(|n| (super::numbering::node_key(lattice_u[n]), n as u32))
+            .collect();
+        order.sort_unstable();
+        for (_, n) in order {
+            let n = n as usize;
             if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64, &mut near_tris) {
                 s.snap[n] = true;
                 s.target[n] = t;
@@ -1300,18 +1314,17 @@ impl Mesh {
             counts[7] += reported as u64;
         }
         comm.sum_u64(&mut counts);
-
         let domain = *self.domain();
         let active = std::mem::take(&mut s.active);
         // The minimum in user units, as the quality measures it. The
-        // lattice positions' squared figures (no roots), as last measured,
-        // pick the elements that may hold it: the two differ by rounding
-        // only, far inside the margin.
+        // lattice positions' figures (no roots), as last measured, pick
+        // the elements that may hold it: the two differ by rounding only,
+        // far inside the margin.
         let squared: Vec<f64> = active.iter().map(|&e| s.least[e as usize]).collect();
         let pos = s.pos;
         debug_assert!(active.iter().zip(&squared).all(|(&e, &q)| {
             let p = self.connectivity()[e as usize].map(|n| pos[n as usize]);
-            corner_figures(&p, 0.0).1 == q
+            corner_verdict(&p, 0.0).1 == q
         }));
         let least = squared.iter().copied().fold(f64::INFINITY, f64::min);
         let near = least + 1e-9 * least.abs() + 1e-12;
@@ -1587,7 +1600,9 @@ mod tests {
                 let slow = j.iter().all(|&v| v >= t);
                 let near = j.iter().any(|&v| (v - t).abs() < 1e-12);
                 if !near {
-                    assert_eq!(corners_valid(&p, t * t), slow, "{p:?} {t}");
+                    let (failed, least) = corner_verdict(&p, t * t);
+                    assert_eq!(failed == 0, slow, "{p:?} {t}");
+                    assert_eq!(least >= t * t, slow, "{p:?} {t}");
                     agree += slow as usize;
                 }
             }
