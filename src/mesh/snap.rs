@@ -332,13 +332,14 @@ impl FeatureCells {
 
 impl<'s> Target<'s> {
     /// `reach` is the largest feature reach any query will use
-    /// ([`FEATURE_REACH`] times the largest cell). `index`, if given, is
-    /// `surface` in the lattice units of `mesh`'s domain.
+    /// ([`FEATURE_REACH`] times the largest cell); the features are those
+    /// for the feature angle (degrees) that meet the box `within`. `index`,
+    /// if given, is `surface` in the lattice units of `mesh`'s domain.
     fn new(
         surface: &Surface,
         index: Option<&'s SurfaceIndex>,
         mesh: &Mesh,
-        feature_angle_deg: f64,
+        (feature_angle_deg, within): (f64, &Aabb),
         reach: f64,
     ) -> Target<'s> {
         let (tris, bvh) = match index {
@@ -357,7 +358,7 @@ impl<'s> Target<'s> {
             }
         };
         let (edges, corners) = if feature_angle_deg < 180.0 {
-            features(&tris, feature_angle_deg)
+            features(&tris, feature_angle_deg, within)
         } else {
             (Vec::new(), Vec::new())
         };
@@ -437,12 +438,19 @@ impl std::hash::Hasher for FoldHasher {
 type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
 
 /// The feature edges (as triangles `a b b`) and corners (`p p p`) of
-/// `tris` for a feature angle in degrees: edges between facets whose
-/// normals differ by more, and edges without exactly two facets; corners
-/// where not exactly two feature edges meet. Vertices with the same bits
-/// are one (-0 and 0 too); edges come in the order of their first facet,
-/// corners in the order their vertices first appear.
-fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>) {
+/// `tris` for a feature angle in degrees that meet the box `within`:
+/// edges between facets whose normals differ by more, and edges without
+/// exactly two facets; corners where not exactly two feature edges meet.
+/// Vertices with the same bits are one (-0 and 0 too); edges come in the
+/// order of their first facet, corners in the order their vertices first
+/// appear.
+///
+/// Only the facets whose boxes meet `within` are read: every facet around
+/// an edge or a vertex that meets it is among them, so those are found as
+/// over the whole surface (a rank reads the part near its own nodes).
+fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>, Vec<Triangle>) {
+    let tris: Vec<&Triangle> = tris.iter().filter(|t| t.aabb().overlaps(within)).collect();
+    let inside = |p: [f64; 3]| (0..3).all(|a| within.min[a] <= p[a] && p[a] <= within.max[a]);
     let bits = |c: f64| if c == 0.0 { 0 } else { c.to_bits() };
     // A tuple, not an array: its fields hash as three words, without the
     // byte-slice path an array takes.
@@ -521,8 +529,8 @@ fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>)
             } else {
                 true
             };
-            if sharp {
-                let (a, b) = (a as usize, b as usize);
+            let (a, b) = (a as usize, b as usize);
+            if sharp && Aabb::from_points([point[a], point[b]]).overlaps(within) {
                 edges.push(Triangle::new(point[a], point[b], point[b]));
                 degree[a] += 1;
                 degree[b] += 1;
@@ -530,7 +538,7 @@ fn features(tris: &[Triangle], angle_deg: f64) -> (Vec<Triangle>, Vec<Triangle>)
         }
     }
     let corners = (0..nv)
-        .filter(|&v| degree[v] > 0 && degree[v] != 2)
+        .filter(|&v| degree[v] > 0 && degree[v] != 2 && inside(point[v]))
         .map(|v| Triangle::new(point[v], point[v], point[v]))
         .collect();
     (edges, corners)
@@ -590,6 +598,19 @@ impl<'a> Snapper<'a> {
                 }
             }
         }
+    }
+
+    /// The independent nodes element `e`'s corners depend on, as
+    /// [`Snapper::support`] gives them: the first `len` of the array.
+    #[inline]
+    fn support_list(&self, e: usize) -> ([u32; 32], usize) {
+        let mut nodes = [0u32; 32];
+        let mut len = 0;
+        self.support(e, |n| {
+            nodes[len] = n as u32;
+            len += 1;
+        });
+        (nodes, len)
     }
 
     /// In a pass over the elements `list`, now at `k`: fetches the corners'
@@ -1206,7 +1227,21 @@ impl Mesh {
         let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
         let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
         let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
-        let target_surface = Target::new(surface, index, self, opts.feature_angle_deg, reach);
+        // The features that can attract a node lie within `reach` of the
+        // box of the queried nodes (with a margin for rounding).
+        let mut within = Aabb::from_points((0..ni).filter(|&n| queried(n)).map(|n| s.lattice[n]));
+        if !within.is_empty() {
+            let grow = reach * (1.0 + 1e-9) + 1.0;
+            within.min = within.min.map(|v| v - grow);
+            within.max = within.max.map(|v| v + grow);
+        }
+        let target_surface = Target::new(
+            surface,
+            index,
+            self,
+            (opts.feature_angle_deg, &within),
+            reach,
+        );
 
         let mut feature = vec![false; ni];
         let mut near_tris = NearTriangles::default();
@@ -1248,18 +1283,17 @@ impl Mesh {
         }
         s.side = side;
         drop(near);
-        for e in 0..self.elements().len() {
-            let mut moves = false;
-            s.support(e, |n| moves |= s.snap[n] || s.layer[n]);
-            if moves {
-                s.active.push(e as u32);
-            }
-        }
         // Node -> active elements, compressed rows (an element may list a
         // node twice through two hanging corners; harmless).
         let mut start = vec![0u32; ni + 1];
-        for &e in &s.active {
-            s.support(e as usize, |n| start[n + 1] += 1);
+        for e in 0..self.elements().len() {
+            let (nodes, len) = s.support_list(e);
+            let nodes = &nodes[..len];
+            let moves = |&n: &u32| s.snap[n as usize] || s.layer[n as usize];
+            if nodes.iter().any(moves) {
+                s.active.push(e as u32);
+                nodes.iter().for_each(|&n| start[n as usize + 1] += 1);
+            }
         }
         for n in 0..ni {
             start[n + 1] += start[n];
@@ -1546,14 +1580,28 @@ mod tests {
             tris.push(Triangle::new(v(q[0]), v(q[1]), v(q[2])));
             tris.push(Triangle::new(v(q[0]), v(q[2]), v(q[3])));
         }
-        let (edges, corners) = features(&tris, 30.0);
+        let all = Aabb {
+            min: [-10.0; 3],
+            max: [10.0; 3],
+        };
+        let (edges, corners) = features(&tris, 30.0, &all);
         assert_eq!(edges.len(), 12);
         assert_eq!(corners.len(), 8);
         // The face diagonals are flat: no feature even at 0 degrees.
-        let (edges, _) = features(&tris, 0.0);
+        let (edges, _) = features(&tris, 0.0, &all);
         assert_eq!(edges.len(), 12);
+        // A box holding the corner at the origin only: its three edges,
+        // found from the facets around it alone, and itself.
+        let near_origin = Aabb {
+            min: [-0.1; 3],
+            max: [0.1; 3],
+        };
+        let (edges, corners) = features(&tris, 30.0, &near_origin);
+        assert_eq!(edges.len(), 3);
+        assert_eq!(corners.len(), 1);
+        assert_eq!(corners[0].v[0], [0.0; 3]);
         let s = default_sphere();
-        let (edges, corners) = features(s.triangles(), 30.0);
+        let (edges, corners) = features(s.triangles(), 30.0, &all);
         assert!(edges.is_empty() && corners.is_empty());
     }
 
