@@ -802,8 +802,9 @@ impl<'a> Snapper<'a> {
     /// elements until every element is valid or those nodes are back.
     fn scale_back(&mut self) {
         let cands = self.active.clone();
+        // The hanging nodes follow in the first measurement: every one that
+        // depends on a moving node is a corner of an active element.
         self.place_surface_nodes();
-        self.update_hanging();
         self.settle(
             cands,
             |s, n| s.snap[n] && s.step[n] < STEPS,
@@ -897,7 +898,8 @@ impl<'a> Snapper<'a> {
     /// partly snapped node, the moves kept where the elements stay valid;
     /// returns how many moved (over all ranks, owned nodes).
     fn relax(&mut self) -> u64 {
-        self.update_hanging();
+        // The hanging nodes are where their dependencies put them: the
+        // measurements after every change placed those around it.
         let ni = self.ni;
         let conn = self.mesh.connectivity();
         let mut sums = vec![0u64; 4 * ni];
