@@ -550,8 +550,8 @@ struct Snapper<'a> {
     comm: &'a dyn Comm,
     lists: Vec<(u32, Vec<u32>)>,
     ni: usize,
-    /// Lattice points of every local node, as `f64`.
-    lattice: Vec<[f64; 3]>,
+    /// Lattice points of every local node.
+    lattice: Vec<[u32; 3]>,
     /// Hanging node `k`'s dependencies in the order of their lattice
     /// points (2 or 4).
     deps: Vec<([u32; 4], u8)>,
@@ -577,6 +577,13 @@ struct Snapper<'a> {
     side: Vec<u64>,
     /// The least scaled Jacobian allowed.
     min_jacobian: f64,
+    /// Scratch kept from one use to the next (fresh pages cost more than
+    /// the work on them): per independent node, the check's flags (all
+    /// zero between uses) and the relaxation's sums; per element, whether
+    /// it was seen (all false between uses).
+    flags: Vec<u64>,
+    sums: Vec<u64>,
+    seen: Vec<bool>,
     /// Per element, the least figure of [`corner_verdict`] at its last
     /// measurement. Every move is followed by the measurement of the
     /// elements around, so for the active elements it is the current one.
@@ -614,18 +621,26 @@ impl<'a> Snapper<'a> {
     }
 
     /// In a pass over the elements `list`, now at `k`: fetches the corners'
-    /// entries of `arrays` for the element a few places ahead. Nodes are
-    /// numbered apart from elements, so an element's corners lie all over
-    /// those arrays, and the passes wait on those loads otherwise.
+    /// positions (and lattice points, with `lattice`) for the element a
+    /// few places ahead. Nodes are numbered apart from elements, so an
+    /// element's corners lie all over those arrays, and the passes wait on
+    /// those loads otherwise.
     #[inline]
-    fn fetch_ahead(&self, list: &[u32], k: usize, arrays: &[&[[f64; 3]]]) {
+    fn fetch_ahead(&self, list: &[u32], k: usize, lattice: bool) {
         if let Some(&ahead) = list.get(k + 6) {
             for &n in &self.mesh.connectivity()[ahead as usize] {
-                for a in arrays {
-                    super::prefetch(a, n as usize);
+                super::prefetch(&self.pos, n as usize);
+                if lattice {
+                    super::prefetch(&self.lattice, n as usize);
                 }
             }
         }
+    }
+
+    /// Node `n`'s lattice point.
+    #[inline]
+    fn lattice(&self, n: usize) -> [f64; 3] {
+        self.lattice[n].map(f64::from)
     }
 
     /// Flags the `eligible` nodes to blame for invalid element `e`: at
@@ -719,7 +734,7 @@ impl<'a> Snapper<'a> {
 
     /// The position of surface node `n` after its steps back.
     fn snapped_position(&self, n: usize) -> [f64; 3] {
-        let (x, t, k) = (self.lattice[n], self.target[n], self.step[n]);
+        let (x, t, k) = (self.lattice(n), self.target[n], self.step[n]);
         match k {
             0 => t,
             STEPS => x,
@@ -755,7 +770,7 @@ impl<'a> Snapper<'a> {
         let j2 = self.min_jacobian * self.min_jacobian;
         let mut bad = Vec::new();
         for (k, &e) in cands.iter().enumerate() {
-            self.fetch_ahead(cands, k, &[&self.pos]);
+            self.fetch_ahead(cands, k, false);
             let c = &conn[e as usize];
             let mut p = [[0.0; 3]; 8];
             for (q, &n) in p.iter_mut().zip(c) {
@@ -825,10 +840,13 @@ impl<'a> Snapper<'a> {
         blamable: impl Fn(&Self, usize) -> bool,
         mut step_back: impl FnMut(&mut Self, usize),
     ) {
-        // Allocated once: the rounds after the first are small.
-        let mut flags = vec![0u64; self.ni];
+        // Allocated once per snap, and left all zero: fresh pages cost more
+        // than the rounds after the first, which are small.
+        let mut flags = std::mem::take(&mut self.flags);
+        flags.resize(self.ni, 0);
         let mut flagged: Vec<u32> = Vec::new();
-        let mut seen = vec![false; self.mesh.elements().len()];
+        let mut seen = std::mem::take(&mut self.seen);
+        seen.resize(self.mesh.elements().len(), false);
         loop {
             let bad = self.bad_among(&cands);
             flagged.clear();
@@ -855,6 +873,9 @@ impl<'a> Snapper<'a> {
             let mut count = [flagged.iter().filter(|&&n| n < owned).count() as u64];
             self.comm.sum_u64(&mut count);
             if count[0] == 0 {
+                for &n in &flagged {
+                    flags[n as usize] = 0;
+                }
                 break;
             }
             for &n in &flagged {
@@ -865,6 +886,10 @@ impl<'a> Snapper<'a> {
                 flags[n as usize] = 0;
             }
         }
+        // Every flag was cleared, and `around` leaves `seen` clear.
+        debug_assert!(flags.iter().all(|&f| f == 0));
+        self.flags = flags;
+        self.seen = seen;
     }
 
     /// Undoes the moves of `moved` nodes (already made) in invalid
@@ -902,9 +927,11 @@ impl<'a> Snapper<'a> {
         // measurements after every change placed those around it.
         let ni = self.ni;
         let conn = self.mesh.connectivity();
-        let mut sums = vec![0u64; 4 * ni];
+        let mut sums = std::mem::take(&mut self.sums);
+        sums.clear();
+        sums.resize(4 * ni, 0);
         for (k, &e) in self.active.iter().enumerate() {
-            self.fetch_ahead(&self.active, k, &[&self.pos, &self.lattice]);
+            self.fetch_ahead(&self.active, k, true);
             let c = &conn[e as usize];
             if !c
                 .iter()
@@ -914,7 +941,7 @@ impl<'a> Snapper<'a> {
             }
             let mut d = [0.0f64; 3];
             for &n in c {
-                let (p, x) = (self.pos[n as usize], self.lattice[n as usize]);
+                let (p, x) = (self.pos[n as usize], self.lattice(n as usize));
                 for a in 0..3 {
                     d[a] += p[a] - x[a];
                 }
@@ -938,7 +965,7 @@ impl<'a> Snapper<'a> {
             if !self.layer[n] || count == 0 {
                 continue;
             }
-            let x = self.lattice[n];
+            let x = self.lattice(n);
             let p: [f64; 3] = std::array::from_fn(|a| {
                 x[a] + (sums[4 * n + a] as i64 as f64 / FIXED) / count as f64
             });
@@ -951,6 +978,7 @@ impl<'a> Snapper<'a> {
                 moved[n] = true;
             }
         }
+        self.sums = sums;
         // The partly snapped nodes step up at the same time: one check of
         // the elements around serves both moves.
         for (n, m) in moved.iter_mut().enumerate() {
@@ -1177,7 +1205,6 @@ impl Mesh {
         let lattice_u = self.node_lattice();
         let masks = self.plain_patch_masks(comm, &lattice_u);
         let ni = self.num_independent();
-        let lattice: Vec<[f64; 3]> = lattice_u.iter().map(|q| q.map(f64::from)).collect();
         let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
             .map(|k| {
                 let mut d = [0u32; 4];
@@ -1196,8 +1223,8 @@ impl Mesh {
                 Vec::new()
             },
             ni,
-            pos: lattice.clone(),
-            lattice,
+            pos: lattice_u.iter().map(|q| q.map(f64::from)).collect(),
+            lattice: lattice_u,
             deps,
             snap: vec![false; ni],
             target: vec![[0.0; 3]; ni],
@@ -1210,6 +1237,9 @@ impl Mesh {
             side: Vec::new(),
             min_jacobian: opts.min_jacobian,
             least: vec![f64::NAN; self.elements().len()],
+            flags: Vec::new(),
+            sums: Vec::new(),
+            seen: Vec::new(),
         };
         let surface_bit = 1u64 << SURFACE_PATCH;
         let sides = (1u64 << SURFACE_PATCH) - 1;
@@ -1231,7 +1261,7 @@ impl Mesh {
         let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
         // The features that can attract a node lie within `reach` of the
         // box of the queried nodes (with a margin for rounding).
-        let mut within = Aabb::from_points((0..ni).filter(|&n| queried(n)).map(|n| s.lattice[n]));
+        let mut within = Aabb::from_points((0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)));
         if !within.is_empty() {
             let grow = reach * (1.0 + 1e-9) + 1.0;
             within.min = within.min.map(|v| v - grow);
@@ -1251,12 +1281,12 @@ impl Mesh {
         // neighbours come next, and the gathered triangles serve more.
         let mut order: Vec<(u64, u32)> = (0..ni)
             .filter(|&n| queried(n))
-            .map(|n| (super::numbering::node_key(lattice_u[n]), n as u32))
+            .map(|n| (super::numbering::node_key(s.lattice[n]), n as u32))
             .collect();
         order.sort_unstable();
         for (_, n) in order {
             let n = n as usize;
-            if let Some((t, f)) = target_surface.of(s.lattice[n], side[n] as f64, &mut near_tris) {
+            if let Some((t, f)) = target_surface.of(s.lattice(n), side[n] as f64, &mut near_tris) {
                 s.snap[n] = true;
                 s.target[n] = t;
                 s.step[n] = 0;
@@ -1322,7 +1352,7 @@ impl Mesh {
             }
         }
         for (n, r) in relaxed.iter_mut().enumerate() {
-            *r = s.layer[n] && s.pos[n] != s.lattice[n];
+            *r = s.layer[n] && s.pos[n] != s.lattice(n);
         }
         s.place_surface_nodes();
         s.update_hanging();
