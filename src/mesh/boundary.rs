@@ -184,8 +184,17 @@ impl Mesh {
                 }
             }
         }
+        let nf = self.hanging.num_face();
         for k in 0..near.len() {
-            if near[k] != u32::MAX && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0) {
+            // A face-hanging node whose four finer elements are kept and
+            // whose coarse one is local is inside: every cell around it is
+            // kept.
+            let inside =
+                k < nf && covered[k].count_ones() == 4 && self.hanging.coarse_element(k).is_some();
+            if near[k] != u32::MAX
+                && !inside
+                && self.hanging_deps(k).iter().any(|&d| masks[d as usize] != 0)
+            {
                 let around = self.around_hanging(&kept, k, near[k] as usize);
                 masks[ni + k] =
                     node_patch_mask(lattice[ni + k], hi, covered[k], |q| around.holds(q));
