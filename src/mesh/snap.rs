@@ -467,15 +467,27 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
     let mut vertex: FoldMap<(u64, u64, u64), u32> = FoldMap::default();
     vertex.reserve(tris.len() / 2 + 16);
     let mut point: Vec<[f64; 3]> = Vec::with_capacity(tris.len() / 2 + 16);
+    // Facets sharing a vertex or an edge mostly lie close together in a
+    // file: a small direct-mapped table of recent answers (it stays in
+    // cache) spares most look-ups in the large maps their cache misses.
+    const RECENT: usize = 1 << 12;
+    let slot = |h: u64| (h.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 52) as usize;
+    let mut recent_vertex = vec![((u64::MAX, u64::MAX, u64::MAX), 0u32); RECENT];
     let ids: Vec<[u32; 3]> = tris
         .iter()
         .map(|t| {
             t.v.map(|p| {
                 let [x, y, z] = p.map(bits);
-                *vertex.entry((x, y, z)).or_insert_with(|| {
+                let r = &mut recent_vertex[slot(x ^ y.rotate_left(21) ^ z.rotate_left(42))];
+                if r.0 == (x, y, z) {
+                    return r.1;
+                }
+                let id = *vertex.entry((x, y, z)).or_insert_with(|| {
                     point.push(p);
                     (point.len() - 1) as u32
-                })
+                });
+                *r = ((x, y, z), id);
+                id
             })
         })
         .collect();
@@ -488,16 +500,25 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
     edge_at.reserve(3 * tris.len() / 2 + 16);
     let mut uses: Vec<(u32, u32, u32)> = Vec::with_capacity(3 * tris.len() / 2 + 16);
     let mut facet_edges = vec![[u32::MAX; 3]; ids.len()];
+    let mut recent_edge = vec![(u64::MAX, 0u32); RECENT];
     for (t, v) in ids.iter().enumerate() {
         if flat(v) {
             continue;
         }
         for k in 0..3 {
             let (a, b) = (v[k], v[(k + 1) % 3]);
-            let at = *edge_at.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                uses.push((t as u32, u32::MAX, 0));
-                (uses.len() - 1) as u32
-            });
+            let key = (a.min(b) as u64) << 32 | a.max(b) as u64;
+            let r = &mut recent_edge[slot(key)];
+            let at = if r.0 == key {
+                r.1
+            } else {
+                let at = *edge_at.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    uses.push((t as u32, u32::MAX, 0));
+                    (uses.len() - 1) as u32
+                });
+                *r = (key, at);
+                at
+            };
             let u = &mut uses[at as usize];
             if u.2 == 1 {
                 u.1 = t as u32;
