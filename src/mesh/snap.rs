@@ -1643,10 +1643,11 @@ mod tests {
             tris.push(Triangle::new(v(q[0]), v(q[1]), v(q[2])));
             tris.push(Triangle::new(v(q[0]), v(q[2]), v(q[3])));
         }
-        let all = Aabb {
-            min: [-10.0; 3],
-            max: [10.0; 3],
+        let around_origin = |h: f64| Aabb {
+            min: [-h; 3],
+            max: [h; 3],
         };
+        let all = around_origin(10.0);
         let (edges, corners) = features(&tris, 30.0, &all);
         assert_eq!(edges.len(), 12);
         assert_eq!(corners.len(), 8);
@@ -1655,11 +1656,7 @@ mod tests {
         assert_eq!(edges.len(), 12);
         // A box holding the corner at the origin only: its three edges,
         // found from the facets around it alone, and itself.
-        let near_origin = Aabb {
-            min: [-0.1; 3],
-            max: [0.1; 3],
-        };
-        let (edges, corners) = features(&tris, 30.0, &near_origin);
+        let (edges, corners) = features(&tris, 30.0, &around_origin(0.1));
         assert_eq!(edges.len(), 3);
         assert_eq!(corners.len(), 1);
         assert_eq!(corners[0].v[0], [0.0; 3]);
