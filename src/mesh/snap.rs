@@ -349,7 +349,8 @@ impl<'s> Target<'s> {
         surface: &Surface,
         index: Option<&'s SurfaceIndex>,
         mesh: &Mesh,
-        (feature_angle_deg, within): (f64, &Aabb),
+        feature_angle_deg: f64,
+        within: &Aabb,
         reach: f64,
     ) -> Target<'s> {
         let (tris, bvh) = match index {
@@ -460,7 +461,6 @@ type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
 /// over the whole surface (a rank reads the part near its own nodes).
 fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>, Vec<Triangle>) {
     let tris: Vec<&Triangle> = tris.iter().filter(|t| t.aabb().overlaps(within)).collect();
-    let inside = |p: [f64; 3]| (0..3).all(|a| within.min[a] <= p[a] && p[a] <= within.max[a]);
     let bits = |c: f64| if c == 0.0 { 0 } else { c.to_bits() };
     // A tuple, not an array: its fields hash as three words, without the
     // byte-slice path an array takes.
@@ -569,7 +569,8 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
         }
     }
     let corners = (0..nv)
-        .filter(|&v| degree[v] > 0 && degree[v] != 2 && inside(point[v]))
+        .filter(|&v| degree[v] > 0 && degree[v] != 2)
+        .filter(|&v| Aabb::from_points([point[v]]).overlaps(within))
         .map(|v| Triangle::new(point[v], point[v], point[v]))
         .collect();
     (edges, corners)
@@ -821,9 +822,11 @@ impl<'a> Snapper<'a> {
     }
 
     /// The active elements depending on the nodes `nodes`, once each:
-    /// only they can have changed. `seen` (one flag per element, all
-    /// false) is left all false.
-    fn around(&self, nodes: &[u32], seen: &mut [bool]) -> Vec<u32> {
+    /// only they can have changed.
+    fn around(&mut self, nodes: &[u32]) -> Vec<u32> {
+        // One flag per element, kept (all false) from one call to the next.
+        let mut seen = std::mem::take(&mut self.seen);
+        seen.resize(self.mesh.elements().len(), false);
         let mut out = Vec::new();
         for &n in nodes {
             let n = n as usize;
@@ -838,6 +841,7 @@ impl<'a> Snapper<'a> {
         for &e in &out {
             seen[e as usize] = false;
         }
+        self.seen = seen;
         // In storage order: the measurements then read the connectivity
         // and the positions near where they read last.
         out.sort_unstable();
@@ -871,13 +875,11 @@ impl<'a> Snapper<'a> {
         blamable: impl Fn(&Self, usize) -> bool,
         mut step_back: impl FnMut(&mut Self, usize),
     ) {
-        // Allocated once per snap, and left all zero: fresh pages cost more
-        // than the rounds after the first, which are small.
+        // Kept from one call to the next and left all zero: fresh pages
+        // cost more than the rounds after the first, which are small.
         let mut flags = std::mem::take(&mut self.flags);
         flags.resize(self.ni, 0);
         let mut flagged: Vec<u32> = Vec::new();
-        let mut seen = std::mem::take(&mut self.seen);
-        seen.resize(self.mesh.elements().len(), false);
         loop {
             let bad = self.bad_among(&cands);
             flagged.clear();
@@ -912,15 +914,13 @@ impl<'a> Snapper<'a> {
             for &n in &flagged {
                 step_back(self, n as usize);
             }
-            cands = self.around(&flagged, &mut seen);
+            cands = self.around(&flagged);
             for &n in &flagged {
                 flags[n as usize] = 0;
             }
         }
-        // Every flag was cleared, and `around` leaves `seen` clear.
         debug_assert!(flags.iter().all(|&f| f == 0));
         self.flags = flags;
-        self.seen = seen;
     }
 
     /// Undoes the moves of `moved` nodes (already made) in invalid
@@ -936,7 +936,7 @@ impl<'a> Snapper<'a> {
         let cands = if nodes.len() * 8 > self.ni {
             self.active.clone()
         } else {
-            self.around(&nodes, &mut vec![false; self.mesh.elements().len()])
+            self.around(&nodes)
         };
         let moved = std::cell::Cell::from_mut(moved).as_slice_of_cells();
         self.settle(
@@ -1298,13 +1298,8 @@ impl Mesh {
             within.min = within.min.map(|v| v - grow);
             within.max = within.max.map(|v| v + grow);
         }
-        let target_surface = Target::new(
-            surface,
-            index,
-            self,
-            (opts.feature_angle_deg, &within),
-            reach,
-        );
+        let target_surface =
+            Target::new(surface, index, self, opts.feature_angle_deg, &within, reach);
 
         let mut feature = vec![false; ni];
         let mut near_tris = NearTriangles::default();
