@@ -168,6 +168,20 @@ impl Brick {
         n.map(|n| n.filter(|n| !self.is_void_in(*n, hi)))
     }
 
+    /// Bit `f` set when face `f` of `o` (`2 axis + 1` on the high side)
+    /// lies on the domain's boundary: [`Brick::face_neighbors`] is `None`
+    /// there, found without building the neighbours.
+    #[inline]
+    pub fn outside_faces(&self, o: Octant) -> u8 {
+        let (c, s, hi) = (o.coords(), o.side(), self.hi());
+        let mut bits = 0;
+        for a in 0..3 {
+            bits |= ((c[a] == 0) as u8) << (2 * a);
+            bits |= ((c[a] + s >= hi[a]) as u8) << (2 * a + 1);
+        }
+        bits
+    }
+
     #[inline]
     fn is_void_in(&self, o: Octant, hi: [u32; 3]) -> bool {
         let c = o.coords();
@@ -275,6 +289,40 @@ mod tests {
                 let by_coords = (0..3).any(|k| c[k] >= hi[k]);
                 assert_eq!(b.is_void(o), by_coords, "{roots:?} {o:?}");
             }
+        }
+    }
+
+    #[test]
+    fn outside_faces_agree_with_the_face_neighbours() {
+        for roots in [[1, 1, 1], [3, 1, 1], [4, 2, 3], [5, 7, 2]] {
+            let b = Brick::new(roots).unwrap();
+            let hi = b.hi();
+            let mut seed = 777u64;
+            let mut outside = 0;
+            for _ in 0..20_000 {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let level = b.level() + (seed >> 59) as u8 % (MAX_LEVEL + 1 - b.level());
+                let mask = !((ROOT_LEN >> level) - 1) & (ROOT_LEN - 1);
+                let c: [u32; 3] = std::array::from_fn(|k| {
+                    // Inside the brick, often against one of its sides.
+                    let v = (seed >> (5 + 19 * k)) as u32 % hi[k];
+                    match (seed >> (60 - k)) & 3 {
+                        0 => 0,
+                        1 => hi[k] - 1,
+                        _ => v,
+                    }
+                });
+                let c = c.map(|v| v & mask);
+                let o = Octant::from_parts(morton_encode(c[0], c[1], c[2]), level);
+                let bits = b.outside_faces(o);
+                for (f, n) in b.face_neighbors(o).iter().enumerate() {
+                    assert_eq!(bits >> f & 1 == 1, n.is_none(), "{roots:?} {o:?} face {f}");
+                }
+                outside += bits.count_ones();
+            }
+            assert!(outside > 1000, "{roots:?}: the sides were seldom reached");
         }
     }
 

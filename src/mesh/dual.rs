@@ -299,7 +299,9 @@ pub(crate) struct DualNodes {
 /// halo elements around them. A dropped leaf would change no node (a point
 /// is a node by the kept leaves around it alone), so leaving the dropped
 /// ones out as gaps takes their part of the walk away.
-pub(crate) fn extract_nodes(leaves: Merged) -> Result<DualNodes> {
+///
+/// Returns the tree too: the face walk of the same mesh goes over it again.
+pub(crate) fn extract_nodes(leaves: Merged) -> Result<(DualNodes, DualTree)> {
     let n = leaves.len();
     if n >= LEAF as usize {
         return Err(Error::new(
@@ -316,12 +318,10 @@ pub(crate) fn extract_nodes(leaves: Merged) -> Result<DualNodes> {
         edge: Entries::new(false, n / 2),
         boundary_points: Vec::new(),
     };
-    let tree_bytes = walk_points(&leaves, |refs| {
+    let tree = DualTree::new(&leaves);
+    walk_points(&tree, |refs| {
         record_point(&leaves, &local, &mut overflow, &mut out, refs)
     });
-    // The walk's end is the mesh's peak; what comes next should not add to
-    // it, so the tree's pages go back rather than stay free in the heap.
-    crate::report::trim_heap_above(tree_bytes / 2);
     if overflow {
         return Err(Error::new(
             ErrorKind::Limit,
@@ -332,7 +332,7 @@ pub(crate) fn extract_nodes(leaves: Merged) -> Result<DualNodes> {
     out.face.shrink_to_fit();
     out.edge.shrink_to_fit();
     out.propagate()?;
-    Ok(out)
+    Ok((out, tree))
 }
 
 /// Lattice coordinates of corner `c` (Morton order) of the octant with
@@ -444,17 +444,41 @@ fn grow<T>(v: &mut Vec<T>) {
     }
 }
 
-/// Visits every lattice point that is a corner of some leaf of `leaves`
-/// (sorted, disjoint, possibly with gaps) exactly once, calling `visit` with
-/// the 8 leaves around it: `refs[p]` is `LEAF | i` for merged leaf `i`
-/// holding the finest cell on side `p` of the point (bit `a` of `p` set: the
-/// high side along axis `a`), or [`VOID`] (see [`leaf_at`]). Returns the
-/// bytes the pointer tree took (freed on return).
-pub(crate) fn walk_points(leaves: &Merged, visit: impl FnMut(&[u32; 8])) -> usize {
-    let n = leaves.len();
-    let mut tree = Vec::with_capacity(n / 24 + 1);
-    let root = build(leaves, Octant::ROOT, 0, n, &mut tree);
-    let mut w = Walker { tree: &tree, visit };
+/// The pointer tree over a merged run of leaves, built once and walked by
+/// [`walk_points`] and [`walk_faces`] (about one byte per leaf). It stays
+/// valid while the leaves it was built on do not change.
+pub(crate) struct DualTree {
+    nodes: Vec<[u32; 8]>,
+    root: u32,
+}
+
+impl std::fmt::Debug for DualTree {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "DualTree({} entries)", self.nodes.len())
+    }
+}
+
+impl DualTree {
+    /// Links `leaves` (sorted, disjoint, possibly with gaps).
+    pub(crate) fn new(leaves: &Merged) -> DualTree {
+        let n = leaves.len();
+        let mut nodes = Vec::with_capacity(n / 24 + 1);
+        let root = build(leaves, Octant::ROOT, 0, n, &mut nodes);
+        DualTree { nodes, root }
+    }
+}
+
+/// Visits every lattice point that is a corner of some leaf of `tree`'s
+/// leaves exactly once, calling `visit` with the 8 leaves around it:
+/// `refs[p]` is `LEAF | i` for merged leaf `i` holding the finest cell on
+/// side `p` of the point (bit `a` of `p` set: the high side along axis
+/// `a`), or [`VOID`] (see [`leaf_at`]).
+pub(crate) fn walk_points(tree: &DualTree, visit: impl FnMut(&[u32; 8])) {
+    let root = tree.root;
+    let mut w = Walker {
+        tree: &tree.nodes,
+        visit,
+    };
     w.start(0, [root; 8]);
     // The root's faces, edges and corners against the outside.
     for m in 1u32..8 {
@@ -469,25 +493,22 @@ pub(crate) fn walk_points(leaves: &Merged, visit: impl FnMut(&[u32; 8])) -> usiz
             b = (b - 1) & m;
         }
     }
-    std::mem::size_of_val(&tree[..])
 }
 
-/// Visits every pair of leaves of `leaves` that share a face (the whole face
+/// Visits every pair of `tree`'s leaves that share a face (the whole face
 /// of the smaller, or either when they are the same size) exactly once,
 /// calling `visit(axis, low, high)` with the leaf on the low and the high
 /// side along `axis` (merged indices). Leaves facing a gap (no leaf, or
-/// outside the root) are not visited. Returns the bytes the pointer tree
-/// took (freed on return). The walk of [`walk_points`] without its edges
-/// and points.
-pub(crate) fn walk_faces(leaves: &Merged, visit: impl FnMut(usize, usize, usize)) -> usize {
-    let n = leaves.len();
-    let mut tree = Vec::with_capacity(n / 24 + 1);
-    let root = build(leaves, Octant::ROOT, 0, n, &mut tree);
-    let mut w = FaceWalker { tree: &tree, visit };
-    if root & LEAF == 0 {
-        w.cell::<0>([root; 8]);
+/// outside the root) are not visited. The walk of [`walk_points`] without
+/// its edges and points.
+pub(crate) fn walk_faces(tree: &DualTree, visit: impl FnMut(usize, usize, usize)) {
+    let mut w = FaceWalker {
+        tree: &tree.nodes,
+        visit,
+    };
+    if tree.root & LEAF == 0 {
+        w.cell::<0>([tree.root; 8]);
     }
-    std::mem::size_of_val(&tree[..])
 }
 
 /// See [`walk_faces`].
@@ -847,7 +868,7 @@ mod tests {
     fn uniform_grid_has_every_lattice_point_once() {
         let leaves = uniform(2);
         let kept = Bits::from_fn(leaves.len(), |_| true);
-        let d = extract_nodes(whole(&leaves)).unwrap();
+        let d = extract_nodes(whole(&leaves)).unwrap().0;
         assert_eq!(d.flags.len(), 125);
         assert!(d.face.len() == 0 && d.edge.len() == 0);
         let at = points(&d, &leaves);
@@ -868,7 +889,7 @@ mod tests {
         // Root split once, child 0 split again.
         let mut leaves: Vec<Octant> = Octant::ROOT.child(0).children().to_vec();
         leaves.extend((1..8).map(|c| Octant::ROOT.child(c)));
-        let d = extract_nodes(whole(&leaves)).unwrap();
+        let d = extract_nodes(whole(&leaves)).unwrap().0;
         let at = points(&d, &leaves);
         // 27 coarse points + 27 fine points of child 0, 8 of them shared.
         assert_eq!(at.len(), 27 + 27 - 8);
@@ -920,7 +941,7 @@ mod tests {
             local: &fine[1..2],
             after: &after,
         };
-        let d = extract_nodes(m).unwrap();
+        let d = extract_nodes(m).unwrap().0;
         let all: Vec<Octant> = (0..m.len()).map(|i| m.get(i)).collect();
         let at = points(&d, &all);
         let mine = fine[1];

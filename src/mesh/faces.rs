@@ -52,7 +52,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::octant::Octant;
 
 use super::dual::{walk_faces, Merged};
-use super::{prefetch, Mesh};
+use super::Mesh;
 
 /// Names of the six domain-side patches, in patch-id order.
 pub const SIDE_PATCHES: [&str; 6] = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax"];
@@ -379,6 +379,22 @@ pub(super) enum FaceKind {
     Halo,
 }
 
+/// What [`Mesh::walk_faces`] reports.
+enum Found {
+    /// Two local elements sharing a face normal to `axis`: `low` on its
+    /// low side (the lower element), `high` on its high side. The face is
+    /// the whole high face of `low` when `low_whole` (`low` is the same
+    /// size or finer), else the whole low face of `high`.
+    Pair {
+        axis: usize,
+        low: u32,
+        high: u32,
+        low_whole: bool,
+    },
+    /// A halo or boundary face.
+    Face(FaceKind, Face),
+}
+
 /// Where a kept element is: local index or halo index.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub(super) enum At {
@@ -488,87 +504,21 @@ fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
     }
 }
 
-/// `faces` sorted by owner, then other side, in place. A counting sort into
-/// a second array scatters the faces all over it when they do not come
-/// roughly in owner order (the dual walk lists the faces across its big
-/// planes last), and on tens of millions of faces the fresh pages alone
-/// cost seconds. So: the faces are permuted in place into blocks of owners
-/// (at most about 1024 blocks, American flag sort), each block is sorted by
-/// owner through a buffer the size of the largest block, and each owner's
-/// few faces by their other side. The order of equal keys does not matter:
-/// an owner never has two faces with the same other side.
-fn sort_by_owner(mut faces: Vec<Face>, owners: usize) -> Vec<Face> {
-    let Some(&first) = faces.first() else {
-        return faces;
-    };
-    let shift = (usize::BITS - (owners >> 10).leading_zeros()).min(31);
-    let block = |f: &Face| (f.owner >> shift) as usize;
-    let nb = (owners >> shift) + 1;
-    let mut bstart = vec![0usize; nb + 1];
-    for f in &faces {
-        bstart[block(f) + 1] += 1;
+/// The face of element `e` (local index `i`, the owner) on side `plus` of
+/// `axis`, `shape` in halves of that face.
+fn element_face(i: u32, e: Octant, axis: usize, plus: bool, shape: u16, other: Other) -> Face {
+    let (mut origin, s) = (e.coords(), e.side());
+    if plus {
+        origin[axis] += s;
     }
-    for b in 0..nb {
-        bstart[b + 1] += bstart[b];
+    Face {
+        owner: i,
+        other,
+        origin,
+        half: s / 2,
+        normal: axis as u8 | if plus { 0 } else { 4 },
+        shape,
     }
-    // Each face is moved once into the next free slot of its block. The
-    // walk lists faces far from their owner's order, so each move lands in
-    // a different block: the slot after it is fetched ahead, which the
-    // hardware cannot guess across a thousand blocks.
-    let mut head = bstart[..nb].to_vec();
-    for b in 0..nb {
-        while head[b] < bstart[b + 1] {
-            let mut f = faces[head[b]];
-            let mut k = block(&f);
-            while k != b {
-                std::mem::swap(&mut f, &mut faces[head[k]]);
-                head[k] += 1;
-                prefetch(&faces, head[k] + 4);
-                k = block(&f);
-            }
-            faces[head[b]] = f;
-            head[b] += 1;
-        }
-    }
-    let widest = (0..nb)
-        .map(|b| bstart[b + 1] - bstart[b])
-        .max()
-        .unwrap_or(0);
-    let mut tmp = vec![first; widest];
-    let mut start = vec![0usize; (1 << shift) + 1];
-    for b in 0..nb {
-        let (lo, hi) = (bstart[b], bstart[b + 1]);
-        let base = (b << shift) as u32;
-        tmp[..hi - lo].copy_from_slice(&faces[lo..hi]);
-        start.iter_mut().for_each(|c| *c = 0);
-        for f in &tmp[..hi - lo] {
-            start[(f.owner - base) as usize + 1] += 1;
-        }
-        for k in 0..1 << shift {
-            start[k + 1] += start[k];
-        }
-        let mut fill = start.clone();
-        for f in &tmp[..hi - lo] {
-            let at = &mut fill[(f.owner - base) as usize];
-            faces[lo + *at] = *f;
-            *at += 1;
-        }
-        for k in 0..1 << shift {
-            let (a, z) = (lo + start[k], lo + start[k + 1]);
-            if z - a > 1 {
-                // An owner has a few faces (three on average): insertion.
-                let run = &mut faces[a..z];
-                for i in 1..run.len() {
-                    let mut j = i;
-                    while j > 0 && run[j].other < run[j - 1].other {
-                        run.swap(j, j - 1);
-                        j -= 1;
-                    }
-                }
-            }
-        }
-    }
-    faces
 }
 
 impl Mesh {
@@ -576,30 +526,84 @@ impl Mesh {
     /// only: the halo came with the mesh.
     pub fn faces(&self) -> Result<Faces> {
         let elements: &[Octant] = &self.elements;
-        if elements.len() > u32::MAX as usize {
+        let nl = elements.len();
+        if nl >= u32::MAX as usize {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
         }
-        // Room for the boundary and halo faces too, appended to this list in
-        // the end: growing a list of tens of millions of faces copies it to
-        // fresh pages, and room never written costs no memory.
-        let mut internal: Vec<Face> = Vec::with_capacity(4 * elements.len());
+        // An internal face's owner, the lower of its two elements, is the
+        // one on its low side: two octants sharing a face part in their
+        // least common ancestor's children that differ in the normal's bit
+        // alone, the low one first in Morton order. So element `i` owns
+        // the faces on its three high sides, and they are listed in owner
+        // order from what the walk finds per element, with no sort of the
+        // faces:
+        //
+        //   - `whole[3 i + a]`: 1 + the element across the whole high face
+        //     `a` of `i` (the same size or coarser), 0 when there is none;
+        //   - `quarters`: `(c << 32) | j` for a coarse `c` whose high face
+        //     meets the finer `j` (a quarter of it, listed as `j`'s face).
+        //
+        // The list comes first in the heap, so that the scratch arrays,
+        // freed at the end, leave their room for what comes next rather
+        // than holes under it. Room never written costs no memory.
+        let mut faces: Vec<Face> = Vec::with_capacity(4 * nl);
+        let mut whole = vec![0u32; 3 * nl];
+        let mut quarters: Vec<u64> = Vec::new();
         let mut boundary: Vec<Face> = Vec::new();
         let mut halo: Vec<Face> = Vec::new();
-        self.for_each_face(|kind, face| match kind {
-            FaceKind::Internal => internal.push(face),
-            FaceKind::Boundary => boundary.push(face),
-            FaceKind::Halo => halo.push(face),
+        self.walk_faces(|found| match found {
+            Found::Pair {
+                axis,
+                low,
+                high,
+                low_whole: true,
+            } => whole[3 * low as usize + axis] = high + 1,
+            Found::Pair { low, high, .. } => quarters.push((low as u64) << 32 | high as u64),
+            Found::Face(FaceKind::Boundary, face) => boundary.push(face),
+            Found::Face(_, face) => halo.push(face),
         });
-        // Internal faces: the owner is the lower element.
-        for face in internal.iter_mut() {
-            if let Other::Element(j) = face.other {
-                if j < face.owner {
-                    *face = face.flipped(j, Other::Element(face.owner));
+        quarters.sort_unstable();
+        let num_internal = whole.iter().filter(|&&w| w != 0).count() + quarters.len();
+        faces.reserve_exact(num_internal + boundary.len() + halo.len());
+        let full = pack(WHOLE);
+        let mut q = 0;
+        for (i, &e) in elements.iter().enumerate() {
+            let first = faces.len();
+            for a in 0..3 {
+                let j = whole[3 * i + a];
+                if j != 0 {
+                    faces.push(element_face(
+                        i as u32,
+                        e,
+                        a,
+                        true,
+                        full,
+                        Other::Element(j - 1),
+                    ));
+                }
+            }
+            while q < quarters.len() && (quarters[q] >> 32) as usize == i {
+                let j = quarters[q] as u32;
+                let f = elements[j as usize];
+                let (cf, ce) = (f.coords(), e.coords());
+                let a = (0..3).find(|&a| cf[a] == ce[a] + e.side()).unwrap_or(0);
+                let face = element_face(j, f, a, false, full, Other::Element(i as u32));
+                faces.push(face.flipped(i as u32, Other::Element(j)));
+                q += 1;
+            }
+            // Each owner's few faces (at most three whole ones and twelve
+            // quarters) by the other side: insertion.
+            let own = &mut faces[first..];
+            for k in 1..own.len() {
+                let mut m = k;
+                while m > 0 && own[m].other < own[m - 1].other {
+                    own.swap(m, m - 1);
+                    m -= 1;
                 }
             }
         }
-        let internal = sort_by_owner(internal, elements.len());
-        let num_internal = internal.len();
+        drop(whole);
+        debug_assert_eq!(faces.len(), num_internal);
         boundary.sort_by_key(|f| match f.other {
             Other::Patch(p) => p,
             _ => u16::MAX,
@@ -637,7 +641,6 @@ impl Mesh {
             halo_ranges.push((r, base + a..base + b));
             a = b;
         }
-        let mut faces = internal;
         faces.append(&mut boundary);
         faces.append(&mut halo);
         Ok(Faces {
@@ -661,6 +664,33 @@ impl Mesh {
     /// elements in the pieces of [`dropped_pieces`].
     pub(super) fn for_each_face(&self, mut put: impl FnMut(FaceKind, Face)) {
         let elements: &[Octant] = &self.elements;
+        let whole = pack(WHOLE);
+        self.walk_faces(|found| match found {
+            Found::Pair {
+                axis,
+                low,
+                high,
+                low_whole,
+            } => {
+                let (lo, hi) = (low as usize, high as usize);
+                let f = if low_whole {
+                    element_face(low, elements[lo], axis, true, whole, Other::Element(high))
+                } else {
+                    element_face(high, elements[hi], axis, false, whole, Other::Element(low))
+                };
+                put(FaceKind::Internal, f);
+            }
+            Found::Face(kind, f) => put(kind, f),
+        });
+    }
+
+    /// The walk behind [`Mesh::for_each_face`] and [`Mesh::faces`]: one
+    /// dual walk of the local and halo elements ([`walk_faces`]) reports
+    /// each pair of local elements sharing a face, and each halo face by
+    /// the local side; then each element's boundary faces follow, in
+    /// element order, then face, then piece.
+    fn walk_faces(&self, mut found: impl FnMut(Found)) {
+        let elements: &[Octant] = &self.elements;
         let (nl, hb) = (elements.len(), self.halo.before);
         let merged = self.halo.around(elements);
         let at = |k: usize| -> At {
@@ -672,54 +702,45 @@ impl Mesh {
                 At::Halo((k - nl) as u32)
             }
         };
-        // The face of `e` (owner `i`) on side `plus` of `axis`, `shape` in
-        // halves of it.
-        let face = |i: u32, e: Octant, axis: usize, plus: bool, shape: u16, other: Other| {
-            let (mut origin, s) = (e.coords(), e.side());
-            if plus {
-                origin[axis] += s;
-            }
-            Face {
-                owner: i,
-                other,
-                origin,
-                half: s / 2,
-                normal: axis as u8 | if plus { 0 } else { 4 },
-                shape,
-            }
-        };
+        let face = element_face;
         let whole = pack(WHOLE);
         // Per element, bit `4 f + q`: quarter `q` of its face `f` faces a
         // kept element.
         let mut covered = vec![0u32; nl];
-        let kind = |other: Other| match other {
-            Other::Halo(_) => FaceKind::Halo,
-            _ => FaceKind::Internal,
-        };
-        walk_faces(&merged, |axis, low, high| {
+        walk_faces(&self.dual_tree, |axis, low, high| {
             let (a, b) = (at(low), at(high));
             let (la, lb) = (merged.get(low), merged.get(high));
-            // `fine` (local or not) against the coarser `coarse`: the fine
-            // side lists a local fine face; a halo fine face is a quarter
-            // listed by the local coarse side.
+            // `fine` (local or not) against the coarser `coarse`: which
+            // quarter of the coarse face the fine one is, from the fine
+            // octant's place among its siblings.
             let mut finer = |fine: At, lf: Octant, coarse: At, lc: Octant, fine_low: bool| {
                 let (u, v) = plane_axes(axis);
-                let q = ((lf.coords()[u] - lc.coords()[u]) / lf.side())
-                    | ((lf.coords()[v] - lc.coords()[v]) / lf.side()) << 1;
+                let id = lf.child_id();
+                let q = (id >> u & 1) | (id >> v & 1) << 1;
                 if let At::Local(c) = coarse {
                     covered[c as usize] |= 1 << (4 * (2 * axis + !fine_low as usize) + q as usize);
                 }
                 match (fine, coarse) {
-                    (At::Local(i), _) => {
+                    (At::Local(i), At::Local(c)) => {
                         covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
-                        let other = other_of(coarse);
-                        put(kind(other), face(i, lf, axis, fine_low, whole, other));
+                        let (low, high) = if fine_low { (i, c) } else { (c, i) };
+                        found(Found::Pair {
+                            axis,
+                            low,
+                            high,
+                            low_whole: fine_low,
+                        });
+                    }
+                    (At::Local(i), At::Halo(_)) => {
+                        covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
+                        let f = face(i, lf, axis, fine_low, whole, other_of(coarse));
+                        found(Found::Face(FaceKind::Halo, f));
                     }
                     (At::Halo(_), At::Local(c)) => {
                         let (qa, qb) = ((q & 1) as u8, (q >> 1) as u8);
                         let shape = pack([(qa, qb), (qa + 1, qb), (qa + 1, qb + 1), (qa, qb + 1)]);
                         let f = face(c, lc, axis, !fine_low, shape, other_of(fine));
-                        put(FaceKind::Halo, f);
+                        found(Found::Face(FaceKind::Halo, f));
                     }
                     _ => {}
                 }
@@ -729,49 +750,67 @@ impl Mesh {
             } else if lb.level() > la.level() {
                 finer(b, lb, a, la, false);
             } else {
-                // Equal: the lower local element lists it.
                 if let At::Local(i) = a {
                     covered[i as usize] |= 15 << (4 * (2 * axis + 1));
                 }
                 if let At::Local(j) = b {
                     covered[j as usize] |= 15 << (4 * (2 * axis));
                 }
-                let f = match (a, b) {
-                    (At::Local(i), At::Local(j)) if i < j => {
-                        face(i, la, axis, true, whole, Other::Element(j))
-                    }
+                match (a, b) {
                     (At::Local(i), At::Local(j)) => {
-                        face(j, lb, axis, false, whole, Other::Element(i))
+                        // The low element comes first in Morton order.
+                        debug_assert!(i < j);
+                        found(Found::Pair {
+                            axis,
+                            low: i,
+                            high: j,
+                            low_whole: true,
+                        });
                     }
-                    (At::Local(i), At::Halo(_)) => face(i, la, axis, true, whole, other_of(b)),
-                    (At::Halo(_), At::Local(j)) => face(j, lb, axis, false, whole, other_of(a)),
-                    _ => return,
-                };
-                put(kind(f.other), f);
+                    (At::Local(i), At::Halo(_)) => {
+                        let f = face(i, la, axis, true, whole, other_of(b));
+                        found(Found::Face(FaceKind::Halo, f));
+                    }
+                    (At::Halo(_), At::Local(j)) => {
+                        let f = face(j, lb, axis, false, whole, other_of(a));
+                        found(Found::Face(FaceKind::Halo, f));
+                    }
+                    _ => {}
+                }
             }
         });
+        // The boundary pieces of a face by the quarters kept elements
+        // cover.
+        let pieces: [([u16; 2], usize); 16] = std::array::from_fn(|m| {
+            let p = dropped_pieces(m as u8);
+            let mut out = [0u16; 2];
+            for (k, shape) in p.iter().enumerate() {
+                out[k] = pack(*shape);
+            }
+            (out, p.len())
+        });
+        let brick = &self.domain.brick;
         for (i, &e) in elements.iter().enumerate() {
             if covered[i] == u32::MAX >> 8 {
                 continue;
             }
-            let outside = self.domain.brick.face_neighbors(e);
-            for (f, n) in outside.into_iter().enumerate() {
+            let outside = brick.outside_faces(e);
+            for f in 0..6 {
                 let (axis, plus) = (f / 2, f % 2 == 1);
-                let mask = (covered[i] >> (4 * f) & 15) as u8;
+                let mask = (covered[i] >> (4 * f) & 15) as usize;
                 let mut side = |shape: u16, other: Other| {
-                    put(
-                        FaceKind::Boundary,
-                        face(i as u32, e, axis, plus, shape, other),
-                    );
+                    let face = face(i as u32, e, axis, plus, shape, other);
+                    found(Found::Face(FaceKind::Boundary, face));
                 };
-                if n.is_none() {
+                if outside >> f & 1 == 1 {
                     // Outside the cube or a brick's box: a side patch.
                     side(whole, Other::Patch(f as u16));
                 } else if mask == 0 {
                     side(whole, Other::Patch(SURFACE_PATCH));
                 } else {
-                    for shape in dropped_pieces(mask) {
-                        side(pack(shape), Other::Patch(SURFACE_PATCH));
+                    let (shapes, n) = pieces[mask];
+                    for &shape in &shapes[..n] {
+                        side(shape, Other::Patch(SURFACE_PATCH));
                     }
                 }
             }

@@ -32,7 +32,7 @@
 
 use crate::comm::Comm;
 use crate::ghost::GhostLayer;
-use crate::mesh::dual::{leaf_at, walk_points, Merged};
+use crate::mesh::dual::{leaf_at, walk_points, DualTree, Merged};
 use crate::octant::{morton_encode, Octant, ROOT_LEN};
 use crate::octree::LinearOctree;
 
@@ -161,7 +161,7 @@ fn first_sweep(
     // corner block drops it.
     const GOES: u8 = 0x80;
     let mut seen = vec![0u8; le - lb];
-    walk_points(&merged, |refs| {
+    walk_points(&DualTree::new(&merged), |refs| {
         let status: [bool; 8] = std::array::from_fn(|p| leaf_at(refs[p]).is_some());
         let drops = block_drop_masks()[status_byte(&status)];
         for p in 0..8 {

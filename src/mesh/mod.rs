@@ -186,6 +186,9 @@ pub struct Mesh {
     first_cells: Vec<u64>,
     /// Kept elements of other ranks touching local ones.
     halo: Halo,
+    /// The node walk's pointer tree over the elements and the halo, walked
+    /// again for the faces.
+    dual_tree: dual::DualTree,
     counts: MeshCounts,
     /// Time, traffic, time inside collectives and peak memory per phase.
     timer: PhaseTimer,
@@ -282,11 +285,12 @@ impl Mesh {
             let elements = kept_elements(tree, &local_class, &kept);
             // The walk goes over the elements and the halo elements only.
             let merged = halo.around(&elements.leaves);
-            let d = dual::extract_nodes(merged)?;
+            let (d, dual_tree) = dual::extract_nodes(merged)?;
             let counted = count_hanging(comm, tree.first_cells(), &d, merged);
-            Ok((d, elements, counted))
+            Ok((d, dual_tree, elements, counted))
         });
-        let (d, elements, (face_hanging, edge_hanging)) = crate::comm::agree(comm, nodes)?;
+        let (d, dual_tree, elements, (face_hanging, edge_hanging)) =
+            crate::comm::agree(comm, nodes)?;
 
         let numbering = timer.time(comm, "numbering", || {
             number_independent(comm, tree.first_cells(), &d, halo.around(&elements.leaves))
@@ -294,7 +298,7 @@ impl Mesh {
         let numbering = crate::comm::agree(comm, numbering)?;
 
         let mesh = timer.time(comm, "connectivity", || {
-            assemble(comm, domain, d, elements, halo, numbering)
+            assemble(comm, domain, (d, dual_tree), elements, halo, numbering)
         });
         let mut mesh = crate::comm::agree(comm, mesh)?;
         mesh.first_element = first_element;
@@ -816,7 +820,7 @@ fn kept_elements(tree: &LinearOctree, local_class: &ClassBytes, kept: &Ranks) ->
 fn assemble(
     comm: &dyn Comm,
     domain: &Domain,
-    d: dual::DualNodes,
+    (d, dual_tree): (dual::DualNodes, dual::DualTree),
     elements: KeptElements,
     halo: Halo,
     num: Independent,
@@ -991,6 +995,7 @@ fn assemble(
         first_element: 0,
         first_cells: Vec::new(),
         halo,
+        dual_tree,
         counts: MeshCounts {
             independent_nodes: num.global_count,
             // This rank's, summed by the caller.
