@@ -46,9 +46,76 @@ pub fn radix_sort_bits(v: &mut Vec<u64>, tmp: &mut Vec<u64>, lo: u32, hi: u32) {
     }
 }
 
+/// Sorts `keys` ascending, carrying `vals` along (`vals[i]` goes where
+/// `keys[i]` goes; equal keys keep their order), looking only at bits
+/// `lo..hi` as [`radix_sort_bits`] does.
+pub fn radix_sort_pairs_bits(keys: &mut Vec<u64>, vals: &mut Vec<u32>, lo: u32, hi: u32) {
+    const DIGIT: u32 = 11;
+    const BUCKETS: usize = 1 << DIGIT;
+    assert_eq!(keys.len(), vals.len());
+    let n = keys.len();
+    if n < 256 {
+        let mut both: Vec<(u64, u32)> = keys.iter().copied().zip(vals.iter().copied()).collect();
+        both.sort_by_key(|p| p.0);
+        for (i, (k, v)) in both.into_iter().enumerate() {
+            keys[i] = k;
+            vals[i] = v;
+        }
+        return;
+    }
+    let digits = hi.saturating_sub(lo).div_ceil(DIGIT) as usize;
+    let mut counts = vec![[0usize; BUCKETS]; digits];
+    for &k in keys.iter() {
+        for (d, c) in counts.iter_mut().enumerate() {
+            c[((k >> (lo + d as u32 * DIGIT)) as usize) & (BUCKETS - 1)] += 1;
+        }
+    }
+    let (mut tk, mut tv) = (vec![0u64; n], vec![0u32; n]);
+    for (d, count) in counts.iter_mut().enumerate() {
+        if count.contains(&n) {
+            continue;
+        }
+        let shift = lo + d as u32 * DIGIT;
+        let mut sum = 0;
+        for c in count.iter_mut() {
+            let m = *c;
+            *c = sum;
+            sum += m;
+        }
+        for (&k, &v) in keys.iter().zip(vals.iter()) {
+            let b = ((k >> shift) as usize) & (BUCKETS - 1);
+            tk[count[b]] = k;
+            tv[count[b]] = v;
+            count[b] += 1;
+        }
+        std::mem::swap(keys, &mut tk);
+        std::mem::swap(vals, &mut tv);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sorts_pairs_stably() {
+        for n in [100usize, 50_000] {
+            let mut x = 77u64;
+            let keys: Vec<u64> = (0..n)
+                .map(|_| {
+                    x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                    // Few distinct keys: many ties, whose order must stay.
+                    (x >> 50) << 3 | 5
+                })
+                .collect();
+            let mut want: Vec<(u64, u32)> = keys.iter().copied().zip(0u32..).collect();
+            want.sort_by_key(|p| p.0);
+            let (mut k, mut v) = (keys.clone(), (0..n as u32).collect::<Vec<_>>());
+            radix_sort_pairs_bits(&mut k, &mut v, 3, 64);
+            let got: Vec<(u64, u32)> = k.into_iter().zip(v).collect();
+            assert_eq!(got, want);
+        }
+    }
 
     #[test]
     fn sorts_like_std() {

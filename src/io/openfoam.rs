@@ -46,7 +46,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
-    corner_at, edge_midpoint, near_point_keys, point_key, EdgeMidpoints, PointIndex,
+    corner_at, edge_midpoint, halo_corners, point_key, EdgeMidpoints, PointIndex,
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
@@ -87,9 +87,6 @@ pub struct FoamCounts {
     pub cells: u64,
 }
 
-/// A point that exists but no face used yet.
-const UNUSED: u32 = u32::MAX;
-
 /// Turns each face of `faces`, in order, into its polygon of point
 /// labels and hands it to `emit`; returns this rank's points in label
 /// order (labels follow the order in which the faces first use the
@@ -99,10 +96,23 @@ fn face_polygons(
     faces: &Faces,
     mut emit: impl FnMut(&[u32]) -> Result<()>,
 ) -> Result<Vec<[u32; 3]>> {
-    // Every corner of a kept element near this rank is a mesh point.
+    // Every corner of a kept element near this rank is a mesh point. A
+    // face's corners and edge midpoints are local nodes or corners of
+    // halo elements. Those that are not a local element's corners (the
+    // corners of a split coarse face's pieces, the midpoints of face
+    // edges) lie inside a coarse kept element's face or edge: they hang,
+    // when they are local nodes. So the set searched holds the hanging
+    // nodes and the halo's corners only, and knows which hanging node
+    // each point is (their keys come first, in node order).
     let lattice = mesh.node_lattice();
-    let keys = near_point_keys(mesh, &lattice);
-    let mut set = PointIndex::new(keys);
+    let (nn, ni) = (lattice.len(), mesh.num_independent());
+    let keys: Vec<u64> = lattice[ni..]
+        .iter()
+        .copied()
+        .chain(halo_corners(mesh))
+        .map(point_key)
+        .collect();
+    let (mut set, hanging_of) = PointIndex::with_first(keys, nn - ni);
     // Whether an edge between two local nodes may carry a point.
     let midpoints = EdgeMidpoints::new(mesh);
     let missing = |x: [u32; 3]| {
@@ -111,12 +121,6 @@ fn face_polygons(
             format!("face corner {x:?} is no element's corner"),
         )
     };
-    // Each local node's place in the set: the corners of a face that is
-    // an element's whole face come from its connectivity, with no search.
-    let mut node_at = Vec::with_capacity(lattice.len());
-    for &p in &lattice {
-        node_at.push(set.find(point_key(p)).ok_or_else(|| missing(p))? as u32);
-    }
     let (elements, conn) = (mesh.elements(), mesh.connectivity());
     // Element `e`'s node at `p`, if `p` is one of its corners: (lowest
     // corner, side).
@@ -124,7 +128,18 @@ fn face_polygons(
         corner_at(c, s, p).map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize)
     };
     let cube = |e: u32| (elements[e as usize].coords(), elements[e as usize].side());
-    let mut label = vec![UNUSED; set.len()];
+    // A point is a local node `n` (most are: the corners of a face that is
+    // a local element's whole face come from its connectivity, with no
+    // search), or `nn + j` for the point at place `j` of the set that is
+    // no local node. Labels are stored plus one: zero is "none yet", and
+    // the pages of points never used are never touched.
+    let point_of = |j: usize| -> usize {
+        match hanging_of[j] {
+            u32::MAX => nn + j,
+            h => ni + h as usize,
+        }
+    };
+    let mut label = vec![0u32; nn + set.len()];
     let halo_start = faces.halo_range().start;
     let mut points: Vec<[u32; 3]> = Vec::new();
     let mut total = 0usize;
@@ -143,11 +158,11 @@ fn face_polygons(
         }
         let nodes = c.map(|x| corner_of(emitter.0, emitter.1, x));
         for k in 0..4 {
-            let j = match nodes[k] {
-                Some(n) => node_at[n] as usize,
-                None => set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?,
+            let p = match nodes[k] {
+                Some(n) => n,
+                None => point_of(set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?),
             };
-            poly.push((j, c[k]));
+            poly.push((p, c[k]));
             if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
                 let may = match (nodes[k], nodes[(k + 1) % 4]) {
                     (Some(a), Some(b)) => midpoints.may_hold(a, b, m),
@@ -155,7 +170,7 @@ fn face_polygons(
                 };
                 if may {
                     if let Some(j) = set.find(point_key(m)) {
-                        poly.push((j, m));
+                        poly.push((point_of(j), m));
                     }
                 }
             }
@@ -168,12 +183,12 @@ fn face_polygons(
             poly.rotate_left(at);
         }
         labels.clear();
-        for &(j, x) in &poly {
-            if label[j] == UNUSED {
-                label[j] = points.len() as u32;
+        for &(p, x) in &poly {
+            if label[p] == 0 {
                 points.push(x);
+                label[p] = points.len() as u32;
             }
-            labels.push(label[j]);
+            labels.push(label[p] - 1);
         }
         total += labels.len();
         if total > i32::MAX as usize {
