@@ -70,7 +70,9 @@ pub fn radix_sort_pairs_bits(keys: &mut Vec<u64>, vals: &mut Vec<u32>, lo: u32, 
             c[((k >> (lo + d as u32 * DIGIT)) as usize) & (BUCKETS - 1)] += 1;
         }
     }
-    let (mut tk, mut tv) = (vec![0u64; n], vec![0u32; n]);
+    // Scratch written in full by each scatter before it is read: left
+    // uninitialized rather than zeroed first (tens of megabytes).
+    let (mut tk, mut tv) = (Vec::<u64>::with_capacity(n), Vec::<u32>::with_capacity(n));
     for (d, count) in counts.iter_mut().enumerate() {
         if count.contains(&n) {
             continue;
@@ -82,14 +84,25 @@ pub fn radix_sort_pairs_bits(keys: &mut Vec<u64>, vals: &mut Vec<u32>, lo: u32, 
             *c = sum;
             sum += m;
         }
-        for (&k, &v) in keys.iter().zip(vals.iter()) {
-            let b = ((k >> shift) as usize) & (BUCKETS - 1);
-            tk[count[b]] = k;
-            tv[count[b]] = v;
-            count[b] += 1;
+        {
+            let (ok, ov) = (tk.spare_capacity_mut(), tv.spare_capacity_mut());
+            for (&k, &v) in keys.iter().zip(vals.iter()) {
+                let b = ((k >> shift) as usize) & (BUCKETS - 1);
+                ok[count[b]].write(k);
+                ov[count[b]].write(v);
+                count[b] += 1;
+            }
+        }
+        // SAFETY: the bucket starts partition 0..n, so the scatter wrote
+        // every one of the first `n` slots of both.
+        unsafe {
+            tk.set_len(n);
+            tv.set_len(n);
         }
         std::mem::swap(keys, &mut tk);
         std::mem::swap(vals, &mut tv);
+        tk.clear();
+        tv.clear();
     }
 }
 
