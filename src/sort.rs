@@ -4,21 +4,11 @@
 /// Sorts `v` ascending, looking only at bits `lo..hi` (the caller knows the
 /// other bits are equal in all keys). Uses `tmp` as scratch.
 pub fn radix_sort_bits(v: &mut Vec<u64>, tmp: &mut Vec<u64>, lo: u32, hi: u32) {
-    const DIGIT: u32 = 11;
-    const BUCKETS: usize = 1 << DIGIT;
     if v.len() < 256 {
         v.sort_unstable();
         return;
     }
-    // All digit histograms in one read of the keys, then one scatter per
-    // digit that is not constant.
-    let digits = hi.saturating_sub(lo).div_ceil(DIGIT) as usize;
-    let mut counts = vec![[0usize; BUCKETS]; digits];
-    for &k in v.iter() {
-        for (d, c) in counts.iter_mut().enumerate() {
-            c[((k >> (lo + d as u32 * DIGIT)) as usize) & (BUCKETS - 1)] += 1;
-        }
-    }
+    let mut counts = digit_counts(v, lo, hi);
     let n = v.len();
     // Scratch is fully overwritten by each scatter, so its old contents do
     // not matter; only its length must match.
@@ -27,16 +17,9 @@ pub fn radix_sort_bits(v: &mut Vec<u64>, tmp: &mut Vec<u64>, lo: u32, hi: u32) {
         tmp.resize(n, 0);
     }
     for (d, count) in counts.iter_mut().enumerate() {
-        if count.contains(&n) {
-            continue; // this digit is the same everywhere
-        }
-        let shift = lo + d as u32 * DIGIT;
-        let mut sum = 0;
-        for c in count.iter_mut() {
-            let m = *c;
-            *c = sum;
-            sum += m;
-        }
+        let Some(shift) = bucket_starts(count, n, lo, d) else {
+            continue;
+        };
         for &k in v.iter() {
             let b = ((k >> shift) as usize) & (BUCKETS - 1);
             tmp[count[b]] = k;
@@ -46,12 +29,42 @@ pub fn radix_sort_bits(v: &mut Vec<u64>, tmp: &mut Vec<u64>, lo: u32, hi: u32) {
     }
 }
 
+/// Bits per digit of the radix sorts.
+const DIGIT: u32 = 11;
+const BUCKETS: usize = 1 << DIGIT;
+
+/// The histograms of every digit of bits `lo..hi` of `keys`, in one read.
+fn digit_counts(keys: &[u64], lo: u32, hi: u32) -> Vec<[usize; BUCKETS]> {
+    let digits = hi.saturating_sub(lo).div_ceil(DIGIT) as usize;
+    let mut counts = vec![[0usize; BUCKETS]; digits];
+    for &k in keys {
+        for (d, c) in counts.iter_mut().enumerate() {
+            c[((k >> (lo + d as u32 * DIGIT)) as usize) & (BUCKETS - 1)] += 1;
+        }
+    }
+    counts
+}
+
+/// Turns digit `d`'s histogram `count` (of `n` keys) into bucket starts and
+/// returns the digit's shift, or `None` when the digit is the same in every
+/// key (no scatter needed).
+fn bucket_starts(count: &mut [usize; BUCKETS], n: usize, lo: u32, d: usize) -> Option<u32> {
+    if count.contains(&n) {
+        return None;
+    }
+    let mut sum = 0;
+    for c in count.iter_mut() {
+        let m = *c;
+        *c = sum;
+        sum += m;
+    }
+    Some(lo + d as u32 * DIGIT)
+}
+
 /// Sorts `keys` ascending, carrying `vals` along (`vals[i]` goes where
 /// `keys[i]` goes; equal keys keep their order), looking only at bits
 /// `lo..hi` as [`radix_sort_bits`] does.
 pub fn radix_sort_pairs_bits(keys: &mut Vec<u64>, vals: &mut Vec<u32>, lo: u32, hi: u32) {
-    const DIGIT: u32 = 11;
-    const BUCKETS: usize = 1 << DIGIT;
     assert_eq!(keys.len(), vals.len());
     let n = keys.len();
     if n < 256 {
@@ -63,27 +76,14 @@ pub fn radix_sort_pairs_bits(keys: &mut Vec<u64>, vals: &mut Vec<u32>, lo: u32, 
         }
         return;
     }
-    let digits = hi.saturating_sub(lo).div_ceil(DIGIT) as usize;
-    let mut counts = vec![[0usize; BUCKETS]; digits];
-    for &k in keys.iter() {
-        for (d, c) in counts.iter_mut().enumerate() {
-            c[((k >> (lo + d as u32 * DIGIT)) as usize) & (BUCKETS - 1)] += 1;
-        }
-    }
+    let mut counts = digit_counts(keys, lo, hi);
     // Scratch written in full by each scatter before it is read: left
     // uninitialized rather than zeroed first (tens of megabytes).
     let (mut tk, mut tv) = (Vec::<u64>::with_capacity(n), Vec::<u32>::with_capacity(n));
     for (d, count) in counts.iter_mut().enumerate() {
-        if count.contains(&n) {
+        let Some(shift) = bucket_starts(count, n, lo, d) else {
             continue;
-        }
-        let shift = lo + d as u32 * DIGIT;
-        let mut sum = 0;
-        for c in count.iter_mut() {
-            let m = *c;
-            *c = sum;
-            sum += m;
-        }
+        };
         {
             let (ok, ov) = (tk.spare_capacity_mut(), tv.spare_capacity_mut());
             for (&k, &v) in keys.iter().zip(vals.iter()) {
