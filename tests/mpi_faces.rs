@@ -82,13 +82,13 @@ type GlobalFace = (u64, u64, [u64; 3], u64);
 fn global_faces(m: &Mesh, f: &Faces) -> Vec<GlobalFace> {
     let mut out = Vec::new();
     for face in f.faces() {
-        let a = m.global_element(face.owner as usize);
-        let b = match face.other {
+        let a = m.global_element(face.owner() as usize);
+        let b = match face.other() {
             Other::Patch(p) => u64::MAX - p as u64,
             _ => m.other_global(face).unwrap(),
         };
         // A shared face is listed by both ranks: keep the lower rank's.
-        if let Other::Halo(h) = face.other {
+        if let Other::Halo(h) = face.other() {
             if m.halo().owners[h as usize] < m.rank() as u32 {
                 continue;
             }
@@ -127,8 +127,8 @@ fn check_closure(m: &Mesh, f: &Faces, tag: &str) {
         total[e] += a;
     };
     for face in f.faces() {
-        add(face.owner as usize, face, 1.0);
-        if let Other::Element(j) = face.other {
+        add(face.owner() as usize, face, 1.0);
+        if let Other::Element(j) = face.other() {
             add(j as usize, face, -1.0);
         }
     }
@@ -141,19 +141,23 @@ fn check_closure(m: &Mesh, f: &Faces, tag: &str) {
     let internal = &f.faces()[..f.num_internal()];
     for w in internal.windows(2) {
         assert!(
-            (w[0].owner, w[0].other) < (w[1].owner, w[1].other),
+            (w[0].owner(), w[0].other()) < (w[1].owner(), w[1].other()),
             "{tag}: order"
         );
     }
     for face in internal {
-        let Other::Element(j) = face.other else {
+        let Other::Element(j) = face.other() else {
             panic!("{tag}: non-internal face among internal ones");
         };
-        assert!(face.owner < j, "{tag}: owner must be the lower element");
+        assert!(face.owner() < j, "{tag}: owner must be the lower element");
     }
     for p in 0..NUM_PATCHES {
         for face in &f.faces()[f.patch_range(p)] {
-            assert_eq!(face.other, Other::Patch(p as u16), "{tag}: patch grouping");
+            assert_eq!(
+                face.other(),
+                Other::Patch(p as u16),
+                "{tag}: patch grouping"
+            );
         }
     }
 }
@@ -196,8 +200,8 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
     }
     let faces: BTreeSet<(u32, u32)> = f.faces()[..f.num_internal()]
         .iter()
-        .map(|face| match face.other {
-            Other::Element(j) => (face.owner, j),
+        .map(|face| match face.other() {
+            Other::Element(j) => (face.owner(), j),
             _ => unreachable!(),
         })
         .collect();
@@ -337,7 +341,7 @@ fn shared(m: &Mesh, f: &Faces) -> Vec<u64> {
         v.push(range.len() as u64);
         for face in &f.faces()[range.clone()] {
             let (a, b) = (
-                m.global_element(face.owner as usize),
+                m.global_element(face.owner() as usize),
                 m.other_global(face).unwrap(),
             );
             let (lo, hi) = if (m.rank() as u32) < *r {

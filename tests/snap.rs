@@ -298,12 +298,12 @@ fn check_snapped(name: &str, level: u8, keep: Keep, band: bool) -> (SnapReport, 
     let mut size = vec![0.0f64; m.elements().len()];
     for (k, f) in faces.faces().iter().enumerate() {
         let s = g.face_normal[k].map(|x| x * g.face_area[k]);
-        let o = f.owner as usize;
+        let o = f.owner() as usize;
         for a in 0..3 {
             sum[o][a] += s[a];
         }
         size[o] += g.face_area[k];
-        if let Other::Element(j) = f.other {
+        if let Other::Element(j) = f.other() {
             for a in 0..3 {
                 sum[j as usize][a] -= s[a];
             }

@@ -80,8 +80,8 @@ pub fn run(data: &[u8]) {
     for f in faces.faces() {
         let (a, n) = (f.lattice_area(), f.unit_normal());
         for k in 0..3 {
-            sum[f.owner as usize][k] += a * n[k];
-            if let octmesh::mesh::Other::Element(j) = f.other {
+            sum[f.owner() as usize][k] += a * n[k];
+            if let octmesh::mesh::Other::Element(j) = f.other() {
                 sum[j as usize][k] -= a * n[k];
             }
         }

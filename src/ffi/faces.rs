@@ -214,7 +214,7 @@ fn faces_of(h: &octmesh_t) -> Result<(&Mesh, &Faces, &Boundary)> {
 }
 
 fn neighbour_code(f: &crate::mesh::Face) -> i32 {
-    match f.other {
+    match f.other() {
         Other::Element(j) | Other::Halo(j) => j as i32,
         Other::Patch(p) => -1 - p as i32,
     }
@@ -227,7 +227,7 @@ fn fv_arrays(m: &Mesh, faces: &Faces) -> FvArrays {
     // look-ups cannot fail for its own faces; the octree's otherwise).
     if let Ok(Some(g)) = m.snapped_fv_geometry(faces) {
         return FvArrays {
-            owner: list.iter().map(|f| f.owner as i32).collect(),
+            owner: list.iter().map(|f| f.owner() as i32).collect(),
             neighbour: list.iter().map(neighbour_code).collect(),
             area: g.face_area,
             centre: g.face_centre.into_flattened(),
@@ -241,7 +241,7 @@ fn fv_arrays(m: &Mesh, faces: &Faces) -> FvArrays {
         };
     }
     FvArrays {
-        owner: list.iter().map(|f| f.owner as i32).collect(),
+        owner: list.iter().map(|f| f.owner() as i32).collect(),
         neighbour: list.iter().map(neighbour_code).collect(),
         area: list.iter().map(|f| m.face_area(f)).collect(),
         centre: list.iter().flat_map(|f| m.face_centre(f)).collect(),

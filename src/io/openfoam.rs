@@ -150,9 +150,9 @@ fn face_polygons(
         let c = f.corners();
         // The element whose whole face this is, when it is local: the
         // owner, or a finer local neighbour.
-        let mut emitter = (f.owner, cube(f.owner));
-        if 2 * f.half != emitter.1 .1 {
-            if let Other::Element(j) = f.other {
+        let mut emitter = (f.owner(), cube(f.owner()));
+        if 2 * f.half() != emitter.1 .1 {
+            if let Other::Element(j) = f.other() {
                 emitter = (j, cube(j));
             }
         }
@@ -532,14 +532,14 @@ fn write_polymesh(
         }
         w.flush()?;
 
-        let owners = faces.faces().iter().map(|f| f.owner);
+        let owners = faces.faces().iter().map(|f| f.owner());
         let path = dir.join("owner");
         let mut w = create(&path).map_err(std::io::Error::other)?;
         header(&mut w, fmt, "labelList", loc, "owner", Some(&note))?;
         write_label_iter(&mut w, fmt, nf, owners)?;
         w.flush()?;
 
-        let neighbours = faces.faces()[..ni].iter().map(|f| match f.other {
+        let neighbours = faces.faces()[..ni].iter().map(|f| match f.other() {
             Other::Element(j) => j,
             _ => 0,
         });

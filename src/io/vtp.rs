@@ -79,10 +79,13 @@ fn piece_of(mesh: &Mesh, faces: &Faces) -> Result<Piece> {
     };
     let mut corners = Vec::with_capacity(4 * list.len());
     for f in list {
-        let Other::Patch(id) = f.other else { continue };
+        let Other::Patch(id) = f.other() else {
+            continue;
+        };
         corners.extend(f.corners());
         p.patch.push(id as i32);
-        p.element.push(mesh.global_element(f.owner as usize) as i64);
+        p.element
+            .push(mesh.global_element(f.owner() as usize) as i64);
     }
     // Where the nodes are: moved on a snapped mesh.
     for x in mesh.point_positions(&corners)? {

@@ -117,9 +117,9 @@ impl Mesh {
         let mut list: Vec<BoundaryFace> = faces.faces()
             [faces.num_internal()..faces.halo_range().start]
             .iter()
-            .filter_map(|f| match f.other {
+            .filter_map(|f| match f.other() {
                 Other::Patch(p) => Some(BoundaryFace {
-                    element: f.owner,
+                    element: f.owner(),
                     face: element_face(f.axis(), f.negative()),
                     patch: p,
                 }),

@@ -49,7 +49,7 @@
 use std::ops::Range;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::Octant;
+use crate::octant::{Octant, LATTICE_BITS};
 
 use super::dual::{walk_faces, Merged};
 use super::Mesh;
@@ -74,25 +74,52 @@ pub enum Other {
     Patch(u16),
 }
 
-/// One face. See the module documentation for the conventions.
+/// One face, in 16 bytes. See the module documentation for the
+/// conventions.
+///
+/// A face is measured in halves of the face of the element that emitted
+/// it: its [`Face::origin`] is that element face's lowest corner, its
+/// [`Face::half`] half that face's side, and its [`Face::shape`] four
+/// corners `(a, b)` with `a, b` in `0..=2`, 2 bits each, corner `k` in bits
+/// `4k..4k+4` (`a` low): point `origin + half * (a e_u + b e_v)` where
+/// `(e_u, e_v, e_axis)` is right-handed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Face {
-    /// The local element on this side (the owner).
-    pub owner: u32,
-    /// The other side.
-    pub other: Other,
-    /// Lowest lattice corner of the square the corners are measured in
-    /// (the emitting element's face).
-    pub origin: [u32; 3],
-    /// Half that square's side, lattice units.
-    pub half: u32,
-    /// Normal axis (0 x, 1 y, 2 z) in bits 0-1; bit 2 set when the normal
-    /// points towards decreasing coordinates.
-    pub normal: u8,
-    /// Four corners `(a, b)` with `a, b` in `0..=2`, 2 bits each, corner `k`
-    /// in bits `4k..4k+4` (`a` low): point `origin + half * (a e_u + b e_v)`
-    /// where `(e_u, e_v, e_axis)` is right-handed.
-    pub shape: u16,
+    owner: u32,
+    /// [`Other`] in one word: an element below 2^31, a halo element from
+    /// 2^31 on, a patch `p` as `u32::MAX - p`.
+    other: u32,
+    /// Bits 0-4: the shape's place in [`SHAPES`]; 5-6: the normal's axis;
+    /// 7: the normal points towards decreasing coordinates; 8: the face
+    /// lies on the emitting element's high side; 9 on: the emitting
+    /// element's location code (a 1, then its Morton code at its level).
+    code: u64,
+}
+
+/// Halo elements are numbered from here in [`Face`]'s other side.
+const HALO_BASE: u32 = 1 << 31;
+/// Patches are numbered down from `u32::MAX`, at most this many.
+const MAX_PATCHES: u32 = 1 << 16;
+
+impl Other {
+    /// The one-word form [`Face`] stores.
+    fn encode(self) -> u32 {
+        match self {
+            Other::Element(j) => j,
+            Other::Halo(h) => HALO_BASE + h,
+            Other::Patch(p) => u32::MAX - p as u32,
+        }
+    }
+
+    fn decode(v: u32) -> Other {
+        if v < HALO_BASE {
+            Other::Element(v)
+        } else if v > u32::MAX - MAX_PATCHES {
+            Other::Patch((u32::MAX - v) as u16)
+        } else {
+            Other::Halo(v - HALO_BASE)
+        }
+    }
 }
 
 /// The in-plane axes `(u, v)` of a face normal to `axis`, right-handed with
@@ -106,49 +133,150 @@ const WHOLE: [(u8, u8); 4] = [(0, 0), (2, 0), (2, 2), (0, 2)];
 
 /// Twice the signed (shoelace) area of a quadrilateral in halves,
 /// positive when counter-clockwise in `(u, v)`.
-fn twice_area(corners: &[(u8, u8); 4]) -> i32 {
-    (0..4)
-        .map(|k| {
-            let (a, b) = corners[k];
-            let (c, d) = corners[(k + 1) % 4];
-            a as i32 * d as i32 - c as i32 * b as i32
-        })
-        .sum()
+const fn twice_area(corners: &[(u8, u8); 4]) -> i32 {
+    let mut sum = 0;
+    let mut k = 0;
+    while k < 4 {
+        let (a, b) = corners[k];
+        let (c, d) = corners[(k + 1) % 4];
+        sum += a as i32 * d as i32 - c as i32 * b as i32;
+        k += 1;
+    }
+    sum
 }
 
-fn pack(corners: [(u8, u8); 4]) -> u16 {
+const fn pack(corners: [(u8, u8); 4]) -> u16 {
     let mut c = corners;
     if twice_area(&corners) < 0 {
         c.swap(1, 3);
     }
-    c.iter()
-        .enumerate()
-        .map(|(k, &(a, b))| ((a as u16) | (b as u16) << 2) << (4 * k))
-        .sum()
+    let mut out = 0u16;
+    let mut k = 0;
+    while k < 4 {
+        out |= ((c[k].0 as u16) | (c[k].1 as u16) << 2) << (4 * k);
+        k += 1;
+    }
+    out
+}
+
+/// A quarter of a face in halves, `(a, b)` its lowest corner.
+const fn quarter(a: u8, b: u8) -> [(u8, u8); 4] {
+    [(a, b), (a + 1, b), (a + 1, b + 1), (a, b + 1)]
+}
+
+/// Every shape a face takes ([`dropped_pieces`] and the whole face): the
+/// whole face, the four quarters, the two columns and two rows of half
+/// faces, and the two pieces of each L left by three dropped quarters.
+const SHAPES: [u16; 17] = {
+    let mut out = [0u16; 17];
+    out[0] = pack(WHOLE);
+    let mut q = 0;
+    while q < 4 {
+        out[1 + q] = pack(quarter(q as u8 & 1, q as u8 >> 1));
+        // The L of [`dropped_pieces`] around kept quarter `q`.
+        let (ku, kv) = (2 * (q as u8 & 1), 2 * (q as u8 >> 1));
+        let (ou, ov) = (2 - ku, 2 - kv);
+        out[9 + 2 * q] = pack([(1, kv), (ou, kv), (ou, ov), (1, 1)]);
+        out[10 + 2 * q] = pack([(1, 1), (ou, ov), (ku, ov), (ku, 1)]);
+        q += 1;
+    }
+    let mut a = 0;
+    while a < 2 {
+        out[5 + a] = pack([
+            (a as u8, 0),
+            (a as u8 + 1, 0),
+            (a as u8 + 1, 2),
+            (a as u8, 2),
+        ]);
+        out[7 + a] = pack([
+            (0, a as u8),
+            (2, a as u8),
+            (2, a as u8 + 1),
+            (0, a as u8 + 1),
+        ]);
+        a += 1;
+    }
+    out
+};
+
+/// The place of packed shape `shape` in [`SHAPES`].
+#[inline]
+fn shape_index(shape: u16) -> u64 {
+    SHAPES
+        .iter()
+        .position(|&s| s == shape)
+        .expect("a known face shape") as u64
 }
 
 impl Face {
+    /// The local element on this side (the owner).
+    #[inline]
+    pub fn owner(&self) -> u32 {
+        self.owner
+    }
+
+    /// The other side.
+    #[inline]
+    pub fn other(&self) -> Other {
+        Other::decode(self.other)
+    }
+
     /// The normal axis, 0 to 2.
+    #[inline]
     pub fn axis(&self) -> usize {
-        (self.normal & 3) as usize
+        (self.code >> 5 & 3) as usize
     }
 
     /// Whether the normal points towards decreasing coordinates.
+    #[inline]
     pub fn negative(&self) -> bool {
-        self.normal & 4 != 0
+        self.code >> 7 & 1 == 1
+    }
+
+    /// The four corners in halves, packed (see [`Face`]).
+    #[inline]
+    pub fn shape(&self) -> u16 {
+        SHAPES[(self.code & 31) as usize]
+    }
+
+    /// The element that emitted the face.
+    #[inline]
+    fn emitter(&self) -> Octant {
+        let loc = self.code >> 9;
+        let level = (63 - loc.leading_zeros()) / 3;
+        let m = loc ^ 1 << (3 * level);
+        Octant::from_parts(m << (3 * (LATTICE_BITS - level)), level as u8)
+    }
+
+    /// Lowest lattice corner of the square the corners are measured in
+    /// (the emitting element's face).
+    #[inline]
+    pub fn origin(&self) -> [u32; 3] {
+        let e = self.emitter();
+        let mut o = e.coords();
+        if self.code >> 8 & 1 == 1 {
+            o[self.axis()] += e.side();
+        }
+        o
+    }
+
+    /// Half that square's side, lattice units.
+    #[inline]
+    pub fn half(&self) -> u32 {
+        self.emitter().side() / 2
     }
 
     /// Corner `k` in halves, `(a, b)`, in the stored (counter-clockwise in
     /// `(u, v)`) order.
     fn corner_halves(&self, k: usize) -> (u32, u32) {
-        let w = (self.shape >> (4 * k)) & 15;
+        let w = (self.shape() >> (4 * k)) & 15;
         ((w & 3) as u32, (w >> 2) as u32)
     }
 
     /// The four corners in lattice coordinates, counter-clockwise seen from
     /// the side the normal points to.
     pub fn corners(&self) -> [[u32; 3]; 4] {
-        let (axis, h, o) = (self.axis(), self.half, self.origin);
+        let (axis, h, o) = (self.axis(), self.half(), self.origin());
         std::array::from_fn(|k| {
             // A negative normal sees the (u, v) order clockwise: reverse.
             let j = if self.negative() { (4 - k) % 4 } else { k };
@@ -170,7 +298,7 @@ impl Face {
             let (a, b) = self.corner_halves(k);
             (a as u8, b as u8)
         });
-        0.5 * twice_area(&c) as f64 * (self.half as f64).powi(2)
+        0.5 * twice_area(&c) as f64 * (self.half() as f64).powi(2)
     }
 
     /// Centroid in lattice coordinates.
@@ -186,12 +314,8 @@ impl Face {
             cu += (x0 + x1) * cross;
             cv += (y0 + y1) * cross;
         }
-        let h = self.half as f64;
-        let mut c = [
-            self.origin[0] as f64,
-            self.origin[1] as f64,
-            self.origin[2] as f64,
-        ];
+        let (h, o) = (self.half() as f64, self.origin());
+        let mut c = [o[0] as f64, o[1] as f64, o[2] as f64];
         c[u] += cu / (3.0 * a2) * h;
         c[v] += cv / (3.0 * a2) * h;
         c
@@ -206,9 +330,9 @@ impl Face {
 
     /// The same face seen from the other side (normal reversed).
     fn flipped(mut self, owner: u32, other: Other) -> Face {
-        self.normal ^= 4;
+        self.code ^= 1 << 7;
         self.owner = owner;
-        self.other = other;
+        self.other = other.encode();
         self
     }
 }
@@ -341,9 +465,9 @@ impl Faces {
         for f in surface.iter_mut() {
             let p = part(f).min(n as u16 - 1);
             counts[p as usize] += 1;
-            f.other = Other::Patch(SURFACE_PATCH + p);
+            f.other = Other::Patch(SURFACE_PATCH + p).encode();
         }
-        surface.sort_by_key(|f| f.other);
+        surface.sort_by_key(|f| f.other());
         self.patch_start.truncate(s + 1);
         for c in counts {
             let last = self.patch_start[self.patch_start.len() - 1];
@@ -507,17 +631,17 @@ fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
 /// The face of element `e` (local index `i`, the owner) on side `plus` of
 /// `axis`, `shape` in halves of that face.
 fn element_face(i: u32, e: Octant, axis: usize, plus: bool, shape: u16, other: Other) -> Face {
-    let (mut origin, s) = (e.coords(), e.side());
-    if plus {
-        origin[axis] += s;
-    }
+    let level = e.level() as u32;
+    let loc = 1 << (3 * level) | e.morton() >> (3 * (LATTICE_BITS - level));
+    let shape = if shape == SHAPES[0] {
+        0
+    } else {
+        shape_index(shape)
+    };
     Face {
         owner: i,
-        other,
-        origin,
-        half: s / 2,
-        normal: axis as u8 | if plus { 0 } else { 4 },
-        shape,
+        other: other.encode(),
+        code: shape | (axis as u64) << 5 | (!plus as u64) << 7 | (plus as u64) << 8 | loc << 9,
     }
 }
 
@@ -596,7 +720,7 @@ impl Mesh {
             let own = &mut faces[first..];
             for k in 1..own.len() {
                 let mut m = k;
-                while m > 0 && own[m].other < own[m - 1].other {
+                while m > 0 && own[m].other() < own[m - 1].other() {
                     own.swap(m, m - 1);
                     m -= 1;
                 }
@@ -604,13 +728,13 @@ impl Mesh {
         }
         drop(whole);
         debug_assert_eq!(faces.len(), num_internal);
-        boundary.sort_by_key(|f| match f.other {
+        boundary.sort_by_key(|f| match f.other() {
             Other::Patch(p) => p,
             _ => u16::MAX,
         });
         let mut patch_start = vec![num_internal; NUM_PATCHES + 1];
         for f in &boundary {
-            if let Other::Patch(p) = f.other {
+            if let Other::Patch(p) = f.other() {
                 patch_start[p as usize + 1] += 1;
             }
         }
@@ -620,7 +744,7 @@ impl Mesh {
         let me = self.rank as u32;
         let first = self.first_element;
         let key = |f: &Face| -> (u32, u64, u64) {
-            let Other::Halo(h) = f.other else {
+            let Other::Halo(h) = f.other() else {
                 return (u32::MAX, 0, 0);
             };
             let (r, g) = (self.halo.owners[h as usize], self.halo.global[h as usize]);
@@ -825,8 +949,8 @@ impl Mesh {
             let mut send: Vec<u32> = Vec::new();
             let mut recv: Vec<u32> = Vec::new();
             for f in &faces.faces()[range.clone()] {
-                send.push(f.owner);
-                if let Other::Halo(h) = f.other {
+                send.push(f.owner());
+                if let Other::Halo(h) = f.other() {
                     recv.push(h);
                 }
             }
@@ -859,7 +983,7 @@ impl Mesh {
 
     /// The global element number across face `f` (`None` on a boundary).
     pub fn other_global(&self, f: &Face) -> Option<u64> {
-        match f.other {
+        match f.other() {
             Other::Element(j) => Some(self.global_element(j as usize)),
             Other::Halo(h) => Some(self.halo.global[h as usize]),
             Other::Patch(_) => None,
@@ -931,17 +1055,61 @@ mod tests {
     }
 
     #[test]
+    fn a_face_keeps_its_parts_in_sixteen_bytes() {
+        assert_eq!(std::mem::size_of::<Face>(), 16);
+        for o in [
+            Other::Element(0),
+            Other::Element(HALO_BASE - 1),
+            Other::Halo(0),
+            Other::Halo(HALO_BASE - MAX_PATCHES - 1),
+            Other::Patch(0),
+            Other::Patch(u16::MAX),
+        ] {
+            assert_eq!(Other::decode(o.encode()), o);
+        }
+        // Every octant level, both sides, every shape.
+        let mut x = 99u64;
+        for level in 0..=crate::octant::MAX_LEVEL {
+            for _ in 0..50 {
+                x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+                let side = crate::octant::ROOT_LEN >> level;
+                let c = [x >> 7, x >> 27, x >> 47].map(|v| v as u32 % (1 << level) * side);
+                let e = Octant::new(c[0], c[1], c[2], level).unwrap();
+                let (axis, plus) = ((x >> 3) as usize % 3, x & 1 == 1);
+                let shape = SHAPES[(x >> 11) as usize % SHAPES.len()];
+                let f = element_face(7, e, axis, plus, shape, Other::Halo(5));
+                let mut origin = c;
+                if plus {
+                    origin[axis] += side;
+                }
+                assert_eq!((f.origin(), f.half(), f.shape()), (origin, side / 2, shape));
+                assert_eq!((f.axis(), f.negative(), f.owner()), (axis, !plus, 7));
+                assert_eq!(f.other(), Other::Halo(5));
+            }
+        }
+    }
+
+    #[test]
+    fn every_boundary_piece_is_a_known_shape() {
+        for kept in 0..16u8 {
+            for piece in dropped_pieces(kept) {
+                assert!(SHAPES.contains(&pack(piece)), "{kept:04b}: {piece:?}");
+            }
+        }
+    }
+
+    #[test]
     fn corners_follow_the_normal() {
         for normal in 0..6u8 {
             let axis = normal / 2;
-            let f = Face {
-                owner: 0,
-                other: Other::Patch(0),
-                origin: [4, 4, 4],
-                half: 2,
-                normal: axis | if normal % 2 == 1 { 4 } else { 0 },
-                shape: pack(WHOLE),
-            };
+            // The low face of the element of side 4 at (4, 4, 4), its
+            // normal either way.
+            let e = Octant::new(4, 4, 4, crate::octant::MAX_LEVEL - 1).unwrap();
+            let mut f = element_face(0, e, axis as usize, false, pack(WHOLE), Other::Patch(0));
+            if normal % 2 == 0 {
+                f = f.flipped(0, Other::Patch(0));
+            }
+            assert_eq!((f.origin(), f.half()), ([4, 4, 4], 2));
             let c = f.corners();
             let d = |a: [u32; 3], b: [u32; 3]| [0, 1, 2].map(|k| b[k] as f64 - a[k] as f64);
             let (p, q) = (d(c[0], c[1]), d(c[0], c[2]));

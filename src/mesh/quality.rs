@@ -489,10 +489,10 @@ impl Mesh {
             let c = f.lattice_centre();
             let s = scale(f.unit_normal(), f.lattice_area());
             let corners = f.corners().map(|q| q.map(|x| x as f64));
-            let own = centre(Other::Element(f.owner));
+            let own = centre(Other::Element(f.owner()));
             // Seen from the element with the lower global number: the
             // owner on one rank, and the same bits on any number.
-            let (p, n, s) = match (kind, f.other) {
+            let (p, n, s) = match (kind, f.other()) {
                 (FaceKind::Boundary, _) => {
                     max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
                     return;
@@ -500,7 +500,7 @@ impl Mesh {
                 (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
                     return;
                 }
-                (_, Other::Element(j)) if j < f.owner => (centre(f.other), own, scale(s, -1.0)),
+                (_, Other::Element(j)) if j < f.owner() => (centre(f.other()), own, scale(s, -1.0)),
                 (_, other) => (own, centre(other), s),
             };
             let cos = face_orthogonality(p, n, s);
@@ -544,9 +544,9 @@ impl Mesh {
                 |k| index.find(k).is_some(),
                 &mut poly,
             );
-            let flip = match f.other {
+            let flip = match f.other() {
                 Other::Halo(h) => {
-                    self.halo().global[h as usize] < self.global_element(f.owner as usize)
+                    self.halo().global[h as usize] < self.global_element(f.owner() as usize)
                 }
                 _ => false,
             };
@@ -558,7 +558,7 @@ impl Mesh {
                 poly[1..].reverse();
             }
             for &(_, p) in &poly {
-                let node = corner_node(f.owner, p).or(match f.other {
+                let node = corner_node(f.owner(), p).or(match f.other() {
                     Other::Element(j) => corner_node(j, p),
                     _ => None,
                 });
@@ -615,8 +615,8 @@ impl Mesh {
             // faces sorted by key.
             let mut offset = vec![0usize; n + 1];
             for f in list {
-                offset[f.owner as usize + 1] += 1;
-                if let Other::Element(j) = f.other {
+                offset[f.owner() as usize + 1] += 1;
+                if let Other::Element(j) = f.other() {
                     offset[j as usize + 1] += 1;
                 }
             }
@@ -632,9 +632,9 @@ impl Mesh {
                         key[a] += c[a] as u64;
                     }
                 }
-                sides[next[f.owner as usize]] = (key, k as u32, moved.flipped[k]);
-                next[f.owner as usize] += 1;
-                if let Other::Element(j) = f.other {
+                sides[next[f.owner() as usize]] = (key, k as u32, moved.flipped[k]);
+                next[f.owner() as usize] += 1;
+                if let Other::Element(j) = f.other() {
                     sides[next[j as usize]] = (key, k as u32, true);
                     next[j as usize] += 1;
                 }
@@ -658,8 +658,8 @@ impl Mesh {
         for (k, f) in faces.faces().iter().enumerate() {
             let points = &moved.points[moved.start[k]..moved.start[k + 1]];
             let (s, c) = moved.geometry[k];
-            let own = centres[f.owner as usize];
-            let n = match f.other {
+            let own = centres[f.owner() as usize];
+            let n = match f.other() {
                 Other::Patch(_) => {
                     max[2] = max[2].max(boundary_face_skewness(c, s, points, own));
                     continue;
@@ -1150,8 +1150,8 @@ mod tests {
         for f in faces.faces() {
             let c = mesh.face_centre(f);
             let s = scale(f.unit_normal(), mesh.face_area(f));
-            sides[f.owner as usize].push((c, s));
-            if let Other::Element(j) = f.other {
+            sides[f.owner() as usize].push((c, s));
+            if let Other::Element(j) = f.other() {
                 sides[j as usize].push((c, scale(s, -1.0)));
             }
         }
@@ -1207,7 +1207,7 @@ mod tests {
         let internal = &faces.faces()[..faces.num_internal()];
         let fine_coarse = internal
             .iter()
-            .filter(|f| level(Other::Element(f.owner)) != level(f.other))
+            .filter(|f| level(Other::Element(f.owner())) != level(f.other()))
             .count();
         assert!(fine_coarse > 0);
         let cos = 1.5 / 2.75f64.sqrt();
