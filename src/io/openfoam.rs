@@ -46,7 +46,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
-    corner_at, edge_midpoint, halo_corners, point_key, EdgeMidpoints, PointIndex,
+    corner_at, edge_midpoint, edge_points, point_key, EdgeMidpoints, PointIndex,
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
@@ -106,12 +106,7 @@ fn face_polygons(
     // each point is (their keys come first, in node order).
     let lattice = mesh.node_lattice();
     let (nn, ni) = (lattice.len(), mesh.num_independent());
-    let keys: Vec<u64> = lattice[ni..]
-        .iter()
-        .copied()
-        .chain(halo_corners(mesh))
-        .map(point_key)
-        .collect();
+    let keys: Vec<u64> = edge_points(mesh, &lattice).map(point_key).collect();
     let (mut set, hanging_of) = PointIndex::with_first(keys, nn - ni);
     // Whether an edge between two local nodes may carry a point.
     let midpoints = EdgeMidpoints::new(mesh);

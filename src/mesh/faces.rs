@@ -164,16 +164,20 @@ const fn quarter(a: u8, b: u8) -> [(u8, u8); 4] {
     [(a, b), (a + 1, b), (a + 1, b + 1), (a, b + 1)]
 }
 
-/// Every shape a face takes ([`dropped_pieces`] and the whole face): the
-/// whole face, the four quarters, the two columns and two rows of half
-/// faces, and the two pieces of each L left by three dropped quarters.
+/// Every shape a face takes, packed as [`Face::shape`], a face holding its
+/// place: the whole face ([`WHOLE_SHAPE`]), quarter `q` (`1 + q`), the
+/// half-face columns `a` (`5 + a`) and rows `b` (`7 + b`), and the two
+/// quadrilaterals of the L that three dropped quarters leave around kept
+/// quarter `q` (`9 + 2 q`, `10 + 2 q`; see [`dropped_pieces`]).
 const SHAPES: [u16; 17] = {
     let mut out = [0u16; 17];
     out[0] = pack(WHOLE);
     let mut q = 0;
     while q < 4 {
         out[1 + q] = pack(quarter(q as u8 & 1, q as u8 >> 1));
-        // The L of [`dropped_pieces`] around kept quarter `q`.
+        // The kept quarter's outer corner K, the far corner O, the centre
+        // M: the L-shaped rest splits along M-O into two quadrilaterals
+        // whose corners are all kept corners.
         let (ku, kv) = (2 * (q as u8 & 1), 2 * (q as u8 >> 1));
         let (ou, ov) = (2 - ku, 2 - kv);
         out[9 + 2 * q] = pack([(1, kv), (ou, kv), (ou, ov), (1, 1)]);
@@ -199,14 +203,8 @@ const SHAPES: [u16; 17] = {
     out
 };
 
-/// The place of packed shape `shape` in [`SHAPES`].
-#[inline]
-fn shape_index(shape: u16) -> u64 {
-    SHAPES
-        .iter()
-        .position(|&s| s == shape)
-        .expect("a known face shape") as u64
-}
+/// [`SHAPES`]' whole face.
+const WHOLE_SHAPE: u8 = 0;
 
 impl Face {
     /// The local element on this side (the owner).
@@ -590,58 +588,45 @@ fn other_of(a: At) -> Other {
 
 /// The boundary pieces of a face whose fine neighbours `kept` (bit `2b + a`
 /// for the quarter at `(a, b)` in halves) are partly kept: the dropped
-/// quarters' union as quadrilaterals with corners on kept corners.
-fn dropped_pieces(kept: u8) -> Vec<[(u8, u8); 4]> {
-    let quarter = |a: u8, b: u8| [(a, b), (a + 1, b), (a + 1, b + 1), (a, b + 1)];
-    let dropped: Vec<(u8, u8)> = (0..4)
-        .filter(|q| kept & (1 << q) == 0)
-        .map(|q| (q & 1, q >> 1))
-        .collect();
-    match dropped.len() {
-        1 => vec![quarter(dropped[0].0, dropped[0].1)],
-        2 => {
-            let (p, q) = (dropped[0], dropped[1]);
-            if p.0 == q.0 {
-                // One column: a half face.
-                let a = p.0;
-                vec![[(a, 0), (a + 1, 0), (a + 1, 2), (a, 2)]]
-            } else if p.1 == q.1 {
-                let b = p.1;
-                vec![[(0, b), (2, b), (2, b + 1), (0, b + 1)]]
-            } else {
-                vec![quarter(p.0, p.1), quarter(q.0, q.1)]
+/// quarters' union as quadrilaterals with corners on kept corners, as
+/// places in [`SHAPES`] (the first `n` of the array).
+fn dropped_pieces(kept: u8) -> ([u8; 2], usize) {
+    let dropped = !kept & 15;
+    match dropped.count_ones() {
+        1 => ([1 + dropped.trailing_zeros() as u8, 0], 1),
+        2 => match dropped {
+            // One column (`a` the same) or one row: a half face.
+            0b0101 => ([5, 0], 1),
+            0b1010 => ([6, 0], 1),
+            0b0011 => ([7, 0], 1),
+            0b1100 => ([8, 0], 1),
+            // Two opposite quarters.
+            _ => {
+                let (p, q) = (dropped.trailing_zeros(), 7 - dropped.leading_zeros());
+                ([1 + p as u8, 1 + q as u8], 2)
             }
-        }
+        },
         3 => {
-            // The kept quarter's outer corner K, the far corner O, the
-            // centre M; the L-shaped rest splits along M-O into two
-            // quadrilaterals whose corners are all kept corners.
-            let q = (0..4u8).find(|q| kept & (1 << q) != 0).unwrap_or(0);
-            let (ku, kv) = (2 * (q & 1), 2 * (q >> 1));
-            let (ou, ov) = (2 - ku, 2 - kv);
-            vec![
-                [(1, kv), (ou, kv), (ou, ov), (1, 1)],
-                [(1, 1), (ou, ov), (ku, ov), (ku, 1)],
-            ]
+            let q = kept.trailing_zeros() as u8;
+            ([9 + 2 * q, 10 + 2 * q], 2)
         }
-        _ => Vec::new(),
+        _ => ([0, 0], 0),
     }
 }
 
 /// The face of element `e` (local index `i`, the owner) on side `plus` of
-/// `axis`, `shape` in halves of that face.
-fn element_face(i: u32, e: Octant, axis: usize, plus: bool, shape: u16, other: Other) -> Face {
+/// `axis`, of shape `shape` (a place in [`SHAPES`]) in halves of that face.
+fn element_face(i: u32, e: Octant, axis: usize, plus: bool, shape: u8, other: Other) -> Face {
     let level = e.level() as u32;
     let loc = 1 << (3 * level) | e.morton() >> (3 * (LATTICE_BITS - level));
-    let shape = if shape == SHAPES[0] {
-        0
-    } else {
-        shape_index(shape)
-    };
     Face {
         owner: i,
         other: other.encode(),
-        code: shape | (axis as u64) << 5 | (!plus as u64) << 7 | (plus as u64) << 8 | loc << 9,
+        code: shape as u64
+            | (axis as u64) << 5
+            | (!plus as u64) << 7
+            | (plus as u64) << 8
+            | loc << 9,
     }
 }
 
@@ -687,9 +672,7 @@ impl Mesh {
             Found::Face(_, face) => halo.push(face),
         });
         quarters.sort_unstable();
-        let num_internal = whole.iter().filter(|&&w| w != 0).count() + quarters.len();
-        faces.reserve_exact(num_internal + boundary.len() + halo.len());
-        let full = pack(WHOLE);
+        let full = WHOLE_SHAPE;
         let mut q = 0;
         for (i, &e) in elements.iter().enumerate() {
             let first = faces.len();
@@ -727,7 +710,8 @@ impl Mesh {
             }
         }
         drop(whole);
-        debug_assert_eq!(faces.len(), num_internal);
+        let num_internal = faces.len();
+        faces.reserve_exact(boundary.len() + halo.len());
         boundary.sort_by_key(|f| match f.other() {
             Other::Patch(p) => p,
             _ => u16::MAX,
@@ -788,7 +772,7 @@ impl Mesh {
     /// elements in the pieces of [`dropped_pieces`].
     pub(super) fn for_each_face(&self, mut put: impl FnMut(FaceKind, Face)) {
         let elements: &[Octant] = &self.elements;
-        let whole = pack(WHOLE);
+        let whole = WHOLE_SHAPE;
         self.walk_faces(|found| match found {
             Found::Pair {
                 axis,
@@ -827,7 +811,7 @@ impl Mesh {
             }
         };
         let face = element_face;
-        let whole = pack(WHOLE);
+        let whole = WHOLE_SHAPE;
         // Per element, bit `4 f + q`: quarter `q` of its face `f` faces a
         // kept element.
         let mut covered = vec![0u32; nl];
@@ -861,9 +845,7 @@ impl Mesh {
                         found(Found::Face(FaceKind::Halo, f));
                     }
                     (At::Halo(_), At::Local(c)) => {
-                        let (qa, qb) = ((q & 1) as u8, (q >> 1) as u8);
-                        let shape = pack([(qa, qb), (qa + 1, qb), (qa + 1, qb + 1), (qa, qb + 1)]);
-                        let f = face(c, lc, axis, !fine_low, shape, other_of(fine));
+                        let f = face(c, lc, axis, !fine_low, 1 + q as u8, other_of(fine));
                         found(Found::Face(FaceKind::Halo, f));
                     }
                     _ => {}
@@ -903,16 +885,6 @@ impl Mesh {
                 }
             }
         });
-        // The boundary pieces of a face by the quarters kept elements
-        // cover.
-        let pieces: [([u16; 2], usize); 16] = std::array::from_fn(|m| {
-            let p = dropped_pieces(m as u8);
-            let mut out = [0u16; 2];
-            for (k, shape) in p.iter().enumerate() {
-                out[k] = pack(*shape);
-            }
-            (out, p.len())
-        });
         let brick = &self.domain.brick;
         for (i, &e) in elements.iter().enumerate() {
             if covered[i] == u32::MAX >> 8 {
@@ -921,8 +893,8 @@ impl Mesh {
             let outside = brick.outside_faces(e);
             for f in 0..6 {
                 let (axis, plus) = (f / 2, f % 2 == 1);
-                let mask = (covered[i] >> (4 * f) & 15) as usize;
-                let mut side = |shape: u16, other: Other| {
+                let mask = (covered[i] >> (4 * f) & 15) as u8;
+                let mut side = |shape: u8, other: Other| {
                     let face = face(i as u32, e, axis, plus, shape, other);
                     found(Found::Face(FaceKind::Boundary, face));
                 };
@@ -932,7 +904,7 @@ impl Mesh {
                 } else if mask == 0 {
                     side(whole, Other::Patch(SURFACE_PATCH));
                 } else {
-                    let (shapes, n) = pieces[mask];
+                    let (shapes, n) = dropped_pieces(mask);
                     for &shape in &shapes[..n] {
                         side(shape, Other::Patch(SURFACE_PATCH));
                     }
@@ -1019,10 +991,22 @@ impl Mesh {
 mod tests {
     use super::*;
 
+    /// A packed shape's corners in halves.
+    fn unpack(shape: u16) -> [(u8, u8); 4] {
+        std::array::from_fn(|k| {
+            let w = shape >> (4 * k) & 15;
+            ((w & 3) as u8, (w >> 2) as u8)
+        })
+    }
+
     #[test]
     fn pieces_cover_the_dropped_quarters() {
         for kept in 1u8..15 {
-            let pieces = dropped_pieces(kept);
+            let (places, n) = dropped_pieces(kept);
+            let pieces: Vec<[(u8, u8); 4]> = places[..n]
+                .iter()
+                .map(|&i| unpack(SHAPES[i as usize]))
+                .collect();
             let area: i32 = pieces.iter().map(|p| twice_area(p).abs()).sum();
             let dropped = 4 - kept.count_ones() as i32;
             assert_eq!(area, 2 * dropped, "kept {kept:04b}");
@@ -1076,8 +1060,11 @@ mod tests {
                 let c = [x >> 7, x >> 27, x >> 47].map(|v| v as u32 % (1 << level) * side);
                 let e = Octant::new(c[0], c[1], c[2], level).unwrap();
                 let (axis, plus) = ((x >> 3) as usize % 3, x & 1 == 1);
-                let shape = SHAPES[(x >> 11) as usize % SHAPES.len()];
-                let f = element_face(7, e, axis, plus, shape, Other::Halo(5));
+                let place = (x >> 11) as usize % SHAPES.len();
+                let (shape, f) = (
+                    SHAPES[place],
+                    element_face(7, e, axis, plus, place as u8, Other::Halo(5)),
+                );
                 let mut origin = c;
                 if plus {
                     origin[axis] += side;
@@ -1092,9 +1079,16 @@ mod tests {
     #[test]
     fn every_boundary_piece_is_a_known_shape() {
         for kept in 0..16u8 {
-            for piece in dropped_pieces(kept) {
-                assert!(SHAPES.contains(&pack(piece)), "{kept:04b}: {piece:?}");
+            let (places, n) = dropped_pieces(kept);
+            for &piece in &places[..n] {
+                assert!((piece as usize) < SHAPES.len(), "{kept:04b}: {piece}");
             }
+        }
+        // The shapes are distinct, counter-clockwise, and pack as stored.
+        for (i, &s) in SHAPES.iter().enumerate() {
+            assert!(twice_area(&unpack(s)) > 0, "shape {i}");
+            assert_eq!(pack(unpack(s)), s, "shape {i}");
+            assert!(!SHAPES[..i].contains(&s), "shape {i} twice");
         }
     }
 
@@ -1105,7 +1099,7 @@ mod tests {
             // The low face of the element of side 4 at (4, 4, 4), its
             // normal either way.
             let e = Octant::new(4, 4, 4, crate::octant::MAX_LEVEL - 1).unwrap();
-            let mut f = element_face(0, e, axis as usize, false, pack(WHOLE), Other::Patch(0));
+            let mut f = element_face(0, e, axis as usize, false, WHOLE_SHAPE, Other::Patch(0));
             if normal % 2 == 0 {
                 f = f.flipped(0, Other::Patch(0));
             }

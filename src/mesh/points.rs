@@ -29,16 +29,6 @@ pub fn corner_at(c: [u32; 3], s: u32, p: [u32; 3]) -> Option<usize> {
     Some(m)
 }
 
-/// The keys of the mesh points near this rank: every corner of a local
-/// element (the local nodes first, in node order, from `lattice`, the
-/// mesh's [`super::Mesh::node_lattice`]) or of a halo element, the points a
-/// face's edges may carry. Duplicates are left in.
-pub fn near_point_keys(mesh: &super::Mesh, lattice: &[[u32; 3]]) -> Vec<u64> {
-    let mut keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
-    keys.extend(halo_corners(mesh).map(point_key));
-    keys
-}
-
 /// The mesh points near this rank a face's edge can carry between its
 /// corners: the hanging local nodes (from `lattice`, the mesh's
 /// [`super::Mesh::node_lattice`]) and the halo elements' corners. A mesh

@@ -98,7 +98,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
-    corner_at, edge_points, face_polygon, near_point_keys, PointFilter, PointIndex,
+    corner_at, edge_points, face_polygon, point_key, PointFilter, PointIndex,
 };
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 
@@ -512,12 +512,11 @@ impl Mesh {
     /// The faces of `faces` on the moved points of a snapped mesh (see
     /// [`MovedFaces`]). Local work.
     fn moved_faces(&self, faces: &Faces) -> Result<MovedFaces> {
-        // The mesh points near this rank: every corner of a local or halo
-        // element (the points the OpenFOAM writer puts on the faces' edges).
+        // The points a face edge can carry in its middle (the points the
+        // OpenFOAM writer puts there): hanging nodes and halo corners.
         let lattice = self.node_lattice();
-        let keys = near_point_keys(self, &lattice);
         let filter = PointFilter::new(edge_points(self, &lattice));
-        let mut index = PointIndex::new(keys);
+        let mut index = PointIndex::new(edge_points(self, &lattice).map(point_key).collect());
         let (elements, conn) = (self.elements(), self.connectivity());
         let moved = self.moved().unwrap_or(&[]);
         // The node at lattice point `p` if it is a corner of local element
