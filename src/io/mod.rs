@@ -1,8 +1,9 @@
-//! Files octmesh writes and reads: leaf lists, VTK XML meshes (`vtu`) and
+//! Files octmesh writes and reads (large ones around the page cache: `direct`): leaf lists, VTK XML meshes (`vtu`) and
 //! boundary faces (`vtp`), JSON
 //! statistics and reports (`json`), leak paths (`leak_path`), OpenFOAM cases
 //! (`openfoam`), and (in `geometry::stl`) STL.
 
+pub mod direct;
 pub mod json;
 pub mod leak_path;
 pub mod leaves;

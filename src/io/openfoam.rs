@@ -38,9 +38,10 @@
 //! rank leaves no case looking complete, and every rank reports it.
 
 use std::fs;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use super::direct::DirectWriter;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
@@ -87,6 +88,29 @@ pub struct FoamCounts {
     pub cells: u64,
 }
 
+/// The points of a rank's faces, in label order, by their number: a local
+/// node `n < nn`, or `nn + j` for the point at place `j` of the searched
+/// set that is no local node (a corner of the halo).
+struct FacePoints {
+    /// Each label's point number.
+    ids: Vec<u32>,
+    /// The local nodes' lattice points.
+    lattice: Vec<[u32; 3]>,
+    /// The searched set.
+    set: PointIndex,
+}
+
+impl FacePoints {
+    /// The lattice point of point number `id`.
+    fn lattice_point(&self, id: u32) -> [u32; 3] {
+        let nn = self.lattice.len();
+        match (id as usize).checked_sub(nn) {
+            None => self.lattice[id as usize],
+            Some(j) => self.set.point(j),
+        }
+    }
+}
+
 /// Turns each face of `faces`, in order, into its polygon of point
 /// labels and hands it to `emit`; returns this rank's points in label
 /// order (labels follow the order in which the faces first use the
@@ -95,7 +119,7 @@ fn face_polygons(
     mesh: &Mesh,
     faces: &Faces,
     mut emit: impl FnMut(&[u32]) -> Result<()>,
-) -> Result<Vec<[u32; 3]>> {
+) -> Result<FacePoints> {
     // Every corner of a kept element near this rank is a mesh point. A
     // face's corners and edge midpoints are local nodes or corners of
     // halo elements. Those that are not a local element's corners (the
@@ -136,7 +160,9 @@ fn face_polygons(
     };
     let mut label = vec![0u32; nn + set.len()];
     let halo_start = faces.halo_range().start;
-    let mut points: Vec<[u32; 3]> = Vec::new();
+    // At most every node and every point of the set; only the pages used
+    // are touched.
+    let mut ids: Vec<u32> = Vec::with_capacity(label.len());
     let mut total = 0usize;
     let mut labels: Vec<u32> = Vec::with_capacity(8);
     let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
@@ -178,10 +204,10 @@ fn face_polygons(
             poly.rotate_left(at);
         }
         labels.clear();
-        for &(p, x) in &poly {
+        for &(p, _) in &poly {
             if label[p] == 0 {
-                points.push(x);
-                label[p] = points.len() as u32;
+                ids.push(p as u32);
+                label[p] = ids.len() as u32;
             }
             labels.push(label[p] - 1);
         }
@@ -194,7 +220,7 @@ fn face_polygons(
         }
         emit(&labels)?;
     }
-    Ok(points)
+    Ok(FacePoints { ids, lattice, set })
 }
 
 /// The directory of this rank's mesh.
@@ -395,6 +421,51 @@ fn write_raw<T: Raw>(out: &mut impl Write, v: &[T]) -> std::io::Result<()> {
     }
 }
 
+/// Writes the positions of `points` in label order (user units: the moved
+/// positions on a snapped mesh, the lattice's otherwise), a block at a
+/// time: no array of every position is made.
+fn write_positions(
+    w: &mut impl Write,
+    fmt: FoamFormat,
+    mesh: &Mesh,
+    points: &FacePoints,
+) -> std::io::Result<()> {
+    let nn = points.lattice.len() as u32;
+    let domain = mesh.domain();
+    let moved = mesh.moved();
+    // On a snapped mesh the halo's points that are no local node are the
+    // means of moved corners, all found in one pass.
+    let mut off_node = match moved {
+        Some(_) => {
+            let q: Vec<[u32; 3]> = (points.ids.iter())
+                .filter(|&&id| id >= nn)
+                .map(|&id| points.lattice_point(id))
+                .collect();
+            mesh.off_node_positions(&q).map_err(std::io::Error::other)?
+        }
+        None => Vec::new(),
+    }
+    .into_iter();
+    let mut block: Vec<[f64; 3]> = Vec::with_capacity(1 << 14);
+    for ids in points.ids.chunks(1 << 14) {
+        block.clear();
+        block.extend(ids.iter().map(|&id| match moved {
+            Some(m) if id < nn => m[id as usize],
+            Some(_) => off_node.next().unwrap_or([f64::NAN; 3]),
+            None => domain.from_lattice(points.lattice_point(id).map(f64::from)),
+        }));
+        match fmt {
+            FoamFormat::Binary => write_raw(w, &block)?,
+            FoamFormat::Ascii => {
+                for x in &block {
+                    writeln!(w, "({:.17e} {:.17e} {:.17e})", x[0], x[1], x[2])?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Width of the label count of a binary `faces` file: the labels are
 /// streamed before their number is known, and the count written over room
 /// left for it (OpenFOAM skips the trailing blanks).
@@ -408,41 +479,48 @@ fn write_faces(
     loc: &str,
     mesh: &Mesh,
     faces: &Faces,
-) -> Result<Vec<[u32; 3]>> {
-    use std::io::{Seek, SeekFrom};
+) -> Result<FacePoints> {
     let io = |e: std::io::Error| io_err(path, e);
     let nf = faces.faces().len();
     match fmt {
         FoamFormat::Binary => {
-            // A faceCompactList: the offsets, then the labels. The labels
-            // go to the file as they come, after room for the offsets,
-            // which are written last.
+            // A faceCompactList: the offsets, then the labels. Both go to
+            // the file as they come, each through its own writer at its
+            // own place; the header, the end of the offsets and the label
+            // count are written last.
             let mut head = Vec::new();
             header(&mut head, fmt, "faceCompactList", loc, "faces", None).map_err(io)?;
             write!(head, "{}\n(", nf + 1).map_err(io)?;
             // Between the two lists: the end of the offsets, then the
             // label count (written last, over the same room).
             let between = |count: u32| format!(")\n\n{count:<LABEL_COUNT_WIDTH$}\n(");
-            let data_at = head.len() + 4 * (nf + 1) + between(0).len();
-            let mut file = fs::File::create(path).map_err(io)?;
-            file.seek(SeekFrom::Start(data_at as u64)).map_err(io)?;
-            let mut w = BufWriter::with_capacity(1 << 20, file);
-            let mut offsets = Vec::with_capacity(nf + 1);
+            let offsets_end = head.len() + 4 * (nf + 1);
+            let data_at = offsets_end + between(0).len();
+            let mut w = DirectWriter::create(path).map_err(io)?;
+            w.restart_at(data_at as u64).map_err(io)?;
+            let mut wo = DirectWriter::open(path).map_err(io)?;
+            wo.restart_at(head.len() as u64).map_err(io)?;
+            const CHUNK: usize = 1 << 14;
+            let mut offsets = Vec::with_capacity(CHUNK);
             offsets.push(0u32);
             let mut total = 0u32;
             let points = face_polygons(mesh, faces, |l| {
                 total += l.len() as u32;
                 offsets.push(total);
+                if offsets.len() == CHUNK {
+                    write_raw(&mut wo, &offsets).map_err(io)?;
+                    offsets.clear();
+                }
                 write_raw(&mut w, l).map_err(io)
             })?;
+            write_raw(&mut wo, &offsets).map_err(io)?;
             w.write_all(b")\n").map_err(io)?;
-            let mut file = w.into_inner().map_err(|e| io(e.into_error()))?;
-            file.seek(SeekFrom::Start(0)).map_err(io)?;
-            let mut w = BufWriter::with_capacity(1 << 20, file);
-            w.write_all(&head).map_err(io)?;
-            write_raw(&mut w, &offsets).map_err(io)?;
-            w.write_all(between(total).as_bytes()).map_err(io)?;
             w.flush().map_err(io)?;
+            drop(w);
+            wo.write_all(between(total).as_bytes()).map_err(io)?;
+            wo.restart_at(0).map_err(io)?;
+            wo.write_all(&head).map_err(io)?;
+            wo.flush().map_err(io)?;
             Ok(points)
         }
         FoamFormat::Ascii => {
@@ -469,10 +547,8 @@ fn write_faces(
     }
 }
 
-fn create(path: &Path) -> Result<BufWriter<fs::File>> {
-    fs::File::create(path)
-        .map(|f| BufWriter::with_capacity(1 << 20, f))
-        .map_err(|e| io_err(path, e))
+fn create(path: &Path) -> Result<DirectWriter> {
+    DirectWriter::create(path).map_err(|e| io_err(path, e))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -492,13 +568,10 @@ fn write_polymesh(
     };
     let loc = location.as_str();
     let points = write_faces(&dir.join("faces"), fmt, loc, mesh, faces)?;
-    // The moved positions on a snapped mesh, the lattice's otherwise.
-    let positions = mesh.point_positions(&points)?;
-    drop(points);
     let nf = faces.faces().len();
     let ni = faces.num_internal();
     let counts = FoamCounts {
-        points: positions.len() as u64,
+        points: points.ids.len() as u64,
         faces: nf as u64,
         internal_faces: ni as u64,
         cells: mesh.elements().len() as u64,
@@ -511,21 +584,14 @@ fn write_polymesh(
     let result = (|| -> std::io::Result<()> {
         let mut w = create(&path).map_err(std::io::Error::other)?;
         header(&mut w, fmt, "vectorField", loc, "points", None)?;
-        write!(w, "{}\n(", positions.len())?;
-        match fmt {
-            FoamFormat::Binary => {
-                write_raw(&mut w, &positions)?;
-                writeln!(w, ")")?;
-            }
-            FoamFormat::Ascii => {
-                writeln!(w)?;
-                for x in &positions {
-                    writeln!(w, "({:.17e} {:.17e} {:.17e})", x[0], x[1], x[2])?;
-                }
-                writeln!(w, ")")?;
-            }
+        write!(w, "{}\n(", points.ids.len())?;
+        if fmt == FoamFormat::Ascii {
+            writeln!(w)?;
         }
+        write_positions(&mut w, fmt, mesh, &points)?;
+        writeln!(w, ")")?;
         w.flush()?;
+        drop(points);
 
         let owners = faces.faces().iter().map(|f| f.owner());
         let path = dir.join("owner");

@@ -5,7 +5,7 @@
 //! Faces come in Morton order, so consecutive look-ups land near each
 //! other: each one gallops from the previous hit and stays in cache.
 
-use crate::octant::morton_encode;
+use crate::octant::{morton_decode, morton_encode};
 use crate::sort::{gallop_last_le, radix_sort_bits};
 
 /// A lattice point's Morton code (21 bits per axis, so the far corner of
@@ -101,6 +101,11 @@ impl PointIndex {
     /// Whether the set is empty.
     pub fn is_empty(&self) -> bool {
         self.keys.is_empty()
+    }
+
+    /// The point at place `j`.
+    pub fn point(&self, j: usize) -> [u32; 3] {
+        morton_decode(self.keys[j])
     }
 
     /// The position of the point with key `k`, if it is in the set.

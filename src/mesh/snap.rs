@@ -1506,9 +1506,39 @@ impl Mesh {
                 Err(_) => missing.push((*q, i as u32)),
             }
         }
+        self.midpoint_positions(moved, missing, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Mesh::point_positions`] of points that are no local node: the
+    /// midpoints of local elements' edges and faces.
+    pub(crate) fn off_node_positions(&self, points: &[[u32; 3]]) -> Result<Vec<[f64; 3]>> {
+        let Some(moved) = &self.moved_lattice else {
+            return self.point_positions(points);
+        };
+        let mut out = vec![[f64::NAN; 3]; points.len()];
+        let missing = points
+            .iter()
+            .enumerate()
+            .map(|(i, &q)| (q, i as u32))
+            .collect();
+        self.midpoint_positions(moved, missing, &mut out)?;
+        Ok(out)
+    }
+
+    /// Sets `out[i]` for each `(point, i)` of `missing` to the mean of the
+    /// moved corners of the local element edge or face it is the midpoint
+    /// of.
+    fn midpoint_positions(
+        &self,
+        moved: &[[f64; 3]],
+        mut missing: Vec<([u32; 3], u32)>,
+        out: &mut [[f64; 3]],
+    ) -> Result<()> {
         if missing.is_empty() {
-            return Ok(out);
+            return Ok(());
         }
+        let domain = self.domain();
         missing.sort_unstable();
         // Edges: Morton corner pairs differing in one bit; faces: the four
         // corners with one bit fixed. The same for every element.
@@ -1567,7 +1597,7 @@ impl Mesh {
                 "a face corner of the snapped mesh is no node and no midpoint of a local element",
             ));
         }
-        Ok(out)
+        Ok(())
     }
 }
 
