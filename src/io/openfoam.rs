@@ -146,6 +146,7 @@ fn face_polygons(
     let corner_of = |e: u32, (c, s): ([u32; 3], u32), p: [u32; 3]| -> Option<usize> {
         corner_at(c, s, p).map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize)
     };
+    let too_many = || Error::new(ErrorKind::Limit, "more than 2^31 face labels on one rank");
     let cube = |e: u32| (elements[e as usize].coords(), elements[e as usize].side());
     // A point is a local node `n` (most are: the corners of a face that is
     // a local element's whole face come from its connectivity, with no
@@ -168,11 +169,51 @@ fn face_polygons(
     let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
+        // Most faces are the whole face of a local element: their corners
+        // are its nodes, and an edge's midpoint is looked for only when
+        // both ends may carry one. No coordinates are decoded.
+        let whole = (i < halo_start)
+            .then(|| f.whole_corner_octants())
+            .flatten()
+            .and_then(|m| {
+                let e = if elements[f.owner() as usize].side() == f.emitter_side() {
+                    f.owner()
+                } else {
+                    match f.other() {
+                        Other::Element(j) => j,
+                        _ => return None,
+                    }
+                };
+                Some(m.map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize))
+            });
+        if let Some(nodes) = whole {
+            for k in 0..4 {
+                let (a, b) = (nodes[k], nodes[(k + 1) % 4]);
+                poly.push((a, [0; 3]));
+                if midpoints.may_hold_ends(a, b) {
+                    if let Some(m) = edge_midpoint(lattice[a], lattice[b]) {
+                        if midpoints.may_hold(a, b, m) {
+                            if let Some(j) = set.find(point_key(m)) {
+                                poly.push((point_of(j), m));
+                            }
+                        }
+                    }
+                }
+            }
+            push_labels(&poly, &mut label, &mut ids, &mut labels);
+            total += labels.len();
+            if total > i32::MAX as usize {
+                return Err(too_many());
+            }
+            emit(&labels)?;
+            continue;
+        }
+
         let c = f.corners();
         // The element whose whole face this is, when it is local: the
         // owner, or a finer local neighbour.
         let mut emitter = (f.owner(), cube(f.owner()));
-        if 2 * f.half() != emitter.1 .1 {
+        if f.emitter_side() != emitter.1 .1 {
             if let Other::Element(j) = f.other() {
                 emitter = (j, cube(j));
             }
@@ -203,24 +244,32 @@ fn face_polygons(
                 .unwrap_or(0);
             poly.rotate_left(at);
         }
-        labels.clear();
-        for &(p, _) in &poly {
-            if label[p] == 0 {
-                ids.push(p as u32);
-                label[p] = ids.len() as u32;
-            }
-            labels.push(label[p] - 1);
-        }
+        push_labels(&poly, &mut label, &mut ids, &mut labels);
         total += labels.len();
         if total > i32::MAX as usize {
-            return Err(Error::new(
-                ErrorKind::Limit,
-                "more than 2^31 face labels on one rank",
-            ));
+            return Err(too_many());
         }
         emit(&labels)?;
     }
     Ok(FacePoints { ids, lattice, set })
+}
+
+/// The labels of the points of `poly` (labels stored plus one in `label`;
+/// a point without one gets the next, and its number goes to `ids`).
+fn push_labels(
+    poly: &[(usize, [u32; 3])],
+    label: &mut [u32],
+    ids: &mut Vec<u32>,
+    labels: &mut Vec<u32>,
+) {
+    labels.clear();
+    for &(p, _) in poly {
+        if label[p] == 0 {
+            ids.push(p as u32);
+            label[p] = ids.len() as u32;
+        }
+        labels.push(label[p] - 1);
+    }
 }
 
 /// The directory of this rank's mesh.
@@ -503,17 +552,24 @@ fn write_faces(
             const CHUNK: usize = 1 << 14;
             let mut offsets = Vec::with_capacity(CHUNK);
             offsets.push(0u32);
+            let mut labels = Vec::with_capacity(CHUNK + 8);
             let mut total = 0u32;
             let points = face_polygons(mesh, faces, |l| {
                 total += l.len() as u32;
                 offsets.push(total);
+                labels.extend_from_slice(l);
                 if offsets.len() == CHUNK {
                     write_raw(&mut wo, &offsets).map_err(io)?;
                     offsets.clear();
                 }
-                write_raw(&mut w, l).map_err(io)
+                if labels.len() >= CHUNK {
+                    write_raw(&mut w, &labels).map_err(io)?;
+                    labels.clear();
+                }
+                Ok(())
             })?;
             write_raw(&mut wo, &offsets).map_err(io)?;
+            write_raw(&mut w, &labels).map_err(io)?;
             w.write_all(b")\n").map_err(io)?;
             w.flush().map_err(io)?;
             drop(w);

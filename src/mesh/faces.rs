@@ -258,10 +258,40 @@ impl Face {
         o
     }
 
+    /// The side of the element that emitted the face, lattice units.
+    #[inline]
+    pub fn emitter_side(&self) -> u32 {
+        self.emitter().side()
+    }
+
     /// Half that square's side, lattice units.
     #[inline]
     pub fn half(&self) -> u32 {
         self.emitter().side() / 2
+    }
+
+    /// For a face that is the whole face of the element that emitted it:
+    /// that element's corners (Morton order, 0 to 7) in the order of
+    /// [`Face::corners`]; `None` for a part of a face. No coordinates are
+    /// decoded.
+    #[inline]
+    pub fn whole_corner_octants(&self) -> Option<[usize; 4]> {
+        if self.code & 31 != WHOLE_SHAPE as u64 {
+            return None;
+        }
+        let axis = self.axis();
+        let plus = (self.code >> 8 & 1) as usize;
+        // The (u, v) axes of `corners`.
+        let (u, v) = match axis {
+            0 => (1, 2),
+            1 => (2, 0),
+            _ => (0, 1),
+        };
+        Some(std::array::from_fn(|k| {
+            let j = if self.negative() { (4 - k) % 4 } else { k };
+            let (a, b) = self.corner_halves(j);
+            plus << axis | (a as usize / 2) << u | (b as usize / 2) << v
+        }))
     }
 
     /// Corner `k` in halves, `(a, b)`, in the stored (counter-clockwise in
@@ -1105,6 +1135,15 @@ mod tests {
             }
             assert_eq!((f.origin(), f.half()), ([4, 4, 4], 2));
             let c = f.corners();
+            for plus in [false, true] {
+                let mut g = element_face(0, e, axis as usize, plus, WHOLE_SHAPE, Other::Patch(0));
+                if normal % 2 == 0 {
+                    g = g.flipped(0, Other::Patch(0));
+                }
+                let m = g.whole_corner_octants().expect("a whole face");
+                let at = |m| crate::mesh::dual::corner_coords(e.coords(), e.side(), m);
+                assert_eq!(m.map(at), g.corners(), "normal {normal} plus {plus}");
+            }
             let d = |a: [u32; 3], b: [u32; 3]| [0, 1, 2].map(|k| b[k] as f64 - a[k] as f64);
             let (p, q) = (d(c[0], c[1]), d(c[0], c[2]));
             let cross = [

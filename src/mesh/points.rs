@@ -170,6 +170,7 @@ impl PointFilter {
 pub struct EdgeMidpoints {
     hanging_end: Vec<bool>,
     halo: PointFilter,
+    halo_empty: bool,
 }
 
 impl EdgeMidpoints {
@@ -183,6 +184,7 @@ impl EdgeMidpoints {
         EdgeMidpoints {
             hanging_end,
             halo: PointFilter::new(halo_corners(mesh)),
+            halo_empty: mesh.halo().leaves.is_empty(),
         }
     }
 
@@ -190,6 +192,14 @@ impl EdgeMidpoints {
     /// `m`, may carry a mesh point at `m` (`false`: surely not).
     pub fn may_hold(&self, a: usize, b: usize, m: [u32; 3]) -> bool {
         (self.hanging_end[a] && self.hanging_end[b]) || self.halo.may_hold(m)
+    }
+
+    /// [`EdgeMidpoints::may_hold`] before the midpoint is known: `false`
+    /// when the answer is `false` whatever it is (always, without a halo,
+    /// unless both ends are ends of an edge-hanging node).
+    #[inline]
+    pub fn may_hold_ends(&self, a: usize, b: usize) -> bool {
+        (self.hanging_end[a] && self.hanging_end[b]) || !self.halo_empty
     }
 }
 
