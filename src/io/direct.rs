@@ -24,6 +24,8 @@ use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
 use std::os::unix::fs::FileExt;
 use std::path::Path;
+use std::sync::Arc;
+use std::thread::JoinHandle;
 
 /// Alignment of direct writes, in memory and in the file: the largest
 /// logical block size in common use.
@@ -36,25 +38,58 @@ const CHUNK: usize = 8 << 20;
 #[repr(C, align(4096))]
 struct Block([u8; BLOCK]);
 
+/// A direct write under way: its thread hands back the buffer and whether
+/// the file system took the write directly.
+type Job = JoinHandle<(Vec<Block>, io::Result<bool>)>;
+
 /// A writer that sends the whole blocks of a file with `O_DIRECT`, the
 /// rest through the page cache; see the module's documentation. Bytes are
 /// written from a start offset on ([`DirectWriter::restart_at`] moves it);
 /// call [`Write::flush`] when done: dropping the writer discards what is
 /// still buffered.
+///
+/// A full buffer's blocks are written by a short-lived thread while the
+/// caller fills a second buffer: the thread waits on the device (no
+/// computing, no MPI), so the caller's work and the disk overlap. At most
+/// one write is under way; an error comes back from the next call.
 pub struct DirectWriter {
     /// The ordinary handle: the partial blocks, everything when `direct`
     /// is `None`.
-    plain: File,
+    plain: Arc<File>,
     /// The same file opened with `O_DIRECT`, while the file system takes it.
-    direct: Option<File>,
+    direct: Option<Arc<File>>,
     /// The buffer, `CHUNK` bytes; the pending bytes sit at
     /// `base % BLOCK ..`, so file offsets and buffer places agree modulo
     /// the block size and whole blocks of the file are aligned in memory.
     blocks: Vec<Block>,
+    /// The other buffer, when no write holds it.
+    spare: Option<Vec<Block>>,
+    /// The write under way.
+    job: Option<Job>,
     /// File offset of the first pending byte.
     base: u64,
     /// Pending bytes.
     len: usize,
+}
+
+/// A buffer of `CHUNK` bytes.
+fn new_blocks() -> Vec<Block> {
+    let mut blocks = Vec::with_capacity(CHUNK / BLOCK);
+    blocks.resize_with(CHUNK / BLOCK, || Block([0; BLOCK]));
+    blocks
+}
+
+/// Writes `buf` (whole blocks) at `at` through `direct`, or through
+/// `plain` when the file system refuses it (`Ok(false)`).
+fn write_blocks(direct: &File, plain: &File, buf: &[u8], at: u64) -> io::Result<bool> {
+    match direct.write_all_at(buf, at) {
+        Ok(()) => Ok(true),
+        // A file system that opens with O_DIRECT but refuses the write.
+        Err(e) if e.raw_os_error() == Some(libc::EINVAL) => {
+            plain.write_all_at(buf, at).map(|()| false)
+        }
+        Err(e) => Err(e),
+    }
 }
 
 impl DirectWriter {
@@ -64,25 +99,24 @@ impl DirectWriter {
         Ok(Self::around(plain, path))
     }
 
-    /// A writer of `plain`, the file at `path`.
-    fn around(plain: File, path: &Path) -> Self {
-        let direct = open_direct(path);
-        let mut blocks = Vec::with_capacity(CHUNK / BLOCK);
-        blocks.resize_with(CHUNK / BLOCK, || Block([0; BLOCK]));
-        DirectWriter {
-            plain,
-            direct,
-            blocks,
-            base: 0,
-            len: 0,
-        }
-    }
-
     /// Opens the existing file at `path` (its bytes kept), writing from
     /// offset 0: a second writer of the same file, at another place.
     pub fn open(path: &Path) -> io::Result<Self> {
         let plain = OpenOptions::new().write(true).open(path)?;
         Ok(Self::around(plain, path))
+    }
+
+    /// A writer of `plain`, the file at `path`.
+    fn around(plain: File, path: &Path) -> Self {
+        DirectWriter {
+            plain: Arc::new(plain),
+            direct: open_direct(path).map(Arc::new),
+            blocks: new_blocks(),
+            spare: None,
+            job: None,
+            base: 0,
+            len: 0,
+        }
     }
 
     /// Whether whole blocks go straight to the file.
@@ -97,50 +131,81 @@ impl DirectWriter {
         Ok(())
     }
 
-    /// Writes the pending bytes' whole blocks directly and their partial
-    /// first block through the page cache; the partial last block is
-    /// written too when `all`, else kept at the buffer's front.
+    /// Waits for the write under way; its buffer becomes the spare.
+    fn wait(&mut self) -> io::Result<()> {
+        if let Some(job) = self.job.take() {
+            let (buf, took) = job
+                .join()
+                .map_err(|_| io::Error::other("the writing thread failed"))?;
+            self.spare = Some(buf);
+            if !took? {
+                self.direct = None;
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes the pending bytes' whole blocks directly (from a thread,
+    /// unless `all`) and their partial first block through the page cache;
+    /// the partial last block is written too when `all`, else kept at the
+    /// buffer's front.
     fn drain(&mut self, all: bool) -> io::Result<()> {
+        self.wait()?;
         let lead = (self.base % BLOCK as u64) as usize;
         let (base, end) = (self.base, self.base + self.len as u64);
         let down = |x: u64| x - x % BLOCK as u64;
         let (a0, a1) = (down(base + BLOCK as u64 - 1), down(end));
-        let mut from = base;
-        if self.direct.is_some() && a0 < a1 {
-            let at = |x: u64| lead + (x - base) as usize;
-            let (p0, p1) = (at(a0), at(a1));
-            let buf = bytes(&self.blocks);
-            if a0 > base {
-                self.plain.write_all_at(&buf[lead..p0], base)?;
-            }
-            let direct = self.direct.take().expect("checked above");
-            match direct.write_all_at(&buf[p0..p1], a0) {
-                Ok(()) => self.direct = Some(direct),
-                // A file system that opens with O_DIRECT but refuses the
-                // write: ordinary writes from here on.
-                Err(e) if e.raw_os_error() == Some(libc::EINVAL) => {
-                    self.plain.write_all_at(&buf[p0..p1], a0)?;
-                }
-                Err(e) => return Err(e),
-            }
-            from = a1;
-        }
-        let keep = if all || self.direct.is_none() {
-            let at = lead + (from - base) as usize;
+        let at = |x: u64| lead + (x - base) as usize;
+        let Some(direct) = self.direct.clone().filter(|_| a0 < a1) else {
             self.plain
-                .write_all_at(&bytes(&self.blocks)[at..lead + self.len], from)?;
-            0
-        } else {
-            // The partial last block, now at the start of a block of
-            // memory as `from` is at the start of one in the file.
-            let at = lead + (from - base) as usize;
-            let n = (end - from) as usize;
-            bytes_mut(&mut self.blocks).copy_within(at..at + n, 0);
-            n
+                .write_all_at(&bytes(&self.blocks)[lead..lead + self.len], base)?;
+            self.base = end;
+            self.len = 0;
+            return Ok(());
         };
-        self.base = end - keep as u64;
-        self.len = keep;
+        let (p0, p1) = (at(a0), at(a1));
+        if a0 > base {
+            self.plain
+                .write_all_at(&bytes(&self.blocks)[lead..p0], base)?;
+        }
+        // The partial last block goes to the front of the other buffer,
+        // to a block of memory as `a1` starts a block of the file.
+        let tail = (end - a1) as usize;
+        let mut next = self.spare.take().unwrap_or_else(new_blocks);
+        bytes_mut(&mut next)[..tail].copy_from_slice(&bytes(&self.blocks)[p1..p1 + tail]);
+        let full = std::mem::replace(&mut self.blocks, next);
+        let plain = Arc::clone(&self.plain);
+        let job = move || {
+            let took = write_blocks(&direct, &plain, &bytes(&full)[p0..p1], a0);
+            (full, took)
+        };
+        if all {
+            let (full, took) = job();
+            self.spare = Some(full);
+            if !took? {
+                self.direct = None;
+            }
+            self.plain.write_all_at(&bytes(&self.blocks)[..tail], a1)?;
+            self.base = end;
+            self.len = 0;
+        } else {
+            self.job = Some(
+                std::thread::Builder::new()
+                    .name("octmesh-write".into())
+                    .spawn(job)?,
+            );
+            self.base = a1;
+            self.len = tail;
+        }
         Ok(())
+    }
+}
+
+impl Drop for DirectWriter {
+    fn drop(&mut self) {
+        // No write may land after the caller has moved on (and perhaps
+        // removed the file).
+        let _ = self.wait();
     }
 }
 
