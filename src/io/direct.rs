@@ -131,6 +131,13 @@ impl DirectWriter {
         Ok(())
     }
 
+    /// Writes what is pending and waits for the device to hold the file
+    /// (`fsync`): late errors (a full disk, a quota) come back here.
+    pub fn sync_all(&mut self) -> io::Result<()> {
+        self.drain(true)?;
+        self.plain.sync_all()
+    }
+
     /// Waits for the write under way; its buffer becomes the spare.
     fn wait(&mut self) -> io::Result<()> {
         if let Some(job) = self.job.take() {

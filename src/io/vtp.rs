@@ -19,6 +19,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use super::direct::DirectWriter;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::mesh::patches::PatchNames;
@@ -112,7 +113,8 @@ fn write_piece(path: &Path, piece: &Piece, names: &PatchNames) -> Result<()> {
         at += 8 + arrays[k].4;
     }
     let write = || -> std::io::Result<()> {
-        let mut w = BufWriter::with_capacity(1 << 20, File::create(path)?);
+        // Values go one by one: a small buffer in front of the direct one.
+        let mut w = BufWriter::with_capacity(1 << 16, DirectWriter::create(path)?);
         header(&mut w, "PolyData", names)?;
         writeln!(w, "  <PolyData>")?;
         writeln!(

@@ -36,6 +36,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use super::direct::DirectWriter;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 
@@ -396,7 +397,7 @@ pub fn write_vtu(path: &Path, piece: &VtuPiece) -> Result<()> {
     }
 
     let write = || -> std::io::Result<()> {
-        let mut w = BufWriter::with_capacity(CHUNK, File::create(path)?);
+        let mut w = DirectWriter::create(path)?;
         writeln!(w, "<?xml version=\"1.0\"?>")?;
         writeln!(
             w,
@@ -437,7 +438,7 @@ pub fn write_vtu(path: &Path, piece: &VtuPiece) -> Result<()> {
         write!(w, "\n  </AppendedData>\n</VTKFile>\n")?;
         // Sync so that late write errors (full disk, quota on a network file
         // system) are reported here instead of being lost when the file closes.
-        w.into_inner().map_err(|e| e.into_error())?.sync_all()
+        w.sync_all()
     };
     write().map_err(|e| io_err(path, e))
 }
