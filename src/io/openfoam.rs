@@ -133,7 +133,7 @@ fn face_polygons(
     let keys: Vec<u64> = edge_points(mesh, &lattice).map(point_key).collect();
     let (mut set, hanging_of) = PointIndex::with_first(keys, nn - ni);
     // Whether an edge between two local nodes may carry a point.
-    let midpoints = EdgeMidpoints::new(mesh);
+    let midpoints = EdgeMidpoints::new(mesh, &lattice);
     let missing = |x: [u32; 3]| {
         Error::new(
             ErrorKind::Internal,

@@ -163,43 +163,64 @@ impl PointFilter {
 /// their middle. One can only where a local edge-hanging node hangs on the
 /// edge, and that node's dependencies are the edge's ends (a face-hanging
 /// node is the middle of no face edge), or where a halo element has a
-/// corner. So the ends of every edge-hanging node are marked, and the
-/// halo's corners go into a [`PointFilter`] (empty on one rank): most
-/// edges are answered from two flags, with no search and no hashing.
+/// corner. Such a halo element touches the edge and, the octree being
+/// balanced across edges, has half the edge's length, so it also has a
+/// corner at one of the edge's ends:
+///
+/// ```text
+///   a ------ m ------ b     local element's edge
+///   |  halo  |
+///   +--------+              a halo corner at m has one at a (or b)
+/// ```
+///
+/// So each local node carries two marks, "end of an edge-hanging node's
+/// edge" and "maybe a halo corner" (from a [`PointFilter`] of the halo's
+/// corners, empty on one rank), and most edges are answered from the two
+/// ends' marks, with no midpoint made and no hashing.
 #[derive(Clone, Debug)]
 pub struct EdgeMidpoints {
-    hanging_end: Vec<bool>,
+    marks: Vec<u8>,
     halo: PointFilter,
-    halo_empty: bool,
 }
 
+/// Mark: an end of an edge-hanging node's edge.
+const HANGING_END: u8 = 1;
+/// Mark: maybe a corner of a halo element.
+const HALO_CORNER: u8 = 2;
+
 impl EdgeMidpoints {
-    /// The marks of `mesh`'s local nodes and its halo's corners.
-    pub fn new(mesh: &super::Mesh) -> EdgeMidpoints {
-        let mut hanging_end = vec![false; mesh.num_nodes()];
+    /// The marks of `mesh`'s local nodes, at `lattice` (the mesh's
+    /// [`super::Mesh::node_lattice`]), and its halo's corners.
+    pub fn new(mesh: &super::Mesh, lattice: &[[u32; 3]]) -> EdgeMidpoints {
+        let halo = PointFilter::new(halo_corners(mesh));
+        let mut marks = if mesh.halo().leaves.is_empty() {
+            vec![0u8; lattice.len()]
+        } else {
+            lattice
+                .iter()
+                .map(|&p| if halo.may_hold(p) { HALO_CORNER } else { 0 })
+                .collect()
+        };
         for d in mesh.edge_hanging() {
-            hanging_end[d[0] as usize] = true;
-            hanging_end[d[1] as usize] = true;
+            marks[d[0] as usize] |= HANGING_END;
+            marks[d[1] as usize] |= HANGING_END;
         }
-        EdgeMidpoints {
-            hanging_end,
-            halo: PointFilter::new(halo_corners(mesh)),
-            halo_empty: mesh.halo().leaves.is_empty(),
-        }
+        EdgeMidpoints { marks, halo }
     }
 
     /// Whether the edge between local nodes `a` and `b`, with midpoint
     /// `m`, may carry a mesh point at `m` (`false`: surely not).
     pub fn may_hold(&self, a: usize, b: usize, m: [u32; 3]) -> bool {
-        (self.hanging_end[a] && self.hanging_end[b]) || self.halo.may_hold(m)
+        let (x, y) = (self.marks[a], self.marks[b]);
+        x & y & HANGING_END != 0 || ((x | y) & HALO_CORNER != 0 && self.halo.may_hold(m))
     }
 
     /// [`EdgeMidpoints::may_hold`] before the midpoint is known: `false`
-    /// when the answer is `false` whatever it is (always, without a halo,
-    /// unless both ends are ends of an edge-hanging node).
+    /// when the answer is `false` whatever it is.
     #[inline]
     pub fn may_hold_ends(&self, a: usize, b: usize) -> bool {
-        (self.hanging_end[a] && self.hanging_end[b]) || !self.halo_empty
+        let (x, y) = (self.marks[a], self.marks[b]);
+        x & y & HANGING_END != 0 || (x | y) & HALO_CORNER != 0
     }
 }
 
