@@ -23,15 +23,10 @@ def main():
     ap.add_argument("--pairs", type=int, default=10, help="alternating plain/band pairs")
     ap.add_argument("--distance", type=float,
                     help="band width in model units (default: one cell at the level)")
-    ap.add_argument("--no-build", action="store_true")
-    args = ap.parse_args()
-    env = bl.mpi_env()
-    surface = bl.surface_arg(args.surface)
-    if surface is None:
-        print("skipped: %s" % bl.missing_note(args.surface))
+    started = bl.start_on_surface(ap, "distance band against surface refinement")
+    if started is None:
         return 0
-    info = bl.prepare(env, args.no_build, "distance band against surface refinement",
-                      need_p4est=False)
+    args, env, surface, info = started
     base = ["octree", surface, "--level", str(args.level), "--balance", "none"]
     bl.WORK.mkdir(parents=True, exist_ok=True)
     cell = args.distance

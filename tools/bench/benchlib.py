@@ -193,6 +193,21 @@ def prepare(env, no_build, title, need_p4est=True):
     return info
 
 
+def start_on_surface(ap, title, need_p4est=False):
+    """The start of a tool measuring one surface: adds --no-build to the
+    parser `ap` (which has --surface) and parses the command line; returns
+    (args, env, surface argument, machine info), or None after printing why
+    the surface is skipped."""
+    ap.add_argument("--no-build", action="store_true")
+    args = ap.parse_args()
+    env = mpi_env()
+    surface = surface_arg(args.surface)
+    if surface is None:
+        print("skipped: %s" % missing_note(args.surface))
+        return None
+    return args, env, surface, prepare(env, args.no_build, title, need_p4est=need_p4est)
+
+
 def header_line(info, extra=""):
     """One Markdown paragraph naming the machine, date and commit."""
     return ("Machine: %s. Date: %s. Commit: %s. %s. Load average at start: %s.%s"

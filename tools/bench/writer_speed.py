@@ -46,14 +46,10 @@ def main():
     ap.add_argument("--keep", default="inside")
     ap.add_argument("--np", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--no-build", action="store_true")
-    args = ap.parse_args()
-    env = bl.mpi_env()
-    surface = bl.surface_arg(args.surface)
-    if surface is None:
-        print("skipped: %s" % bl.missing_note(args.surface))
+    started = bl.start_on_surface(ap, "OpenFOAM case against dd")
+    if started is None:
         return 0
-    info = bl.prepare(env, args.no_build, "OpenFOAM case against dd", need_p4est=False)
+    args, env, surface, info = started
     bl.WORK.mkdir(parents=True, exist_ok=True)
     case = bl.WORK / "writer_case"
     scratch = bl.WORK / "writer_dd"
