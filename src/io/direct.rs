@@ -72,11 +72,23 @@ pub struct DirectWriter {
     len: usize,
 }
 
-/// A buffer of `CHUNK` bytes.
+/// A buffer of `CHUNK` bytes, zeroed by the allocator: the system hands
+/// out zero pages untouched, so a small file's writer faults in only the
+/// pages it fills, not 8 MiB.
 fn new_blocks() -> Vec<Block> {
-    let mut blocks = Vec::with_capacity(CHUNK / BLOCK);
-    blocks.resize_with(CHUNK / BLOCK, || Block([0; BLOCK]));
-    blocks
+    let n = CHUNK / BLOCK;
+    let layout = std::alloc::Layout::array::<Block>(n).expect("a fixed, small size");
+    // SAFETY: the layout is that of `n` blocks (non-zero size); the
+    // pointer, when not null, is a zeroed allocation of it by the global
+    // allocator, and zero bytes are valid blocks, so it is a vector of
+    // length and capacity `n`.
+    unsafe {
+        let p = std::alloc::alloc_zeroed(layout).cast::<Block>();
+        if p.is_null() {
+            std::alloc::handle_alloc_error(layout);
+        }
+        Vec::from_raw_parts(p, n, n)
+    }
 }
 
 /// Writes `buf` (whole blocks) at `at` through `direct`, or through

@@ -44,7 +44,7 @@ use std::path::{Path, PathBuf};
 use super::direct::DirectWriter;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
-use crate::mesh::faces::{Faces, Other, SURFACE_PATCH};
+use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
     corner_at, edge_midpoint, edge_points, point_key, EdgeMidpoints, PointIndex,
@@ -167,6 +167,17 @@ fn face_polygons(
     let mut total = 0usize;
     let mut labels: Vec<u32> = Vec::with_capacity(8);
     let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
+    // The local element whose whole face `f` is: the owner, or a finer
+    // local neighbour.
+    let emitter = |f: &Face| -> Option<u32> {
+        if elements[f.owner() as usize].side() == f.emitter_side() {
+            return Some(f.owner());
+        }
+        match f.other() {
+            Other::Element(j) => Some(j),
+            _ => None,
+        }
+    };
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
         // Most faces are the whole face of a local element: their corners
@@ -176,15 +187,8 @@ fn face_polygons(
             .then(|| f.whole_corner_octants())
             .flatten()
             .and_then(|m| {
-                let e = if elements[f.owner() as usize].side() == f.emitter_side() {
-                    f.owner()
-                } else {
-                    match f.other() {
-                        Other::Element(j) => j,
-                        _ => return None,
-                    }
-                };
-                Some(m.map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize))
+                let e = emitter(f)? as usize;
+                Some(m.map(|m| conn[e][VTK_TO_MORTON[m]] as usize))
             });
         if let Some(nodes) = whole {
             for k in 0..4 {
@@ -200,49 +204,35 @@ fn face_polygons(
                     }
                 }
             }
-            push_labels(&poly, &mut label, &mut ids, &mut labels);
-            total += labels.len();
-            if total > i32::MAX as usize {
-                return Err(too_many());
-            }
-            emit(&labels)?;
-            continue;
-        }
-
-        let c = f.corners();
-        // The element whose whole face this is, when it is local: the
-        // owner, or a finer local neighbour.
-        let mut emitter = (f.owner(), cube(f.owner()));
-        if f.emitter_side() != emitter.1 .1 {
-            if let Other::Element(j) = f.other() {
-                emitter = (j, cube(j));
-            }
-        }
-        let nodes = c.map(|x| corner_of(emitter.0, emitter.1, x));
-        for k in 0..4 {
-            let p = match nodes[k] {
-                Some(n) => n,
-                None => point_of(set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?),
-            };
-            poly.push((p, c[k]));
-            if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
-                let may = match (nodes[k], nodes[(k + 1) % 4]) {
-                    (Some(a), Some(b)) => midpoints.may_hold(a, b, m),
-                    _ => true,
+        } else {
+            let c = f.corners();
+            let e = emitter(f).unwrap_or(f.owner());
+            let nodes = c.map(|x| corner_of(e, cube(e), x));
+            for k in 0..4 {
+                let p = match nodes[k] {
+                    Some(n) => n,
+                    None => point_of(set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?),
                 };
-                if may {
-                    if let Some(j) = set.find(point_key(m)) {
-                        poly.push((point_of(j), m));
+                poly.push((p, c[k]));
+                if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
+                    let may = match (nodes[k], nodes[(k + 1) % 4]) {
+                        (Some(a), Some(b)) => midpoints.may_hold(a, b, m),
+                        _ => true,
+                    };
+                    if may {
+                        if let Some(j) = set.find(point_key(m)) {
+                            poly.push((point_of(j), m));
+                        }
                     }
                 }
             }
-        }
-        if i >= halo_start {
-            // Both sides start at the lowest point.
-            let at = (0..poly.len())
-                .min_by_key(|&k| point_key(poly[k].1))
-                .unwrap_or(0);
-            poly.rotate_left(at);
+            if i >= halo_start {
+                // Both sides start at the lowest point.
+                let at = (0..poly.len())
+                    .min_by_key(|&k| point_key(poly[k].1))
+                    .unwrap_or(0);
+                poly.rotate_left(at);
+            }
         }
         push_labels(&poly, &mut label, &mut ids, &mut labels);
         total += labels.len();
