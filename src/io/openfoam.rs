@@ -5,7 +5,9 @@
 //!
 //! # What is written
 //!
-//! Per mesh: `points` (vectorField), `faces` (faceList, or faceCompactList
+//! Per mesh: `points` (vectorField; in binary its count is padded with
+//! blanks like the label count below, as the positions stream to the file
+//! while the faces are made), `faces` (faceList, or faceCompactList
 //! in binary: offsets, then point labels, whose count is padded with
 //! blanks to a fixed width as it is written after them), `owner`,
 //! `neighbour` (labelList), `boundary` (polyBoundaryMesh). Labels are
@@ -44,10 +46,11 @@ use std::path::{Path, PathBuf};
 use super::direct::DirectWriter;
 use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
+use crate::mesh::dual::corner_coords;
 use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
-    corner_at, edge_midpoint, edge_points, point_key, EdgeMidpoints, PointIndex,
+    corner_at, edge_midpoint, halo_corners, point_key, EdgeMidpoints, PointIndex,
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
@@ -88,38 +91,19 @@ pub struct FoamCounts {
     pub cells: u64,
 }
 
-/// The points of a rank's faces, in label order, by their number: a local
-/// node `n < nn`, or `nn + j` for the point at place `j` of the searched
-/// set that is no local node (a corner of the halo).
-struct FacePoints {
-    /// Each label's point number.
-    ids: Vec<u32>,
-    /// The local nodes' lattice points.
-    lattice: Vec<[u32; 3]>,
-    /// The searched set.
-    set: PointIndex,
-}
-
-impl FacePoints {
-    /// The lattice point of point number `id`.
-    fn lattice_point(&self, id: u32) -> [u32; 3] {
-        let nn = self.lattice.len();
-        match (id as usize).checked_sub(nn) {
-            None => self.lattice[id as usize],
-            Some(j) => self.set.point(j),
-        }
-    }
-}
-
 /// Turns each face of `faces`, in order, into its polygon of point
-/// labels and hands it to `emit`; returns this rank's points in label
-/// order (labels follow the order in which the faces first use the
-/// points). No list of every label is kept: the caller streams them.
+/// labels and hands it to `emit`; hands each point to `first_use` when a
+/// face first uses it, as its number (a local node `n < nn`, or `nn + j`
+/// for the point at place `j` of the searched set that is no local node)
+/// and its lattice point. Labels follow the order in which the faces first
+/// use the points; returns their count. No list of every label or every
+/// point is kept: the caller streams them.
 fn face_polygons(
     mesh: &Mesh,
     faces: &Faces,
     mut emit: impl FnMut(&[u32]) -> Result<()>,
-) -> Result<FacePoints> {
+    mut first_use: impl FnMut(u32, [u32; 3]) -> Result<()>,
+) -> Result<u32> {
     // Every corner of a kept element near this rank is a mesh point. A
     // face's corners and edge midpoints are local nodes or corners of
     // halo elements. Those that are not a local element's corners (the
@@ -128,12 +112,15 @@ fn face_polygons(
     // when they are local nodes. So the set searched holds the hanging
     // nodes and the halo's corners only, and knows which hanging node
     // each point is (their keys come first, in node order).
-    let lattice = mesh.node_lattice();
-    let (nn, ni) = (lattice.len(), mesh.num_independent());
-    let keys: Vec<u64> = edge_points(mesh, &lattice).map(point_key).collect();
+    let nn = mesh.num_nodes();
+    let ni = mesh.num_independent();
+    let keys: Vec<u64> = (hanging_lattice(mesh).into_iter())
+        .chain(halo_corners(mesh))
+        .map(point_key)
+        .collect();
     let (mut set, hanging_of) = PointIndex::with_first(keys, nn - ni);
     // Whether an edge between two local nodes may carry a point.
-    let midpoints = EdgeMidpoints::new(mesh, &lattice);
+    let midpoints = EdgeMidpoints::new(mesh);
     let missing = |x: [u32; 3]| {
         Error::new(
             ErrorKind::Internal,
@@ -160,10 +147,8 @@ fn face_polygons(
         }
     };
     let mut label = vec![0u32; nn + set.len()];
+    let mut count = 0u32;
     let halo_start = faces.halo_range().start;
-    // At most every node and every point of the set; only the pages used
-    // are touched.
-    let mut ids: Vec<u32> = Vec::with_capacity(label.len());
     let mut total = 0usize;
     let mut labels: Vec<u32> = Vec::with_capacity(8);
     let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
@@ -178,24 +163,35 @@ fn face_polygons(
             _ => None,
         }
     };
+    // The last emitter's cube: faces come by owner, so a few in a row
+    // share it.
+    let mut last = (u32::MAX, ([0u32; 3], 0u32));
     for (i, f) in faces.faces().iter().enumerate() {
         poly.clear();
         // Most faces are the whole face of a local element: their corners
         // are its nodes, and an edge's midpoint is looked for only when
-        // both ends may carry one. No coordinates are decoded.
+        // both ends may carry one.
         let whole = (i < halo_start)
             .then(|| f.whole_corner_octants())
             .flatten()
-            .and_then(|m| {
-                let e = emitter(f)? as usize;
-                Some(m.map(|m| conn[e][VTK_TO_MORTON[m]] as usize))
-            });
-        if let Some(nodes) = whole {
+            .and_then(|m| Some((emitter(f)?, m)));
+        if let Some((e, m)) = whole {
+            if last.0 != e {
+                last = (e, cube(e));
+            }
+            let (c, s) = last.1;
+            let row = &conn[e as usize];
+            // A loop, not `map`, which was not inlined and handed its
+            // result back through memory.
+            let mut nodes = [(0usize, [0u32; 3]); 4];
             for k in 0..4 {
-                let (a, b) = (nodes[k], nodes[(k + 1) % 4]);
-                poly.push((a, [0; 3]));
+                nodes[k] = (row[VTK_TO_MORTON[m[k]]] as usize, corner_coords(c, s, m[k]));
+            }
+            for k in 0..4 {
+                let ((a, xa), (b, xb)) = (nodes[k], nodes[(k + 1) % 4]);
+                poly.push((a, xa));
                 if midpoints.may_hold_ends(a, b) {
-                    if let Some(m) = edge_midpoint(lattice[a], lattice[b]) {
+                    if let Some(m) = edge_midpoint(xa, xb) {
                         if midpoints.may_hold(a, b, m) {
                             if let Some(j) = set.find(point_key(m)) {
                                 poly.push((point_of(j), m));
@@ -234,32 +230,43 @@ fn face_polygons(
                 poly.rotate_left(at);
             }
         }
-        push_labels(&poly, &mut label, &mut ids, &mut labels);
+        labels.clear();
+        for &(p, x) in &poly {
+            if label[p] == 0 {
+                count += 1;
+                label[p] = count;
+                first_use(p as u32, x)?;
+            }
+            labels.push(label[p] - 1);
+        }
         total += labels.len();
         if total > i32::MAX as usize {
             return Err(too_many());
         }
         emit(&labels)?;
     }
-    Ok(FacePoints { ids, lattice, set })
+    Ok(count)
 }
 
-/// The labels of the points of `poly` (labels stored plus one in `label`;
-/// a point without one gets the next, and its number goes to `ids`).
-fn push_labels(
-    poly: &[(usize, [u32; 3])],
-    label: &mut [u32],
-    ids: &mut Vec<u32>,
-    labels: &mut Vec<u32>,
-) {
-    labels.clear();
-    for &(p, _) in poly {
-        if label[p] == 0 {
-            ids.push(p as u32);
-            label[p] = ids.len() as u32;
+/// The lattice points of the hanging local nodes, by node from the mesh's
+/// first hanging one. Every hanging node is a local element's corner, so
+/// the elements give them, and the independent nodes' points are never
+/// made.
+fn hanging_lattice(mesh: &Mesh) -> Vec<[u32; 3]> {
+    let (nn, ni) = (mesh.num_nodes(), mesh.num_independent());
+    let mut out = vec![[0u32; 3]; nn - ni];
+    for (e, row) in mesh.elements().iter().zip(mesh.connectivity()) {
+        if row.iter().all(|&n| (n as usize) < ni) {
+            continue;
         }
-        labels.push(label[p] - 1);
+        let (c, s) = (e.coords(), e.side());
+        for (v, &n) in row.iter().enumerate() {
+            if let Some(h) = (n as usize).checked_sub(ni) {
+                out[h] = corner_coords(c, s, VTK_TO_MORTON[v]);
+            }
+        }
     }
+    out
 }
 
 /// The directory of this rank's mesh.
@@ -460,49 +467,130 @@ fn write_raw<T: Raw>(out: &mut impl Write, v: &[T]) -> std::io::Result<()> {
     }
 }
 
-/// Writes the positions of `points` in label order (user units: the moved
-/// positions on a snapped mesh, the lattice's otherwise), a block at a
-/// time: no array of every position is made.
-fn write_positions(
-    w: &mut impl Write,
+/// The `points` file, filled as the faces first use the points (user
+/// units: the moved positions on a snapped mesh, the lattice's otherwise).
+/// In binary the positions stream to the file in label order and the
+/// count goes last over room left for it, as in `faces`: no array of every
+/// point is made. ASCII cases (small ones) keep the positions and write
+/// them at the end.
+struct PointsOut<'m> {
+    mesh: &'m Mesh,
     fmt: FoamFormat,
-    mesh: &Mesh,
-    points: &FacePoints,
-) -> std::io::Result<()> {
-    let nn = points.lattice.len() as u32;
-    let domain = mesh.domain();
-    let moved = mesh.moved();
-    // On a snapped mesh the halo's points that are no local node are the
-    // means of moved corners, all found in one pass.
-    let mut off_node = match moved {
-        Some(_) => {
-            let q: Vec<[u32; 3]> = (points.ids.iter())
-                .filter(|&&id| id >= nn)
-                .map(|&id| points.lattice_point(id))
-                .collect();
-            mesh.off_node_positions(&q).map_err(std::io::Error::other)?
-        }
-        None => Vec::new(),
+    path: PathBuf,
+    /// Binary: the file's writer, from the first position on.
+    w: Option<DirectWriter>,
+    /// Where the first position goes (binary).
+    data_at: u64,
+    /// Binary: the positions not yet handed to `w`; ASCII: all of them.
+    block: Vec<[f64; 3]>,
+    /// On a snapped mesh, the points that are no local node, with their
+    /// labels: their positions are the means of moved corners, found in
+    /// one pass at the end (NaN until then).
+    off_node: Vec<([u32; 3], u32)>,
+    count: u32,
+}
+
+/// Room for the count of `points` in binary (the same rule as
+/// [`LABEL_COUNT_WIDTH`]).
+const POINT_COUNT_WIDTH: usize = 20;
+
+impl<'m> PointsOut<'m> {
+    fn new(path: &Path, fmt: FoamFormat, loc: &str, mesh: &'m Mesh) -> Result<Self> {
+        let head = points_head(fmt, loc, 0).map_err(|e| io_err(path, e))?;
+        let w = match fmt {
+            FoamFormat::Binary => {
+                let mut w = create(path)?;
+                w.restart_at(head.len() as u64)
+                    .map_err(|e| io_err(path, e))?;
+                Some(w)
+            }
+            FoamFormat::Ascii => None,
+        };
+        Ok(PointsOut {
+            mesh,
+            fmt,
+            path: path.to_path_buf(),
+            w,
+            data_at: head.len() as u64,
+            block: Vec::with_capacity(1 << 14),
+            off_node: Vec::new(),
+            count: 0,
+        })
     }
-    .into_iter();
-    let mut block: Vec<[f64; 3]> = Vec::with_capacity(1 << 14);
-    for ids in points.ids.chunks(1 << 14) {
-        block.clear();
-        block.extend(ids.iter().map(|&id| match moved {
-            Some(m) if id < nn => m[id as usize],
-            Some(_) => off_node.next().unwrap_or([f64::NAN; 3]),
-            None => domain.from_lattice(points.lattice_point(id).map(f64::from)),
-        }));
-        match fmt {
-            FoamFormat::Binary => write_raw(w, &block)?,
-            FoamFormat::Ascii => {
-                for x in &block {
-                    writeln!(w, "({:.17e} {:.17e} {:.17e})", x[0], x[1], x[2])?;
-                }
+
+    /// The next point: local node or searched point number `id` (see
+    /// [`face_polygons`]) at lattice point `x`.
+    fn push(&mut self, id: u32, x: [u32; 3]) -> Result<()> {
+        let p = match self.mesh.moved() {
+            Some(m) if (id as usize) < m.len() => m[id as usize],
+            Some(_) => {
+                self.off_node.push((x, self.count));
+                [f64::NAN; 3]
+            }
+            None => self.mesh.domain().from_lattice(x.map(f64::from)),
+        };
+        self.count += 1;
+        self.block.push(p);
+        if let Some(w) = &mut self.w {
+            if self.block.len() == self.block.capacity() {
+                write_raw(w, &self.block).map_err(|e| io_err(&self.path, e))?;
+                self.block.clear();
             }
         }
+        Ok(())
     }
-    Ok(())
+
+    /// Writes what is left, the off-node positions, the end and the
+    /// header.
+    fn finish(mut self, loc: &str) -> Result<u32> {
+        let path = self.path.clone();
+        let io = |e: std::io::Error| io_err(&path, e);
+        let q: Vec<[u32; 3]> = self.off_node.iter().map(|o| o.0).collect();
+        let off = if q.is_empty() {
+            Vec::new()
+        } else {
+            self.mesh.off_node_positions(&q)?
+        };
+        let head = points_head(self.fmt, loc, self.count).map_err(io)?;
+        match self.w.take() {
+            Some(mut w) => {
+                write_raw(&mut w, &self.block).map_err(io)?;
+                w.write_all(b")\n").map_err(io)?;
+                for (&(_, l), p) in self.off_node.iter().zip(&off) {
+                    w.restart_at(self.data_at + 24 * l as u64).map_err(io)?;
+                    write_raw(&mut w, std::slice::from_ref(p)).map_err(io)?;
+                }
+                w.restart_at(0).map_err(io)?;
+                w.write_all(&head).map_err(io)?;
+                w.flush().map_err(io)?;
+            }
+            None => {
+                for (&(_, l), p) in self.off_node.iter().zip(&off) {
+                    self.block[l as usize] = *p;
+                }
+                let mut w = create(&path)?;
+                w.write_all(&head).map_err(io)?;
+                for x in &self.block {
+                    writeln!(w, "({:.17e} {:.17e} {:.17e})", x[0], x[1], x[2]).map_err(io)?;
+                }
+                w.write_all(b")\n").map_err(io)?;
+                w.flush().map_err(io)?;
+            }
+        }
+        Ok(self.count)
+    }
+}
+
+/// The `points` file up to its first position: in binary the count padded
+/// to [`POINT_COUNT_WIDTH`] (so it can be written last), in ASCII as is.
+fn points_head(fmt: FoamFormat, loc: &str, count: u32) -> std::io::Result<Vec<u8>> {
+    let mut head = Vec::new();
+    header(&mut head, fmt, "vectorField", loc, "points", None)?;
+    match fmt {
+        FoamFormat::Binary => write!(head, "{count:<POINT_COUNT_WIDTH$}\n(")?,
+        FoamFormat::Ascii => write!(head, "{count}\n(\n")?,
+    }
+    Ok(head)
 }
 
 /// Width of the label count of a binary `faces` file: the labels are
@@ -511,14 +599,16 @@ fn write_positions(
 const LABEL_COUNT_WIDTH: usize = 20;
 
 /// Writes the `faces` file of this rank, the face polygons streamed from
-/// [`face_polygons`], and returns the points in label order.
+/// [`face_polygons`], and hands the points to `points` as they are first
+/// used.
 fn write_faces(
     path: &Path,
     fmt: FoamFormat,
     loc: &str,
     mesh: &Mesh,
     faces: &Faces,
-) -> Result<FacePoints> {
+    points: &mut PointsOut,
+) -> Result<()> {
     let io = |e: std::io::Error| io_err(path, e);
     let nf = faces.faces().len();
     match fmt {
@@ -544,20 +634,25 @@ fn write_faces(
             offsets.push(0u32);
             let mut labels = Vec::with_capacity(CHUNK + 8);
             let mut total = 0u32;
-            let points = face_polygons(mesh, faces, |l| {
-                total += l.len() as u32;
-                offsets.push(total);
-                labels.extend_from_slice(l);
-                if offsets.len() == CHUNK {
-                    write_raw(&mut wo, &offsets).map_err(io)?;
-                    offsets.clear();
-                }
-                if labels.len() >= CHUNK {
-                    write_raw(&mut w, &labels).map_err(io)?;
-                    labels.clear();
-                }
-                Ok(())
-            })?;
+            face_polygons(
+                mesh,
+                faces,
+                |l| {
+                    total += l.len() as u32;
+                    offsets.push(total);
+                    labels.extend_from_slice(l);
+                    if offsets.len() == CHUNK {
+                        write_raw(&mut wo, &offsets).map_err(io)?;
+                        offsets.clear();
+                    }
+                    if labels.len() >= CHUNK {
+                        write_raw(&mut w, &labels).map_err(io)?;
+                        labels.clear();
+                    }
+                    Ok(())
+                },
+                |id, x| points.push(id, x),
+            )?;
             write_raw(&mut wo, &offsets).map_err(io)?;
             write_raw(&mut w, &labels).map_err(io)?;
             w.write_all(b")\n").map_err(io)?;
@@ -567,28 +662,33 @@ fn write_faces(
             wo.restart_at(0).map_err(io)?;
             wo.write_all(&head).map_err(io)?;
             wo.flush().map_err(io)?;
-            Ok(points)
+            Ok(())
         }
         FoamFormat::Ascii => {
             let mut w = create(path)?;
             header(&mut w, fmt, "faceList", loc, "faces", None).map_err(io)?;
             writeln!(w, "{nf}\n(").map_err(io)?;
-            let points = face_polygons(mesh, faces, |l| {
-                (|| -> std::io::Result<()> {
-                    write!(w, "{}(", l.len())?;
-                    for (k, x) in l.iter().enumerate() {
-                        if k > 0 {
-                            write!(w, " ")?;
+            face_polygons(
+                mesh,
+                faces,
+                |l| {
+                    (|| -> std::io::Result<()> {
+                        write!(w, "{}(", l.len())?;
+                        for (k, x) in l.iter().enumerate() {
+                            if k > 0 {
+                                write!(w, " ")?;
+                            }
+                            write!(w, "{x}")?;
                         }
-                        write!(w, "{x}")?;
-                    }
-                    writeln!(w, ")")
-                })()
-                .map_err(io)
-            })?;
+                        writeln!(w, ")")
+                    })()
+                    .map_err(io)
+                },
+                |id, x| points.push(id, x),
+            )?;
             writeln!(w, ")").map_err(io)?;
             w.flush().map_err(io)?;
-            Ok(points)
+            Ok(())
         }
     }
 }
@@ -613,11 +713,13 @@ fn write_polymesh(
         format!("processor{me}/constant/polyMesh")
     };
     let loc = location.as_str();
-    let points = write_faces(&dir.join("faces"), fmt, loc, mesh, faces)?;
+    let mut points = PointsOut::new(&dir.join("points"), fmt, loc, mesh)?;
+    write_faces(&dir.join("faces"), fmt, loc, mesh, faces, &mut points)?;
+    let num_points = points.finish(loc)?;
     let nf = faces.faces().len();
     let ni = faces.num_internal();
     let counts = FoamCounts {
-        points: points.ids.len() as u64,
+        points: num_points as u64,
         faces: nf as u64,
         internal_faces: ni as u64,
         cells: mesh.elements().len() as u64,
@@ -626,19 +728,7 @@ fn write_polymesh(
         "nPoints:{} nCells:{} nFaces:{} nInternalFaces:{}",
         counts.points, counts.cells, counts.faces, counts.internal_faces
     );
-    let path = dir.join("points");
     let result = (|| -> std::io::Result<()> {
-        let mut w = create(&path).map_err(std::io::Error::other)?;
-        header(&mut w, fmt, "vectorField", loc, "points", None)?;
-        write!(w, "{}\n(", points.ids.len())?;
-        if fmt == FoamFormat::Ascii {
-            writeln!(w)?;
-        }
-        write_positions(&mut w, fmt, mesh, &points)?;
-        writeln!(w, ")")?;
-        w.flush()?;
-        drop(points);
-
         let owners = faces.faces().iter().map(|f| f.owner());
         let path = dir.join("owner");
         let mut w = create(&path).map_err(std::io::Error::other)?;

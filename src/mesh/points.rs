@@ -189,18 +189,24 @@ const HANGING_END: u8 = 1;
 const HALO_CORNER: u8 = 2;
 
 impl EdgeMidpoints {
-    /// The marks of `mesh`'s local nodes, at `lattice` (the mesh's
-    /// [`super::Mesh::node_lattice`]), and its halo's corners.
-    pub fn new(mesh: &super::Mesh, lattice: &[[u32; 3]]) -> EdgeMidpoints {
+    /// The marks of `mesh`'s local nodes and its halo's corners. A node
+    /// that may be a halo corner is found at the corners of the local
+    /// elements (every local node is one's, or only a dependency, which no
+    /// face uses), so no node's lattice point is stored.
+    pub fn new(mesh: &super::Mesh) -> EdgeMidpoints {
         let halo = PointFilter::new(halo_corners(mesh));
-        let mut marks = if mesh.halo().leaves.is_empty() {
-            vec![0u8; lattice.len()]
-        } else {
-            lattice
-                .iter()
-                .map(|&p| if halo.may_hold(p) { HALO_CORNER } else { 0 })
-                .collect()
-        };
+        let mut marks = vec![0u8; mesh.num_nodes()];
+        if !mesh.halo().leaves.is_empty() {
+            for (e, row) in mesh.elements().iter().zip(mesh.connectivity()) {
+                let (c, s) = (e.coords(), e.side());
+                for (v, &n) in row.iter().enumerate() {
+                    let p = super::dual::corner_coords(c, s, super::VTK_TO_MORTON[v]);
+                    if halo.may_hold(p) {
+                        marks[n as usize] |= HALO_CORNER;
+                    }
+                }
+            }
+        }
         for d in mesh.edge_hanging() {
             marks[d[0] as usize] |= HANGING_END;
             marks[d[1] as usize] |= HANGING_END;
