@@ -98,89 +98,217 @@ pub struct FoamCounts {
 /// and its lattice point. Labels follow the order in which the faces first
 /// use the points; returns their count. No list of every label or every
 /// point is kept: the caller streams them.
+///
+/// With `spare_core`, a second thread makes the polygons (the searches)
+/// a chunk ahead while this one labels and hands them on: the same labels
+/// in the same order.
 fn face_polygons(
     mesh: &Mesh,
     faces: &Faces,
+    spare_core: bool,
     mut emit: impl FnMut(&[u32]) -> Result<()>,
     mut first_use: impl FnMut(u32, [u32; 3]) -> Result<()>,
 ) -> Result<u32> {
-    // Every corner of a kept element near this rank is a mesh point. A
-    // face's corners and edge midpoints are local nodes or corners of
-    // halo elements. Those that are not a local element's corners (the
-    // corners of a split coarse face's pieces, the midpoints of face
-    // edges) lie inside a coarse kept element's face or edge: they hang,
-    // when they are local nodes. So the set searched holds the hanging
-    // nodes and the halo's corners only, and knows which hanging node
-    // each point is (their keys come first, in node order).
-    let nn = mesh.num_nodes();
-    let ni = mesh.num_independent();
-    let keys: Vec<u64> = (hanging_lattice(mesh).into_iter())
-        .chain(halo_corners(mesh))
-        .map(point_key)
-        .collect();
-    let (mut set, hanging_of) = PointIndex::with_first(keys, nn - ni);
-    // Whether an edge between two local nodes may carry a point.
-    let midpoints = EdgeMidpoints::new(mesh);
-    let missing = |x: [u32; 3]| {
-        Error::new(
-            ErrorKind::Internal,
-            format!("face corner {x:?} is no element's corner"),
-        )
-    };
-    let (elements, conn) = (mesh.elements(), mesh.connectivity());
-    // Element `e`'s node at `p`, if `p` is one of its corners: (lowest
-    // corner, side).
-    let corner_of = |e: u32, (c, s): ([u32; 3], u32), p: [u32; 3]| -> Option<usize> {
-        corner_at(c, s, p).map(|m| conn[e as usize][VTK_TO_MORTON[m]] as usize)
-    };
-    let too_many = || Error::new(ErrorKind::Limit, "more than 2^31 face labels on one rank");
-    let cube = |e: u32| (elements[e as usize].coords(), elements[e as usize].side());
-    // A point is a local node `n` (most are: the corners of a face that is
-    // a local element's whole face come from its connectivity, with no
-    // search), or `nn + j` for the point at place `j` of the set that is
-    // no local node. Labels are stored plus one: zero is "none yet", and
-    // the pages of points never used are never touched.
-    let point_of = |j: usize| -> usize {
-        match hanging_of[j] {
-            u32::MAX => nn + j,
-            h => ni + h as usize,
-        }
-    };
-    let mut label = vec![0u32; nn + set.len()];
+    let mut maker = Polygons::new(mesh, faces);
+    // Labels are stored plus one: zero is "none yet", and the pages of
+    // points never used are never touched.
+    let mut label = vec![0u32; maker.num_points()];
     let mut count = 0u32;
-    let halo_start = faces.halo_range().start;
     let mut total = 0usize;
     let mut labels: Vec<u32> = Vec::with_capacity(8);
-    let mut poly: Vec<(usize, [u32; 3])> = Vec::with_capacity(8);
-    // The local element whose whole face `f` is: the owner, or a finer
-    // local neighbour.
-    let emitter = |f: &Face| -> Option<u32> {
-        if elements[f.owner() as usize].side() == f.emitter_side() {
+    let mut take = |poly: &[(u32, [u32; 3])]| -> Result<()> {
+        labels.clear();
+        for &(p, x) in poly {
+            let l = &mut label[p as usize];
+            if *l == 0 {
+                count += 1;
+                *l = count;
+                first_use(p, x)?;
+            }
+            labels.push(*l - 1);
+        }
+        total += labels.len();
+        if total > i32::MAX as usize {
+            return Err(Error::new(
+                ErrorKind::Limit,
+                "more than 2^31 face labels on one rank",
+            ));
+        }
+        emit(&labels)
+    };
+    let nf = faces.faces().len();
+    if !spare_core || nf < 2 * POLYGON_CHUNK {
+        let mut poly = Vec::with_capacity(8);
+        for i in 0..nf {
+            poly.clear();
+            maker.polygon(i, &mut poly)?;
+            take(&poly)?;
+        }
+    } else {
+        std::thread::scope(|scope| -> Result<()> {
+            let (ready, chunks) = std::sync::mpsc::sync_channel::<Result<Chunk>>(2);
+            let (done, spare) = std::sync::mpsc::channel::<Chunk>();
+            scope.spawn(move || {
+                for lo in (0..nf).step_by(POLYGON_CHUNK) {
+                    let mut c = spare.try_recv().unwrap_or_default();
+                    c.poly.clear();
+                    c.lens.clear();
+                    let made = (lo..nf.min(lo + POLYGON_CHUNK)).try_for_each(|i| {
+                        let start = c.poly.len();
+                        maker.polygon(i, &mut c.poly)?;
+                        c.lens.push((c.poly.len() - start) as u8);
+                        Ok(())
+                    });
+                    let failed = made.is_err();
+                    // A closed channel: the labelling side stopped.
+                    if ready.send(made.map(|()| c)).is_err() || failed {
+                        return;
+                    }
+                }
+            });
+            for c in chunks {
+                let c = c?;
+                let mut at = 0;
+                for &n in &c.lens {
+                    take(&c.poly[at..at + n as usize])?;
+                    at += n as usize;
+                }
+                let _ = done.send(c);
+            }
+            Ok(())
+        })?;
+    }
+    Ok(count)
+}
+
+/// Faces per chunk handed from the polygon thread to the labelling one.
+const POLYGON_CHUNK: usize = 1 << 13;
+
+/// Polygons of consecutive faces: their points, then each face's count.
+#[derive(Default)]
+struct Chunk {
+    poly: Vec<(u32, [u32; 3])>,
+    lens: Vec<u8>,
+}
+
+/// The part of [`face_polygons`] that needs no labels: each face's points
+/// as numbers with their lattice points.
+struct Polygons<'m> {
+    faces: &'m [Face],
+    halo_start: usize,
+    elements: &'m [crate::octant::Octant],
+    conn: &'m [[u32; 8]],
+    /// The hanging nodes and the halo's corners.
+    set: PointIndex,
+    /// The hanging node at each place of `set`, if it is one.
+    hanging_of: Vec<u32>,
+    /// Whether an edge between two local nodes may carry a point.
+    midpoints: EdgeMidpoints,
+    nn: usize,
+    ni: usize,
+    /// The last emitter and its cube: faces come by owner, so a few in a
+    /// row share it.
+    last: (u32, ([u32; 3], u32)),
+}
+
+impl<'m> Polygons<'m> {
+    fn new(mesh: &'m Mesh, faces: &'m Faces) -> Self {
+        // Every corner of a kept element near this rank is a mesh point. A
+        // face's corners and edge midpoints are local nodes or corners of
+        // halo elements. Those that are not a local element's corners (the
+        // corners of a split coarse face's pieces, the midpoints of face
+        // edges) lie inside a coarse kept element's face or edge: they
+        // hang, when they are local nodes. So the set searched holds the
+        // hanging nodes and the halo's corners only, and knows which
+        // hanging node each point is (their keys come first, in node
+        // order).
+        let nn = mesh.num_nodes();
+        let ni = mesh.num_independent();
+        let keys: Vec<u64> = (hanging_lattice(mesh).into_iter())
+            .chain(halo_corners(mesh))
+            .map(point_key)
+            .collect();
+        let (set, hanging_of) = PointIndex::with_first(keys, nn - ni);
+        Polygons {
+            faces: faces.faces(),
+            halo_start: faces.halo_range().start,
+            elements: mesh.elements(),
+            conn: mesh.connectivity(),
+            set,
+            hanging_of,
+            midpoints: EdgeMidpoints::new(mesh),
+            nn,
+            ni,
+            last: (u32::MAX, ([0; 3], 0)),
+        }
+    }
+
+    /// How many point numbers there are.
+    fn num_points(&self) -> usize {
+        self.nn + self.set.len()
+    }
+
+    /// The point number of place `j` of the set: its hanging node, or
+    /// `nn + j`.
+    fn point_of(&self, j: usize) -> u32 {
+        match self.hanging_of[j] {
+            u32::MAX => (self.nn + j) as u32,
+            h => (self.ni + h as usize) as u32,
+        }
+    }
+
+    /// The local element whose whole face `f` is: the owner, or a finer
+    /// local neighbour.
+    fn emitter(&self, f: &Face) -> Option<u32> {
+        if self.elements[f.owner() as usize].side() == f.emitter_side() {
             return Some(f.owner());
         }
         match f.other() {
             Other::Element(j) => Some(j),
             _ => None,
         }
-    };
-    // The last emitter's cube: faces come by owner, so a few in a row
-    // share it.
-    let mut last = (u32::MAX, ([0u32; 3], 0u32));
-    for (i, f) in faces.faces().iter().enumerate() {
-        poly.clear();
+    }
+
+    fn cube(&self, e: u32) -> ([u32; 3], u32) {
+        let o = self.elements[e as usize];
+        (o.coords(), o.side())
+    }
+
+    /// The point on the edge from `xa` to `xb` (local nodes `a`, `b` when
+    /// known) in its middle, if there is one.
+    fn midpoint(
+        &mut self,
+        ends: Option<(usize, usize)>,
+        xa: [u32; 3],
+        xb: [u32; 3],
+    ) -> Option<(u32, [u32; 3])> {
+        let m = edge_midpoint(xa, xb)?;
+        if let Some((a, b)) = ends {
+            if !self.midpoints.may_hold(a, b, m) {
+                return None;
+            }
+        }
+        let j = self.set.find(point_key(m))?;
+        Some((self.point_of(j), m))
+    }
+
+    /// Appends face `i`'s points, in order, to `poly`.
+    fn polygon(&mut self, i: usize, poly: &mut Vec<(u32, [u32; 3])>) -> Result<()> {
+        let f = &self.faces[i];
+        let start = poly.len();
         // Most faces are the whole face of a local element: their corners
         // are its nodes, and an edge's midpoint is looked for only when
         // both ends may carry one.
-        let whole = (i < halo_start)
+        let whole = (i < self.halo_start)
             .then(|| f.whole_corner_octants())
             .flatten()
-            .and_then(|m| Some((emitter(f)?, m)));
+            .and_then(|m| Some((self.emitter(f)?, m)));
         if let Some((e, m)) = whole {
-            if last.0 != e {
-                last = (e, cube(e));
+            if self.last.0 != e {
+                self.last = (e, self.cube(e));
             }
-            let (c, s) = last.1;
-            let row = &conn[e as usize];
+            let (c, s) = self.last.1;
+            let row = &self.conn[e as usize];
             // A loop, not `map`, which was not inlined and handed its
             // result back through memory.
             let mut nodes = [(0usize, [0u32; 3]); 4];
@@ -189,63 +317,46 @@ fn face_polygons(
             }
             for k in 0..4 {
                 let ((a, xa), (b, xb)) = (nodes[k], nodes[(k + 1) % 4]);
-                poly.push((a, xa));
-                if midpoints.may_hold_ends(a, b) {
-                    if let Some(m) = edge_midpoint(xa, xb) {
-                        if midpoints.may_hold(a, b, m) {
-                            if let Some(j) = set.find(point_key(m)) {
-                                poly.push((point_of(j), m));
-                            }
-                        }
-                    }
+                poly.push((a as u32, xa));
+                if self.midpoints.may_hold_ends(a, b) {
+                    poly.extend(self.midpoint(Some((a, b)), xa, xb));
                 }
             }
-        } else {
-            let c = f.corners();
-            let e = emitter(f).unwrap_or(f.owner());
-            let nodes = c.map(|x| corner_of(e, cube(e), x));
-            for k in 0..4 {
-                let p = match nodes[k] {
-                    Some(n) => n,
-                    None => point_of(set.find(point_key(c[k])).ok_or_else(|| missing(c[k]))?),
-                };
-                poly.push((p, c[k]));
-                if let Some(m) = edge_midpoint(c[k], c[(k + 1) % 4]) {
-                    let may = match (nodes[k], nodes[(k + 1) % 4]) {
-                        (Some(a), Some(b)) => midpoints.may_hold(a, b, m),
-                        _ => true,
-                    };
-                    if may {
-                        if let Some(j) = set.find(point_key(m)) {
-                            poly.push((point_of(j), m));
-                        }
-                    }
+            return Ok(());
+        }
+        let c = f.corners();
+        let e = self.emitter(f).unwrap_or(f.owner());
+        let cube = self.cube(e);
+        let row = &self.conn[e as usize];
+        let nodes = c.map(|x| corner_at(cube.0, cube.1, x).map(|m| row[VTK_TO_MORTON[m]] as usize));
+        for k in 0..4 {
+            let p = match nodes[k] {
+                Some(n) => n as u32,
+                None => {
+                    let j = self.set.find(point_key(c[k])).ok_or_else(|| {
+                        Error::new(
+                            ErrorKind::Internal,
+                            format!("face corner {:?} is no element's corner", c[k]),
+                        )
+                    })?;
+                    self.point_of(j)
                 }
-            }
-            if i >= halo_start {
-                // Both sides start at the lowest point.
-                let at = (0..poly.len())
-                    .min_by_key(|&k| point_key(poly[k].1))
-                    .unwrap_or(0);
-                poly.rotate_left(at);
-            }
+            };
+            poly.push((p, c[k]));
+            let (xa, xb) = (c[k], c[(k + 1) % 4]);
+            let ends = nodes[k].zip(nodes[(k + 1) % 4]);
+            poly.extend(self.midpoint(ends, xa, xb));
         }
-        labels.clear();
-        for &(p, x) in &poly {
-            if label[p] == 0 {
-                count += 1;
-                label[p] = count;
-                first_use(p as u32, x)?;
-            }
-            labels.push(label[p] - 1);
+        if i >= self.halo_start {
+            // Both sides start at the lowest point.
+            let face = &mut poly[start..];
+            let at = (0..face.len())
+                .min_by_key(|&k| point_key(face[k].1))
+                .unwrap_or(0);
+            face.rotate_left(at);
         }
-        total += labels.len();
-        if total > i32::MAX as usize {
-            return Err(too_many());
-        }
-        emit(&labels)?;
+        Ok(())
     }
-    Ok(count)
 }
 
 /// The lattice points of the hanging local nodes, by node from the mesh's
@@ -311,11 +422,15 @@ pub fn write_case(
         Ok(())
     };
     agree(comm, check)?;
+    // A core no rank of this node runs on makes the polygons while this
+    // rank labels them (a serial run on a workstation, say).
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let spare_core = cores > comm.ranks_on_node();
     let scratch = partial(&target);
     let written = (|| -> Result<FoamCounts> {
         let _ = fs::remove_dir_all(&scratch);
         fs::create_dir_all(&scratch).map_err(|e| io_err(&scratch, e))?;
-        write_polymesh(&scratch, mesh, faces, opts, me, p)
+        write_polymesh(&scratch, mesh, faces, opts, (me, p), spare_core)
     })();
     if written.is_err() {
         let _ = fs::remove_dir_all(&scratch);
@@ -607,6 +722,7 @@ fn write_faces(
     loc: &str,
     mesh: &Mesh,
     faces: &Faces,
+    spare_core: bool,
     points: &mut PointsOut,
 ) -> Result<()> {
     let io = |e: std::io::Error| io_err(path, e);
@@ -637,6 +753,7 @@ fn write_faces(
             face_polygons(
                 mesh,
                 faces,
+                spare_core,
                 |l| {
                     total += l.len() as u32;
                     offsets.push(total);
@@ -671,6 +788,7 @@ fn write_faces(
             face_polygons(
                 mesh,
                 faces,
+                spare_core,
                 |l| {
                     (|| -> std::io::Result<()> {
                         write!(w, "{}(", l.len())?;
@@ -703,8 +821,8 @@ fn write_polymesh(
     mesh: &Mesh,
     faces: &Faces,
     opts: &FoamOptions,
-    me: usize,
-    p: usize,
+    (me, p): (usize, usize),
+    spare_core: bool,
 ) -> Result<FoamCounts> {
     let fmt = opts.format;
     let location = if p == 1 {
@@ -714,7 +832,15 @@ fn write_polymesh(
     };
     let loc = location.as_str();
     let mut points = PointsOut::new(&dir.join("points"), fmt, loc, mesh)?;
-    write_faces(&dir.join("faces"), fmt, loc, mesh, faces, &mut points)?;
+    write_faces(
+        &dir.join("faces"),
+        fmt,
+        loc,
+        mesh,
+        faces,
+        spare_core,
+        &mut points,
+    )?;
     let num_points = points.finish(loc)?;
     let nf = faces.faces().len();
     let ni = faces.num_internal();
@@ -929,3 +1055,67 @@ relaxationFactors
     }
 }
 ";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::{classify_leaves, CutRule, Keep};
+    use crate::comm::{CommRef, SerialComm};
+    use crate::domain::{Domain, DEFAULT_FIT};
+    use crate::geometry::load_surface;
+    use crate::mesh::MeshOptions;
+    use crate::octant::Connectivity;
+    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+    use std::rc::Rc;
+
+    /// Each face's labels, then each point's number and lattice point.
+    type Written = (Vec<Vec<u32>>, Vec<(u32, [u32; 3])>);
+
+    /// The labels of every face and the points in label order.
+    fn polygons(mesh: &Mesh, faces: &Faces, spare_core: bool) -> Written {
+        let (mut out, mut points) = (Vec::new(), Vec::new());
+        let n = face_polygons(
+            mesh,
+            faces,
+            spare_core,
+            |l| {
+                out.push(l.to_vec());
+                Ok(())
+            },
+            |id, x| {
+                points.push((id, x));
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(n as usize, points.len());
+        (out, points)
+    }
+
+    #[test]
+    fn a_second_thread_makes_the_same_polygons() {
+        let comm: CommRef = Rc::new(SerialComm);
+        let s = load_surface("sphere").unwrap();
+        let b = s.bbox();
+        let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+        let index = SurfaceIndex::new(&s, &domain);
+        let mut t = build_from_surface(comm, &index, 6, NO_LIMIT).unwrap();
+        t.balance(Connectivity::Corner).unwrap();
+        let classes = classify_leaves(t.leaves(), &index);
+        let opts = MeshOptions {
+            keep: Keep::Outside,
+            cut_rule: CutRule::Center,
+            clean_walls: true,
+        };
+        let mesh = Mesh::build(&t, &domain, Some(&classes), &opts).unwrap();
+        let faces = mesh.faces().unwrap();
+        // Several chunks, the last one short.
+        assert!(faces.faces().len() > 3 * POLYGON_CHUNK + 1);
+        let (serial, points) = polygons(&mesh, &faces, false);
+        assert!(
+            serial.iter().any(|l| l.len() > 4),
+            "no polygon with a hanging point"
+        );
+        assert_eq!((serial, points), polygons(&mesh, &faces, true));
+    }
+}
