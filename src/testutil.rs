@@ -29,3 +29,38 @@ impl Rng {
         std::array::from_fn(|_| lo + (hi - lo) * self.unit())
     }
 }
+
+/// The mesh of surface `name` (a built-in or a file) at `level`, keeping
+/// `keep` (one rank, corner balance, cut leaves kept by their centres,
+/// walls cleaned), and the surface.
+pub(crate) fn mesh_of(
+    name: &str,
+    level: u8,
+    keep: crate::classify::Keep,
+) -> (crate::mesh::Mesh, crate::geometry::Surface) {
+    use crate::classify::{classify_leaves, CutRule};
+    use crate::comm::{CommRef, SerialComm};
+    use crate::domain::{Domain, DEFAULT_FIT};
+    use crate::mesh::{Mesh, MeshOptions};
+    use crate::octant::Connectivity;
+    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+    let comm: CommRef = std::rc::Rc::new(SerialComm);
+    let s = crate::geometry::load_surface(name).unwrap();
+    let b = s.bbox();
+    let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+    let index = SurfaceIndex::new(&s, &domain);
+    let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
+    t.balance(Connectivity::Corner).unwrap();
+    let classes = classify_leaves(t.leaves(), &index);
+    let opts = MeshOptions {
+        keep,
+        cut_rule: CutRule::Center,
+        clean_walls: true,
+    };
+    (Mesh::build(&t, &domain, Some(&classes), &opts).unwrap(), s)
+}
+
+/// The fluid mesh around the built-in sphere at `level` ([`mesh_of`]).
+pub(crate) fn sphere_mesh(level: u8) -> crate::mesh::Mesh {
+    mesh_of("sphere", level, crate::classify::Keep::Outside).0
+}

@@ -1059,14 +1059,7 @@ relaxationFactors
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::classify::{classify_leaves, CutRule, Keep};
-    use crate::comm::{CommRef, SerialComm};
-    use crate::domain::{Domain, DEFAULT_FIT};
-    use crate::geometry::load_surface;
-    use crate::mesh::MeshOptions;
-    use crate::octant::Connectivity;
-    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
-    use std::rc::Rc;
+    use crate::testutil::sphere_mesh;
 
     /// Each face's labels, then each point's number and lattice point.
     type Written = (Vec<Vec<u32>>, Vec<(u32, [u32; 3])>);
@@ -1094,20 +1087,7 @@ mod tests {
 
     #[test]
     fn a_second_thread_makes_the_same_polygons() {
-        let comm: CommRef = Rc::new(SerialComm);
-        let s = load_surface("sphere").unwrap();
-        let b = s.bbox();
-        let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
-        let index = SurfaceIndex::new(&s, &domain);
-        let mut t = build_from_surface(comm, &index, 6, NO_LIMIT).unwrap();
-        t.balance(Connectivity::Corner).unwrap();
-        let classes = classify_leaves(t.leaves(), &index);
-        let opts = MeshOptions {
-            keep: Keep::Outside,
-            cut_rule: CutRule::Center,
-            clean_walls: true,
-        };
-        let mesh = Mesh::build(&t, &domain, Some(&classes), &opts).unwrap();
+        let mesh = sphere_mesh(6);
         let faces = mesh.faces().unwrap();
         // Several chunks, the last one short.
         assert!(faces.faces().len() > 3 * POLYGON_CHUNK + 1);

@@ -861,14 +861,8 @@ pub fn write_worst_vtu(path: &Path, worst: &[WorstElement]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::classify::{classify_leaves, CutRule, Keep};
-    use crate::comm::{CommRef, SerialComm};
-    use crate::domain::{Domain, DEFAULT_FIT};
-    use crate::geometry::load_surface;
-    use crate::mesh::MeshOptions;
-    use crate::octant::Connectivity;
-    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
-    use std::rc::Rc;
+    use crate::comm::SerialComm;
+    use crate::testutil::sphere_mesh;
 
     /// The unit cube's corners in VTK order, mapped by `f`.
     fn cube(f: impl Fn([f64; 3]) -> [f64; 3]) -> [[f64; 3]; 8] {
@@ -1117,23 +1111,6 @@ mod tests {
         for a in 0..3 {
             assert!(close(centre[a], mean[a]), "{centre:?} {mean:?}");
         }
-    }
-
-    fn sphere_mesh(level: u8) -> Mesh {
-        let comm: CommRef = Rc::new(SerialComm);
-        let s = load_surface("sphere").unwrap();
-        let b = s.bbox();
-        let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
-        let index = SurfaceIndex::new(&s, &domain);
-        let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
-        t.balance(Connectivity::Corner).unwrap();
-        let classes = classify_leaves(t.leaves(), &index);
-        let opts = MeshOptions {
-            keep: Keep::Outside,
-            cut_rule: CutRule::Center,
-            clean_walls: true,
-        };
-        Mesh::build(&t, &domain, Some(&classes), &opts).unwrap()
     }
 
     #[test]

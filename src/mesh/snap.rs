@@ -1604,32 +1604,10 @@ impl Mesh {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::classify::{classify_leaves, CutRule, Keep};
-    use crate::comm::{CommRef, SerialComm};
-    use crate::domain::{Domain, DEFAULT_FIT};
-    use crate::geometry::load_surface;
+    use crate::classify::Keep;
+    use crate::comm::SerialComm;
     use crate::geometry::shapes::default_sphere;
-    use crate::mesh::MeshOptions;
-    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
-    use crate::Connectivity;
-    use std::rc::Rc;
-
-    fn mesh_of(name: &str, level: u8, keep: Keep) -> (Mesh, Surface) {
-        let comm: CommRef = Rc::new(SerialComm);
-        let s = load_surface(name).unwrap();
-        let b = s.bbox();
-        let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
-        let index = SurfaceIndex::new(&s, &domain);
-        let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
-        t.balance(Connectivity::Corner).unwrap();
-        let classes = classify_leaves(t.leaves(), &index);
-        let opts = MeshOptions {
-            keep,
-            cut_rule: CutRule::Center,
-            clean_walls: true,
-        };
-        (Mesh::build(&t, &domain, Some(&classes), &opts).unwrap(), s)
-    }
+    use crate::testutil::mesh_of;
 
     #[test]
     fn snapped_sphere_is_valid_and_on_the_surface() {
