@@ -101,7 +101,7 @@ pub struct FoamCounts {
 ///
 /// With `spare_core`, a second thread makes the polygons (the searches)
 /// a chunk ahead while this one labels and hands them on: the same labels
-/// in the same order.
+/// in the same order (and all of it here if the thread cannot start).
 fn face_polygons(
     mesh: &Mesh,
     faces: &Faces,
@@ -137,35 +137,36 @@ fn face_polygons(
         emit(&labels)
     };
     let nf = faces.faces().len();
-    if !spare_core || nf < 2 * POLYGON_CHUNK {
-        let mut poly = Vec::with_capacity(8);
-        for i in 0..nf {
-            poly.clear();
-            maker.polygon(i, &mut poly)?;
-            take(&poly)?;
-        }
-    } else {
+    // Faces labelled so far; the rest, if the thread cannot start, here.
+    let mut next = 0;
+    if spare_core && nf >= 2 * POLYGON_CHUNK {
         std::thread::scope(|scope| -> Result<()> {
             let (ready, chunks) = std::sync::mpsc::sync_channel::<Result<Chunk>>(2);
             let (done, spare) = std::sync::mpsc::channel::<Chunk>();
-            scope.spawn(move || {
-                for lo in (0..nf).step_by(POLYGON_CHUNK) {
-                    let mut c = spare.try_recv().unwrap_or_default();
-                    c.poly.clear();
-                    c.lens.clear();
-                    let made = (lo..nf.min(lo + POLYGON_CHUNK)).try_for_each(|i| {
-                        let start = c.poly.len();
-                        maker.polygon(i, &mut c.poly)?;
-                        c.lens.push((c.poly.len() - start) as u8);
-                        Ok(())
-                    });
-                    let failed = made.is_err();
-                    // A closed channel: the labelling side stopped.
-                    if ready.send(made.map(|()| c)).is_err() || failed {
-                        return;
+            let maker = &mut maker;
+            let started = std::thread::Builder::new()
+                .name("octmesh-polygons".into())
+                .spawn_scoped(scope, move || {
+                    for lo in (0..nf).step_by(POLYGON_CHUNK) {
+                        let mut c = spare.try_recv().unwrap_or_default();
+                        c.poly.clear();
+                        c.lens.clear();
+                        let made = (lo..nf.min(lo + POLYGON_CHUNK)).try_for_each(|i| {
+                            let start = c.poly.len();
+                            maker.polygon(i, &mut c.poly)?;
+                            c.lens.push((c.poly.len() - start) as u8);
+                            Ok(())
+                        });
+                        let failed = made.is_err();
+                        // A closed channel: the labelling side stopped.
+                        if ready.send(made.map(|()| c)).is_err() || failed {
+                            return;
+                        }
                     }
-                }
-            });
+                });
+            if started.is_err() {
+                return Ok(());
+            }
             for c in chunks {
                 let c = c?;
                 let mut at = 0;
@@ -173,10 +174,17 @@ fn face_polygons(
                     take(&c.poly[at..at + n as usize])?;
                     at += n as usize;
                 }
+                next += c.lens.len();
                 let _ = done.send(c);
             }
             Ok(())
         })?;
+    }
+    let mut poly = Vec::with_capacity(8);
+    for i in next..nf {
+        poly.clear();
+        maker.polygon(i, &mut poly)?;
+        take(&poly)?;
     }
     Ok(count)
 }
