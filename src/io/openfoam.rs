@@ -232,7 +232,7 @@ impl<'m> Polygons<'m> {
         // order).
         let nn = mesh.num_nodes();
         let ni = mesh.num_independent();
-        let keys: Vec<u64> = (hanging_lattice(mesh).into_iter())
+        let keys: Vec<u64> = (mesh.hanging_lattice().into_iter())
             .chain(halo_corners(mesh))
             .map(point_key)
             .collect();
@@ -365,27 +365,6 @@ impl<'m> Polygons<'m> {
         }
         Ok(())
     }
-}
-
-/// The lattice points of the hanging local nodes, by node from the mesh's
-/// first hanging one. Every hanging node is a local element's corner, so
-/// the elements give them, and the independent nodes' points are never
-/// made.
-fn hanging_lattice(mesh: &Mesh) -> Vec<[u32; 3]> {
-    let (nn, ni) = (mesh.num_nodes(), mesh.num_independent());
-    let mut out = vec![[0u32; 3]; nn - ni];
-    for (e, row) in mesh.elements().iter().zip(mesh.connectivity()) {
-        if row.iter().all(|&n| (n as usize) < ni) {
-            continue;
-        }
-        let (c, s) = (e.coords(), e.side());
-        for (v, &n) in row.iter().enumerate() {
-            if let Some(h) = (n as usize).checked_sub(ni) {
-                out[h] = corner_coords(c, s, VTK_TO_MORTON[v]);
-            }
-        }
-    }
-    out
 }
 
 /// The directory of this rank's mesh.
@@ -613,10 +592,6 @@ struct PointsOut<'m> {
     count: u32,
 }
 
-/// Room for the count of `points` in binary (the same rule as
-/// [`LABEL_COUNT_WIDTH`]).
-const POINT_COUNT_WIDTH: usize = 20;
-
 impl<'m> PointsOut<'m> {
     fn new(path: &Path, fmt: FoamFormat, loc: &str, mesh: &'m Mesh) -> Result<Self> {
         let head = points_head(fmt, loc, 0).map_err(|e| io_err(path, e))?;
@@ -705,21 +680,22 @@ impl<'m> PointsOut<'m> {
 }
 
 /// The `points` file up to its first position: in binary the count padded
-/// to [`POINT_COUNT_WIDTH`] (so it can be written last), in ASCII as is.
+/// to [`COUNT_WIDTH`] (so it can be written last), in ASCII as is.
 fn points_head(fmt: FoamFormat, loc: &str, count: u32) -> std::io::Result<Vec<u8>> {
     let mut head = Vec::new();
     header(&mut head, fmt, "vectorField", loc, "points", None)?;
     match fmt {
-        FoamFormat::Binary => write!(head, "{count:<POINT_COUNT_WIDTH$}\n(")?,
+        FoamFormat::Binary => write!(head, "{count:<COUNT_WIDTH$}\n(")?,
         FoamFormat::Ascii => write!(head, "{count}\n(\n")?,
     }
     Ok(head)
 }
 
-/// Width of the label count of a binary `faces` file: the labels are
-/// streamed before their number is known, and the count written over room
-/// left for it (OpenFOAM skips the trailing blanks).
-const LABEL_COUNT_WIDTH: usize = 20;
+/// Width of a count written after its list in binary (the labels of
+/// `faces`, the positions of `points`): the list is streamed before its
+/// length is known, and the count written over room left for it
+/// (OpenFOAM skips the trailing blanks).
+const COUNT_WIDTH: usize = 20;
 
 /// Writes the `faces` file of this rank, the face polygons streamed from
 /// [`face_polygons`], and hands the points to `points` as they are first
@@ -746,7 +722,7 @@ fn write_faces(
             write!(head, "{}\n(", nf + 1).map_err(io)?;
             // Between the two lists: the end of the offsets, then the
             // label count (written last, over the same room).
-            let between = |count: u32| format!(")\n\n{count:<LABEL_COUNT_WIDTH$}\n(");
+            let between = |count: u32| format!(")\n\n{count:<COUNT_WIDTH$}\n(");
             let offsets_end = head.len() + 4 * (nf + 1);
             let data_at = offsets_end + between(0).len();
             let mut w = DirectWriter::create(path).map_err(io)?;

@@ -479,16 +479,38 @@ impl Mesh {
     /// stored, but recovered from the elements' corners).
     pub fn node_lattice(&self) -> Vec<[u32; 3]> {
         let mut out = vec![[0u32; 3]; self.num_nodes()];
-        for (e, c) in self.elements.iter().zip(&self.connectivity) {
-            let (a, s) = (e.coords(), e.side());
-            for (v, &n) in c.iter().enumerate() {
-                out[n as usize] = dual::corner_coords(a, s, VTK_TO_MORTON[v]);
-            }
-        }
+        self.for_each_corner(|n, x| out[n as usize] = x);
         for &(n, x) in &self.dep_only {
             out[n as usize] = x;
         }
         out
+    }
+
+    /// Lattice coordinates of the hanging nodes, by node from
+    /// [`Mesh::num_independent`] on (a new vector). Every hanging node is
+    /// a local element's corner, so the independent nodes' points are not
+    /// made.
+    pub(crate) fn hanging_lattice(&self) -> Vec<[u32; 3]> {
+        let ni = self.num_independent();
+        let mut out = vec![[0u32; 3]; self.num_nodes() - ni];
+        self.for_each_corner(|n, x| {
+            if let Some(h) = (n as usize).checked_sub(ni) {
+                out[h] = x;
+            }
+        });
+        out
+    }
+
+    /// Calls `f(node, lattice point)` at every corner of every local
+    /// element (a node once per element that has it; the nodes that are
+    /// only a dependency never), each element's anchor decoded once.
+    pub(crate) fn for_each_corner(&self, mut f: impl FnMut(u32, [u32; 3])) {
+        for (e, c) in self.elements.iter().zip(&self.connectivity) {
+            let (a, s) = (e.coords(), e.side());
+            for (v, &n) in c.iter().enumerate() {
+                f(n, dual::corner_coords(a, s, VTK_TO_MORTON[v]));
+            }
+        }
     }
 
     /// Coordinates of all local nodes in user units (a new vector): the

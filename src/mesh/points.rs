@@ -197,15 +197,11 @@ impl EdgeMidpoints {
         let halo = PointFilter::new(halo_corners(mesh));
         let mut marks = vec![0u8; mesh.num_nodes()];
         if !mesh.halo().leaves.is_empty() {
-            for (e, row) in mesh.elements().iter().zip(mesh.connectivity()) {
-                let (c, s) = (e.coords(), e.side());
-                for (v, &n) in row.iter().enumerate() {
-                    let p = super::dual::corner_coords(c, s, super::VTK_TO_MORTON[v]);
-                    if halo.may_hold(p) {
-                        marks[n as usize] |= HALO_CORNER;
-                    }
+            mesh.for_each_corner(|n, p| {
+                if halo.may_hold(p) {
+                    marks[n as usize] |= HALO_CORNER;
                 }
-            }
+            });
         }
         for d in mesh.edge_hanging() {
             marks[d[0] as usize] |= HANGING_END;
