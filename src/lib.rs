@@ -26,6 +26,7 @@ pub mod budget;
 pub mod classify;
 pub mod comm;
 pub mod config;
+pub mod cores;
 pub mod curvature;
 pub mod domain;
 pub mod error;

@@ -411,8 +411,7 @@ pub fn write_case(
     agree(comm, check)?;
     // A core no rank of this node runs on makes the polygons while this
     // rank labels them (a serial run on a workstation, say).
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let spare_core = cores > comm.ranks_on_node();
+    let spare_core = crate::cores::spare_core(comm);
     let scratch = partial(&target);
     let written = (|| -> Result<FoamCounts> {
         let _ = fs::remove_dir_all(&scratch);

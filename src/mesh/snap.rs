@@ -69,6 +69,7 @@ use crate::refine::SurfaceIndex;
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
+use std::sync::atomic::Ordering;
 
 use super::faces::SURFACE_PATCH;
 use super::quality::{corner_scaled_jacobians, CORNER_EDGES};
@@ -106,6 +107,12 @@ pub const SURFACE_REACH: f64 = 4.0;
 pub const RELAX_TOLERANCE: f64 = 1e-3;
 /// Fixed-point scale of the smoothing's sums: 2^32 per lattice unit.
 const FIXED: f64 = 4294967296.0;
+/// Passes over at least this many nodes or elements are shared with a
+/// second thread when the rank has a spare core: below it a thread's
+/// start costs more than it saves.
+const SPLIT_AT: usize = 1 << 15;
+/// The pieces such a pass is cut into ([`crate::cores::map_chunks`]).
+const CHUNK: usize = 1 << 13;
 
 /// How [`Mesh::snap`] moves the nodes.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
@@ -352,6 +359,7 @@ impl<'s> Target<'s> {
         feature_angle_deg: f64,
         within: &Aabb,
         reach: f64,
+        found: Option<(Vec<Triangle>, Vec<Triangle>)>,
     ) -> Target<'s> {
         let (tris, bvh) = match index {
             Some(ix) => (Cow::Borrowed(&ix.tris[..]), Cow::Borrowed(&ix.bvh)),
@@ -368,7 +376,9 @@ impl<'s> Target<'s> {
                 (Cow::Owned(tris), Cow::Owned(bvh))
             }
         };
-        let (edges, corners) = if feature_angle_deg < 180.0 {
+        let (edges, corners) = if let Some(found) = found {
+            found
+        } else if feature_angle_deg < 180.0 {
             features(&tris, feature_angle_deg, within)
         } else {
             (Vec::new(), Vec::new())
@@ -453,8 +463,9 @@ type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
 /// edges between facets whose normals differ by more, and edges without
 /// exactly two facets; corners where not exactly two feature edges meet.
 /// Vertices with the same bits are one (-0 and 0 too); edges come in the
-/// order of their first facet, corners in the order their vertices first
-/// appear.
+/// order of their first facet, each from its lower end ([`order`]),
+/// corners in that order of their points: the same whichever facets
+/// around them are read.
 ///
 /// Only the facets whose boxes meet `within` are read: every facet around
 /// an edge or a vertex that meets it is among them, so those are found as
@@ -483,7 +494,9 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
                     return r.1;
                 }
                 let id = *vertex.entry((x, y, z)).or_insert_with(|| {
-                    point.push(p);
+                    // One zero: the points do not depend on which facet
+                    // names a vertex first.
+                    point.push(p.map(|c| c + 0.0));
                     (point.len() - 1) as u32
                 });
                 *r = ((x, y, z), id);
@@ -562,24 +575,41 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
             };
             let (a, b) = (a as usize, b as usize);
             if sharp && Aabb::from_points([point[a], point[b]]).overlaps(within) {
-                edges.push(Triangle::new(point[a], point[b], point[b]));
+                // From the lower end (coordinates compared in turn), so
+                // the closest points' bits do not depend on which facets
+                // were read.
+                let (p, q) = (point[a], point[b]);
+                let (p, q) = if order(q, p).is_lt() { (q, p) } else { (p, q) };
+                edges.push(Triangle::new(p, q, q));
                 degree[a] += 1;
                 degree[b] += 1;
             }
         }
     }
-    let corners = (0..nv)
+    let mut corners: Vec<Triangle> = (0..nv)
         .filter(|&v| degree[v] > 0 && degree[v] != 2)
         .filter(|&v| Aabb::from_points([point[v]]).overlaps(within))
         .map(|v| Triangle::new(point[v], point[v], point[v]))
         .collect();
+    corners.sort_unstable_by(|a, b| order(a.v[0], b.v[0]));
     (edges, corners)
+}
+
+/// Points compared by x, then y, then z.
+fn order(p: [f64; 3], q: [f64; 3]) -> std::cmp::Ordering {
+    (0..3)
+        .map(|a| p[a].total_cmp(&q[a]))
+        .find(|o| o.is_ne())
+        .unwrap_or(std::cmp::Ordering::Equal)
 }
 
 /// The state of one snap: positions in lattice units, per local node.
 struct Snapper<'a> {
     mesh: &'a Mesh,
     comm: &'a dyn Comm,
+    /// Whether a second thread may take half of the long passes
+    /// ([`crate::cores`]).
+    spare: bool,
     lists: Vec<(u32, Vec<u32>)>,
     ni: usize,
     /// Lattice points of every local node.
@@ -792,6 +822,66 @@ impl<'a> Snapper<'a> {
         }
     }
 
+    /// The elements a snap may change, from the surface nodes that may
+    /// move (`surface`): the nodes the relaxation moves (interior nodes
+    /// within `opts.layers` elements of those, off every patch), the
+    /// active elements (those depending on either kind, in storage order)
+    /// and the adjacency from the nodes to them (compressed rows: node
+    /// `n`'s elements are `adj[start[n]..start[n + 1]]`; an element may
+    /// be listed twice for a node through two hanging corners, which is
+    /// harmless). Collective.
+    #[allow(clippy::type_complexity)]
+    fn moving_elements(
+        &self,
+        surface: &dyn Fn(usize) -> bool,
+        masks: &[u64],
+        opts: &SnapOptions,
+    ) -> (Vec<bool>, Vec<u32>, Vec<u32>, Vec<u32>) {
+        let (ni, elements) = (self.ni, self.mesh.elements().len());
+        let mut near: Vec<u64> = (0..ni).map(|n| surface(n) as u64).collect();
+        for _ in 0..opts.layers {
+            let mut next = near.clone();
+            for e in 0..elements {
+                let mut touch = false;
+                self.support(e, |n| touch |= near[n] != 0);
+                if touch {
+                    self.support(e, |n| next[n] = 1);
+                }
+            }
+            self.exchange(&mut next, 1, |a, b| *a |= b);
+            near = next;
+        }
+        let layer: Vec<bool> = (0..ni)
+            .map(|n| near[n] != 0 && masks[n] == 0 && opts.iterations > 0)
+            .collect();
+        drop(near);
+        let mut active = Vec::new();
+        let mut start = vec![0u32; ni + 1];
+        for e in 0..elements {
+            let (nodes, len) = self.support_list(e);
+            let nodes = &nodes[..len];
+            if nodes
+                .iter()
+                .any(|&n| surface(n as usize) || layer[n as usize])
+            {
+                active.push(e as u32);
+                nodes.iter().for_each(|&n| start[n as usize + 1] += 1);
+            }
+        }
+        for n in 0..ni {
+            start[n + 1] += start[n];
+        }
+        let mut adj = vec![0u32; start[ni] as usize];
+        let mut fill = start.clone();
+        for &e in &active {
+            self.support(e as usize, |n| {
+                adj[fill[n] as usize] = e;
+                fill[n] += 1;
+            });
+        }
+        (layer, active, start, adj)
+    }
+
     /// The elements of `cands` with a corner below the least scaled
     /// Jacobian, and those corners ([`corner_verdict`]); every element's
     /// figure is kept in `least`. Their hanging corners are placed from their dependencies
@@ -800,25 +890,51 @@ impl<'a> Snapper<'a> {
     fn bad_among(&mut self, cands: &[u32]) -> Vec<(u32, u8)> {
         let conn = self.mesh.connectivity();
         let j2 = self.min_jacobian * self.min_jacobian;
-        let mut bad = Vec::new();
-        for (k, &e) in cands.iter().enumerate() {
-            self.fetch_ahead(cands, k, false);
-            let c = &conn[e as usize];
-            let mut p = [[0.0; 3]; 8];
-            for (q, &n) in p.iter_mut().zip(c) {
-                let n = n as usize;
-                if n >= self.ni {
-                    self.pos[n] = mean(&self.pos, self.deps[n - self.ni]);
+        let (ni, deps) = (self.ni, &self.deps);
+        let (fixed, hanging) = self.pos.split_at_mut(ni);
+        let fixed = &*fixed;
+        // With a spare core two threads measure: they may place the same
+        // hanging node (with the same bits), and each element's figure is
+        // stored by the one that measures it.
+        let hanging = crate::cores::shared_words(hanging);
+        let least = crate::cores::shared_words(slice_as_words(&mut self.least));
+        let measure = |part: std::ops::Range<usize>| {
+            let part = &cands[part];
+            let mut bad = Vec::new();
+            for (k, &e) in part.iter().enumerate() {
+                if let Some(&ahead) = part.get(k + 6) {
+                    for &n in &conn[ahead as usize] {
+                        let n = n as usize;
+                        if n < ni {
+                            super::prefetch(fixed, n);
+                        } else {
+                            super::prefetch(hanging, n - ni);
+                        }
+                    }
                 }
-                *q = self.pos[n];
+                let mut p = [[0.0; 3]; 8];
+                for (q, &n) in p.iter_mut().zip(&conn[e as usize]) {
+                    let n = n as usize;
+                    *q = if n < ni {
+                        fixed[n]
+                    } else {
+                        let m = mean(fixed, deps[n - ni]);
+                        for (w, v) in hanging[n - ni].iter().zip(m) {
+                            w.store(v.to_bits(), Ordering::Relaxed);
+                        }
+                        m
+                    };
+                }
+                let (failed, figure) = corner_verdict(&p, j2);
+                least[e as usize][0].store(figure.to_bits(), Ordering::Relaxed);
+                if failed != 0 {
+                    bad.push((e, failed));
+                }
             }
-            let (failed, least) = corner_verdict(&p, j2);
-            self.least[e as usize] = least;
-            if failed != 0 {
-                bad.push((e, failed));
-            }
-        }
-        bad
+            bad
+        };
+        let spare = self.spare && cands.len() >= SPLIT_AT;
+        crate::cores::map_chunks(spare, cands.len(), CHUNK, measure).concat()
     }
 
     /// The active elements depending on the nodes `nodes`, once each:
@@ -1192,6 +1308,12 @@ fn jacobian_at(q: &[[f64; 3]; 8], t: [f64; 3]) -> f64 {
 
 /// The mean of the positions of a hanging node's dependencies, in the
 /// order given (their lattice points'), pairwise.
+/// `v` as one-word arrays (for [`crate::cores::shared_words`]).
+fn slice_as_words(v: &mut [f64]) -> &mut [[f64; 1]] {
+    // SAFETY: `[f64; 1]` has the layout of `f64`.
+    unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
+}
+
 fn mean(pos: &[[f64; 3]], (d, n): ([u32; 4], u8)) -> [f64; 3] {
     let p = |k: usize| pos[d[k] as usize];
     if n == 2 {
@@ -1229,80 +1351,134 @@ impl Mesh {
         index: Option<&SurfaceIndex>,
         opts: &SnapOptions,
     ) -> Result<SnapReport> {
+        let spare = crate::cores::spare_core(comm);
+        self.snap_threads(comm, surface, index, opts, spare)
+    }
+
+    /// [`Mesh::snap_indexed`], with a second thread where `spare` allows
+    /// (the same bits either way).
+    fn snap_threads(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        index: Option<&SurfaceIndex>,
+        opts: &SnapOptions,
+        spare: bool,
+    ) -> Result<SnapReport> {
         let index = index.filter(|ix| ix.tris.len() == surface.len());
         agree(comm, opts.check())?;
         self.moved = None;
         self.moved_lattice = None;
-        let lattice_u = self.node_lattice();
-        let masks = self.plain_patch_masks(comm, &lattice_u);
-        let ni = self.num_independent();
-        let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
-            .map(|k| {
-                let mut d = [0u32; 4];
-                let h = self.hanging_deps(k);
-                d[..h.len()].copy_from_slice(&h);
-                d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
-                (d, h.len() as u8)
-            })
-            .collect();
-        let mut s = Snapper {
-            mesh: self,
-            comm,
-            lists: if comm.size() > 1 {
-                self.exchange_lists()
-            } else {
-                Vec::new()
-            },
-            ni,
-            pos: lattice_u.iter().map(|q| q.map(f64::from)).collect(),
-            lattice: lattice_u,
-            deps,
-            snap: vec![false; ni],
-            target: vec![[0.0; 3]; ni],
-            step: vec![STEPS; ni],
-            climbing: vec![true; ni],
-            layer: vec![false; ni],
-            active: Vec::new(),
-            adj_start: Vec::new(),
-            adj: Vec::new(),
-            side: Vec::new(),
-            min_jacobian: opts.min_jacobian,
-            least: vec![f64::NAN; self.elements().len()],
-            flags: Vec::new(),
-            sums: Vec::new(),
-            seen: Vec::new(),
+        // On a lone rank with a spare core, the surface's features (which
+        // depend on the surface only) are found on a second thread while
+        // this one finds the nodes to move; they are then cut to the box
+        // those nodes give, as if found in it (see [`features`]).
+        let early = match index {
+            Some(ix) if spare && comm.size() == 1 && opts.feature_angle_deg < 180.0 => Some(ix),
+            _ => None,
         };
+        let everywhere = Aabb {
+            min: [f64::NEG_INFINITY; 3],
+            max: [f64::INFINITY; 3],
+        };
+        let (found, (masks, mut s, side, reach, within)) = crate::cores::join(
+            early.is_some(),
+            || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, &everywhere)),
+            || {
+                let lattice_u = self.node_lattice();
+                let masks = self.plain_patch_masks(comm, &lattice_u);
+                let ni = self.num_independent();
+                let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
+                    .map(|k| {
+                        let mut d = [0u32; 4];
+                        let h = self.hanging_deps(k);
+                        d[..h.len()].copy_from_slice(&h);
+                        d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
+                        (d, h.len() as u8)
+                    })
+                    .collect();
+                let s = Snapper {
+                    mesh: self,
+                    comm,
+                    spare,
+                    lists: if comm.size() > 1 {
+                        self.exchange_lists()
+                    } else {
+                        Vec::new()
+                    },
+                    ni,
+                    pos: lattice_u.iter().map(|q| q.map(f64::from)).collect(),
+                    lattice: lattice_u,
+                    deps,
+                    snap: vec![false; ni],
+                    target: vec![[0.0; 3]; ni],
+                    step: vec![STEPS; ni],
+                    climbing: vec![true; ni],
+                    layer: vec![false; ni],
+                    active: Vec::new(),
+                    adj_start: Vec::new(),
+                    adj: Vec::new(),
+                    side: Vec::new(),
+                    min_jacobian: opts.min_jacobian,
+                    least: vec![f64::NAN; self.elements().len()],
+                    flags: Vec::new(),
+                    sums: Vec::new(),
+                    seen: Vec::new(),
+                };
+                let surface_bit = 1u64 << SURFACE_PATCH;
+                let sides = (1u64 << SURFACE_PATCH) - 1;
+                let on_surface = |n: usize| masks[n] & surface_bit != 0;
+
+                // The finest element side at each node, over the ranks.
+                let mut side = vec![u64::MAX; ni];
+                for (e, c) in self.elements().iter().zip(self.connectivity()) {
+                    for &n in c {
+                        let n = n as usize;
+                        if n < ni {
+                            side[n] = side[n].min(e.side() as u64);
+                        }
+                    }
+                }
+                s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
+                let queried =
+                    |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
+                let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
+                let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
+                // The features that can attract a node lie within `reach` of the
+                // box of the queried nodes (with a margin for rounding).
+                let mut within =
+                    Aabb::from_points((0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)));
+                if !within.is_empty() {
+                    let grow = reach * (1.0 + 1e-9) + 1.0;
+                    within.min = within.min.map(|v| v - grow);
+                    within.max = within.max.map(|v| v + grow);
+                }
+                (masks, s, side, reach, within)
+            },
+        );
+        let ni = s.ni;
         let surface_bit = 1u64 << SURFACE_PATCH;
         let sides = (1u64 << SURFACE_PATCH) - 1;
         let on_surface = |n: usize| masks[n] & surface_bit != 0;
-
-        // The finest element side at each node, over the ranks.
-        let mut side = vec![u64::MAX; ni];
-        for (e, c) in self.elements().iter().zip(self.connectivity()) {
-            for &n in c {
-                let n = n as usize;
-                if n < ni {
-                    side[n] = side[n].min(e.side() as u64);
-                }
-            }
-        }
-        s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
         let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
-        let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
-        let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
-        // The features that can attract a node lie within `reach` of the
-        // box of the queried nodes (with a margin for rounding).
-        let mut within = Aabb::from_points((0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)));
-        if !within.is_empty() {
-            let grow = reach * (1.0 + 1e-9) + 1.0;
-            within.min = within.min.map(|v| v - grow);
-            within.max = within.max.map(|v| v + grow);
-        }
-        let target_surface =
-            Target::new(surface, index, self, opts.feature_angle_deg, &within, reach);
+        let found = found.map(|(edges, corners)| {
+            let meets = |t: &Triangle| t.aabb().overlaps(&within);
+            (
+                edges.into_iter().filter(meets).collect(),
+                corners.into_iter().filter(meets).collect(),
+            )
+        });
+        let target_surface = Target::new(
+            surface,
+            index,
+            self,
+            opts.feature_angle_deg,
+            &within,
+            reach,
+            found,
+        );
 
         let mut feature = vec![false; ni];
-        let mut near_tris = NearTriangles::default();
         // In the Morton order of their lattice points: each query's
         // neighbours come next, and the gathered triangles serve more.
         let mut order: Vec<(u64, u32)> = (0..ni)
@@ -1310,9 +1486,29 @@ impl Mesh {
             .map(|n| (super::numbering::node_key(s.lattice[n]), n as u32))
             .collect();
         order.sort_unstable();
-        for (_, n) in order {
+        // A node's target depends on nothing but its point: the pieces of
+        // the order may go to two threads. The elements that may change
+        // are found meanwhile, from the nodes queried (nearly all of them
+        // find a target).
+        let spare_here = s.spare && order.len() >= SPLIT_AT;
+        let query = |part: std::ops::Range<usize>| {
+            let mut near_tris = NearTriangles::default();
+            order[part]
+                .iter()
+                .map(|&(_, n)| {
+                    let n = n as usize;
+                    let x = s.lattice[n].map(f64::from);
+                    target_surface.of(x, side[n] as f64, &mut near_tris)
+                })
+                .collect::<Vec<_>>()
+        };
+        let (targets, (layer, active, adj_start, adj)) =
+            crate::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
+                s.moving_elements(&queried, &masks, opts)
+            });
+        for (&(_, n), found) in order.iter().zip(targets.into_iter().flatten()) {
             let n = n as usize;
-            if let Some((t, f)) = target_surface.of(s.lattice(n), side[n] as f64, &mut near_tris) {
+            if let Some((t, f)) = found {
                 s.snap[n] = true;
                 s.target[n] = t;
                 s.step[n] = 0;
@@ -1320,52 +1516,11 @@ impl Mesh {
             }
         }
         drop(target_surface);
-
-        // The layers: interior nodes within `layers` elements of a
-        // moving surface node.
-        let mut near: Vec<u64> = (0..ni).map(|n| s.snap[n] as u64).collect();
-        for _ in 0..opts.layers {
-            let mut next = near.clone();
-            for e in 0..self.elements().len() {
-                let mut touch = false;
-                s.support(e, |n| touch |= near[n] != 0);
-                if touch {
-                    s.support(e, |n| next[n] = 1);
-                }
-            }
-            s.exchange(&mut next, 1, |a, b| *a |= b);
-            near = next;
-        }
-        for n in 0..ni {
-            s.layer[n] = near[n] != 0 && masks[n] == 0 && opts.iterations > 0;
-        }
-        s.side = side;
-        drop(near);
-        // Node -> active elements, compressed rows (an element may list a
-        // node twice through two hanging corners; harmless).
-        let mut start = vec![0u32; ni + 1];
-        for e in 0..self.elements().len() {
-            let (nodes, len) = s.support_list(e);
-            let nodes = &nodes[..len];
-            let moves = |&n: &u32| s.snap[n as usize] || s.layer[n as usize];
-            if nodes.iter().any(moves) {
-                s.active.push(e as u32);
-                nodes.iter().for_each(|&n| start[n as usize + 1] += 1);
-            }
-        }
-        for n in 0..ni {
-            start[n + 1] += start[n];
-        }
-        let mut adj = vec![0u32; start[ni] as usize];
-        let mut fill = start.clone();
-        for &e in &s.active {
-            s.support(e as usize, |n| {
-                adj[fill[n] as usize] = e;
-                fill[n] += 1;
-            });
-        }
-        s.adj_start = start;
+        s.layer = layer;
+        s.active = active;
+        s.adj_start = adj_start;
         s.adj = adj;
+        s.side = side;
 
         s.scale_back();
         let mut relaxed = vec![false; ni];
@@ -1608,6 +1763,62 @@ mod tests {
     use crate::comm::SerialComm;
     use crate::geometry::shapes::default_sphere;
     use crate::testutil::mesh_of;
+
+    #[test]
+    fn a_second_thread_gives_the_same_bits() {
+        // Level 7: more surface nodes and active elements than SPLIT_AT,
+        // so the passes are shared; outside, so nodes step back and up.
+        let (mut m, s) = mesh_of("sphere", 7, Keep::Outside);
+        let index = SurfaceIndex::new(&s, m.domain());
+        let opts = SnapOptions {
+            feature_angle_deg: 10.0,
+            ..SnapOptions::default()
+        };
+        // A snapped mesh is snapped again from the lattice.
+        let mut run = |spare: bool| {
+            let r = m
+                .snap_threads(&SerialComm, &s, Some(&index), &opts, spare)
+                .unwrap();
+            (format!("{r:?}"), m.moved_lattice.clone().unwrap())
+        };
+        let (one, two) = (run(false), run(true));
+        assert!(one.1.len() > 2 * SPLIT_AT);
+        assert_eq!(one.0, two.0);
+        assert!(one
+            .1
+            .iter()
+            .zip(&two.1)
+            .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+    }
+
+    #[test]
+    fn features_found_everywhere_then_cut_are_those_found_in_the_box() {
+        // A tiny feature angle makes most of the sphere's edges features.
+        let s = default_sphere();
+        let tris = s.triangles();
+        let everywhere = Aabb {
+            min: [f64::NEG_INFINITY; 3],
+            max: [f64::INFINITY; 3],
+        };
+        let (all_edges, all_corners) = features(tris, 0.01, &everywhere);
+        let b = s.bbox();
+        let within = Aabb {
+            min: b.min,
+            max: std::array::from_fn(|a| 0.5 * (b.min[a] + b.max[a])),
+        };
+        let (edges, corners) = features(tris, 0.01, &within);
+        let meets = |t: &&Triangle| t.aabb().overlaps(&within);
+        assert!(!corners.is_empty() && edges.len() < all_edges.len());
+        let cut = |v: &[Triangle]| v.iter().filter(meets).map(|t| t.v).collect::<Vec<_>>();
+        assert_eq!(
+            cut(&all_edges),
+            edges.iter().map(|t| t.v).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            cut(&all_corners),
+            corners.iter().map(|t| t.v).collect::<Vec<_>>()
+        );
+    }
 
     #[test]
     fn snapped_sphere_is_valid_and_on_the_surface() {
