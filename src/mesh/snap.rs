@@ -683,18 +683,14 @@ impl<'a> Snapper<'a> {
     }
 
     /// In a pass over the elements `list`, now at `k`: fetches the corners'
-    /// positions (and lattice points, with `lattice`) for the element a
-    /// few places ahead. Nodes are numbered apart from elements, so an
-    /// element's corners lie all over those arrays, and the passes wait on
-    /// those loads otherwise.
+    /// positions for the element a few places ahead. Nodes are numbered
+    /// apart from elements, so an element's corners lie all over that
+    /// array, and the passes wait on those loads otherwise.
     #[inline]
-    fn fetch_ahead(&self, list: &[u32], k: usize, lattice: bool) {
+    fn fetch_ahead(&self, list: &[u32], k: usize) {
         if let Some(&ahead) = list.get(k + 6) {
             for &n in &self.mesh.connectivity()[ahead as usize] {
                 super::prefetch(&self.pos, n as usize);
-                if lattice {
-                    super::prefetch(&self.lattice, n as usize);
-                }
             }
         }
     }
@@ -1077,8 +1073,9 @@ impl<'a> Snapper<'a> {
         let mut sums = std::mem::take(&mut self.sums);
         sums.clear();
         sums.resize(4 * ni, 0);
+        let elements = self.mesh.elements();
         for (k, &e) in self.active.iter().enumerate() {
-            self.fetch_ahead(&self.active, k, true);
+            self.fetch_ahead(&self.active, k);
             let c = &conn[e as usize];
             if !c
                 .iter()
@@ -1086,11 +1083,17 @@ impl<'a> Snapper<'a> {
             {
                 continue;
             }
+            // The corners' lattice points from the element's anchor and
+            // side (the same numbers as the nodes' own, without fetching
+            // eight of them from all over memory).
+            let (anchor, side) = (elements[e as usize].coords(), elements[e as usize].side());
             let mut d = [0.0f64; 3];
-            for &n in c {
-                let (p, x) = (self.pos[n as usize], self.lattice(n as usize));
+            for (v, &n) in c.iter().enumerate() {
+                let p = self.pos[n as usize];
+                let x = super::dual::corner_coords(anchor, side, VTK_TO_MORTON[v]);
+                debug_assert_eq!(x, self.lattice[n as usize]);
                 for a in 0..3 {
-                    d[a] += p[a] - x[a];
+                    d[a] += p[a] - f64::from(x[a]);
                 }
             }
             let fixed = d.map(|v| ((v / 8.0) * FIXED).round() as i64 as u64);
