@@ -2,8 +2,10 @@
 //! the same bits on any number of ranks.
 //!
 //! Run by `cargo test`, this program launches itself under `mpirun` on 1
-//! to 4 ranks. Every run snaps the solid and fluid sphere and the solid
-//! torus on all ranks, gathers each node's position by its lattice point
+//! to 4 ranks. Every run snaps the solid and fluid sphere, the solid
+//! torus and (when `../shared/data` has it) the solid fandisk, whose
+//! feature edges each rank finds near its own nodes, on all ranks,
+//! gathers each node's position by its lattice point
 //! on rank 0 and compares the bits (and the report) with the same mesh
 //! snapped by rank 0 alone. The run on one rank also checks, on one
 //! process:
@@ -345,6 +347,15 @@ fn child() {
     same_on_all_ranks(&comm, "sphere", 5, Keep::Inside);
     same_on_all_ranks(&comm, "sphere", 5, Keep::Outside);
     same_on_all_ranks(&comm, "torus", 5, Keep::Inside);
+    // Sharp edges: each rank finds the features near its own nodes.
+    if let Some(path) = common::shared_model("fandisk.stl") {
+        same_on_all_ranks(&comm, path.to_str().unwrap(), 6, Keep::Inside);
+    } else if comm.rank() == 0 {
+        println!(
+            "SKIP fandisk on {} ranks: not in ../shared/data",
+            comm.size()
+        );
+    }
     if comm.size() == 1 {
         serial_checks();
     }

@@ -347,17 +347,90 @@ impl FeatureCells {
     }
 }
 
+/// Where a feature can attract one of a rank's surface nodes from: the
+/// cells of a coarse grid over the lattice cube that hold such a node. A
+/// box *meets* the region when, grown by the feature reach, it overlaps
+/// one of them; a larger box meets it whenever a smaller one inside does,
+/// so the facets around an edge or a vertex that meets it meet it too.
+/// A rank reads only the facets that meet its region: with several ranks
+/// each has part of the surface, far less than the box of its nodes holds
+/// (a Morton part is not a box).
+struct Region {
+    /// Cell side (lattice units), cells per axis, and the growth.
+    side: f64,
+    cells: usize,
+    grow: f64,
+    /// One bit per cell, x fastest.
+    bits: Vec<u64>,
+    any: bool,
+}
+
+impl Region {
+    /// The region of the nodes at `points` for cells of at most `largest`
+    /// (lattice units) and a reach of `reach`.
+    fn new(points: impl Iterator<Item = [f64; 3]>, largest: f64, reach: f64) -> Region {
+        let root = crate::octant::ROOT_LEN as f64;
+        // Cells of 16 of the largest surface cells, at most 128 a side.
+        let side = (16.0 * largest).max(root / 128.0);
+        let cells = (root / side).ceil() as usize;
+        let mut r = Region {
+            side,
+            cells,
+            grow: reach * (1.0 + 1e-9) + 1.0,
+            bits: vec![0; (cells * cells * cells).div_ceil(64)],
+            any: false,
+        };
+        for p in points {
+            let c = p.map(|v| r.index(v));
+            let k = r.key(c);
+            r.bits[k / 64] |= 1 << (k % 64);
+            r.any = true;
+        }
+        r
+    }
+
+    #[inline]
+    fn index(&self, v: f64) -> usize {
+        ((v / self.side).floor().max(0.0) as usize).min(self.cells - 1)
+    }
+
+    #[inline]
+    fn key(&self, c: [usize; 3]) -> usize {
+        (c[2] * self.cells + c[1]) * self.cells + c[0]
+    }
+
+    /// Whether box `b` meets the region (see [`Region`]).
+    fn meets(&self, b: &Aabb) -> bool {
+        if !self.any || b.is_empty() {
+            return false;
+        }
+        let lo = b.min.map(|v| self.index(v - self.grow));
+        let hi = b.max.map(|v| self.index(v + self.grow));
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let k = self.key([x, y, z]);
+                    if self.bits[k / 64] >> (k % 64) & 1 != 0 {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
 impl<'s> Target<'s> {
     /// `reach` is the largest feature reach any query will use
     /// ([`FEATURE_REACH`] times the largest cell); the features are those
-    /// for the feature angle (degrees) that meet the box `within`. `index`,
+    /// for the feature angle (degrees) that meet `region`, or `found`. `index`,
     /// if given, is `surface` in the lattice units of `mesh`'s domain.
     fn new(
         surface: &Surface,
         index: Option<&'s SurfaceIndex>,
         mesh: &Mesh,
         feature_angle_deg: f64,
-        within: &Aabb,
+        region: &Region,
         reach: f64,
         found: Option<(Vec<Triangle>, Vec<Triangle>)>,
     ) -> Target<'s> {
@@ -379,7 +452,7 @@ impl<'s> Target<'s> {
         let (edges, corners) = if let Some(found) = found {
             found
         } else if feature_angle_deg < 180.0 {
-            features(&tris, feature_angle_deg, within)
+            features(&tris, feature_angle_deg, |b| region.meets(b))
         } else {
             (Vec::new(), Vec::new())
         };
@@ -459,7 +532,7 @@ impl std::hash::Hasher for FoldHasher {
 type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
 
 /// The feature edges (as triangles `a b b`) and corners (`p p p`) of
-/// `tris` for a feature angle in degrees that meet the box `within`:
+/// `tris` for a feature angle in degrees whose boxes `meets` accepts:
 /// edges between facets whose normals differ by more, and edges without
 /// exactly two facets; corners where not exactly two feature edges meet.
 /// Vertices with the same bits are one (-0 and 0 too); edges come in the
@@ -467,11 +540,17 @@ type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
 /// corners in that order of their points: the same whichever facets
 /// around them are read.
 ///
-/// Only the facets whose boxes meet `within` are read: every facet around
-/// an edge or a vertex that meets it is among them, so those are found as
-/// over the whole surface (a rank reads the part near its own nodes).
-fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>, Vec<Triangle>) {
-    let tris: Vec<&Triangle> = tris.iter().filter(|t| t.aabb().overlaps(within)).collect();
+/// Only the facets whose boxes `meets` accepts are read. It must accept
+/// every box holding one it accepts (as [`Region::meets`] does): then
+/// every facet around an edge or a vertex it accepts is read, so those are
+/// found as over the whole surface (a rank reads the part near its own
+/// nodes).
+fn features(
+    tris: &[Triangle],
+    angle_deg: f64,
+    meets: impl Fn(&Aabb) -> bool,
+) -> (Vec<Triangle>, Vec<Triangle>) {
+    let tris: Vec<&Triangle> = tris.iter().filter(|t| meets(&t.aabb())).collect();
     let bits = |c: f64| if c == 0.0 { 0 } else { c.to_bits() };
     // A tuple, not an array: its fields hash as three words, without the
     // byte-slice path an array takes.
@@ -574,7 +653,7 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
                 true
             };
             let (a, b) = (a as usize, b as usize);
-            if sharp && Aabb::from_points([point[a], point[b]]).overlaps(within) {
+            if sharp && meets(&Aabb::from_points([point[a], point[b]])) {
                 // From the lower end (coordinates compared in turn), so
                 // the closest points' bits do not depend on which facets
                 // were read.
@@ -588,7 +667,7 @@ fn features(tris: &[Triangle], angle_deg: f64, within: &Aabb) -> (Vec<Triangle>,
     }
     let mut corners: Vec<Triangle> = (0..nv)
         .filter(|&v| degree[v] > 0 && degree[v] != 2)
-        .filter(|&v| Aabb::from_points([point[v]]).overlaps(within))
+        .filter(|&v| meets(&Aabb::from_points([point[v]])))
         .map(|v| Triangle::new(point[v], point[v], point[v]))
         .collect();
     corners.sort_unstable_by(|a, b| order(a.v[0], b.v[0]));
@@ -1374,19 +1453,15 @@ impl Mesh {
         self.moved_lattice = None;
         // On a lone rank with a spare core, the surface's features (which
         // depend on the surface only) are found on a second thread while
-        // this one finds the nodes to move; they are then cut to the box
-        // those nodes give, as if found in it (see [`features`]).
+        // this one finds the nodes to move; they are then cut to the
+        // region those nodes give, as if found in it (see [`features`]).
         let early = match index {
             Some(ix) if spare && comm.size() == 1 && opts.feature_angle_deg < 180.0 => Some(ix),
             _ => None,
         };
-        let everywhere = Aabb {
-            min: [f64::NEG_INFINITY; 3],
-            max: [f64::INFINITY; 3],
-        };
         let (found, (masks, mut s, side, reach, within)) = crate::cores::join(
             early.is_some(),
-            || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, &everywhere)),
+            || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, |_| true)),
             || {
                 let lattice_u = self.node_lattice();
                 let masks = self.plain_patch_masks(comm, &lattice_u);
@@ -1447,15 +1522,13 @@ impl Mesh {
                     |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
                 let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
                 let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
-                // The features that can attract a node lie within `reach` of the
-                // box of the queried nodes (with a margin for rounding).
-                let mut within =
-                    Aabb::from_points((0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)));
-                if !within.is_empty() {
-                    let grow = reach * (1.0 + 1e-9) + 1.0;
-                    within.min = within.min.map(|v| v - grow);
-                    within.max = within.max.map(|v| v + grow);
-                }
+                // The features that can attract a node lie within `reach` of
+                // it.
+                let within = Region::new(
+                    (0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)),
+                    largest.unwrap_or(1) as f64,
+                    reach,
+                );
                 (masks, s, side, reach, within)
             },
         );
@@ -1465,7 +1538,7 @@ impl Mesh {
         let on_surface = |n: usize| masks[n] & surface_bit != 0;
         let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
         let found = found.map(|(edges, corners)| {
-            let meets = |t: &Triangle| t.aabb().overlaps(&within);
+            let meets = |t: &Triangle| within.meets(&t.aabb());
             (
                 edges.into_iter().filter(meets).collect(),
                 corners.into_iter().filter(meets).collect(),
@@ -1795,32 +1868,41 @@ mod tests {
     }
 
     #[test]
-    fn features_found_everywhere_then_cut_are_those_found_in_the_box() {
-        // A tiny feature angle makes most of the sphere's edges features.
+    fn features_found_everywhere_then_cut_are_those_found_in_the_region() {
+        // A tiny feature angle makes most of the sphere's edges features;
+        // the region is that of the vertices on one side of a plane.
         let s = default_sphere();
-        let tris = s.triangles();
-        let everywhere = Aabb {
-            min: [f64::NEG_INFINITY; 3],
-            max: [f64::INFINITY; 3],
-        };
-        let (all_edges, all_corners) = features(tris, 0.01, &everywhere);
         let b = s.bbox();
-        let within = Aabb {
-            min: b.min,
-            max: std::array::from_fn(|a| 0.5 * (b.min[a] + b.max[a])),
-        };
-        let (edges, corners) = features(tris, 0.01, &within);
-        let meets = |t: &&Triangle| t.aabb().overlaps(&within);
+        let domain =
+            crate::domain::Domain::around(b.min, b.max, crate::domain::DEFAULT_FIT).unwrap();
+        let tris: Vec<Triangle> = s
+            .triangles()
+            .iter()
+            .map(|t| Triangle {
+                v: t.v.map(|p| domain.to_lattice(p)),
+            })
+            .collect();
+        let (all_edges, all_corners) = features(&tris, 0.01, |_| true);
+        let mid = 0.5 * crate::octant::ROOT_LEN as f64;
+        let side = |p: [f64; 3]| p[0] + 0.3 * p[1] < mid;
+        let points = tris.iter().flat_map(|t| t.v).filter(|&p| side(p));
+        let largest = crate::octant::ROOT_LEN as f64 / 256.0;
+        let region = Region::new(points, largest, FEATURE_REACH * largest);
+        let (edges, corners) = features(&tris, 0.01, |b| region.meets(b));
         assert!(!corners.is_empty() && edges.len() < all_edges.len());
-        let cut = |v: &[Triangle]| v.iter().filter(meets).map(|t| t.v).collect::<Vec<_>>();
-        assert_eq!(
-            cut(&all_edges),
-            edges.iter().map(|t| t.v).collect::<Vec<_>>()
-        );
-        assert_eq!(
-            cut(&all_corners),
-            corners.iter().map(|t| t.v).collect::<Vec<_>>()
-        );
+        let cut = |v: &[Triangle]| {
+            v.iter()
+                .filter(|t| region.meets(&t.aabb()))
+                .map(|t| t.v)
+                .collect::<Vec<_>>()
+        };
+        let kept = |v: &[Triangle]| v.iter().map(|t| t.v).collect::<Vec<_>>();
+        assert_eq!(cut(&all_edges), kept(&edges));
+        assert_eq!(cut(&all_corners), kept(&corners));
+        // An edge from a point of the region meets it.
+        assert!(all_edges
+            .iter()
+            .all(|t| !side(t.v[0]) || region.meets(&t.aabb())));
     }
 
     #[test]
@@ -1865,20 +1947,20 @@ mod tests {
             max: [h; 3],
         };
         let all = around_origin(10.0);
-        let (edges, corners) = features(&tris, 30.0, &all);
+        let (edges, corners) = features(&tris, 30.0, |b| b.overlaps(&all));
         assert_eq!(edges.len(), 12);
         assert_eq!(corners.len(), 8);
         // The face diagonals are flat: no feature even at 0 degrees.
-        let (edges, _) = features(&tris, 0.0, &all);
+        let (edges, _) = features(&tris, 0.0, |b| b.overlaps(&all));
         assert_eq!(edges.len(), 12);
         // A box holding the corner at the origin only: its three edges,
         // found from the facets around it alone, and itself.
-        let (edges, corners) = features(&tris, 30.0, &around_origin(0.1));
+        let (edges, corners) = features(&tris, 30.0, |b| b.overlaps(&around_origin(0.1)));
         assert_eq!(edges.len(), 3);
         assert_eq!(corners.len(), 1);
         assert_eq!(corners[0].v[0], [0.0; 3]);
         let s = default_sphere();
-        let (edges, corners) = features(s.triangles(), 30.0, &all);
+        let (edges, corners) = features(s.triangles(), 30.0, |b| b.overlaps(&all));
         assert!(edges.is_empty() && corners.is_empty());
     }
 
