@@ -1459,7 +1459,7 @@ impl Mesh {
             Some(ix) if spare && comm.size() == 1 && opts.feature_angle_deg < 180.0 => Some(ix),
             _ => None,
         };
-        let (found, (masks, mut s, side, reach, within)) = crate::cores::join(
+        let (found, (masks, mut s, side, reach, region)) = crate::cores::join(
             early.is_some(),
             || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, |_| true)),
             || {
@@ -1524,12 +1524,12 @@ impl Mesh {
                 let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
                 // The features that can attract a node lie within `reach` of
                 // it.
-                let within = Region::new(
+                let region = Region::new(
                     (0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)),
                     largest.unwrap_or(1) as f64,
                     reach,
                 );
-                (masks, s, side, reach, within)
+                (masks, s, side, reach, region)
             },
         );
         let ni = s.ni;
@@ -1538,7 +1538,7 @@ impl Mesh {
         let on_surface = |n: usize| masks[n] & surface_bit != 0;
         let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
         let found = found.map(|(edges, corners)| {
-            let meets = |t: &Triangle| within.meets(&t.aabb());
+            let meets = |t: &Triangle| region.meets(&t.aabb());
             (
                 edges.into_iter().filter(meets).collect(),
                 corners.into_iter().filter(meets).collect(),
@@ -1549,7 +1549,7 @@ impl Mesh {
             index,
             self,
             opts.feature_angle_deg,
-            &within,
+            &region,
             reach,
             found,
         );
