@@ -1875,13 +1875,7 @@ mod tests {
         let b = s.bbox();
         let domain =
             crate::domain::Domain::around(b.min, b.max, crate::domain::DEFAULT_FIT).unwrap();
-        let tris: Vec<Triangle> = s
-            .triangles()
-            .iter()
-            .map(|t| Triangle {
-                v: t.v.map(|p| domain.to_lattice(p)),
-            })
-            .collect();
+        let tris = SurfaceIndex::new(&s, &domain).tris;
         let (all_edges, all_corners) = features(&tris, 0.01, |_| true);
         let mid = 0.5 * crate::octant::ROOT_LEN as f64;
         let side = |p: [f64; 3]| p[0] + 0.3 * p[1] < mid;
