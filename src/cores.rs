@@ -129,7 +129,7 @@ where
 
 /// `v` seen as atomic words, so that threads may store into it at once
 /// (each into its own places, or the same bits where they meet).
-pub fn shared_words<const N: usize>(v: &mut [[f64; N]]) -> &[[AtomicU64; N]] {
+pub fn shared_f64(v: &mut [f64]) -> &[AtomicU64] {
     const {
         assert!(std::mem::size_of::<AtomicU64>() == std::mem::size_of::<f64>());
         assert!(std::mem::align_of::<AtomicU64>() == std::mem::align_of::<f64>());

@@ -686,8 +686,8 @@ fn order(p: [f64; 3], q: [f64; 3]) -> std::cmp::Ordering {
 struct Snapper<'a> {
     mesh: &'a Mesh,
     comm: &'a dyn Comm,
-    /// Whether a second thread may take half of the long passes
-    /// ([`crate::cores`]).
+    /// Whether a second thread may take pieces of the long passes
+    /// ([`crate::cores::map_chunks`]).
     spare: bool,
     lists: Vec<(u32, Vec<u32>)>,
     ni: usize,
@@ -971,8 +971,8 @@ impl<'a> Snapper<'a> {
         // With a spare core two threads measure: they may place the same
         // hanging node (with the same bits), and each element's figure is
         // stored by the one that measures it.
-        let hanging = crate::cores::shared_words(hanging);
-        let least = crate::cores::shared_words(slice_as_words(&mut self.least));
+        let hanging = crate::cores::shared_f64(hanging.as_flattened_mut());
+        let least = crate::cores::shared_f64(&mut self.least);
         let measure = |part: std::ops::Range<usize>| {
             let part = &cands[part];
             let mut bad = Vec::new();
@@ -983,7 +983,7 @@ impl<'a> Snapper<'a> {
                         if n < ni {
                             super::prefetch(fixed, n);
                         } else {
-                            super::prefetch(hanging, n - ni);
+                            super::prefetch(hanging, 3 * (n - ni));
                         }
                     }
                 }
@@ -994,14 +994,14 @@ impl<'a> Snapper<'a> {
                         fixed[n]
                     } else {
                         let m = mean(fixed, deps[n - ni]);
-                        for (w, v) in hanging[n - ni].iter().zip(m) {
+                        for (w, v) in hanging[3 * (n - ni)..][..3].iter().zip(m) {
                             w.store(v.to_bits(), Ordering::Relaxed);
                         }
                         m
                     };
                 }
                 let (failed, figure) = corner_verdict(&p, j2);
-                least[e as usize][0].store(figure.to_bits(), Ordering::Relaxed);
+                least[e as usize].store(figure.to_bits(), Ordering::Relaxed);
                 if failed != 0 {
                     bad.push((e, failed));
                 }
@@ -1388,14 +1388,20 @@ fn jacobian_at(q: &[[f64; 3]; 8], t: [f64; 3]) -> f64 {
         + a[2] * (b[0] * c[1] - b[1] * c[0])
 }
 
-/// The mean of the positions of a hanging node's dependencies, in the
-/// order given (their lattice points'), pairwise.
-/// `v` as one-word arrays (for [`crate::cores::shared_words`]).
-fn slice_as_words(v: &mut [f64]) -> &mut [[f64; 1]] {
-    // SAFETY: `[f64; 1]` has the layout of `f64`.
-    unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast(), v.len()) }
+/// Whether a node with patch mask `mask` is on the surface patch.
+fn is_on_surface(mask: u64) -> bool {
+    mask >> SURFACE_PATCH & 1 != 0
 }
 
+/// Whether a node with patch mask `mask` and finest element side `side`
+/// (`u64::MAX`: no local element) is sent to the surface: on the surface
+/// patch and on no side of the domain.
+fn is_queried(mask: u64, side: u64) -> bool {
+    is_on_surface(mask) && mask & ((1u64 << SURFACE_PATCH) - 1) == 0 && side != u64::MAX
+}
+
+/// The mean of the positions of a hanging node's dependencies, in the
+/// order given (their lattice points'), pairwise.
 fn mean(pos: &[[f64; 3]], (d, n): ([u32; 4], u8)) -> [f64; 3] {
     let p = |k: usize| pos[d[k] as usize];
     if n == 2 {
@@ -1503,10 +1509,6 @@ impl Mesh {
                     sums: Vec::new(),
                     seen: Vec::new(),
                 };
-                let surface_bit = 1u64 << SURFACE_PATCH;
-                let sides = (1u64 << SURFACE_PATCH) - 1;
-                let on_surface = |n: usize| masks[n] & surface_bit != 0;
-
                 // The finest element side at each node, over the ranks.
                 let mut side = vec![u64::MAX; ni];
                 for (e, c) in self.elements().iter().zip(self.connectivity()) {
@@ -1518,8 +1520,7 @@ impl Mesh {
                     }
                 }
                 s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
-                let queried =
-                    |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
+                let queried = |n: usize| is_queried(masks[n], side[n]);
                 let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
                 let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
                 // The features that can attract a node lie within `reach` of
@@ -1533,10 +1534,8 @@ impl Mesh {
             },
         );
         let ni = s.ni;
-        let surface_bit = 1u64 << SURFACE_PATCH;
-        let sides = (1u64 << SURFACE_PATCH) - 1;
-        let on_surface = |n: usize| masks[n] & surface_bit != 0;
-        let queried = |n: usize| on_surface(n) && masks[n] & sides == 0 && side[n] != u64::MAX;
+        let on_surface = |n: usize| is_on_surface(masks[n]);
+        let queried = |n: usize| is_queried(masks[n], side[n]);
         let found = found.map(|(edges, corners)| {
             let meets = |t: &Triangle| region.meets(&t.aabb());
             (
