@@ -722,7 +722,7 @@ struct Snapper<'a> {
     /// the work on them): per independent node, the check's flags (all
     /// zero between uses) and the relaxation's sums; per element, whether
     /// it was seen (all false between uses).
-    flags: Vec<u64>,
+    flags: Vec<u8>,
     sums: Vec<u64>,
     seen: Vec<bool>,
     /// Per element, the least figure of [`corner_verdict`] at its last
@@ -790,7 +790,7 @@ impl<'a> Snapper<'a> {
         e: usize,
         failed: u8,
         eligible: impl Fn(usize) -> bool,
-        flags: &mut [u64],
+        flags: &mut [u8],
         flagged: &mut Vec<u32>,
     ) {
         let c = &self.mesh.connectivity()[e];
@@ -840,7 +840,12 @@ impl<'a> Snapper<'a> {
     /// Combines `words` values per independent node over the ranks sharing
     /// it: each rank's own values are sent, and `combine` folds in those
     /// received (it must be commutative and associative).
-    fn exchange(&self, vals: &mut [u64], words: usize, combine: impl Fn(&mut u64, u64)) {
+    fn exchange<T: Copy + Into<u64>>(
+        &self,
+        vals: &mut [T],
+        words: usize,
+        combine: impl Fn(&mut T, u64),
+    ) {
         if self.comm.size() == 1 {
             return;
         }
@@ -850,7 +855,7 @@ impl<'a> Snapper<'a> {
             counts[*r as usize] = nodes.len() * words;
             for &n in nodes {
                 let n = n as usize;
-                send.extend_from_slice(&vals[n * words..(n + 1) * words]);
+                send.extend(vals[n * words..(n + 1) * words].iter().map(|&v| v.into()));
             }
         }
         let (recv, got) = self.comm.alltoallv_u64(&send, &counts);
@@ -902,9 +907,8 @@ impl<'a> Snapper<'a> {
     /// within `opts.layers` elements of those, off every patch), the
     /// active elements (those depending on either kind, in storage order)
     /// and the adjacency from the nodes to them (compressed rows: node
-    /// `n`'s elements are `adj[start[n]..start[n + 1]]`; an element may
-    /// be listed twice for a node through two hanging corners, which is
-    /// harmless). Collective.
+    /// `n`'s elements are `adj[start[n]..start[n + 1]]`, each once, in
+    /// order). Collective.
     #[allow(clippy::type_complexity)]
     fn moving_elements(
         &self,
@@ -913,7 +917,9 @@ impl<'a> Snapper<'a> {
         opts: &SnapOptions,
     ) -> (Vec<bool>, Vec<u32>, Vec<u32>, Vec<u32>) {
         let (ni, elements) = (self.ni, self.mesh.elements().len());
-        let mut near: Vec<u64> = (0..ni).map(|n| surface(n) as u64).collect();
+        // Byte flags: the passes look them up all over the nodes, and a
+        // byte array stays in cache where a word array does not.
+        let mut near: Vec<u8> = (0..ni).map(|n| surface(n) as u8).collect();
         for _ in 0..opts.layers {
             let mut next = near.clone();
             for e in 0..elements {
@@ -923,26 +929,35 @@ impl<'a> Snapper<'a> {
                     self.support(e, |n| next[n] = 1);
                 }
             }
-            self.exchange(&mut next, 1, |a, b| *a |= b);
+            self.exchange(&mut next, 1, |a, b| *a |= b as u8);
             near = next;
         }
         let layer: Vec<bool> = (0..ni)
             .map(|n| near[n] != 0 && masks[n] == 0 && opts.iterations > 0)
             .collect();
+        let moving: Vec<bool> = (0..ni).map(|n| surface(n) || layer[n]).collect();
         drop(near);
+        // Each node once per element (a node several hanging corners
+        // depend on comes up several times): `last` holds the element
+        // that last counted it.
         let mut active = Vec::new();
         let mut start = vec![0u32; ni + 1];
+        let mut last = vec![u32::MAX; ni];
         for e in 0..elements {
             let (nodes, len) = self.support_list(e);
             let nodes = &nodes[..len];
-            if nodes
-                .iter()
-                .any(|&n| surface(n as usize) || layer[n as usize])
-            {
+            if nodes.iter().any(|&n| moving[n as usize]) {
                 active.push(e as u32);
-                nodes.iter().for_each(|&n| start[n as usize + 1] += 1);
+                for &n in nodes {
+                    let n = n as usize;
+                    if last[n] != e as u32 {
+                        last[n] = e as u32;
+                        start[n + 1] += 1;
+                    }
+                }
             }
         }
+        drop(last);
         for n in 0..ni {
             start[n + 1] += start[n];
         }
@@ -950,10 +965,15 @@ impl<'a> Snapper<'a> {
         let mut fill = start.clone();
         for &e in &active {
             self.support(e as usize, |n| {
-                adj[fill[n] as usize] = e;
-                fill[n] += 1;
+                // The elements come in order: a repeat is the last one.
+                let at = fill[n] as usize;
+                if at == start[n] as usize || adj[at - 1] != e {
+                    adj[at] = e;
+                    fill[n] += 1;
+                }
             });
         }
+        debug_assert!((0..ni).all(|n| fill[n] == start[n + 1]));
         (layer, active, start, adj)
     }
 
@@ -1084,7 +1104,7 @@ impl<'a> Snapper<'a> {
                 );
             }
             // The owner of a flagged node has its flag after the exchange.
-            self.exchange(&mut flags, 1, |a, b| *a |= b);
+            self.exchange(&mut flags, 1, |a, b| *a |= b as u8);
             if self.comm.size() > 1 {
                 // Flags other ranks set on shared nodes.
                 for (_, nodes) in &self.lists {
