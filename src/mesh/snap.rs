@@ -720,11 +720,11 @@ struct Snapper<'a> {
     min_jacobian: f64,
     /// Scratch kept from one use to the next (fresh pages cost more than
     /// the work on them): per independent node, the check's flags (all
-    /// zero between uses) and the relaxation's sums; per element, whether
-    /// it was seen (all false between uses).
+    /// zero between uses) and the relaxation's sums; one bit per element,
+    /// whether it was seen (all zero between uses).
     flags: Vec<u8>,
     sums: Vec<u64>,
-    seen: Vec<bool>,
+    seen: Vec<u64>,
     /// Per element, the least figure of [`corner_verdict`] at its last
     /// measurement. Every move is followed by the measurement of the
     /// elements around, so for the active elements it is the current one.
@@ -1035,27 +1035,33 @@ impl<'a> Snapper<'a> {
     /// The active elements depending on the nodes `nodes`, once each:
     /// only they can have changed.
     fn around(&mut self, nodes: &[u32]) -> Vec<u32> {
-        // One flag per element, kept (all false) from one call to the next.
+        // One bit per element (a set that stays in the first cache
+        // level), all zero from one call to the next; read out word by
+        // word, the elements come in storage order without a sort, so
+        // the measurements read the connectivity and the positions near
+        // where they read last.
         let mut seen = std::mem::take(&mut self.seen);
-        seen.resize(self.mesh.elements().len(), false);
-        let mut out = Vec::new();
+        seen.resize(self.mesh.elements().len().div_ceil(64), 0);
+        let (mut lo, mut hi) = (usize::MAX, 0);
         for &n in nodes {
             let n = n as usize;
             let (a, b) = (self.adj_start[n] as usize, self.adj_start[n + 1] as usize);
             for &e in &self.adj[a..b] {
-                if !seen[e as usize] {
-                    seen[e as usize] = true;
-                    out.push(e);
-                }
+                let w = e as usize / 64;
+                seen[w] |= 1 << (e % 64);
+                lo = lo.min(w);
+                hi = hi.max(w);
             }
         }
-        for &e in &out {
-            seen[e as usize] = false;
+        let mut out = Vec::new();
+        for w in lo..=hi.min(seen.len().saturating_sub(1)) {
+            let mut bits = std::mem::take(&mut seen[w]);
+            while bits != 0 {
+                out.push((w * 64) as u32 + bits.trailing_zeros());
+                bits &= bits - 1;
+            }
         }
         self.seen = seen;
-        // In storage order: the measurements then read the connectivity
-        // and the positions near where they read last.
-        out.sort_unstable();
         out
     }
 
@@ -1576,11 +1582,14 @@ impl Mesh {
         let mut feature = vec![false; ni];
         // In the Morton order of their lattice points: each query's
         // neighbours come next, and the gathered triangles serve more.
-        let mut order: Vec<(u64, u32)> = (0..ni)
-            .filter(|&n| queried(n))
-            .map(|n| (super::numbering::node_key(s.lattice[n]), n as u32))
+        // (One node per lattice point: the keys are distinct.)
+        let mut order: Vec<u32> = (0..ni as u32).filter(|&n| queried(n as usize)).collect();
+        let mut keys: Vec<u64> = order
+            .iter()
+            .map(|&n| super::numbering::node_key(s.lattice[n as usize]))
             .collect();
-        order.sort_unstable();
+        crate::sort::radix_sort_pairs_bits(&mut keys, &mut order, 0, 64);
+        drop(keys);
         // A node's target depends on nothing but its point: the pieces of
         // the order may go to two threads. The elements that may change
         // are found meanwhile, from the nodes queried (nearly all of them
@@ -1590,7 +1599,7 @@ impl Mesh {
             let mut near_tris = NearTriangles::default();
             order[part]
                 .iter()
-                .map(|&(_, n)| {
+                .map(|&n| {
                     let n = n as usize;
                     let x = s.lattice[n].map(f64::from);
                     target_surface.of(x, side[n] as f64, &mut near_tris)
@@ -1601,7 +1610,7 @@ impl Mesh {
             crate::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
                 s.moving_elements(&queried, &masks, opts)
             });
-        for (&(_, n), found) in order.iter().zip(targets.into_iter().flatten()) {
+        for (&n, found) in order.iter().zip(targets.into_iter().flatten()) {
             let n = n as usize;
             if let Some((t, f)) = found {
                 s.snap[n] = true;
