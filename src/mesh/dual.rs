@@ -123,10 +123,38 @@ impl Bits {
         Bits { words }
     }
 
+    /// `n` entries, none set.
+    pub fn new(n: usize) -> Bits {
+        Bits {
+            words: vec![0; n.div_ceil(64)],
+        }
+    }
+
     /// Entry `i`.
     #[inline]
     pub fn get(&self, i: usize) -> bool {
         self.words[i >> 6] >> (i & 63) & 1 == 1
+    }
+
+    /// Sets entry `i`.
+    #[inline]
+    pub fn set(&mut self, i: usize) {
+        self.words[i >> 6] |= 1 << (i & 63);
+    }
+
+    /// Appends the set entries among `lo..=hi` to `out` in increasing
+    /// order and clears them.
+    pub fn drain_into(&mut self, lo: usize, hi: usize, out: &mut Vec<u32>) {
+        if lo > hi {
+            return;
+        }
+        for w in lo >> 6..=hi >> 6 {
+            let mut bits = std::mem::take(&mut self.words[w]);
+            while bits != 0 {
+                out.push((w * 64) as u32 + bits.trailing_zeros());
+                bits &= bits - 1;
+            }
+        }
     }
 }
 

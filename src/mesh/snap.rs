@@ -71,6 +71,7 @@ use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
 use std::sync::atomic::Ordering;
 
+use super::dual::Bits;
 use super::faces::SURFACE_PATCH;
 use super::quality::{corner_scaled_jacobians, CORNER_EDGES};
 use super::{Mesh, VTK_TO_MORTON};
@@ -361,7 +362,7 @@ struct Region {
     cells: usize,
     grow: f64,
     /// One bit per cell, x fastest.
-    bits: Vec<u64>,
+    bits: Bits,
     any: bool,
 }
 
@@ -377,13 +378,12 @@ impl Region {
             side,
             cells,
             grow: reach * (1.0 + 1e-9) + 1.0,
-            bits: vec![0; (cells * cells * cells).div_ceil(64)],
+            bits: Bits::new(cells * cells * cells),
             any: false,
         };
         for p in points {
             let c = p.map(|v| r.index(v));
-            let k = r.key(c);
-            r.bits[k / 64] |= 1 << (k % 64);
+            r.bits.set(r.key(c));
             r.any = true;
         }
         r
@@ -409,8 +409,7 @@ impl Region {
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    let k = self.key([x, y, z]);
-                    if self.bits[k / 64] >> (k % 64) & 1 != 0 {
+                    if self.bits.get(self.key([x, y, z])) {
                         return true;
                     }
                 }
@@ -721,10 +720,10 @@ struct Snapper<'a> {
     /// Scratch kept from one use to the next (fresh pages cost more than
     /// the work on them): per independent node, the check's flags (all
     /// zero between uses) and the relaxation's sums; one bit per element,
-    /// whether it was seen (all zero between uses).
+    /// whether it was seen (all clear between uses).
     flags: Vec<u8>,
     sums: Vec<u64>,
-    seen: Vec<u64>,
+    seen: Bits,
     /// Per element, the least figure of [`corner_verdict`] at its last
     /// measurement. Every move is followed by the measurement of the
     /// elements around, so for the active elements it is the current one.
@@ -1040,28 +1039,18 @@ impl<'a> Snapper<'a> {
         // word, the elements come in storage order without a sort, so
         // the measurements read the connectivity and the positions near
         // where they read last.
-        let mut seen = std::mem::take(&mut self.seen);
-        seen.resize(self.mesh.elements().len().div_ceil(64), 0);
         let (mut lo, mut hi) = (usize::MAX, 0);
         for &n in nodes {
             let n = n as usize;
             let (a, b) = (self.adj_start[n] as usize, self.adj_start[n + 1] as usize);
             for &e in &self.adj[a..b] {
-                let w = e as usize / 64;
-                seen[w] |= 1 << (e % 64);
-                lo = lo.min(w);
-                hi = hi.max(w);
+                self.seen.set(e as usize);
+                lo = lo.min(e as usize);
+                hi = hi.max(e as usize);
             }
         }
         let mut out = Vec::new();
-        for w in lo..=hi.min(seen.len().saturating_sub(1)) {
-            let mut bits = std::mem::take(&mut seen[w]);
-            while bits != 0 {
-                out.push((w * 64) as u32 + bits.trailing_zeros());
-                bits &= bits - 1;
-            }
-        }
-        self.seen = seen;
+        self.seen.drain_into(lo, hi, &mut out);
         out
     }
 
@@ -1533,7 +1522,7 @@ impl Mesh {
                     least: vec![f64::NAN; self.elements().len()],
                     flags: Vec::new(),
                     sums: Vec::new(),
-                    seen: Vec::new(),
+                    seen: Bits::new(self.elements().len()),
                 };
                 // The finest element side at each node, over the ranks.
                 let mut side = vec![u64::MAX; ni];
