@@ -69,7 +69,7 @@ use crate::refine::SurfaceIndex;
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::dual::Bits;
 use super::faces::SURFACE_PATCH;
@@ -992,41 +992,16 @@ impl<'a> Snapper<'a> {
         // stored by the one that measures it.
         let hanging = crate::cores::shared_f64(hanging.as_flattened_mut());
         let least = crate::cores::shared_f64(&mut self.least);
-        let measure = |part: std::ops::Range<usize>| {
-            let part = &cands[part];
-            let mut bad = Vec::new();
-            for (k, &e) in part.iter().enumerate() {
-                if let Some(&ahead) = part.get(k + 6) {
-                    for &n in &conn[ahead as usize] {
-                        let n = n as usize;
-                        if n < ni {
-                            super::prefetch(fixed, n);
-                        } else {
-                            super::prefetch(hanging, 3 * (n - ni));
-                        }
-                    }
-                }
-                let mut p = [[0.0; 3]; 8];
-                for (q, &n) in p.iter_mut().zip(&conn[e as usize]) {
-                    let n = n as usize;
-                    *q = if n < ni {
-                        fixed[n]
-                    } else {
-                        let m = mean(fixed, deps[n - ni]);
-                        for (w, v) in hanging[3 * (n - ni)..][..3].iter().zip(m) {
-                            w.store(v.to_bits(), Ordering::Relaxed);
-                        }
-                        m
-                    };
-                }
-                let (failed, figure) = corner_verdict(&p, j2);
-                least[e as usize].store(figure.to_bits(), Ordering::Relaxed);
-                if failed != 0 {
-                    bad.push((e, failed));
-                }
-            }
-            bad
+        let m = Measure {
+            conn,
+            ni,
+            deps,
+            fixed,
+            hanging,
+            least,
+            j2,
         };
+        let measure = |part: std::ops::Range<usize>| m.part(&cands[part]);
         let spare = self.spare && cands.len() >= SPLIT_AT;
         crate::cores::map_chunks(spare, cands.len(), CHUNK, measure).concat()
     }
@@ -1299,6 +1274,159 @@ fn corner_verdict(p: &[[f64; 3]; 8], j2: f64) -> (u8, f64) {
         }
     });
     (failed, figure.iter().fold(f64::INFINITY, |l, &f| l.min(f)))
+}
+
+/// What [`Snapper::bad_among`] measures with, shared by its threads.
+struct Measure<'a> {
+    conn: &'a [[u32; 8]],
+    ni: usize,
+    deps: &'a [([u32; 4], u8)],
+    fixed: &'a [[f64; 3]],
+    /// The hanging nodes' positions, placed as they are met (two threads
+    /// may place the same one, with the same bits).
+    hanging: &'a [AtomicU64],
+    /// Per element, its least figure, stored by the thread measuring it.
+    least: &'a [AtomicU64],
+    j2: f64,
+}
+
+impl Measure<'_> {
+    /// The elements of `part` with a corner below the least scaled
+    /// Jacobian, and those corners; with AVX-512 where the processor has
+    /// it ([`wide`]): the same verdicts and figures, in a quarter of the
+    /// instructions. (A least figure of zero may come with the other
+    /// sign.)
+    fn part(&self, part: &[u32]) -> Vec<(u32, u8)> {
+        #[cfg(target_arch = "x86_64")]
+        if wide::available() {
+            // SAFETY: the processor has AVX-512F.
+            return unsafe { wide::measure(self, part) };
+        }
+        self.run(part, corner_verdict)
+    }
+
+    /// [`Measure::part`] with the corner test `verdict`.
+    #[inline(always)]
+    fn run(
+        &self,
+        part: &[u32],
+        verdict: impl Fn(&[[f64; 3]; 8], f64) -> (u8, f64),
+    ) -> Vec<(u32, u8)> {
+        let (conn, ni, deps, fixed) = (self.conn, self.ni, self.deps, self.fixed);
+        let mut bad = Vec::new();
+        for (k, &e) in part.iter().enumerate() {
+            if let Some(&ahead) = part.get(k + 6) {
+                for &n in &conn[ahead as usize] {
+                    let n = n as usize;
+                    if n < ni {
+                        super::prefetch(fixed, n);
+                    } else {
+                        super::prefetch(self.hanging, 3 * (n - ni));
+                    }
+                }
+            }
+            let mut p = [[0.0; 3]; 8];
+            for (q, &n) in p.iter_mut().zip(&conn[e as usize]) {
+                let n = n as usize;
+                *q = if n < ni {
+                    fixed[n]
+                } else {
+                    let m = mean(fixed, deps[n - ni]);
+                    for (w, v) in self.hanging[3 * (n - ni)..][..3].iter().zip(m) {
+                        w.store(v.to_bits(), Ordering::Relaxed);
+                    }
+                    m
+                };
+            }
+            let (failed, figure) = verdict(&p, self.j2);
+            self.least[e as usize].store(figure.to_bits(), Ordering::Relaxed);
+            if failed != 0 {
+                bad.push((e, failed));
+            }
+        }
+        bad
+    }
+}
+
+/// The element check with AVX-512, chosen at run time (the build targets
+/// x86-64-v2). Measured on the dragon at level 10 (1.83 million elements,
+/// one thread): a full pass in 0.14-0.15 s instead of 0.25-0.26 s.
+#[cfg(target_arch = "x86_64")]
+mod wide {
+    use super::{Measure, CORNER_EDGES};
+    use std::arch::x86_64::*;
+
+    /// [`Measure::part`] compiled for AVX-512F, the corner test inlined.
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn measure(m: &Measure, part: &[u32]) -> Vec<(u32, u8)> {
+        // SAFETY: this function runs only where AVX-512F is.
+        m.run(part, |p, j2| unsafe { corner_verdict(p, j2) })
+    }
+
+    /// Whether this processor has AVX-512F (asked once).
+    pub fn available() -> bool {
+        static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *HAS.get_or_init(|| std::is_x86_feature_detected!("avx512f"))
+    }
+
+    /// Lane `k` holds `f(k)`.
+    #[inline(always)]
+    fn lanes(f: impl Fn(usize) -> i64) -> __m512i {
+        let v: [i64; 8] = std::array::from_fn(f);
+        // SAFETY: an unaligned load of 64 bytes from an array of 64.
+        unsafe { _mm512_loadu_si512(v.as_ptr().cast()) }
+    }
+
+    /// [`super::corner_verdict`], lane `k` for corner `k`.
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    pub unsafe fn corner_verdict(p: &[[f64; 3]; 8], j2: f64) -> (u8, f64) {
+        // Each lane does the scalar code's operations in its order, with
+        // no fused multiply-adds: the same roundings, the same bits.
+        let column = |a: usize| {
+            _mm512_set_pd(
+                p[7][a], p[6][a], p[5][a], p[4][a], p[3][a], p[2][a], p[1][a], p[0][a],
+            )
+        };
+        let (x, y, z) = (column(0), column(1), column(2));
+        let edge = |c: __m512d, e: usize| {
+            _mm512_sub_pd(
+                _mm512_permutexvar_pd(lanes(|k| CORNER_EDGES[k][e] as i64), c),
+                c,
+            )
+        };
+        let (ax, ay, az) = (edge(x, 0), edge(y, 0), edge(z, 0));
+        let (bx, by, bz) = (edge(x, 1), edge(y, 1), edge(z, 1));
+        let (cx, cy, cz) = (edge(x, 2), edge(y, 2), edge(z, 2));
+        let (mul, add, sub) = (_mm512_mul_pd, _mm512_add_pd, _mm512_sub_pd);
+        let det = add(
+            sub(
+                mul(ax, sub(mul(by, cz), mul(bz, cy))),
+                mul(ay, sub(mul(bx, cz), mul(bz, cx))),
+            ),
+            mul(az, sub(mul(bx, cy), mul(by, cx))),
+        );
+        let length = |u: __m512d, v: __m512d, w: __m512d| add(add(mul(u, u), mul(v, v)), mul(w, w));
+        let product = mul(
+            mul(length(ax, ay, az), length(bx, by, bz)),
+            length(cx, cy, cz),
+        );
+        let zero = _mm512_setzero_pd();
+        let positive = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(det, zero);
+        let enough =
+            _mm512_cmp_pd_mask::<_CMP_GE_OQ>(mul(det, det), mul(_mm512_set1_pd(j2), product));
+        let failed = !(positive & enough);
+        let flat_edge = _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(product, zero);
+        let figure = _mm512_div_pd(mul(det, _mm512_abs_pd(det)), product);
+        let figure = _mm512_mask_blend_pd(flat_edge, figure, zero);
+        (failed, _mm512_reduce_min_pd(figure))
+    }
 }
 
 /// The volume of the trilinear hexahedron with corners `p` in VTK order:
@@ -2026,6 +2154,48 @@ mod tests {
             }
         }
         assert!(agree > 500, "{agree}");
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn the_wide_test_gives_the_same_bits() {
+        if !wide::available() {
+            eprintln!("skipped: this processor has no AVX-512F");
+            return;
+        }
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let mut failing = 0;
+        for round in 0..4000 {
+            let mut p: [[f64; 3]; 8] = std::array::from_fn(|v| {
+                let m = VTK_TO_MORTON[v];
+                [0, 1, 2].map(|a| (m >> a & 1) as f64 * 1024.0 + 700.0 * next())
+            });
+            // Flat and collapsed elements too: an edge of no length, two
+            // corners in one plane.
+            if round % 7 == 0 {
+                p[6] = p[5];
+            }
+            if round % 11 == 0 {
+                p[3][2] = p[0][2];
+            }
+            for j in [0.0, 0.001, 0.1, 0.5] {
+                let scalar = corner_verdict(&p, j * j);
+                // SAFETY: the processor has AVX-512F (checked above).
+                let wide = unsafe { wide::corner_verdict(&p, j * j) };
+                assert_eq!(scalar.0, wide.0, "{p:?} {j}");
+                // The same number; a zero may come with either sign.
+                assert!(scalar.1 == wide.1, "{p:?} {j}: {scalar:?} {wide:?}");
+                assert_eq!(scalar.1.to_bits() | 1 << 63, wide.1.to_bits() | 1 << 63);
+                failing += (scalar.0 != 0) as usize;
+            }
+        }
+        assert!(failing > 1000, "{failing}");
     }
 
     #[test]
