@@ -24,6 +24,19 @@ pub fn spare_core(comm: &dyn Comm) -> bool {
     cores > comm.ranks_on_node() && allowed
 }
 
+/// Whether this processor has AVX-512F. The build targets x86-64-v2, so
+/// the snap's kernels written for it (`mesh::snap`, `geometry::distance`)
+/// are chosen at run time; they give the scalar code's bits.
+pub fn avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *HAS.get_or_init(|| std::is_x86_feature_detected!("avx512f"))
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Runs `a` and `b` and returns both results: with `spare`, `a` on a
 /// second thread while this one runs `b`; else (or when the thread cannot
 /// start) one after the other on this thread. A panic in either reaches
