@@ -402,13 +402,16 @@ fn serial_checks() {
             println!("SKIP {model}: not in ../shared/data");
             continue;
         };
-        for keep in [Keep::Inside, Keep::Outside] {
-            let (r, _, _) = check_snapped(path.to_str().unwrap(), 6, keep, false);
-            if sharp {
-                assert!(
-                    r.feature_nodes > 0,
-                    "{model} {keep:?}: no node on a feature"
-                );
+        // Three levels each, as the sphere and the torus above.
+        for level in 5..=7 {
+            for keep in [Keep::Inside, Keep::Outside] {
+                let (r, _, _) = check_snapped(path.to_str().unwrap(), level, keep, false);
+                if sharp {
+                    assert!(
+                        r.feature_nodes > 0,
+                        "{model} level {level} {keep:?}: no node on a feature"
+                    );
+                }
             }
         }
     }
