@@ -314,41 +314,52 @@ impl NearTriangles {
         if room <= 0.0 {
             return None;
         }
-        let limit = 0.98 * room * room;
-        let mut best: Option<(u32, f64)> = None;
-        let mut bound = limit;
+        let mut near = Nearest {
+            best: None,
+            bound: 0.98 * room * room,
+        };
         // The last answer first: usually near, it prunes the rest.
         if let Some(t) = self.last {
             let [p, q, r] = tris[t as usize].v;
-            let d = point_triangle2(x, p, q, r);
-            if d < bound {
-                best = Some((t, d));
-                bound = d;
-            }
+            near.offer(t, point_triangle2(x, p, q, r));
         }
         #[cfg(target_arch = "x86_64")]
         if self.wide {
             // SAFETY: `wide` says the processor has AVX-512F.
-            unsafe { wide::scan(&self.chunks, tris, x, &mut best, &mut bound) };
-            return best.map(|b| b.0);
+            unsafe { wide::scan(&self.chunks, tris, x, &mut near) };
+            return near.best.map(|b| b.0);
         }
         for &(t, b) in &self.found {
-            if point_box2(x, b.min, b.max) > bound {
+            if point_box2(x, b.min, b.max) > near.bound {
                 continue;
             }
             let [p, q, r] = tris[t as usize].v;
-            let d = point_triangle2(x, p, q, r);
-            // A tie goes to the lower index.
-            let better = match best {
-                None => d < bound,
-                Some((bt, bd)) => d < bd || (d == bd && t < bt),
-            };
-            if better {
-                best = Some((t, d));
-                bound = d;
-            }
+            near.offer(t, point_triangle2(x, p, q, r));
         }
-        best.map(|b| b.0)
+        near.best.map(|b| b.0)
+    }
+}
+
+/// The nearest triangle so far and its squared distance, and the bound a
+/// nearer one must beat (the distance limit until one is found).
+struct Nearest {
+    best: Option<(u32, f64)>,
+    bound: f64,
+}
+
+impl Nearest {
+    /// Triangle `t` at squared distance `d`: kept if nearer, or as near
+    /// with a lower index (so the answer does not depend on the order).
+    #[inline(always)]
+    fn offer(&mut self, t: u32, d: f64) {
+        let better = match self.best {
+            None => d < self.bound,
+            Some((bt, bd)) => d < bd || (d == bd && t < bt),
+        };
+        if better {
+            self.best = Some((t, d));
+            self.bound = d;
+        }
     }
 }
 
@@ -1349,9 +1360,8 @@ struct Measure<'a> {
 impl Measure<'_> {
     /// The elements of `part` with a corner below the least scaled
     /// Jacobian, and those corners; with AVX-512 where the processor has
-    /// it ([`wide`]): the same verdicts and figures, in a quarter of the
-    /// instructions. (A least figure of zero may come with the other
-    /// sign.)
+    /// it ([`wide`]): the same verdicts and figures. (A least figure of
+    /// zero may come with the other sign.)
     fn part(&self, part: &[u32]) -> Vec<(u32, u8)> {
         #[cfg(target_arch = "x86_64")]
         if self.wide {
@@ -1404,12 +1414,14 @@ impl Measure<'_> {
     }
 }
 
-/// The element check with AVX-512, chosen at run time (the build targets
-/// x86-64-v2). Measured on the dragon at level 10 (1.83 million elements,
-/// one thread): a full check in about 0.15 s instead of 0.25 s.
+/// The element check and the nearest-triangle scan with AVX-512, chosen at
+/// run time (the build targets x86-64-v2). Measured on the dragon at level
+/// 10, one thread: a full check of its 1.83 million active elements in
+/// about 0.15 s instead of 0.25 s, its 1.2 million nearest-point queries
+/// 7 to 13 % faster.
 #[cfg(target_arch = "x86_64")]
 mod wide {
-    use super::{point_triangle2, Chunk, Measure, Triangle, CORNER_EDGES};
+    use super::{point_triangle2, Chunk, Measure, Nearest, Triangle, CORNER_EDGES};
     use std::arch::x86_64::*;
 
     /// [`Measure::part`] compiled for AVX-512F, the corner test inlined.
@@ -1432,13 +1444,7 @@ mod wide {
     /// # Safety
     /// The processor must have AVX-512F.
     #[target_feature(enable = "avx512f")]
-    pub unsafe fn scan(
-        chunks: &[Chunk],
-        tris: &[Triangle],
-        x: [f64; 3],
-        best: &mut Option<(u32, f64)>,
-        bound: &mut f64,
-    ) {
+    pub unsafe fn scan(chunks: &[Chunk], tris: &[Triangle], x: [f64; 3], near: &mut Nearest) {
         let xs = x.map(|v| _mm512_set1_pd(v));
         // SAFETY: loads of eight values from arrays of eight.
         let load = |v: &[f64; 8]| unsafe { _mm512_loadu_pd(v.as_ptr()) };
@@ -1451,7 +1457,8 @@ mod wide {
                 _mm512_mul_pd(dk, dk)
             });
             let box2 = _mm512_add_pd(_mm512_add_pd(d[0], d[1]), d[2]);
-            let mut within = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(box2, _mm512_set1_pd(*bound)) as u32;
+            let mut within =
+                _mm512_cmp_pd_mask::<_CMP_LE_OQ>(box2, _mm512_set1_pd(near.bound)) as u32;
             if within == 0 {
                 continue;
             }
@@ -1464,7 +1471,7 @@ mod wide {
             while within != 0 {
                 let j = within.trailing_zeros() as usize;
                 within &= within - 1;
-                if boxes[j] > *bound {
+                if boxes[j] > near.bound {
                     continue;
                 }
                 let t = ch.ids[j];
@@ -1474,14 +1481,7 @@ mod wide {
                 } else {
                     dist[j]
                 };
-                let better = match *best {
-                    None => d < *bound,
-                    Some((bt, bd)) => d < bd || (d == bd && t < bt),
-                };
-                if better {
-                    *best = Some((t, d));
-                    *bound = d;
-                }
+                near.offer(t, d);
             }
         }
     }
