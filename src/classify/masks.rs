@@ -16,7 +16,7 @@ pub(crate) const SZ: [f64; 8] = [-1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0, 1.0];
 
 /// What one triangle does to the eight children of an octant (bit `i` for
 /// child `i`).
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy, Default, Debug, PartialEq, Eq)]
 pub(crate) struct ChildMasks {
     /// The triangle may touch the child's grown box (a superset of those it
     /// does): it stays a candidate below.
@@ -57,6 +57,25 @@ impl Classifier<'_> {
         want: u8,
         leafy: u8,
     ) -> ChildMasks {
+        #[cfg(target_arch = "x86_64")]
+        if self.wide {
+            // SAFETY: `wide` is set only where AVX-512F is.
+            return unsafe { wide::child_masks(self, t, c, side, want, leafy) };
+        }
+        self.masks_with::<false>(t, c, side, want, leafy)
+    }
+
+    /// [`Classifier::child_masks`], the eight children's lanes side by
+    /// side when `WIDE` (only inside a function compiled for AVX-512F).
+    #[inline(always)]
+    fn masks_with<const WIDE: bool>(
+        &self,
+        t: u32,
+        c: [f64; 3],
+        side: f64,
+        want: u8,
+        leafy: u8,
+    ) -> ChildMasks {
         let g = self.grow;
         let mut exact = want & leafy;
         let mut near = want;
@@ -82,7 +101,7 @@ impl Classifier<'_> {
             return ChildMasks::default();
         }
         if near & seg != 0 {
-            seg &= segments_meeting_box(c, quarter, lo3, hi3, g);
+            seg &= segments_meeting_box::<WIDE>(c, quarter, lo3, hi3, g);
         }
         if exact == 0 && near & seg == 0 {
             // No box verdict wanted and no segment to cross: the boxes alone
@@ -131,16 +150,8 @@ impl Classifier<'_> {
                 f64::INFINITY
             };
             let (s0, s1) = (t0 - eta_p, t1 + eta_p);
-            let (mut s, mut un, mut far, mut across) = (0u8, 0u8, 0u8, 0u8);
-            for i in 0..8 {
-                let x = SX[i] * h[0] + SY[i] * h[1] + SZ[i] * h[2];
-                let gap = fmax(t0 - x - rad, x - rad - t1);
-                s |= ((gap > eta) as u8) << i;
-                un |= ((gap >= -eta) as u8) << i;
-                far |= ((gap > g * l1 + eta) as u8) << i;
-                let same = (s0 > 0.0) & (s0 > x) | (s1 < 0.0) & (s1 < x);
-                across |= (!same as u8) << i;
-            }
+            let span = Span { h, t0, t1, rad };
+            let [s, un, far, across] = plane_lanes::<WIDE>(&span, eta, g * l1 + eta, s0, s1);
             near &= !far;
             plane = across;
             if tiny {
@@ -185,18 +196,11 @@ impl Classifier<'_> {
                     let tiny = a.iter().all(|x| x.abs() <= tiny_e);
                     let rad = half * (a[0].abs() + a[1].abs() + a[2].abs());
                     let h = [half * a[0], half * a[1], half * a[2]];
-                    let mut m = open;
-                    while m != 0 {
-                        let i = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        let x = SX[i] * h[0] + SY[i] * h[1] + SZ[i] * h[2];
-                        let gap = fmax(t0 - x - rad, x - rad - t1);
-                        // Without branches: the verdicts are close to random.
-                        let apart = (gap > eta) & !tiny;
-                        sep |= (apart as u8) << i;
-                        open &= !((apart as u8) << i);
-                        unsure |= ((!apart & (gap >= -eta)) as u8) << i;
-                    }
+                    let span = Span { h, t0, t1, rad };
+                    let (apart, close) = edge_lanes::<WIDE>(&span, eta, tiny, open);
+                    sep |= apart;
+                    open &= !apart;
+                    unsure |= close;
                 }
                 if open == 0 {
                     break;
@@ -214,24 +218,97 @@ impl Classifier<'_> {
     }
 }
 
+/// A triangle's extent `[t0, t1]` on one separating axis, and what the
+/// children's boxes give there: child `i`'s centre projects to
+/// `SX[i] h[0] + SY[i] h[1] + SZ[i] h[2]` (the parent's centre to 0), its
+/// box to that plus or minus `rad`.
+struct Span {
+    h: [f64; 3],
+    t0: f64,
+    t1: f64,
+    rad: f64,
+}
+
+impl Span {
+    /// Child `i`'s centre on the axis, and the gap between its box and
+    /// the triangle (positive: apart).
+    #[inline(always)]
+    fn gap(&self, i: usize) -> (f64, f64) {
+        let h = self.h;
+        let x = SX[i] * h[0] + SY[i] * h[1] + SZ[i] * h[2];
+        (x, fmax(self.t0 - x - self.rad, x - self.rad - self.t1))
+    }
+}
+
+/// On the triangle's normal: the children certainly apart (gap above
+/// `eta`), possibly touching (gap at least `-eta`), apart even when grown
+/// (gap above `far`), and whose centre may lie across the plane from the
+/// parent's (the plane known within `[s0, s1]`).
+#[inline(always)]
+fn plane_lanes<const WIDE: bool>(span: &Span, eta: f64, far: f64, s0: f64, s1: f64) -> [u8; 4] {
+    #[cfg(target_arch = "x86_64")]
+    if WIDE {
+        // SAFETY: `WIDE` code runs only where AVX-512F is.
+        return unsafe { wide::plane_lanes(span, eta, far, s0, s1) };
+    }
+    let mut out = [0u8; 4];
+    for i in 0..8 {
+        let (x, gap) = span.gap(i);
+        out[0] |= ((gap > eta) as u8) << i;
+        out[1] |= ((gap >= -eta) as u8) << i;
+        out[2] |= ((gap > far) as u8) << i;
+        let same = (s0 > 0.0) & (s0 > x) | (s1 < 0.0) & (s1 < x);
+        out[3] |= (!same as u8) << i;
+    }
+    out
+}
+
+/// On an edge-by-box-axis product, for the children in `open`: those
+/// certainly apart (never on a `tiny` axis), and those neither apart nor
+/// clearly overlapping.
+#[inline(always)]
+fn edge_lanes<const WIDE: bool>(span: &Span, eta: f64, tiny: bool, open: u8) -> (u8, u8) {
+    #[cfg(target_arch = "x86_64")]
+    if WIDE {
+        // SAFETY: `WIDE` code runs only where AVX-512F is.
+        return unsafe { wide::edge_lanes(span, eta, tiny, open) };
+    }
+    let (mut apart, mut close) = (0u8, 0u8);
+    let mut m = open;
+    while m != 0 {
+        let i = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let (_, gap) = span.gap(i);
+        // Without branches: the verdicts are close to random.
+        let a = (gap > eta) & !tiny;
+        apart |= (a as u8) << i;
+        close |= ((!a & (gap >= -eta)) as u8) << i;
+    }
+    (apart, close)
+}
+
 /// Children whose segment from the parent's centre `c` to their own centre
 /// (`quarter` away on each axis) meets the box `[lo, hi]` grown by `g`: the
 /// parameter intervals of the three slabs along the diagonal must overlap.
 /// Rounding is covered by a margin far below `g` in space.
-#[inline]
-pub(crate) fn segments_meeting_box(
+#[inline(always)]
+pub(crate) fn segments_meeting_box<const WIDE: bool>(
     c: [f64; 3],
     quarter: f64,
     lo: [f64; 3],
     hi: [f64; 3],
     g: f64,
 ) -> u8 {
-    const SLACK: f64 = 1e-9;
     let inv = 1.0 / quarter;
     // Along axis k, the positive children enter the slab at `u[k]` and leave
     // at `w[k]`; the negative ones over `[-w[k], -u[k]]`.
     let u: [f64; 3] = std::array::from_fn(|k| (lo[k] - g - c[k]) * inv);
     let w: [f64; 3] = std::array::from_fn(|k| (hi[k] + g - c[k]) * inv);
+    #[cfg(target_arch = "x86_64")]
+    if WIDE {
+        // SAFETY: `WIDE` code runs only where AVX-512F is.
+        return unsafe { wide::segments(u, w) };
+    }
     let mut out = 0u8;
     for i in 0..8 {
         let (mut t0, mut t1) = (0.0f64, 1.0f64);
@@ -248,6 +325,9 @@ pub(crate) fn segments_meeting_box(
     }
     out
 }
+
+/// Margin of [`segments_meeting_box`]'s parameter intervals.
+const SLACK: f64 = 1e-9;
 
 /// [`crosses`] for the eight segments from `p` to `p + h s` (`s` in
 /// `{-1, 1}^3`, child `i` has `s_k = +1` iff bit `k` of `i` is set), for the
@@ -299,4 +379,113 @@ pub(crate) fn crossings_from_center(p: [i64; 3], h: i64, t: &FixedTri, mask: u8)
         }
     }
     (out, pside)
+}
+
+/// The lanes of [`Classifier::child_masks`] with AVX-512F: child `i` in
+/// lane `i`. Each lane does the scalar code's operations in its order,
+/// with no fused multiply-adds, and `_mm512_max_pd(a, b)` is `fmax(a, b)`
+/// (`a > b ? a : b`), so every verdict has the scalar code's bits.
+#[cfg(target_arch = "x86_64")]
+mod wide {
+    use super::*;
+    use std::arch::x86_64::*;
+
+    /// [`Classifier::child_masks`] compiled for AVX-512F.
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn child_masks(
+        cl: &Classifier,
+        t: u32,
+        c: [f64; 3],
+        side: f64,
+        want: u8,
+        leafy: u8,
+    ) -> ChildMasks {
+        cl.masks_with::<true>(t, c, side, want, leafy)
+    }
+
+    /// `v[i]` in lane `i`.
+    #[inline(always)]
+    fn load(v: &[f64; 8]) -> __m512d {
+        // SAFETY: an unaligned load of 64 bytes from an array of 64.
+        unsafe { _mm512_loadu_pd(v.as_ptr()) }
+    }
+
+    /// Child centres and gaps ([`Span::gap`]) in all eight lanes.
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    unsafe fn gaps(span: &Span) -> (__m512d, __m512d) {
+        let (mul, add, sub) = (_mm512_mul_pd, _mm512_add_pd, _mm512_sub_pd);
+        let h = span.h.map(|v| _mm512_set1_pd(v));
+        let x = add(
+            add(mul(load(&SX), h[0]), mul(load(&SY), h[1])),
+            mul(load(&SZ), h[2]),
+        );
+        let rad = _mm512_set1_pd(span.rad);
+        let below = sub(sub(_mm512_set1_pd(span.t0), x), rad);
+        let above = sub(sub(x, rad), _mm512_set1_pd(span.t1));
+        (x, _mm512_max_pd(below, above))
+    }
+
+    /// [`super::plane_lanes`].
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    pub(super) unsafe fn plane_lanes(span: &Span, eta: f64, far: f64, s0: f64, s1: f64) -> [u8; 4] {
+        let (x, gap) = gaps(span);
+        let apart = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(gap, _mm512_set1_pd(eta));
+        let close = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(gap, _mm512_set1_pd(-eta));
+        let far = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(gap, _mm512_set1_pd(far));
+        let mut same = 0u8;
+        if s0 > 0.0 {
+            same |= _mm512_cmp_pd_mask::<_CMP_GT_OQ>(_mm512_set1_pd(s0), x);
+        }
+        if s1 < 0.0 {
+            same |= _mm512_cmp_pd_mask::<_CMP_LT_OQ>(_mm512_set1_pd(s1), x);
+        }
+        [apart, close, far, !same]
+    }
+
+    /// [`super::edge_lanes`].
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    pub(super) unsafe fn edge_lanes(span: &Span, eta: f64, tiny: bool, open: u8) -> (u8, u8) {
+        let (_, gap) = gaps(span);
+        let over = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(gap, _mm512_set1_pd(eta));
+        let apart = if tiny { 0 } else { over & open };
+        let close = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(gap, _mm512_set1_pd(-eta)) & open & !apart;
+        (apart, close)
+    }
+
+    /// [`super::segments_meeting_box`]'s lanes, from the slab parameters
+    /// `u`, `w`.
+    ///
+    /// # Safety
+    /// The processor must have AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    pub(super) unsafe fn segments(u: [f64; 3], w: [f64; 3]) -> u8 {
+        let mut t0 = _mm512_setzero_pd();
+        let mut t1 = _mm512_set1_pd(1.0);
+        for k in 0..3 {
+            // Lanes of the children on the positive side along `k` take
+            // `[u, w]`, the others `[-w, -u]`.
+            let a = _mm512_mask_blend_pd(POS[k], _mm512_set1_pd(-w[k]), _mm512_set1_pd(u[k]));
+            let b = _mm512_mask_blend_pd(POS[k], _mm512_set1_pd(-u[k]), _mm512_set1_pd(w[k]));
+            t0 = _mm512_max_pd(t0, a);
+            t1 = _mm512_min_pd(t1, b);
+        }
+        let reach = _mm512_add_pd(t1, _mm512_set1_pd(SLACK));
+        _mm512_cmp_pd_mask::<_CMP_LE_OQ>(t0, reach)
+    }
 }

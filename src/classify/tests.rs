@@ -523,6 +523,7 @@ fn classify_batched_box_test_agrees() {
     let mut rng = Rng(0xb0c5_7e57);
     let d = Domain::cube([0.0; 3], ROOT_LEN as f64).unwrap();
     let (mut sure, mut unsure, mut touching, mut crossing) = (0usize, 0usize, 0usize, 0usize);
+    let mut wide_cases = 0;
     for case in 0..4000 {
         let level = (1 + rng.next() % (MAX_LEVEL as u64 - 1)) as u8;
         let side = ROOT_LEN >> level;
@@ -575,6 +576,20 @@ fn classify_batched_box_test_agrees() {
         let cl = Classifier::new(&index, false);
         let t = &cl.tris[0];
         let m = cl.child_masks(0, center, half, 0xff, 0xff);
+        if cl.wide {
+            // The AVX-512 lanes give the scalar code's verdicts, for any
+            // children wanted.
+            let mut scalar = Classifier::new(&index, false);
+            scalar.wide = false;
+            for (want, leafy) in [(0xff, 0xff), (rng.next() as u8, rng.next() as u8)] {
+                assert_eq!(
+                    cl.child_masks(0, center, half, want, leafy),
+                    scalar.child_masks(0, center, half, want, leafy),
+                    "case {case}, want {want:#x}, leafy {leafy:#x}"
+                );
+            }
+            wide_cases += 1;
+        }
         let pc = cl.center(o);
         let h = cl.to_fixed((side / 4) as u64);
         for i in 0..8u32 {
@@ -604,6 +619,35 @@ fn classify_batched_box_test_agrees() {
         touching > 2000 && sure > 5 * unsure && unsure > 100 && crossing > 300,
         "{touching} {sure} {unsure} {crossing}"
     );
+    if crate::cores::avx512() {
+        assert!(wide_cases > 3000, "{wide_cases}");
+    } else {
+        println!("no AVX-512F here: the child masks' lanes were not compared");
+    }
+}
+
+/// The whole classification with and without the AVX-512 lanes: the same
+/// bytes, on a closed surface (parity) and an open one (winding, caps).
+#[test]
+fn classify_wide_lanes_give_the_same_bytes() {
+    if !crate::cores::avx512() {
+        println!("no AVX-512F here: nothing to compare");
+        return;
+    }
+    for (surface, rule) in [
+        (default_torus(), InsideRule::Parity),
+        (holed_sphere(0.8), InsideRule::Winding),
+    ] {
+        let (_, index) = fitted(&surface);
+        let leaves = leaves_of(&index, 7, true);
+        let mut c = InsideClassifier::new(&index, rule);
+        assert!(c.c.wide);
+        let wide = c.classify(&leaves);
+        c.c.wide = false;
+        let scalar = c.classify(&leaves);
+        assert_eq!(wide, scalar, "{rule:?}");
+        assert!(wide.iter().any(|&b| b & CUT != 0) && wide.contains(&CENTER_INSIDE));
+    }
 }
 
 #[test]

@@ -47,6 +47,9 @@ pub(crate) struct Classifier<'a> {
     /// Index in `fixed` of each triangle of `caps`.
     pub(crate) cap_ids: Vec<u32>,
     pub(crate) summary: Option<WindingSummary>,
+    /// The processor has AVX-512F: the child masks take the eight children
+    /// side by side ([`crate::cores::avx512`]; the same bits).
+    pub(crate) wide: bool,
 }
 
 /// Margin by which Barill et al.'s estimate of the caps' winding number
@@ -197,6 +200,7 @@ impl<'a> Classifier<'a> {
             caps,
             cap_ids,
             summary,
+            wide: crate::cores::avx512(),
         }
     }
 

@@ -5,6 +5,8 @@ use super::*;
 use crate::comm::{agree, CommRef};
 use crate::error::Result;
 use crate::geometry::intersect::triangle_box_overlap;
+#[cfg(target_arch = "x86_64")]
+use crate::geometry::intersect::wide;
 use crate::geometry::{Aabb, Triangle};
 use crate::octant::Octant;
 use crate::octree::LinearOctree;
@@ -281,6 +283,7 @@ impl LinearOctree {
             masks: Vec::new(),
             out: Vec::with_capacity(self.local_len()),
             limit: limit.min(usize::MAX as u64) as usize,
+            wide: crate::cores::avx512(),
         };
         let mut result = Ok(());
         let leaves = self.leaves();
@@ -356,6 +359,9 @@ pub(crate) struct SurfaceWalker<'a> {
     pub(crate) masks: Vec<u8>,
     pub(crate) out: Vec<Octant>,
     pub(crate) limit: usize,
+    /// The processor has AVX-512F ([`crate::cores::avx512`]): a triangle
+    /// is tested against eight children at once, with the same verdicts.
+    pub(crate) wide: bool,
 }
 
 impl SurfaceWalker<'_> {
@@ -369,15 +375,14 @@ impl SurfaceWalker<'_> {
         }
         // The children's candidates by boxes; the exact test only has to
         // find one that touches.
-        let b = split_candidates(self.boxes, &mut self.buf, &mut self.masks, lo, hi, o);
+        child_masks(self.boxes, &self.buf[lo..hi], o, &mut self.masks);
+        let touched = self.touched(o, lo, hi);
+        let masks = &self.masks;
+        let b = scatter_by_child(&mut self.buf, lo, hi, |j| masks[j - lo]);
         for i in 0..8u32 {
             let c = o.child(i);
-            let (cmin, cmax) = c.bounds_f64();
             let (start, end) = (b[i as usize], b[i as usize + 1]);
-            if self.buf[start..end]
-                .iter()
-                .any(|&t| triangle_box_overlap(&self.tris[t as usize], cmin, cmax))
-            {
+            if touched & 1 << i != 0 {
                 self.walk(c, start, end)?;
             } else {
                 self.out.push(c);
@@ -412,19 +417,53 @@ impl SurfaceWalker<'_> {
     /// triangle touching a child decides.
     pub(crate) fn last_level(&mut self, o: Octant, lo: usize, hi: usize) {
         child_masks(self.boxes, &self.buf[lo..hi], o, &mut self.masks);
+        let touched = self.touched(o, lo, hi);
         for i in 0..8u32 {
             let c = o.child(i);
-            let (cmin, cmax) = c.bounds_f64();
-            let touched = (lo..hi).any(|j| {
-                self.masks[j - lo] & (1 << i) != 0
-                    && triangle_box_overlap(&self.tris[self.buf[j] as usize], cmin, cmax)
-            });
-            if touched {
+            if touched & 1 << i != 0 {
                 self.out.extend_from_slice(&c.children());
             } else {
                 self.out.push(c);
             }
         }
+    }
+
+    /// The children of `o` that a triangle of `buf[lo..hi]` touches
+    /// ([`triangle_box_overlap`]), given each one's box mask in `masks`.
+    /// With AVX-512 a triangle is tested against its children at once;
+    /// either way, the first triangle touching a child decides it.
+    fn touched(&self, o: Octant, lo: usize, hi: usize) -> u8 {
+        let list = &self.buf[lo..hi];
+        #[cfg(target_arch = "x86_64")]
+        if self.wide {
+            let (mut cmin, mut cmax) = ([[0.0; 8]; 3], [[0.0; 8]; 3]);
+            for i in 0..8 {
+                let (a, b) = o.child(i as u32).bounds_f64();
+                for k in 0..3 {
+                    (cmin[k][i], cmax[k][i]) = (a[k], b[k]);
+                }
+            }
+            let mut touched = 0u8;
+            for (&t, &m) in list.iter().zip(&self.masks) {
+                let want = m & !touched;
+                if want != 0 {
+                    // SAFETY: `wide` is set only where AVX-512F is.
+                    touched |= unsafe {
+                        wide::triangle_boxes_overlap(&self.tris[t as usize], &cmin, &cmax, want)
+                    };
+                }
+            }
+            return touched;
+        }
+        let mut touched = 0u8;
+        for i in 0..8u32 {
+            let (cmin, cmax) = o.child(i).bounds_f64();
+            let hit = list.iter().zip(&self.masks).any(|(&t, &m)| {
+                m & 1 << i != 0 && triangle_box_overlap(&self.tris[t as usize], cmin, cmax)
+            });
+            touched |= (hit as u8) << i;
+        }
+        touched
     }
 
     pub(crate) fn check_limit(&self) -> Result<()> {
