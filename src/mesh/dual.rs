@@ -692,6 +692,13 @@ impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
     /// octants sit (0: a cell, 1 bit: a face, 2: an edge, 3: a point),
     /// `refs[p]` for `p` a subset of `M` is the octant on side `p`.
     fn cell<const M: usize>(&mut self, refs: [u32; 8]) {
+        // Around the lowest internal nodes (families of leaves) every
+        // sub-cell but the centre point has leaves alone on its sides:
+        // the centre point, the first sub-cell, is all there is to visit.
+        if refs.iter().all(|&r| r & (LEAF | FAMILY) != 0) {
+            self.sub::<M, 0>(&refs);
+            return;
+        }
         // Written out sub-cell by sub-cell: every loop below has a length
         // known at compile time.
         macro_rules! subs {
