@@ -773,28 +773,29 @@ fn record_point(
     refs: &[u32; 8],
 ) {
     let local = |r: u32| local.contains(&((r & !LEAF) as usize));
-    // Bit `d` of `along[p]`: the leaf on side `p` (every leaf of the walk
+    // Bit `p` of `same[d]`: the leaf on side `p` (every leaf of the walk
     // is kept) is also on side `p ^ 1 << d`. A leaf around the point fills
     // an aligned block of 1, 2 or 4 sides, which holds a neighbour of each
-    // of its sides along every axis it spans: no bit, the point is its
-    // corner; one (its axis), inside its edge; two, inside its face.
-    let mut along = [0u8; 8];
-    let (mut corners, mut flags) = (0u8, 0u8);
+    // of its sides along every axis it spans: no axis, the point is its
+    // corner; one, inside its edge; two, inside its face. As bit masks
+    // over the sides, without a branch per side.
+    let (mut same, mut valid, mut remote) = ([0u8; 3], 0u8, 0u8);
     for p in 0..8 {
         let r = refs[p];
-        if r == VOID {
-            continue;
-        }
-        along[p] = (0..3).fold(0, |m, d| m | ((refs[p ^ (1 << d)] == r) as u8) << d);
-        corners |= ((along[p] == 0) as u8) << p;
-        if !local(r) {
-            flags |= BOUNDARY;
-        } else if along[p] == 0 {
-            flags |= CORNER;
+        valid |= ((r != VOID) as u8) << p;
+        remote |= (!local(r) as u8) << p;
+        for (d, s) in same.iter_mut().enumerate() {
+            *s |= ((refs[p ^ (1 << d)] == r) as u8) << p;
         }
     }
+    let same = same.map(|s| s & valid);
+    let corners = valid & !(same[0] | same[1] | same[2]);
     if corners == 0 {
         return;
+    }
+    let mut flags = if remote & valid != 0 { BOUNDARY } else { 0 };
+    if corners & !remote != 0 {
+        flags |= CORNER;
     }
     let most = out.flags.len().max(out.face.len()).max(out.edge.len());
     if most >= 1 << 30 {
@@ -803,18 +804,23 @@ fn record_point(
         return;
     }
     let id;
-    // The number of axes a leaf spans at the point.
-    let spans = |p: usize| along[p].count_ones();
-    if let Some(p) = (0..8).find(|&p| spans(p) == 2) {
+    // The axes the leaf on side `p` spans at the point, as bits.
+    let along = |p: usize| (0..3).fold(0, |m, d| m | (same[d] >> p & 1) << d);
+    // The sides whose leaf spans two axes, and one.
+    let two = same[0] & same[1] | same[0] & same[2] | same[1] & same[2];
+    let one = (same[0] | same[1] | same[2]) & !two;
+    if two != 0 {
+        let p = two.trailing_zeros() as usize;
         // Face interior of the coarse leaf: its 4 positions span two
         // axes; the third, across which it does not extend, is the
         // face normal.
-        let n = (!along[p] & 7).trailing_zeros() as usize;
+        let n = (!along(p) & 7).trailing_zeros() as usize;
         let side = (p >> n) & 1;
         id = FACE | out.face.len() as u32;
         out.face.push(refs[p] & !LEAF, (n | side << 2) as u8, flags);
-    } else if let Some(p) = (0..8).find(|&p| spans(p) == 1) {
-        let e = along[p].trailing_zeros() as usize;
+    } else if one != 0 {
+        let p = one.trailing_zeros() as usize;
+        let e = along(p).trailing_zeros() as usize;
         // The edge of the coarse leaf through the point: opposite side
         // of the point on the two other axes, both ends along `e`.
         let base = !p & 7 & !(1 << e);
