@@ -170,6 +170,27 @@ pub(crate) struct Ranks {
 }
 
 impl Ranks {
+    /// Appends to `out` the entries of `v` (one per entry of the set) that
+    /// are members, in order: whole words of members at a time.
+    pub fn select<T: Copy>(&self, v: &[T], out: &mut Vec<T>) {
+        if self.full {
+            out.extend_from_slice(v);
+            return;
+        }
+        for (w, &word) in self.bits.words.iter().enumerate() {
+            let base = 64 * w;
+            if word == u64::MAX {
+                out.extend_from_slice(&v[base..base + 64]);
+                continue;
+            }
+            let mut rest = word;
+            while rest != 0 {
+                out.push(v[base + rest.trailing_zeros() as usize]);
+                rest &= rest - 1;
+            }
+        }
+    }
+
     /// The members among `n` entries, given by `f`.
     pub fn from_fn(n: usize, f: impl FnMut(usize) -> bool) -> Ranks {
         let bits = Bits::from_fn(n, f);
@@ -901,6 +922,35 @@ mod tests {
                 if m != UNSET {
                     out[m as usize] = corner_coords(a, s, c);
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn ranks_select_the_members_in_order() {
+        let mut rng = crate::testutil::Rng(0x5e1e_c7ed);
+        for n in [0, 1, 63, 64, 65, 200, 1000] {
+            // Runs of members and of others, and scattered ones.
+            let member: Vec<bool> = (0..n)
+                .map(|i| match (i / 64) % 3 {
+                    0 => true,
+                    1 => false,
+                    _ => rng.next() & 1 == 0,
+                })
+                .collect();
+            let v: Vec<u32> = (0..n as u32).map(|i| i * 7 + 1).collect();
+            let ranks = Ranks::from_fn(n, |i| member[i]);
+            let mut got = Vec::new();
+            ranks.select(&v, &mut got);
+            let want: Vec<u32> = v
+                .iter()
+                .zip(&member)
+                .filter(|p| *p.1)
+                .map(|p| *p.0)
+                .collect();
+            assert_eq!(got, want, "{n}");
+            for (k, &x) in got.iter().enumerate() {
+                assert_eq!(ranks.rank(((x - 1) / 7) as usize), k as u32);
             }
         }
     }

@@ -810,11 +810,10 @@ fn kept_elements(tree: &LinearOctree, local_class: &ClassBytes, kept: &Ranks) ->
         ClassBytes::Uniform(c, _) => (None, LeafClass::from_bits(*c) as u8),
         ClassBytes::Slice(s) => {
             let mut class = Vec::with_capacity(nkept);
-            class.extend(
-                (s.iter().enumerate())
-                    .filter(|&(i, _)| kept.contains(i))
-                    .map(|(_, &c)| LeafClass::from_bits(c) as u8),
-            );
+            kept.select(s, &mut class);
+            class
+                .iter_mut()
+                .for_each(|c| *c = LeafClass::from_bits(*c) as u8);
             (Some(class), 0)
         }
     };
@@ -822,11 +821,7 @@ fn kept_elements(tree: &LinearOctree, local_class: &ClassBytes, kept: &Ranks) ->
         Elements::Shared(tree.shared_leaves())
     } else {
         let mut own = Vec::with_capacity(nkept);
-        own.extend(
-            (tree.leaves().iter().enumerate())
-                .filter(|&(i, _)| kept.contains(i))
-                .map(|(_, &o)| o),
-        );
+        kept.select(tree.leaves(), &mut own);
         Elements::Own(own)
     };
     KeptElements {
