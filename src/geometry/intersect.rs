@@ -224,27 +224,13 @@ pub(crate) mod wide {
         ]
     }
 
-    /// `f64::min` lane by lane: a NaN gives way to the other argument.
+    /// `f64::min` or `f64::max` lane by lane, from `vminpd`'s or
+    /// `vmaxpd`'s answer `m` for `(a, b)`: that instruction answers `b`
+    /// when either is NaN, where `f64`'s answer `a` when `b` is NaN.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    fn min(a: __m512d, b: __m512d) -> __m512d {
-        // `vminpd` answers its second argument when either is NaN.
-        _mm512_mask_mov_pd(
-            _mm512_min_pd(a, b),
-            _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(b, b),
-            a,
-        )
-    }
-
-    /// `f64::max` lane by lane.
-    #[target_feature(enable = "avx512f")]
-    #[inline]
-    fn max(a: __m512d, b: __m512d) -> __m512d {
-        _mm512_mask_mov_pd(
-            _mm512_max_pd(a, b),
-            _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(b, b),
-            a,
-        )
+    fn unless_nan(m: __m512d, a: __m512d, b: __m512d) -> __m512d {
+        _mm512_mask_mov_pd(m, _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(b, b), a)
     }
 
     /// `super::separates`, lane by lane: the lanes where `axis` separates
@@ -263,6 +249,8 @@ pub(crate) mod wide {
             )
         };
         let d = [dot(v[0]), dot(v[1]), dot(v[2])];
+        let min = |a, b| unless_nan(_mm512_min_pd(a, b), a, b);
+        let max = |a, b| unless_nan(_mm512_max_pd(a, b), a, b);
         let t_min = min(min(d[0], d[1]), d[2]);
         let t_max = max(max(d[0], d[1]), d[2]);
         let (mut b_min, mut b_max) = (zero, zero);
