@@ -375,10 +375,10 @@ impl SurfaceWalker<'_> {
         }
         // The children's candidates by boxes; the exact test only has to
         // find one that touches.
-        child_masks(self.boxes, &self.buf[lo..hi], o, &mut self.masks);
+        let b = split_candidates(self.boxes, &mut self.buf, &mut self.masks, lo, hi, o);
+        // The lists were appended after `buf[lo..hi]`, which still holds
+        // the octant's own, with their masks.
         let touched = self.touched(o, lo, hi);
-        let masks = &self.masks;
-        let b = scatter_by_child(&mut self.buf, lo, hi, |j| masks[j - lo]);
         for i in 0..8u32 {
             let c = o.child(i);
             let (start, end) = (b[i as usize], b[i as usize + 1]);
