@@ -16,7 +16,7 @@
 //! edge- or corner-balanced octree those corners never hang themselves.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::Octant;
+use crate::octant::{Octant, LATTICE_BITS};
 
 /// Reference to a pointer-tree entry: an internal node index, `LEAF | i`
 /// for leaf `i` of the merged array, `FAMILY | i` for an internal node
@@ -80,24 +80,6 @@ impl<T: Copy> Merged<'_, T> {
         } else {
             self.after[i - b - self.local.len()]
         }
-    }
-
-    /// The first index in `lo..hi` whose entry fails `pred`, which must
-    /// hold on a prefix of the range ([`slice::partition_point`] over the
-    /// three parts).
-    pub fn partition_point(&self, lo: usize, hi: usize, pred: impl Fn(&T) -> bool) -> usize {
-        let mut start = 0;
-        for part in [self.before, self.local, self.after] {
-            let (a, b) = (lo.max(start), hi.min(start + part.len()));
-            if a < b {
-                let k = part[a - start..b - start].partition_point(&pred);
-                if a + k < b {
-                    return a + k;
-                }
-            }
-            start += part.len();
-        }
-        hi
     }
 
     /// Merged indices of the local leaves.
@@ -449,39 +431,88 @@ impl DualNodes {
     }
 }
 
-/// Links `leaves[lo..hi]` (the leaves inside `o`) into the pointer tree.
-fn build(leaves: &Merged, o: Octant, lo: usize, hi: usize, tree: &mut Vec<[u32; 8]>) -> u32 {
-    if lo == hi {
-        return VOID;
+/// Links the sorted leaves into the pointer tree in one pass, in the order
+/// a recursive descent would create its entries (pre-order): `path[l]` is
+/// the open internal node at level `l` on the way to the last leaf. A leaf
+/// closes the nodes that are not its ancestors and opens the missing ones.
+///
+/// ```text
+///   level 0        [ root ]
+///                 /   |    \
+///   level 1  [n1]   LEAF    ...      path = [root, n1, n2]
+///            /  \
+///   level 2 [n2] VOID                next leaf: keeps the ancestors it
+///           /|\                      shares with the last one, closes
+///          leaves                    the rest (a family collapses)
+/// ```
+fn build(leaves: &Merged) -> (Vec<[u32; 8]>, u32) {
+    let n = leaves.len();
+    let mut nodes: Vec<[u32; 8]> = Vec::with_capacity(n / 24 + 1);
+    let mut root = VOID;
+    let mut path = [0u32; crate::octant::MAX_LEVEL as usize + 1];
+    let mut open = 0usize;
+    let mut last = 0u64;
+    // Child index of the octant with Morton code `m` within its parent at
+    // level `l - 1`.
+    let digit = |m: u64, l: usize| (m >> (3 * (LATTICE_BITS - l as u32)) & 7) as usize;
+    // Closes the open node at level `l` on the way to the leaf with Morton
+    // code `m`: eight consecutive leaves become a family.
+    let close = |nodes: &mut Vec<[u32; 8]>, root: &mut u32, path: &[u32], l: usize, m: u64| {
+        let idx = path[l] as usize;
+        let e = nodes[idx];
+        let first = e[0] & !LEAF;
+        let family = e[0] != VOID
+            && e[0] & LEAF != 0
+            && first < FAMILY
+            && (1..8).all(|c| e[c] == e[0] + c as u32);
+        if family {
+            // No child is internal: nothing was pushed after it.
+            debug_assert_eq!(idx + 1, nodes.len());
+            nodes.pop();
+            let r = FAMILY | first;
+            if l == 0 {
+                *root = r;
+            } else {
+                nodes[path[l - 1] as usize][digit(m, l)] = r;
+            }
+        }
+    };
+    let mut i = 0u32;
+    for part in [leaves.before, leaves.local, leaves.after] {
+        for o in part {
+            let (m, level) = (o.morton(), o.level() as usize);
+            // Leading base-8 digits shared with the last leaf: the open
+            // nodes up to that level are also this leaf's ancestors.
+            let shared = ((m ^ last).leading_zeros() - (64 - 3 * LATTICE_BITS)) / 3;
+            let keep = open.min(shared as usize + 1).min(level);
+            for l in (keep..open).rev() {
+                close(&mut nodes, &mut root, &path, l, last);
+            }
+            for l in keep..level {
+                let idx = nodes.len() as u32;
+                nodes.push([VOID; 8]);
+                if l == 0 {
+                    root = idx;
+                } else {
+                    nodes[path[l - 1] as usize][digit(m, l)] = idx;
+                }
+                path[l] = idx;
+            }
+            if level == 0 {
+                root = LEAF | i;
+            } else {
+                nodes[path[level - 1] as usize][digit(m, level)] = LEAF | i;
+            }
+            open = level;
+            last = m;
+            i += 1;
+        }
     }
-    if leaves.get(lo).level() <= o.level() {
-        // The first leaf overlapping `o` is at most its size: it contains it.
-        return LEAF | lo as u32;
+    for l in (0..open).rev() {
+        close(&mut nodes, &mut root, &path, l, last);
     }
-    let idx = tree.len();
-    tree.push([VOID; 8]);
-    let mut a = lo;
-    for c in 0..8u32 {
-        let child = o.child(c);
-        let end = child.cell_end();
-        let before_end = |l: &Octant| l.cell_begin() < end;
-        let b = if hi - a > 16 {
-            leaves.partition_point(a, hi, before_end)
-        } else {
-            // Short runs (most of them, near the leaves): a scan.
-            (a..hi).find(|&j| !before_end(&leaves.get(j))).unwrap_or(hi)
-        };
-        let r = build(leaves, child, a, b, tree);
-        tree[idx][c as usize] = r;
-        a = b;
-    }
-    // Eight leaves, the children themselves: no entry needed. Nothing was
-    // pushed after this entry, since no child is internal.
-    if (lo as u32) < FAMILY && (0..8).all(|c| tree[idx][c] == LEAF | (lo + c) as u32) {
-        tree.pop();
-        return FAMILY | lo as u32;
-    }
-    idx as u32
+    debug_assert_eq!(i as usize, n);
+    (nodes, root)
 }
 
 /// Grows a full vector by a quarter instead of doubling it: these arrays
@@ -510,9 +541,7 @@ impl std::fmt::Debug for DualTree {
 impl DualTree {
     /// Links `leaves` (sorted, disjoint, possibly with gaps).
     pub(crate) fn new(leaves: &Merged) -> DualTree {
-        let n = leaves.len();
-        let mut nodes = Vec::with_capacity(n / 24 + 1);
-        let root = build(leaves, Octant::ROOT, 0, n, &mut nodes);
+        let (nodes, root) = build(leaves);
         DualTree { nodes, root }
     }
 }
@@ -1057,5 +1086,65 @@ mod tests {
         let used: Vec<u8> = (d.face.iter()).chain(d.edge.iter()).map(|e| e.2).collect();
         assert!(used.contains(&(CORNER | BOUNDARY)));
         assert!(used.iter().all(|&f| f & BOUNDARY != 0));
+    }
+    /// The recursive descent the one-pass [`build`] replaces: the children
+    /// of `o` found by searching the sorted leaves.
+    fn build_by_descent(leaves: &[Octant], o: Octant, tree: &mut Vec<[u32; 8]>, lo: usize) -> u32 {
+        if leaves.is_empty() {
+            return VOID;
+        }
+        if leaves[0].level() <= o.level() {
+            return LEAF | lo as u32;
+        }
+        let idx = tree.len();
+        tree.push([VOID; 8]);
+        let mut a = 0;
+        for c in 0..8u32 {
+            let end = o.child(c).cell_end();
+            let b = a + leaves[a..].partition_point(|l| l.cell_begin() < end);
+            let r = build_by_descent(&leaves[a..b], o.child(c), tree, lo + a);
+            tree[idx][c as usize] = r;
+            a = b;
+        }
+        if (0..8).all(|c| tree[idx][c] == LEAF | (lo + c) as u32) {
+            tree.pop();
+            return FAMILY | lo as u32;
+        }
+        idx as u32
+    }
+
+    #[test]
+    fn one_pass_build_equals_the_recursive_descent() {
+        let mut rng = crate::testutil::Rng(7);
+        for case in 0..200 {
+            // A random complete tree, then random leaves removed (gaps).
+            let mut leaves = vec![Octant::ROOT];
+            let depth = 1 + case % 5;
+            for _ in 0..depth {
+                leaves = leaves
+                    .iter()
+                    .flat_map(|&o| {
+                        if o.level() < 6 && rng.unit() < 0.5 {
+                            o.children().to_vec()
+                        } else {
+                            vec![o]
+                        }
+                    })
+                    .collect();
+            }
+            let drop = [0.0, 0.1, 0.6][case % 3];
+            leaves.retain(|_| rng.unit() >= drop);
+            let (before, rest) = leaves.split_at(leaves.len() / 3);
+            let (local, after) = rest.split_at(rest.len() / 2);
+            let merged = Merged {
+                before,
+                local,
+                after,
+            };
+            let mut want = Vec::new();
+            let want_root = build_by_descent(&leaves, Octant::ROOT, &mut want, 0);
+            let (got, got_root) = build(&merged);
+            assert_eq!((got_root, &got), (want_root, &want), "case {case}");
+        }
     }
 }
