@@ -206,6 +206,11 @@ impl Ranks {
         self.before[i >> 6] + w.count_ones()
     }
 
+    /// Whether every entry is a member.
+    pub fn is_full(&self) -> bool {
+        self.full
+    }
+
     /// Number of members.
     pub fn count(&self) -> u32 {
         self.count

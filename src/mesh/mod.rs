@@ -882,7 +882,22 @@ fn assemble(
             format!("{total} nodes on rank {}: at most 2^31 - 1", comm.rank()),
         ));
     }
+    // When every node found is used and owned here (one rank, or no
+    // neighbour), a node's new number is the first of its kind plus its
+    // index: no rank queries and no branch on its kind.
+    let direct = num.owned.is_full() && face_used.is_full() && edge_used.is_full();
+    // By the tag's two bits: independent, edge, face, none.
+    let first_of_kind = [
+        0,
+        (num_independent + nf) as u32,
+        num_independent as u32,
+        UNSET,
+    ];
     let new_of = |id: u32| -> u32 {
+        if direct {
+            let kind = (id >> 30) as usize;
+            return first_of_kind[kind] + (id & !TAG) * (kind != 3) as u32;
+        }
         match id & TAG {
             0 => independent(id),
             FACE => (num_independent as u32) + face_used.rank((id & !TAG) as usize),
@@ -904,7 +919,11 @@ fn assemble(
                 continue;
             }
             let row = &corners[q as usize];
-            for (raw, x) in dual::entry_deps(leaves.get(q as usize), row, mask) {
+            let mut rest = mask;
+            while rest != 0 {
+                let c = rest.trailing_zeros() as usize;
+                rest &= rest - 1;
+                let raw = row[c];
                 let dep = if raw & TAG == 0 {
                     independent(raw)
                 } else {
@@ -917,7 +936,10 @@ fn assemble(
                     ));
                 }
                 if flags[raw as usize] & CORNER == 0 {
-                    dep_only.push((dep, x));
+                    // Rare (partition boundaries): the leaf is decoded
+                    // only for these.
+                    let o = leaves.get(q as usize);
+                    dep_only.push((dep, dual::corner_coords(o.coords(), o.side(), c)));
                 }
             }
             list.leaf[w] = q;
