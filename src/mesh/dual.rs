@@ -328,6 +328,14 @@ pub(crate) struct DualNodes {
     /// Independent nodes with a kept ghost leaf around them, and their
     /// lattice points, in node order (few: partition boundaries only).
     pub boundary_points: Vec<(u32, [u32; 3])>,
+    /// Face- and edge-hanging nodes whose directory cell (the finest cell
+    /// above the point along every axis, see [`crate::mesh::numbering`])
+    /// lies in a local leaf: this rank counts them.
+    pub directory_here: [u64; 2],
+    /// Face- and edge-hanging nodes (indices into `face`, `edge`) with no
+    /// leaf known above them (a gap, or the domain's upper boundary): their
+    /// directory is looked up.
+    pub directory_unknown: [Vec<u32>; 2],
 }
 
 /// Runs the traversal over `leaves` (sorted, disjoint, possibly with gaps):
@@ -353,6 +361,8 @@ pub(crate) fn extract_nodes(leaves: Merged) -> Result<(DualNodes, DualTree)> {
         face: Entries::new(true, n / 4),
         edge: Entries::new(false, n / 2),
         boundary_points: Vec::new(),
+        directory_here: [0; 2],
+        directory_unknown: [Vec::new(), Vec::new()],
     };
     let tree = DualTree::new(&leaves);
     walk_points(&tree, |refs| {
@@ -864,6 +874,12 @@ fn record_point(
     // The sides whose leaf spans two axes, and one.
     let two = same[0] & same[1] | same[0] & same[2] | same[1] & same[2];
     let one = (same[0] | same[1] | same[2]) & !two;
+    // The leaf above the point along every axis holds its directory cell.
+    let above = (valid >> 7 & 1 != 0, (valid & !remote) >> 7 & 1 != 0);
+    let mut directory = |kind: usize, k: usize| match above {
+        (true, here) => out.directory_here[kind] += here as u64,
+        (false, _) => out.directory_unknown[kind].push(k as u32),
+    };
     if two != 0 {
         let p = two.trailing_zeros() as usize;
         // Face interior of the coarse leaf: its 4 positions span two
@@ -872,6 +888,7 @@ fn record_point(
         let n = (!along(p) & 7).trailing_zeros() as usize;
         let side = (p >> n) & 1;
         id = FACE | out.face.len() as u32;
+        directory(0, out.face.len());
         out.face.push(refs[p] & !LEAF, (n | side << 2) as u8, flags);
     } else if one != 0 {
         let p = one.trailing_zeros() as usize;
@@ -880,6 +897,7 @@ fn record_point(
         // of the point on the two other axes, both ends along `e`.
         let base = !p & 7 & !(1 << e);
         id = EDGE | out.edge.len() as u32;
+        directory(1, out.edge.len());
         out.edge.push(refs[p] & !LEAF, (e | base << 2) as u8, flags);
     } else {
         id = out.flags.len() as u32;

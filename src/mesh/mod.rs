@@ -667,21 +667,18 @@ fn count_hanging(
     if comm.size() == 1 {
         return (nf, ne);
     }
+    // The walk counted the nodes whose directory cell is in a local leaf;
+    // the others' directory is looked up from their points.
     let me = comm.rank();
-    let local = leaves.local_range();
-    let mine = |e: &(u32, u8, u8)| {
-        // A node on a face or edge through its coarse leaf's lowest corner
-        // (Morton corner 0) lies in the leaf's half-open box, and so does
-        // its directory cell: a local leaf's node is this rank's.
-        if e.1 & 1 != 0 && local.contains(&(e.0 as usize)) {
-            return true;
-        }
-        let x = dual::DualNodes::hanging_coords(leaves.get(e.0 as usize), e.1);
-        numbering::directory_rank(first_cell, x) == me
+    let count = |kind: usize, list: &dual::Entries| {
+        let looked_up = d.directory_unknown[kind].iter().filter(|&&k| {
+            let (q, mask, _) = list.get(k as usize);
+            let x = dual::DualNodes::hanging_coords(leaves.get(q as usize), mask);
+            numbering::directory_rank(first_cell, x) == me
+        });
+        d.directory_here[kind] + looked_up.count() as u64
     };
-    let face = d.face.iter().filter(mine).count();
-    let edge = d.edge.iter().filter(mine).count();
-    (face as u64, edge as u64)
+    (count(0, &d.face), count(1, &d.edge))
 }
 
 /// Owners and global numbers of the used independent nodes.
