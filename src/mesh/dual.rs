@@ -41,7 +41,8 @@ pub(crate) const EDGE: u32 = 0x4000_0000;
 
 /// Node flag: a corner of a kept local leaf.
 pub(crate) const CORNER: u8 = 1;
-/// Node flag: a dependency of a used hanging node.
+/// Node flag: a dependency of a used hanging node on a ghost leaf (those
+/// on a local leaf are corners of it).
 pub(crate) const DEP: u8 = 2;
 /// Node flag: another rank may use it (a kept ghost leaf around it, or a
 /// dependency of such a hanging node); only these need the directory.
@@ -377,7 +378,7 @@ pub(crate) fn extract_nodes(leaves: Merged) -> Result<(DualNodes, DualTree)> {
     out.flags.shrink_to_fit();
     out.face.shrink_to_fit();
     out.edge.shrink_to_fit();
-    out.propagate()?;
+    out.propagate(&local)?;
     Ok((out, tree))
 }
 
@@ -404,12 +405,15 @@ pub(crate) fn entry_deps(
 
 impl DualNodes {
     /// Marks the dependencies of hanging nodes: used when the hanging node
-    /// is, boundary when it is.
-    fn propagate(&mut self) -> Result<()> {
+    /// is, boundary when it is. The corners of a local coarse leaf are
+    /// corners of an element already, so only a ghost's, or a boundary
+    /// node's, are looked at.
+    fn propagate(&mut self, local: &std::ops::Range<usize>) -> Result<()> {
         let corners = &self.corners;
         let flags = &mut self.flags;
         for (q, mask, f) in self.face.iter().chain(self.edge.iter()) {
-            let add = (if f & USED != 0 { DEP } else { 0 }) | (f & BOUNDARY);
+            let ghost = !local.contains(&(q as usize));
+            let add = (if f & USED != 0 && ghost { DEP } else { 0 }) | (f & BOUNDARY);
             if add == 0 {
                 continue;
             }
@@ -1064,13 +1068,13 @@ mod tests {
             }
             assert_eq!(DualNodes::hanging_coords(leaves[q as usize], mask), at[&id]);
         }
-        // Every independent node is a corner; 8 coarse corners of child 0's
-        // faces and edges are also dependencies.
+        // Every independent node is a corner; the coarse leaves are local,
+        // so their corners need no mark as dependencies.
         assert!(d
             .flags
             .iter()
             .all(|&f| f & CORNER != 0 && f & BOUNDARY == 0));
-        assert!(d.flags.iter().filter(|&&f| f & DEP != 0).count() >= 7);
+        assert!(d.flags.iter().all(|&f| f & DEP == 0));
     }
 
     #[test]
@@ -1110,6 +1114,7 @@ mod tests {
         assert!(used.contains(&(CORNER | BOUNDARY)));
         assert!(used.iter().all(|&f| f & BOUNDARY != 0));
     }
+
     /// The recursive descent the one-pass [`build`] replaces: the children
     /// of `o` found by searching the sorted leaves.
     fn build_by_descent(leaves: &[Octant], o: Octant, tree: &mut Vec<[u32; 8]>, lo: usize) -> u32 {
