@@ -207,6 +207,17 @@ impl Ranks {
         self.before[i >> 6] + w.count_ones()
     }
 
+    /// Members before `i`, and whether `i` is one, without a branch.
+    #[inline]
+    pub fn rank_member(&self, i: usize) -> (u32, bool) {
+        let word = self.bits.words[i >> 6];
+        let below = word & ((1u64 << (i & 63)) - 1);
+        (
+            self.before[i >> 6] + below.count_ones(),
+            word >> (i & 63) & 1 == 1,
+        )
+    }
+
     /// Whether every entry is a member.
     pub fn is_full(&self) -> bool {
         self.full
@@ -1008,6 +1019,16 @@ mod tests {
             for (k, &x) in got.iter().enumerate() {
                 assert_eq!(ranks.rank(((x - 1) / 7) as usize), k as u32);
             }
+            // The branch-free query agrees with the count of members before
+            // each entry, members or not.
+            let mut before = 0;
+            for (i, &m) in member.iter().enumerate() {
+                assert_eq!(ranks.rank_member(i), (before, m), "{n} {i}");
+                before += m as u32;
+            }
+            let full = Ranks::from_fn(n, |_| true);
+            assert!(full.is_full());
+            assert!((0..n).all(|i| full.rank_member(i) == (i as u32, true)));
         }
     }
 

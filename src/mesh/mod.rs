@@ -82,7 +82,7 @@ pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, S
 pub use hanging::HangingDeps;
 pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
 
-use dual::{Merged, Ranks, CORNER, EDGE, FACE, TAG, UNSET};
+use dual::{Merged, Ranks, CORNER, TAG, UNSET};
 use hanging::{Hanging, GHOST};
 
 /// VTK hexahedron corner `v` is Morton corner `VTK_TO_MORTON[v]`
@@ -890,17 +890,22 @@ fn assemble(
         num_independent as u32,
         UNSET,
     ];
+    let of_kind = [&num.owned, &edge_used, &face_used];
     let new_of = |id: u32| -> u32 {
+        let kind = (id >> 30) as usize;
         if direct {
-            let kind = (id >> 30) as usize;
             return first_of_kind[kind] + (id & !TAG) * (kind != 3) as u32;
         }
-        match id & TAG {
-            0 => independent(id),
-            FACE => (num_independent as u32) + face_used.rank((id & !TAG) as usize),
-            EDGE => (num_independent + nf) as u32 + edge_used.rank((id & !TAG) as usize),
-            _ => UNSET,
+        if kind == 3 {
+            return UNSET;
         }
+        // No branch on the kind, which follows no pattern the processor
+        // could predict; a node owned elsewhere is rare.
+        let (rank, member) = of_kind[kind].rank_member((id & !TAG) as usize);
+        if kind == 0 && !member {
+            return independent(id);
+        }
+        first_of_kind[kind] + rank
     };
 
     // Each used hanging entry keeps its coarse leaf, and its code byte
@@ -983,8 +988,13 @@ fn assemble(
     let mut with_hanging = 0u64;
     for (w, i) in local_range.clone().enumerate() {
         let c = connectivity[i];
-        with_hanging += c.iter().any(|&n| n & TAG != 0) as u64;
-        connectivity[w] = std::array::from_fn(|v| new_of(c[VTK_TO_MORTON[v]]));
+        with_hanging += (c.iter().fold(0, |a, &n| a | n) & TAG != 0) as u64;
+        // A plain loop: `array::from_fn` left a call per corner here.
+        let mut row = [UNSET; 8];
+        for (v, slot) in row.iter_mut().enumerate() {
+            *slot = new_of(c[VTK_TO_MORTON[v]]);
+        }
+        connectivity[w] = row;
     }
     connectivity.truncate(local_range.len());
     if connectivity.len() < connectivity.capacity() / 2 {
