@@ -916,6 +916,10 @@ fn assemble(
     let mut compact = |list: &mut dual::Entries| -> Result<hanging::Refs> {
         let mut w = 0;
         for k in 0..list.len() {
+            // The coarse leaves come in the walk's order, not in memory's.
+            if let Some(&ahead) = list.leaf.get(k + 16) {
+                prefetch(&corners, ahead as usize);
+            }
             let (q, mask, entry_flags) = list.get(k);
             if entry_flags & CORNER == 0 {
                 continue;
