@@ -844,21 +844,26 @@ impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
     }
 }
 
-/// Node extraction at one point of the walk (see [`walk_points`]).
-fn record_point(
-    leaves: &Merged,
-    local: &std::ops::Range<usize>,
-    overflow: &mut bool,
-    out: &mut DualNodes,
-    refs: &[u32; 8],
-) {
+/// The sides' bit masks at a point (see [`record_point`]): `same[d]`, the
+/// sides whose leaf is also on the side across axis `d`; the sides with a
+/// leaf; the sides whose leaf is not local (or none).
+#[inline]
+fn side_masks(refs: &[u32; 8], local: &std::ops::Range<usize>) -> ([u8; 3], u8, u8) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        side_masks_sse2(refs, local)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        side_masks_scalar(refs, local)
+    }
+}
+
+/// [`side_masks`], a side at a time (other processors; the reference of
+/// the SSE2 version's test).
+#[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
+fn side_masks_scalar(refs: &[u32; 8], local: &std::ops::Range<usize>) -> ([u8; 3], u8, u8) {
     let local = |r: u32| local.contains(&((r & !LEAF) as usize));
-    // Bit `p` of `same[d]`: the leaf on side `p` (every leaf of the walk
-    // is kept) is also on side `p ^ 1 << d`. A leaf around the point fills
-    // an aligned block of 1, 2 or 4 sides, which holds a neighbour of each
-    // of its sides along every axis it spans: no axis, the point is its
-    // corner; one, inside its edge; two, inside its face. As bit masks
-    // over the sides, without a branch per side.
     let (mut same, mut valid, mut remote) = ([0u8; 3], 0u8, 0u8);
     for p in 0..8 {
         let r = refs[p];
@@ -868,6 +873,61 @@ fn record_point(
             *s |= ((refs[p ^ (1 << d)] == r) as u8) << p;
         }
     }
+    (same, valid, remote)
+}
+
+/// [`side_masks`] with SSE2 (every x86-64 processor): the sides in two
+/// registers of four, compared with themselves shuffled. A fifth less time
+/// for the walk with its records (Armadillo level 10, in-process minimum
+/// of four against the scalar version).
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn side_masks_sse2(refs: &[u32; 8], local: &std::ops::Range<usize>) -> ([u8; 3], u8, u8) {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of x86-64; the loads read the 32 bytes of `refs`.
+    unsafe {
+        let lo = _mm_loadu_si128(refs.as_ptr().cast());
+        let hi = _mm_loadu_si128(refs.as_ptr().add(4).cast());
+        let bits = |v: __m128i| _mm_movemask_ps(_mm_castsi128_ps(v)) as u8;
+        let pair = |a: __m128i, b: __m128i| bits(a) | bits(b) << 4;
+        // Across x: sides 0<->1, 2<->3; across y: 0<->2, 1<->3.
+        let x = pair(
+            _mm_cmpeq_epi32(lo, _mm_shuffle_epi32::<0b10_11_00_01>(lo)),
+            _mm_cmpeq_epi32(hi, _mm_shuffle_epi32::<0b10_11_00_01>(hi)),
+        );
+        let y = pair(
+            _mm_cmpeq_epi32(lo, _mm_shuffle_epi32::<0b01_00_11_10>(lo)),
+            _mm_cmpeq_epi32(hi, _mm_shuffle_epi32::<0b01_00_11_10>(hi)),
+        );
+        let z = bits(_mm_cmpeq_epi32(lo, hi)) * 0x11;
+        let none = _mm_set1_epi32(VOID as i32);
+        let valid = !pair(_mm_cmpeq_epi32(lo, none), _mm_cmpeq_epi32(hi, none));
+        // Leaf indices are below 2^31: signed comparisons serve.
+        let index = _mm_set1_epi32(!LEAF as i32);
+        let (a, b) = (_mm_and_si128(lo, index), _mm_and_si128(hi, index));
+        let start = _mm_set1_epi32(local.start as i32);
+        let end = _mm_set1_epi32(local.end as i32);
+        let inside =
+            |v: __m128i| _mm_andnot_si128(_mm_cmplt_epi32(v, start), _mm_cmplt_epi32(v, end));
+        let remote = !pair(inside(a), inside(b));
+        ([x, y, z], valid, remote)
+    }
+}
+
+/// Node extraction at one point of the walk (see [`walk_points`]).
+fn record_point(
+    leaves: &Merged,
+    local: &std::ops::Range<usize>,
+    overflow: &mut bool,
+    out: &mut DualNodes,
+    refs: &[u32; 8],
+) {
+    // Bit `p` of `same[d]`: the leaf on side `p` (every leaf of the walk
+    // is kept) is also on side `p ^ 1 << d`. A leaf around the point fills
+    // an aligned block of 1, 2 or 4 sides, which holds a neighbour of each
+    // of its sides along every axis it spans: no axis, the point is its
+    // corner; one, inside its edge; two, inside its face.
+    let (same, valid, remote) = side_masks(refs, local);
     let same = same.map(|s| s & valid);
     let corners = valid & !(same[0] | same[1] | same[2]);
     if corners == 0 {
@@ -1134,6 +1194,35 @@ mod tests {
         let used: Vec<u8> = (d.face.iter()).chain(d.edge.iter()).map(|e| e.2).collect();
         assert!(used.contains(&(CORNER | BOUNDARY)));
         assert!(used.iter().all(|&f| f & BOUNDARY != 0));
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn sse2_side_masks_equal_the_scalar_ones() {
+        let mut rng = crate::testutil::Rng(0x51de);
+        let local = 1000..2000usize;
+        // Few distinct values, so that sides repeat; local, ghost and no
+        // leaf; indices next to the local range's ends.
+        let pool = [
+            VOID,
+            LEAF | 999,
+            LEAF | 1000,
+            LEAF | 1999,
+            LEAF | 2000,
+            LEAF,
+            LEAF | 0x7FFF_FFFE,
+        ];
+        for _ in 0..100_000 {
+            let refs: [u32; 8] = std::array::from_fn(|_| {
+                let k = rng.next() as usize % (pool.len() + 3);
+                pool.get(k).copied().unwrap_or(LEAF | (1000 + k as u32))
+            });
+            assert_eq!(
+                side_masks_sse2(&refs, &local),
+                side_masks_scalar(&refs, &local),
+                "{refs:x?}"
+            );
+        }
     }
 
     /// The recursive descent the one-pass [`build`] replaces: the children
