@@ -262,7 +262,12 @@ impl Mesh {
         // second exchange.
         // The kept leaves, numbered: a leaf's element number is the count
         // of kept leaves before it.
-        let kept = Ranks::from_fn(local_class.len(), |i| keep(local_class.get(i)));
+        // `keep` asked once per class byte, not once per leaf.
+        let keeps_class: [bool; 256] = std::array::from_fn(|c| keep(c as u8));
+        let kept = match local_class {
+            ClassBytes::Slice(s) => Ranks::from_fn(s.len(), |i| keeps_class[s[i] as usize]),
+            ClassBytes::Uniform(c, n) => Ranks::from_fn(n, |_| keeps_class[c as usize]),
+        };
         let nkept = kept.count() as u64;
         let kept_counts = comm.allgather_u64(nkept);
         let first_element: u64 = kept_counts[..comm.rank()].iter().sum();
