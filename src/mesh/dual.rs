@@ -608,8 +608,9 @@ pub(crate) fn walk_points(tree: &DualTree, visit: impl FnMut(&[u32; 8])) {
 /// calling `visit(axis, low, high)` with the leaf on the low and the high
 /// side along `axis` (merged indices). Leaves facing a gap (no leaf, or
 /// outside the root) are not visited. The walk of [`walk_points`] without
-/// its edges and points.
-pub(crate) fn walk_faces(tree: &DualTree, visit: impl FnMut(usize, usize, usize)) {
+/// its edges and points; a parent of eight leaves is reported whole
+/// ([`FaceVisitor::family`]).
+pub(crate) fn walk_faces(tree: &DualTree, visit: &mut impl FaceVisitor) {
     let mut w = FaceWalker {
         tree: &tree.nodes,
         visit,
@@ -619,13 +620,53 @@ pub(crate) fn walk_faces(tree: &DualTree, visit: impl FnMut(usize, usize, usize)
     }
 }
 
-/// See [`walk_faces`].
-struct FaceWalker<'a, F> {
-    tree: &'a [[u32; 8]],
-    visit: F,
+/// The twelve faces between the eight children of one parent, as `(axis,
+/// child on the low side, child on the high side)`: along each axis, the
+/// four children with that axis' bit clear face their siblings with it
+/// set.
+pub(crate) const FAMILY_FACES: [(usize, usize, usize); 12] = {
+    let mut f = [(0, 0, 0); 12];
+    let mut k = 0;
+    let mut axis = 0;
+    while axis < 3 {
+        let mut c = 0;
+        while c < 8 {
+            if c >> axis & 1 == 0 {
+                f[k] = (axis, c, c | 1 << axis);
+                k += 1;
+            }
+            c += 1;
+        }
+        axis += 1;
+    }
+    f
+};
+
+/// What [`walk_faces`] reports.
+pub(crate) trait FaceVisitor {
+    /// Leaves `low` and `high` (merged indices) share a face normal to
+    /// `axis`, `low` on its low side.
+    fn pair(&mut self, axis: usize, low: usize, high: usize);
+
+    /// Leaves `b..b + 8` are the eight children of one parent, and share
+    /// the twelve faces between them: by default, twelve
+    /// [`FaceVisitor::pair`]s. Half the faces of a balanced octree are of
+    /// this kind, and a visitor can take them in one step.
+    #[inline]
+    fn family(&mut self, b: usize) {
+        for (axis, low, high) in FAMILY_FACES {
+            self.pair(axis, b + low, b + high);
+        }
+    }
 }
 
-impl<F: FnMut(usize, usize, usize)> FaceWalker<'_, F> {
+/// See [`walk_faces`].
+struct FaceWalker<'a, 'v, V> {
+    tree: &'a [[u32; 8]],
+    visit: &'v mut V,
+}
+
+impl<V: FaceVisitor> FaceWalker<'_, '_, V> {
     #[inline]
     fn child(&self, r: u32, c: u32) -> u32 {
         if r & LEAF != 0 {
@@ -640,6 +681,10 @@ impl<F: FnMut(usize, usize, usize)> FaceWalker<'_, F> {
     /// [`Walker::cell`] for cells and faces only: a face whose two sides
     /// are leaves is visited.
     fn cell<const M: usize>(&mut self, refs: [u32; 8]) {
+        if M == 0 && refs[0] & FAMILY != 0 {
+            self.visit.family((refs[0] & !FAMILY) as usize);
+            return;
+        }
         macro_rules! subs {
             ($($k:literal)*) => { $( self.sub::<M, $k>(&refs); )* };
         }
@@ -673,7 +718,8 @@ impl<F: FnMut(usize, usize, usize)> FaceWalker<'_, F> {
             let (low, high) = (nr[0], nr[sub.m as usize]);
             if low != VOID && high != VOID {
                 let axis = sub.m.trailing_zeros() as usize;
-                (self.visit)(axis, (low & !LEAF) as usize, (high & !LEAF) as usize);
+                let (low, high) = ((low & !LEAF) as usize, (high & !LEAF) as usize);
+                self.visit.pair(axis, low, high);
             }
         }
     }
@@ -1251,27 +1297,39 @@ mod tests {
         idx as u32
     }
 
+    /// A random complete tree, `depth` rounds of splitting leaves below
+    /// `max_level` with probability `split`, then leaves removed with
+    /// probability `drop` (gaps). Not balanced.
+    fn random_leaves(
+        rng: &mut crate::testutil::Rng,
+        depth: usize,
+        max_level: u8,
+        split: f64,
+        drop: f64,
+    ) -> Vec<Octant> {
+        let mut leaves = vec![Octant::ROOT];
+        for _ in 0..depth {
+            leaves = leaves
+                .iter()
+                .flat_map(|&o| {
+                    if o.level() < max_level && rng.unit() < split {
+                        o.children().to_vec()
+                    } else {
+                        vec![o]
+                    }
+                })
+                .collect();
+        }
+        leaves.retain(|_| rng.unit() >= drop);
+        leaves
+    }
+
     #[test]
     fn one_pass_build_equals_the_recursive_descent() {
         let mut rng = crate::testutil::Rng(7);
         for case in 0..200 {
-            // A random complete tree, then random leaves removed (gaps).
-            let mut leaves = vec![Octant::ROOT];
-            let depth = 1 + case % 5;
-            for _ in 0..depth {
-                leaves = leaves
-                    .iter()
-                    .flat_map(|&o| {
-                        if o.level() < 6 && rng.unit() < 0.5 {
-                            o.children().to_vec()
-                        } else {
-                            vec![o]
-                        }
-                    })
-                    .collect();
-            }
             let drop = [0.0, 0.1, 0.6][case % 3];
-            leaves.retain(|_| rng.unit() >= drop);
+            let leaves = random_leaves(&mut rng, 1 + case % 5, 6, 0.5, drop);
             let (before, rest) = leaves.split_at(leaves.len() / 3);
             let (local, after) = rest.split_at(rest.len() / 2);
             let merged = Merged {
@@ -1283,6 +1341,53 @@ mod tests {
             let want_root = build_by_descent(&leaves, Octant::ROOT, &mut want, 0);
             let (got, got_root) = build(&merged);
             assert_eq!((got_root, &got), (want_root, &want), "case {case}");
+        }
+    }
+
+    /// Records what [`walk_faces`] reports, families as their pairs.
+    struct Pairs(Vec<(usize, usize, usize)>);
+
+    impl FaceVisitor for Pairs {
+        fn pair(&mut self, axis: usize, low: usize, high: usize) {
+            self.0.push((axis, low, high));
+        }
+    }
+
+    #[test]
+    fn the_face_walk_meets_every_face_once() {
+        let mut rng = crate::testutil::Rng(11);
+        for case in 0..120 {
+            let drop = [0.0, 0.1, 0.5][case % 3];
+            let leaves = random_leaves(&mut rng, 1 + case % 4, 4, 0.6, drop);
+            let (before, rest) = leaves.split_at(leaves.len() / 4);
+            let (local, after) = rest.split_at(rest.len() / 2);
+            let tree = DualTree::new(&Merged {
+                before,
+                local,
+                after,
+            });
+            let mut got = Pairs(Vec::new());
+            walk_faces(&tree, &mut got);
+            let mut got = got.0;
+            got.sort_unstable();
+            // Every two leaves touching along a face of positive area.
+            let mut want = Vec::new();
+            for (i, a) in leaves.iter().enumerate() {
+                for (j, b) in leaves.iter().enumerate() {
+                    let (ca, cb) = (a.coords(), b.coords());
+                    let (sa, sb) = (a.side(), b.side());
+                    for axis in 0..3 {
+                        let overlap = (0..3)
+                            .filter(|&k| k != axis)
+                            .all(|k| ca[k].max(cb[k]) < (ca[k] + sa).min(cb[k] + sb));
+                        if overlap && ca[axis] + sa == cb[axis] {
+                            want.push((axis, i, j));
+                        }
+                    }
+                }
+            }
+            want.sort_unstable();
+            assert_eq!(got, want, "case {case}");
         }
     }
 }

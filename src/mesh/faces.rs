@@ -51,7 +51,7 @@ use std::ops::Range;
 use crate::error::{Error, ErrorKind, Result};
 use crate::octant::{Octant, LATTICE_BITS};
 
-use super::dual::{walk_faces, Merged};
+use super::dual::{walk_faces, FaceVisitor, Merged, FAMILY_FACES};
 use super::Mesh;
 
 /// Names of the six domain-side patches, in patch-id order.
@@ -83,7 +83,7 @@ pub enum Other {
 /// corners `(a, b)` with `a, b` in `0..=2`, 2 bits each, corner `k` in bits
 /// `4k..4k+4` (`a` low): point `origin + half * (a e_u + b e_v)` where
 /// `(e_u, e_v, e_axis)` is right-handed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Face {
     owner: u32,
     /// [`Other`] in one word: an element below 2^31, a halo element from
@@ -98,6 +98,8 @@ pub struct Face {
 
 /// Halo elements are numbered from here in [`Face`]'s other side.
 const HALO_BASE: u32 = 1 << 31;
+/// Marks a group of quarters in [`Mesh::faces`]'s scratch list.
+const FINE: u32 = 1 << 31;
 /// Patches are numbered down from `u32::MAX`, at most this many.
 const MAX_PATCHES: u32 = 1 << 16;
 
@@ -533,18 +535,23 @@ pub(super) enum FaceKind {
 
 /// What [`Mesh::walk_faces`] reports.
 enum Found {
-    /// Two local elements sharing a face normal to `axis`: `low` on its
-    /// low side (the lower element), `high` on its high side. The face is
-    /// the whole high face of `low` when `low_whole` (`low` is the same
-    /// size or finer), else the whole low face of `high`.
-    Pair {
+    /// Two local elements sharing the whole high face of `low` (the same
+    /// size as `high` or finer), normal to `axis`.
+    Pair { axis: usize, low: u32, high: u32 },
+    /// Two local elements sharing the whole low face of `high`, normal to
+    /// `axis`: quarter `q` (see [`Mesh::walk_faces`]) of the coarser
+    /// `low`'s high face.
+    Quarter {
         axis: usize,
         low: u32,
         high: u32,
-        low_whole: bool,
+        q: u8,
     },
-    /// A halo or boundary face.
-    Face(FaceKind, Face),
+    /// The local elements `i..i + 8` are the children of one parent: the
+    /// twelve faces between them, each a `Pair`.
+    Family(u32),
+    /// A face between a local and a halo element, by the local side.
+    Halo(Face),
 }
 
 /// Where a kept element is: local index or halo index.
@@ -660,13 +667,178 @@ fn element_face(i: u32, e: Octant, axis: usize, plus: bool, shape: u8, other: Ot
     }
 }
 
+/// The visitor of [`Mesh::walk_faces`]'s dual walk.
+struct Visitor<'a, F> {
+    merged: Merged<'a>,
+    /// Halo elements before the local ones.
+    hb: usize,
+    /// Local elements.
+    nl: usize,
+    /// See [`Mesh::walk_faces`].
+    covered: &'a mut [u32],
+    found: &'a mut F,
+}
+
+/// Per child of a family, the faces it shares with its siblings, as bits
+/// of `covered` (see [`Mesh::walk_faces`]): along each axis, its high face
+/// when it is on the low side, else its low face.
+const FAMILY_COVERED: [u32; 8] = {
+    let mut m = [0; 8];
+    let mut c = 0;
+    while c < 8 {
+        let mut a = 0;
+        while a < 3 {
+            let side = 2 * a + 1 - (c >> a & 1);
+            m[c] |= 15 << (4 * side);
+            a += 1;
+        }
+        c += 1;
+    }
+    m
+};
+
+impl<F: FnMut(Found)> Visitor<'_, F> {
+    /// The kept element at merged index `k`.
+    #[inline]
+    fn at(&self, k: usize) -> At {
+        if k < self.hb {
+            At::Halo(k as u32)
+        } else if k < self.hb + self.nl {
+            At::Local((k - self.hb) as u32)
+        } else {
+            At::Halo((k - self.nl) as u32)
+        }
+    }
+}
+
+impl<F: FnMut(Found)> FaceVisitor for Visitor<'_, F> {
+    #[inline]
+    fn family(&mut self, b: usize) {
+        if b >= self.hb && b - self.hb + 8 <= self.nl {
+            let i = b - self.hb;
+            for (c, m) in FAMILY_COVERED.iter().enumerate() {
+                self.covered[i + c] |= m;
+            }
+            (self.found)(Found::Family(i as u32));
+        } else {
+            for (axis, low, high) in FAMILY_FACES {
+                self.pair(axis, b + low, b + high);
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn pair(&mut self, axis: usize, low: usize, high: usize) {
+        // Most pairs: two local elements of the same size.
+        let (i, j) = (low.wrapping_sub(self.hb), high.wrapping_sub(self.hb));
+        if i < self.nl
+            && j < self.nl
+            && self.merged.local[i].level() == self.merged.local[j].level()
+        {
+            self.covered[i] |= 15 << (4 * (2 * axis + 1));
+            self.covered[j] |= 15 << (4 * (2 * axis));
+            (self.found)(Found::Pair {
+                axis,
+                low: i as u32,
+                high: j as u32,
+            });
+            return;
+        }
+        self.any_pair(axis, low, high);
+    }
+}
+
+impl<F: FnMut(Found)> Visitor<'_, F> {
+    /// [`FaceVisitor::pair`] for any two kept elements.
+    #[inline(never)]
+    fn any_pair(&mut self, axis: usize, low: usize, high: usize) {
+        let (face, whole) = (element_face, WHOLE_SHAPE);
+        let (a, b) = (self.at(low), self.at(high));
+        let (la, lb) = (self.merged.get(low), self.merged.get(high));
+        // `fine` (local or not) against the coarser `coarse`: which
+        // quarter of the coarse face the fine one is, from the fine
+        // octant's place among its siblings.
+        let mut finer = |fine: At, lf: Octant, coarse: At, lc: Octant, fine_low: bool| {
+            let (u, v) = plane_axes(axis);
+            let id = lf.child_id();
+            let q = (id >> u & 1) | (id >> v & 1) << 1;
+            if let At::Local(c) = coarse {
+                self.covered[c as usize] |= 1 << (4 * (2 * axis + !fine_low as usize) + q as usize);
+            }
+            match (fine, coarse) {
+                (At::Local(i), At::Local(c)) => {
+                    self.covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
+                    (self.found)(if fine_low {
+                        Found::Pair {
+                            axis,
+                            low: i,
+                            high: c,
+                        }
+                    } else {
+                        Found::Quarter {
+                            axis,
+                            low: c,
+                            high: i,
+                            q: q as u8,
+                        }
+                    });
+                }
+                (At::Local(i), At::Halo(_)) => {
+                    self.covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
+                    let f = face(i, lf, axis, fine_low, whole, other_of(coarse));
+                    (self.found)(Found::Halo(f));
+                }
+                (At::Halo(_), At::Local(c)) => {
+                    let f = face(c, lc, axis, !fine_low, 1 + q as u8, other_of(fine));
+                    (self.found)(Found::Halo(f));
+                }
+                _ => {}
+            }
+        };
+        if la.level() > lb.level() {
+            finer(a, la, b, lb, true);
+        } else if lb.level() > la.level() {
+            finer(b, lb, a, la, false);
+        } else {
+            if let At::Local(i) = a {
+                self.covered[i as usize] |= 15 << (4 * (2 * axis + 1));
+            }
+            if let At::Local(j) = b {
+                self.covered[j as usize] |= 15 << (4 * (2 * axis));
+            }
+            match (a, b) {
+                (At::Local(i), At::Local(j)) => {
+                    // The low element comes first in Morton order.
+                    debug_assert!(i < j);
+                    (self.found)(Found::Pair {
+                        axis,
+                        low: i,
+                        high: j,
+                    });
+                }
+                (At::Local(i), At::Halo(_)) => {
+                    let f = face(i, la, axis, true, whole, other_of(b));
+                    (self.found)(Found::Halo(f));
+                }
+                (At::Halo(_), At::Local(j)) => {
+                    let f = face(j, lb, axis, false, whole, other_of(a));
+                    (self.found)(Found::Halo(f));
+                }
+                _ => {}
+            }
+        }
+    }
+}
+
 impl Mesh {
     /// Extracts this rank's faces (see [`crate::mesh::faces`]). Local work
     /// only: the halo came with the mesh.
     pub fn faces(&self) -> Result<Faces> {
         let elements: &[Octant] = &self.elements;
         let nl = elements.len();
-        if nl >= u32::MAX as usize {
+        // Element numbers and the quarters' groups (at most three per
+        // element) below `FINE`.
+        if nl >= (FINE / 3) as usize {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
         }
         // An internal face's owner, the lower of its two elements, is the
@@ -678,83 +850,90 @@ impl Mesh {
         // faces:
         //
         //   - `whole[3 i + a]`: 1 + the element across the whole high face
-        //     `a` of `i` (the same size or coarser), 0 when there is none;
-        //   - `quarters`: `(c << 32) | j` for a coarse `c` whose high face
-        //     meets the finer `j` (a quarter of it, listed as `j`'s face).
+        //     `a` of `i` (the same size or coarser), or `FINE | g` when
+        //     finer elements are across it, 0 when there is none;
+        //   - `quarters[4 g + q]`: the element across quarter `q` of that
+        //     face, `u32::MAX` when none (a quarter is listed as the finer
+        //     element's face).
         //
         // The list comes first in the heap, so that the scratch arrays,
         // freed at the end, leave their room for what comes next rather
         // than holes under it. Room never written costs no memory.
         let mut faces: Vec<Face> = Vec::with_capacity(4 * nl);
         let mut whole = vec![0u32; 3 * nl];
-        let mut quarters: Vec<u64> = Vec::new();
-        let mut boundary: Vec<Face> = Vec::new();
+        let mut quarters: Vec<u32> = Vec::new();
         let mut halo: Vec<Face> = Vec::new();
-        self.walk_faces(|found| match found {
-            Found::Pair {
-                axis,
-                low,
-                high,
-                low_whole: true,
-            } => whole[3 * low as usize + axis] = high + 1,
-            Found::Pair { low, high, .. } => quarters.push((low as u64) << 32 | high as u64),
-            Found::Face(FaceKind::Boundary, face) => boundary.push(face),
-            Found::Face(_, face) => halo.push(face),
+        let covered = self.walk_faces(|found| match found {
+            Found::Pair { axis, low, high } => whole[3 * low as usize + axis] = high + 1,
+            Found::Quarter { axis, low, high, q } => {
+                let w = &mut whole[3 * low as usize + axis];
+                if *w == 0 {
+                    *w = FINE | (quarters.len() / 4) as u32;
+                    quarters.extend([u32::MAX; 4]);
+                }
+                quarters[4 * (*w & !FINE) as usize + q as usize] = high;
+            }
+            Found::Family(i) => {
+                for (a, low, high) in FAMILY_FACES {
+                    whole[3 * (i as usize + low) + a] = i + high as u32 + 1;
+                }
+            }
+            Found::Halo(face) => halo.push(face),
         });
-        quarters.sort_unstable();
         let full = WHOLE_SHAPE;
-        let mut q = 0;
         for (i, &e) in elements.iter().enumerate() {
             let first = faces.len();
             for a in 0..3 {
-                let j = whole[3 * i + a];
-                if j != 0 {
+                let w = whole[3 * i + a];
+                if w & FINE != 0 {
+                    let g = 4 * (w & !FINE) as usize;
+                    for &j in quarters[g..g + 4].iter().filter(|&&j| j != u32::MAX) {
+                        let f = elements[j as usize];
+                        let face = element_face(j, f, a, false, full, Other::Element(i as u32));
+                        faces.push(face.flipped(i as u32, Other::Element(j)));
+                    }
+                } else if w != 0 {
                     faces.push(element_face(
                         i as u32,
                         e,
                         a,
                         true,
                         full,
-                        Other::Element(j - 1),
+                        Other::Element(w - 1),
                     ));
                 }
             }
-            while q < quarters.len() && (quarters[q] >> 32) as usize == i {
-                let j = quarters[q] as u32;
-                let f = elements[j as usize];
-                let (cf, ce) = (f.coords(), e.coords());
-                let a = (0..3).find(|&a| cf[a] == ce[a] + e.side()).unwrap_or(0);
-                let face = element_face(j, f, a, false, full, Other::Element(i as u32));
-                faces.push(face.flipped(i as u32, Other::Element(j)));
-                q += 1;
-            }
             // Each owner's few faces (at most three whole ones and twelve
-            // quarters) by the other side: insertion.
+            // quarters) by the other element: insertion.
             let own = &mut faces[first..];
             for k in 1..own.len() {
                 let mut m = k;
-                while m > 0 && own[m].other() < own[m - 1].other() {
+                while m > 0 && own[m].other < own[m - 1].other {
                     own.swap(m, m - 1);
                     m -= 1;
                 }
             }
         }
         drop(whole);
+        drop(quarters);
+        // The boundary faces, grouped by patch: counted, then written in
+        // place behind the internal ones (no list of their own to grow,
+        // sort and copy).
         let num_internal = faces.len();
-        faces.reserve_exact(boundary.len() + halo.len());
-        boundary.sort_by_key(|f| match f.other() {
-            Other::Patch(p) => p,
-            _ => u16::MAX,
-        });
         let mut patch_start = vec![num_internal; NUM_PATCHES + 1];
-        for f in &boundary {
-            if let Other::Patch(p) = f.other() {
-                patch_start[p as usize + 1] += 1;
-            }
-        }
+        self.boundary_pieces(&covered, |_, p| patch_start[p as usize + 1] += 1);
         for p in 0..NUM_PATCHES {
             patch_start[p + 1] += patch_start[p] - num_internal;
         }
+        let num_boundary = patch_start[NUM_PATCHES] - num_internal;
+        faces.reserve_exact(num_boundary + halo.len());
+        faces.resize(num_internal + num_boundary, Face::default());
+        let mut next = patch_start.clone();
+        self.boundary_pieces(&covered, |f, p| {
+            faces[next[p as usize]] = f;
+            next[p as usize] += 1;
+        });
+        drop(covered);
         let me = self.rank as u32;
         let first = self.first_element;
         let key = |f: &Face| -> (u32, u64, u64) {
@@ -771,7 +950,7 @@ impl Mesh {
         };
         halo.sort_unstable_by_key(key);
         let mut halo_ranges = Vec::new();
-        let base = num_internal + boundary.len();
+        let base = num_internal + num_boundary;
         let mut a = 0;
         while a < halo.len() {
             let r = key(&halo[a]).0;
@@ -779,7 +958,6 @@ impl Mesh {
             halo_ranges.push((r, base + a..base + b));
             a = b;
         }
-        faces.append(&mut boundary);
         faces.append(&mut halo);
         Ok(Faces {
             faces,
@@ -803,140 +981,82 @@ impl Mesh {
     pub(super) fn for_each_face(&self, mut put: impl FnMut(FaceKind, Face)) {
         let elements: &[Octant] = &self.elements;
         let whole = WHOLE_SHAPE;
-        self.walk_faces(|found| match found {
-            Found::Pair {
-                axis,
-                low,
-                high,
-                low_whole,
-            } => {
-                let (lo, hi) = (low as usize, high as usize);
-                let f = if low_whole {
-                    element_face(low, elements[lo], axis, true, whole, Other::Element(high))
-                } else {
-                    element_face(high, elements[hi], axis, false, whole, Other::Element(low))
-                };
+        let covered = self.walk_faces(|found| match found {
+            Found::Pair { axis, low, high } => {
+                let e = elements[low as usize];
+                let f = element_face(low, e, axis, true, whole, Other::Element(high));
                 put(FaceKind::Internal, f);
             }
-            Found::Face(kind, f) => put(kind, f),
+            Found::Quarter {
+                axis, low, high, ..
+            } => {
+                let e = elements[high as usize];
+                let f = element_face(high, e, axis, false, whole, Other::Element(low));
+                put(FaceKind::Internal, f);
+            }
+            Found::Family(i) => {
+                for (a, low, high) in FAMILY_FACES {
+                    let (low, high) = (i + low as u32, i + high as u32);
+                    let e = elements[low as usize];
+                    let f = element_face(low, e, a, true, whole, Other::Element(high));
+                    put(FaceKind::Internal, f);
+                }
+            }
+            Found::Halo(f) => put(FaceKind::Halo, f),
         });
+        self.boundary_pieces(&covered, |f, _| put(FaceKind::Boundary, f));
     }
 
     /// The walk behind [`Mesh::for_each_face`] and [`Mesh::faces`]: one
     /// dual walk of the local and halo elements ([`walk_faces`]) reports
     /// each pair of local elements sharing a face, and each halo face by
-    /// the local side; then each element's boundary faces follow, in
-    /// element order, then face, then piece.
-    fn walk_faces(&self, mut found: impl FnMut(Found)) {
+    /// the local side. Returns, per element, bit `4 f + q` set when quarter
+    /// `q` of its face `f` faces a kept element (see
+    /// [`Mesh::boundary_pieces`]).
+    fn walk_faces(&self, mut found: impl FnMut(Found)) -> Vec<u32> {
         let elements: &[Octant] = &self.elements;
         let (nl, hb) = (elements.len(), self.halo.before);
-        let merged = self.halo.around(elements);
-        let at = |k: usize| -> At {
-            if k < hb {
-                At::Halo(k as u32)
-            } else if k < hb + nl {
-                At::Local((k - hb) as u32)
-            } else {
-                At::Halo((k - nl) as u32)
-            }
-        };
-        let face = element_face;
-        let whole = WHOLE_SHAPE;
-        // Per element, bit `4 f + q`: quarter `q` of its face `f` faces a
-        // kept element.
         let mut covered = vec![0u32; nl];
-        walk_faces(&self.dual_tree, |axis, low, high| {
-            let (a, b) = (at(low), at(high));
-            let (la, lb) = (merged.get(low), merged.get(high));
-            // `fine` (local or not) against the coarser `coarse`: which
-            // quarter of the coarse face the fine one is, from the fine
-            // octant's place among its siblings.
-            let mut finer = |fine: At, lf: Octant, coarse: At, lc: Octant, fine_low: bool| {
-                let (u, v) = plane_axes(axis);
-                let id = lf.child_id();
-                let q = (id >> u & 1) | (id >> v & 1) << 1;
-                if let At::Local(c) = coarse {
-                    covered[c as usize] |= 1 << (4 * (2 * axis + !fine_low as usize) + q as usize);
-                }
-                match (fine, coarse) {
-                    (At::Local(i), At::Local(c)) => {
-                        covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
-                        let (low, high) = if fine_low { (i, c) } else { (c, i) };
-                        found(Found::Pair {
-                            axis,
-                            low,
-                            high,
-                            low_whole: fine_low,
-                        });
-                    }
-                    (At::Local(i), At::Halo(_)) => {
-                        covered[i as usize] |= 15 << (4 * (2 * axis + fine_low as usize));
-                        let f = face(i, lf, axis, fine_low, whole, other_of(coarse));
-                        found(Found::Face(FaceKind::Halo, f));
-                    }
-                    (At::Halo(_), At::Local(c)) => {
-                        let f = face(c, lc, axis, !fine_low, 1 + q as u8, other_of(fine));
-                        found(Found::Face(FaceKind::Halo, f));
-                    }
-                    _ => {}
-                }
-            };
-            if la.level() > lb.level() {
-                finer(a, la, b, lb, true);
-            } else if lb.level() > la.level() {
-                finer(b, lb, a, la, false);
-            } else {
-                if let At::Local(i) = a {
-                    covered[i as usize] |= 15 << (4 * (2 * axis + 1));
-                }
-                if let At::Local(j) = b {
-                    covered[j as usize] |= 15 << (4 * (2 * axis));
-                }
-                match (a, b) {
-                    (At::Local(i), At::Local(j)) => {
-                        // The low element comes first in Morton order.
-                        debug_assert!(i < j);
-                        found(Found::Pair {
-                            axis,
-                            low: i,
-                            high: j,
-                            low_whole: true,
-                        });
-                    }
-                    (At::Local(i), At::Halo(_)) => {
-                        let f = face(i, la, axis, true, whole, other_of(b));
-                        found(Found::Face(FaceKind::Halo, f));
-                    }
-                    (At::Halo(_), At::Local(j)) => {
-                        let f = face(j, lb, axis, false, whole, other_of(a));
-                        found(Found::Face(FaceKind::Halo, f));
-                    }
-                    _ => {}
-                }
-            }
-        });
+        let mut visitor = Visitor {
+            merged: self.halo.around(elements),
+            hb,
+            nl,
+            covered: &mut covered,
+            found: &mut found,
+        };
+        walk_faces(&self.dual_tree, &mut visitor);
+        covered
+    }
+
+    /// The boundary faces, from the walk's `covered` bits, in element
+    /// order, then face, then piece: `put(face, patch)`. A face's
+    /// unmarked parts are the boundary: a side patch outside the domain,
+    /// else the surface, a coarse face partly covered by finer kept
+    /// elements in the pieces of [`dropped_pieces`].
+    #[inline(always)]
+    fn boundary_pieces(&self, covered: &[u32], mut put: impl FnMut(Face, u16)) {
         let brick = &self.domain.brick;
-        for (i, &e) in elements.iter().enumerate() {
-            if covered[i] == u32::MAX >> 8 {
+        for (i, (&e, &cov)) in self.elements.iter().zip(covered).enumerate() {
+            if cov == u32::MAX >> 8 {
                 continue;
             }
             let outside = brick.outside_faces(e);
             for f in 0..6 {
                 let (axis, plus) = (f / 2, f % 2 == 1);
-                let mask = (covered[i] >> (4 * f) & 15) as u8;
-                let mut side = |shape: u8, other: Other| {
-                    let face = face(i as u32, e, axis, plus, shape, other);
-                    found(Found::Face(FaceKind::Boundary, face));
+                let mask = (cov >> (4 * f) & 15) as u8;
+                let mut side = |shape: u8, patch: u16| {
+                    let face = element_face(i as u32, e, axis, plus, shape, Other::Patch(patch));
+                    put(face, patch);
                 };
                 if outside >> f & 1 == 1 {
                     // Outside the cube or a brick's box: a side patch.
-                    side(whole, Other::Patch(f as u16));
+                    side(WHOLE_SHAPE, f as u16);
                 } else if mask == 0 {
-                    side(whole, Other::Patch(SURFACE_PATCH));
+                    side(WHOLE_SHAPE, SURFACE_PATCH);
                 } else {
                     let (shapes, n) = dropped_pieces(mask);
                     for &shape in &shapes[..n] {
-                        side(shape, Other::Patch(SURFACE_PATCH));
+                        side(shape, SURFACE_PATCH);
                     }
                 }
             }
