@@ -834,6 +834,13 @@ impl Mesh {
     /// Extracts this rank's faces (see [`crate::mesh::faces`]). Local work
     /// only: the halo came with the mesh.
     pub fn faces(&self) -> Result<Faces> {
+        self.faces_with(false)
+    }
+
+    /// [`Mesh::faces`]; with `spare_core` (see [`crate::cores::spare_core`]),
+    /// a second thread has the kernel make the pages of the face list and
+    /// of the scratch arrays while this one walks (the same faces).
+    pub fn faces_with(&self, spare_core: bool) -> Result<Faces> {
         let elements: &[Octant] = &self.elements;
         let nl = elements.len();
         // Element numbers and the quarters' groups (at most three per
@@ -863,57 +870,70 @@ impl Mesh {
         let mut whole = vec![0u32; 3 * nl];
         let mut quarters: Vec<u32> = Vec::new();
         let mut halo: Vec<Face> = Vec::new();
-        let covered = self.walk_faces(|found| match found {
-            Found::Pair { axis, low, high } => whole[3 * low as usize + axis] = high + 1,
-            Found::Quarter { axis, low, high, q } => {
-                let w = &mut whole[3 * low as usize + axis];
-                if *w == 0 {
-                    *w = FINE | (quarters.len() / 4) as u32;
-                    quarters.extend([u32::MAX; 4]);
-                }
-                quarters[4 * (*w & !FINE) as usize + q as usize] = high;
-            }
-            Found::Family(i) => {
-                for (a, low, high) in FAMILY_FACES {
-                    whole[3 * (i as usize + low) + a] = i + high as u32 + 1;
-                }
-            }
-            Found::Halo(face) => halo.push(face),
-        });
-        let full = WHOLE_SHAPE;
-        for (i, &e) in elements.iter().enumerate() {
-            let first = faces.len();
-            for a in 0..3 {
-                let w = whole[3 * i + a];
-                if w & FINE != 0 {
-                    let g = 4 * (w & !FINE) as usize;
-                    for &j in quarters[g..g + 4].iter().filter(|&&j| j != u32::MAX) {
-                        let f = elements[j as usize];
-                        let face = element_face(j, f, a, false, full, Other::Element(i as u32));
-                        faces.push(face.flipped(i as u32, Other::Element(j)));
+        let mut covered = vec![0u32; nl];
+        // Every element has six faces or more, each shared by two at most:
+        // the list holds `3 nl` faces at least.
+        let fresh = [
+            crate::cores::bytes_of(&covered),
+            crate::cores::bytes_of(&whole),
+            (
+                faces.as_ptr() as usize,
+                3 * nl * std::mem::size_of::<Face>(),
+            ),
+        ];
+        crate::cores::with_pages_made(spare_core, &fresh, || {
+            self.walk_faces(&mut covered, |found| match found {
+                Found::Pair { axis, low, high } => whole[3 * low as usize + axis] = high + 1,
+                Found::Quarter { axis, low, high, q } => {
+                    let w = &mut whole[3 * low as usize + axis];
+                    if *w == 0 {
+                        *w = FINE | (quarters.len() / 4) as u32;
+                        quarters.extend([u32::MAX; 4]);
                     }
-                } else if w != 0 {
-                    faces.push(element_face(
-                        i as u32,
-                        e,
-                        a,
-                        true,
-                        full,
-                        Other::Element(w - 1),
-                    ));
+                    quarters[4 * (*w & !FINE) as usize + q as usize] = high;
+                }
+                Found::Family(i) => {
+                    for (a, low, high) in FAMILY_FACES {
+                        whole[3 * (i as usize + low) + a] = i + high as u32 + 1;
+                    }
+                }
+                Found::Halo(face) => halo.push(face),
+            });
+            let full = WHOLE_SHAPE;
+            for (i, &e) in elements.iter().enumerate() {
+                let first = faces.len();
+                for a in 0..3 {
+                    let w = whole[3 * i + a];
+                    if w & FINE != 0 {
+                        let g = 4 * (w & !FINE) as usize;
+                        for &j in quarters[g..g + 4].iter().filter(|&&j| j != u32::MAX) {
+                            let f = elements[j as usize];
+                            let face = element_face(j, f, a, false, full, Other::Element(i as u32));
+                            faces.push(face.flipped(i as u32, Other::Element(j)));
+                        }
+                    } else if w != 0 {
+                        faces.push(element_face(
+                            i as u32,
+                            e,
+                            a,
+                            true,
+                            full,
+                            Other::Element(w - 1),
+                        ));
+                    }
+                }
+                // Each owner's few faces (at most three whole ones and twelve
+                // quarters) by the other element: insertion.
+                let own = &mut faces[first..];
+                for k in 1..own.len() {
+                    let mut m = k;
+                    while m > 0 && own[m].other < own[m - 1].other {
+                        own.swap(m, m - 1);
+                        m -= 1;
+                    }
                 }
             }
-            // Each owner's few faces (at most three whole ones and twelve
-            // quarters) by the other element: insertion.
-            let own = &mut faces[first..];
-            for k in 1..own.len() {
-                let mut m = k;
-                while m > 0 && own[m].other < own[m - 1].other {
-                    own.swap(m, m - 1);
-                    m -= 1;
-                }
-            }
-        }
+        });
         drop(whole);
         drop(quarters);
         // The boundary faces, grouped by patch: counted, then written in
@@ -981,7 +1001,8 @@ impl Mesh {
     pub(super) fn for_each_face(&self, mut put: impl FnMut(FaceKind, Face)) {
         let elements: &[Octant] = &self.elements;
         let whole = WHOLE_SHAPE;
-        let covered = self.walk_faces(|found| match found {
+        let mut covered = vec![0u32; self.elements.len()];
+        self.walk_faces(&mut covered, |found| match found {
             Found::Pair { axis, low, high } => {
                 let e = elements[low as usize];
                 let f = element_face(low, e, axis, true, whole, Other::Element(high));
@@ -1010,22 +1031,20 @@ impl Mesh {
     /// The walk behind [`Mesh::for_each_face`] and [`Mesh::faces`]: one
     /// dual walk of the local and halo elements ([`walk_faces`]) reports
     /// each pair of local elements sharing a face, and each halo face by
-    /// the local side. Returns, per element, bit `4 f + q` set when quarter
-    /// `q` of its face `f` faces a kept element (see
+    /// the local side. Sets, per element of `covered` (all 0 before), bit
+    /// `4 f + q` when quarter `q` of its face `f` faces a kept element (see
     /// [`Mesh::boundary_pieces`]).
-    fn walk_faces(&self, mut found: impl FnMut(Found)) -> Vec<u32> {
+    fn walk_faces(&self, covered: &mut [u32], mut found: impl FnMut(Found)) {
         let elements: &[Octant] = &self.elements;
         let (nl, hb) = (elements.len(), self.halo.before);
-        let mut covered = vec![0u32; nl];
         let mut visitor = Visitor {
             merged: self.halo.around(elements),
             hb,
             nl,
-            covered: &mut covered,
+            covered,
             found: &mut found,
         };
         walk_faces(&self.dual_tree, &mut visitor);
-        covered
     }
 
     /// The boundary faces, from the walk's `covered` bits, in element
@@ -1140,6 +1159,21 @@ impl Mesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pages_made_by_a_second_thread_leave_the_same_faces() {
+        let mesh = crate::testutil::sphere_mesh(6);
+        let (one, two) = (
+            mesh.faces_with(false).unwrap(),
+            mesh.faces_with(true).unwrap(),
+        );
+        assert!(one.faces().len() >= 3 * mesh.elements().len());
+        assert_eq!(one.faces(), two.faces());
+        assert_eq!(
+            (one.num_internal(), &one.patch_start),
+            (two.num_internal(), &two.patch_start)
+        );
+    }
 
     /// A packed shape's corners in halves.
     fn unpack(shape: u16) -> [(u8, u8); 4] {

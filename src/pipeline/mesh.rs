@@ -168,9 +168,10 @@ impl Session {
                 }
             }
             let (locator, parts) = (&self.locator, self.parts.len());
+            let spare = crate::cores::spare_core(&*comm);
             let faces = self.timer.time(&*comm, "faces", || match mesh {
                 Some(m) => {
-                    let mut f = m.faces()?;
+                    let mut f = m.faces_with(spare)?;
                     if let Some(loc) = locator {
                         let mut scratch = Vec::new();
                         f.split_surface(parts, |face| {
