@@ -1324,19 +1324,25 @@ mod tests {
         leaves
     }
 
+    /// `leaves` as ghosts before (the first `before`), local leaves (half
+    /// the rest) and ghosts after.
+    fn split_in_three(leaves: &[Octant], before: usize) -> Merged<'_> {
+        let (before, rest) = leaves.split_at(before);
+        let (local, after) = rest.split_at(rest.len() / 2);
+        Merged {
+            before,
+            local,
+            after,
+        }
+    }
+
     #[test]
     fn one_pass_build_equals_the_recursive_descent() {
         let mut rng = crate::testutil::Rng(7);
         for case in 0..200 {
             let drop = [0.0, 0.1, 0.6][case % 3];
             let leaves = random_leaves(&mut rng, 1 + case % 5, 6, 0.5, drop);
-            let (before, rest) = leaves.split_at(leaves.len() / 3);
-            let (local, after) = rest.split_at(rest.len() / 2);
-            let merged = Merged {
-                before,
-                local,
-                after,
-            };
+            let merged = split_in_three(&leaves, leaves.len() / 3);
             let mut want = Vec::new();
             let want_root = build_by_descent(&leaves, Octant::ROOT, &mut want, 0);
             let (got, got_root) = build(&merged);
@@ -1359,13 +1365,7 @@ mod tests {
         for case in 0..120 {
             let drop = [0.0, 0.1, 0.5][case % 3];
             let leaves = random_leaves(&mut rng, 1 + case % 4, 4, 0.6, drop);
-            let (before, rest) = leaves.split_at(leaves.len() / 4);
-            let (local, after) = rest.split_at(rest.len() / 2);
-            let tree = DualTree::new(&Merged {
-                before,
-                local,
-                after,
-            });
+            let tree = DualTree::new(&split_in_three(&leaves, leaves.len() / 4));
             let mut got = Pairs(Vec::new());
             walk_faces(&tree, &mut got);
             let mut got = got.0;
