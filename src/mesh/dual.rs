@@ -649,14 +649,13 @@ pub(crate) trait FaceVisitor {
     fn pair(&mut self, axis: usize, low: usize, high: usize);
 
     /// Leaves `b..b + 8` are the eight children of one parent, and share
-    /// the twelve faces between them: by default, twelve
-    /// [`FaceVisitor::pair`]s. Half the faces of a balanced octree are of
-    /// this kind, and a visitor can take them in one step.
+    /// the twelve faces between them ([`FAMILY_FACES`]). Half the faces of
+    /// a balanced octree are of this kind: a visitor can take them in one
+    /// step and return `true`; on `false` (the default) the walk reports
+    /// them as twelve [`FaceVisitor::pair`]s.
     #[inline]
-    fn family(&mut self, b: usize) {
-        for (axis, low, high) in FAMILY_FACES {
-            self.pair(axis, b + low, b + high);
-        }
+    fn family(&mut self, _b: usize) -> bool {
+        false
     }
 }
 
@@ -682,7 +681,12 @@ impl<V: FaceVisitor> FaceWalker<'_, '_, V> {
     /// are leaves is visited.
     fn cell<const M: usize>(&mut self, refs: [u32; 8]) {
         if M == 0 && refs[0] & FAMILY != 0 {
-            self.visit.family((refs[0] & !FAMILY) as usize);
+            let b = (refs[0] & !FAMILY) as usize;
+            if !self.visit.family(b) {
+                for (axis, low, high) in FAMILY_FACES {
+                    self.visit.pair(axis, b + low, b + high);
+                }
+            }
             return;
         }
         macro_rules! subs {

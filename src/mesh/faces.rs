@@ -679,20 +679,16 @@ struct Visitor<'a, F> {
     found: &'a mut F,
 }
 
-/// Per child of a family, the faces it shares with its siblings, as bits
-/// of `covered` (see [`Mesh::walk_faces`]): along each axis, its high face
-/// when it is on the low side, else its low face.
+/// Per child of a family, the faces it shares with its siblings
+/// ([`FAMILY_FACES`]), as bits of `covered` (see [`Mesh::walk_faces`]).
 const FAMILY_COVERED: [u32; 8] = {
     let mut m = [0; 8];
-    let mut c = 0;
-    while c < 8 {
-        let mut a = 0;
-        while a < 3 {
-            let side = 2 * a + 1 - (c >> a & 1);
-            m[c] |= 15 << (4 * side);
-            a += 1;
-        }
-        c += 1;
+    let mut k = 0;
+    while k < FAMILY_FACES.len() {
+        let (a, low, high) = FAMILY_FACES[k];
+        m[low] |= 15 << (4 * (2 * a + 1));
+        m[high] |= 15 << (4 * (2 * a));
+        k += 1;
     }
     m
 };
@@ -712,19 +708,19 @@ impl<F: FnMut(Found)> Visitor<'_, F> {
 }
 
 impl<F: FnMut(Found)> FaceVisitor for Visitor<'_, F> {
+    /// A family of local elements; one with a halo child goes pair by
+    /// pair.
     #[inline]
-    fn family(&mut self, b: usize) {
-        if b >= self.hb && b - self.hb + 8 <= self.nl {
-            let i = b - self.hb;
-            for (c, m) in FAMILY_COVERED.iter().enumerate() {
-                self.covered[i + c] |= m;
-            }
-            (self.found)(Found::Family(i as u32));
-        } else {
-            for (axis, low, high) in FAMILY_FACES {
-                self.pair(axis, b + low, b + high);
-            }
+    fn family(&mut self, b: usize) -> bool {
+        if b < self.hb || b - self.hb + 8 > self.nl {
+            return false;
         }
+        let i = b - self.hb;
+        for (c, m) in FAMILY_COVERED.iter().enumerate() {
+            self.covered[i + c] |= m;
+        }
+        (self.found)(Found::Family(i as u32));
+        true
     }
 
     #[inline(always)]
@@ -922,8 +918,8 @@ impl Mesh {
                         ));
                     }
                 }
-                // Each owner's few faces (at most three whole ones and twelve
-                // quarters) by the other element: insertion.
+                // Each owner's few faces (at most twelve) by the other
+                // element: insertion.
                 let own = &mut faces[first..];
                 for k in 1..own.len() {
                     let mut m = k;
