@@ -85,27 +85,38 @@ pub fn bytes_of<T>(v: &[T]) -> (usize, usize) {
     (v.as_ptr() as usize, std::mem::size_of_val(v))
 }
 
-/// Runs `work` on this thread while, with `spare`, a second thread has the
-/// kernel make the pages of fresh memory `ranges` (address, bytes) now, so
-/// that `work`'s first writes there find them made. A page costs the
-/// kernel about 1.5 µs on a virtual machine like the ones measured in
-/// BENCHMARKS.md: a third of a large face extraction's time, which the
-/// second thread takes off this one. The memory must stay allocated while
-/// `work` runs; no byte of it changes. Linux only; elsewhere, or without
-/// `spare`, `work` alone.
+/// Runs `work` on this thread after the kernel made the pages of fresh
+/// memory `ranges` (address, bytes), so that `work`'s first writes there
+/// find them made. A page costs the kernel about 1.5 µs on a virtual
+/// machine like the ones measured in BENCHMARKS.md when a first write
+/// makes it, a third of a large face extraction's time, and about a third
+/// less when made in bulk. With `spare`, a second thread makes them while
+/// `work` runs, which takes that time off this thread; without, this
+/// thread makes them first, in bulk ([`make_pages`]). The memory must stay
+/// allocated while `work` runs; no byte of it changes.
 pub fn with_pages_made<R>(spare: bool, ranges: &[(usize, usize)], work: impl FnOnce() -> R) -> R {
     #[cfg(target_os = "linux")]
     if spare {
         let ranges = ranges.to_vec();
         return join(true, move || make_pages(&ranges), work).1;
     }
-    let _ = ranges;
+    make_pages(ranges);
     work()
 }
 
-/// See [`with_pages_made`].
+/// Has the kernel make the pages of fresh memory `ranges` (address,
+/// bytes) now, in bulk, as first writes would one by one; no byte changes.
+/// Linux only; elsewhere nothing (the writes make them).
+pub fn make_pages(ranges: &[(usize, usize)]) {
+    #[cfg(target_os = "linux")]
+    populate(ranges);
+    #[cfg(not(target_os = "linux"))]
+    let _ = ranges;
+}
+
+/// See [`make_pages`].
 #[cfg(target_os = "linux")]
-fn make_pages(ranges: &[(usize, usize)]) {
+fn populate(ranges: &[(usize, usize)]) {
     // SAFETY: sysconf only reads a system constant.
     let page = unsafe { libc::sysconf(libc::_SC_PAGESIZE) }.max(4096) as usize;
     for &(at, len) in ranges {

@@ -102,6 +102,9 @@ const HALO_BASE: u32 = 1 << 31;
 const FINE: u32 = 1 << 31;
 /// Patches are numbered down from `u32::MAX`, at most this many.
 const MAX_PATCHES: u32 = 1 << 16;
+/// An element's `covered` bits when every quarter of its six faces faces a
+/// kept element: it has no boundary face.
+const ALL_COVERED: u32 = u32::MAX >> 8;
 
 impl Other {
     /// The one-word form [`Face`] stores.
@@ -877,6 +880,9 @@ impl Mesh {
                 3 * nl * std::mem::size_of::<Face>(),
             ),
         ];
+        // Boundary faces per patch, counted as the internal ones are
+        // listed (the walk has marked every element's covered quarters).
+        let mut per_patch = [0usize; NUM_PATCHES];
         crate::cores::with_pages_made(spare_core, &fresh, || {
             self.walk_faces(&mut covered, |found| match found {
                 Found::Pair { axis, low, high } => whole[3 * low as usize + axis] = high + 1,
@@ -928,28 +934,37 @@ impl Mesh {
                         m -= 1;
                     }
                 }
+                self.element_boundary(i as u32, e, covered[i], |_, p| per_patch[p as usize] += 1);
             }
         });
         drop(whole);
         drop(quarters);
-        // The boundary faces, grouped by patch: counted, then written in
-        // place behind the internal ones (no list of their own to grow,
-        // sort and copy).
+        // The boundary faces, grouped by patch: written in place behind the
+        // internal ones (no list of their own to grow, sort and copy).
         let num_internal = faces.len();
         let mut patch_start = vec![num_internal; NUM_PATCHES + 1];
-        self.boundary_pieces(&covered, |_, p| patch_start[p as usize + 1] += 1);
         for p in 0..NUM_PATCHES {
-            patch_start[p + 1] += patch_start[p] - num_internal;
+            patch_start[p + 1] = patch_start[p] + per_patch[p];
         }
         let num_boundary = patch_start[NUM_PATCHES] - num_internal;
         faces.reserve_exact(num_boundary + halo.len());
-        faces.resize(num_internal + num_boundary, Face::default());
-        let mut next = patch_start.clone();
+        let room = &mut faces.spare_capacity_mut()[..num_boundary];
+        crate::cores::make_pages(&[crate::cores::bytes_of(room)]);
+        let mut next: Vec<usize> = patch_start.iter().map(|s| s - num_internal).collect();
         self.boundary_pieces(&covered, |f, p| {
-            faces[next[p as usize]] = f;
+            room[next[p as usize]].write(f);
             next[p as usize] += 1;
         });
         drop(covered);
+        if (0..NUM_PATCHES).any(|p| num_internal + next[p] != patch_start[p + 1]) {
+            return Err(Error::new(
+                ErrorKind::Internal,
+                "the boundary faces differ from their count",
+            ));
+        }
+        // SAFETY: the pieces counted per patch were each written once, at
+        // their patch's places: every place of `room` holds a face.
+        unsafe { faces.set_len(num_internal + num_boundary) };
         let me = self.rank as u32;
         let first = self.first_element;
         let key = |f: &Face| -> (u32, u64, u64) {
@@ -1050,29 +1065,35 @@ impl Mesh {
     /// elements in the pieces of [`dropped_pieces`].
     #[inline(always)]
     fn boundary_pieces(&self, covered: &[u32], mut put: impl FnMut(Face, u16)) {
-        let brick = &self.domain.brick;
         for (i, (&e, &cov)) in self.elements.iter().zip(covered).enumerate() {
-            if cov == u32::MAX >> 8 {
-                continue;
-            }
-            let outside = brick.outside_faces(e);
-            for f in 0..6 {
-                let (axis, plus) = (f / 2, f % 2 == 1);
-                let mask = (cov >> (4 * f) & 15) as u8;
-                let mut side = |shape: u8, patch: u16| {
-                    let face = element_face(i as u32, e, axis, plus, shape, Other::Patch(patch));
-                    put(face, patch);
-                };
-                if outside >> f & 1 == 1 {
-                    // Outside the cube or a brick's box: a side patch.
-                    side(WHOLE_SHAPE, f as u16);
-                } else if mask == 0 {
-                    side(WHOLE_SHAPE, SURFACE_PATCH);
-                } else {
-                    let (shapes, n) = dropped_pieces(mask);
-                    for &shape in &shapes[..n] {
-                        side(shape, SURFACE_PATCH);
-                    }
+            self.element_boundary(i as u32, e, cov, &mut put);
+        }
+    }
+
+    /// The boundary faces of element `i` (octant `e`, `covered` bits
+    /// `cov`), as [`Mesh::boundary_pieces`] lists them.
+    #[inline(always)]
+    fn element_boundary(&self, i: u32, e: Octant, cov: u32, mut put: impl FnMut(Face, u16)) {
+        if cov == ALL_COVERED {
+            return;
+        }
+        let outside = self.domain.brick.outside_faces(e);
+        for f in 0..6 {
+            let (axis, plus) = (f / 2, f % 2 == 1);
+            let mask = (cov >> (4 * f) & 15) as u8;
+            let mut side = |shape: u8, patch: u16| {
+                let face = element_face(i, e, axis, plus, shape, Other::Patch(patch));
+                put(face, patch);
+            };
+            if outside >> f & 1 == 1 {
+                // Outside the cube or a brick's box: a side patch.
+                side(WHOLE_SHAPE, f as u16);
+            } else if mask == 0 {
+                side(WHOLE_SHAPE, SURFACE_PATCH);
+            } else {
+                let (shapes, n) = dropped_pieces(mask);
+                for &shape in &shapes[..n] {
+                    side(shape, SURFACE_PATCH);
                 }
             }
         }
