@@ -197,11 +197,21 @@ impl EdgeMidpoints {
         let halo = PointFilter::new(halo_corners(mesh));
         let mut marks = vec![0u8; mesh.num_nodes()];
         if !mesh.halo().leaves.is_empty() {
-            mesh.for_each_corner(|n, p| {
-                if halo.may_hold(p) {
-                    marks[n as usize] |= HALO_CORNER;
+            // Most elements are far from every halo element: one look-up
+            // of a coarse cell settles them, instead of eight of `halo`.
+            let near = NearCells::new(&mesh.halo().leaves);
+            for (&e, row) in mesh.elements().iter().zip(mesh.connectivity()) {
+                if !near.may_touch(e) {
+                    continue;
                 }
-            });
+                let (c, s) = (e.coords(), e.side());
+                for (v, &n) in row.iter().enumerate() {
+                    let p = super::dual::corner_coords(c, s, super::VTK_TO_MORTON[v]);
+                    if halo.may_hold(p) {
+                        marks[n as usize] |= HALO_CORNER;
+                    }
+                }
+            }
         }
         for d in mesh.edge_hanging() {
             marks[d[0] as usize] |= HANGING_END;
@@ -223,6 +233,74 @@ impl EdgeMidpoints {
     pub fn may_hold_ends(&self, a: usize, b: usize) -> bool {
         let (x, y) = (self.marks[a], self.marks[b]);
         x & y & HANGING_END != 0 || (x | y) & HALO_CORNER != 0
+    }
+}
+
+/// Coarse cells (of side [`NearCells::SIDE_BITS`] bits) around a set of
+/// octants, hashed to a bit filter small enough to stay in cache:
+/// [`NearCells::may_touch`] is `false` for an octant that surely touches
+/// none of them (not even at a corner).
+///
+/// ```text
+///   |  cell  |  cell  |  cell  |     an octant of the set marks the cells
+///   |     [##|##]     |        |     holding its closed box grown by one
+///   |    ^mark both   |        |     lattice unit down; an octant no larger
+///                                    than a cell touches it only if the
+///                                    cell of its lowest corner is marked
+/// ```
+///
+/// An octant no larger than a cell lies in the cell of its lowest corner
+/// `c`; a point `p = c + d s` of its closed box (`d` in `{0, 1}^3`, side
+/// `s`) is in the closed box of a set member `h` only if `p - d` (a point
+/// of the octant's own cell) is in `h`'s closed box grown by one unit
+/// down, whose cells are marked.
+#[derive(Clone, Debug)]
+struct NearCells {
+    bits: Vec<u64>,
+}
+
+impl NearCells {
+    /// Log2 of a cell's side in lattice units.
+    const SIDE_BITS: u32 = crate::octant::LATTICE_BITS - 7;
+    /// Log2 of the filter's size in bits.
+    const FILTER_BITS: u32 = 21;
+
+    fn new(set: &[crate::octant::Octant]) -> NearCells {
+        let mut f = NearCells {
+            bits: vec![0; 1 << (Self::FILTER_BITS - 6)],
+        };
+        let k = Self::SIDE_BITS;
+        for h in set {
+            let (c, s) = (h.coords(), h.side());
+            let lo = c.map(|v| v.saturating_sub(1) >> k);
+            let hi = c.map(|v| (v + s) >> k);
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        let b = Self::slot([x, y, z]);
+                        f.bits[b >> 6] |= 1 << (b & 63);
+                    }
+                }
+            }
+        }
+        f
+    }
+
+    fn slot(cell: [u32; 3]) -> usize {
+        // Cells past 21 bits per axis only fold onto others: more "maybe",
+        // never a miss.
+        let k = cell[0] as u64 ^ (cell[1] as u64) << 21 ^ (cell[2] as u64) << 42;
+        (k.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - Self::FILTER_BITS)) as usize
+    }
+
+    /// Whether `o` may touch an octant of the set.
+    #[inline]
+    fn may_touch(&self, o: crate::octant::Octant) -> bool {
+        if o.side() > 1 << Self::SIDE_BITS {
+            return true;
+        }
+        let b = Self::slot(o.coords().map(|v| v >> Self::SIDE_BITS));
+        self.bits[b >> 6] >> (b & 63) & 1 == 1
     }
 }
 
@@ -281,6 +359,47 @@ mod tests {
         assert_eq!(which, vec![u32::MAX, 1, 2, 0, u32::MAX]);
         assert_eq!(idx.find(30), Some(2));
         assert_eq!(idx.find(31), None);
+    }
+
+    #[test]
+    fn near_cells_miss_no_touching_octant() {
+        use crate::octant::{Octant, ROOT_LEN};
+        let mut x = 12_345u64;
+        let mut next = |n: u32| {
+            x = x
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((x >> 33) % n as u64) as u32
+        };
+        // Octants of levels around the cell's (level 7), near each other.
+        let random = |next: &mut dyn FnMut(u32) -> u32| {
+            let level = 4 + next(8) as u8;
+            let s = ROOT_LEN >> level;
+            let at = |v: u32| (v / s) * s;
+            let base = ROOT_LEN / 4;
+            let c = [0; 3].map(|_| at(base + next(ROOT_LEN / 16)));
+            Octant::new(c[0], c[1], c[2], level).unwrap()
+        };
+        let touch = |a: Octant, b: Octant| {
+            let (ca, cb) = (a.coords(), b.coords());
+            (0..3).all(|k| ca[k] <= cb[k] + b.side() && cb[k] <= ca[k] + a.side())
+        };
+        let (mut touching, mut rejected) = (0, 0);
+        for _ in 0..200 {
+            let set: Vec<Octant> = (0..3).map(|_| random(&mut next)).collect();
+            let near = NearCells::new(&set);
+            for _ in 0..200 {
+                let o = random(&mut next);
+                if set.iter().any(|&h| touch(o, h)) {
+                    touching += 1;
+                    assert!(near.may_touch(o), "{o:?} touches one of {set:?}");
+                } else if !near.may_touch(o) {
+                    rejected += 1;
+                }
+            }
+        }
+        // The test meets both cases, and the filter rejects some octants.
+        assert!(touching > 100 && rejected > 1000, "{touching} {rejected}");
     }
 
     #[test]
