@@ -48,6 +48,7 @@ use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::dual::corner_coords;
 use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
+use crate::mesh::hanging::{face_diagonal, DepsIndex};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::points::{
     corner_at, edge_midpoint, halo_corners, point_key, EdgeMidpoints, PointIndex,
@@ -206,10 +207,10 @@ struct Polygons<'m> {
     halo_start: usize,
     elements: &'m [crate::octant::Octant],
     conn: &'m [[u32; 8]],
-    /// The hanging nodes and the halo's corners.
-    set: PointIndex,
-    /// The hanging node at each place of `set`, if it is one.
-    hanging_of: Vec<u32>,
+    /// The hanging nodes by the nodes they depend on.
+    hanging: DepsIndex,
+    /// The halo's corners.
+    halo: PointIndex,
     /// Whether an edge between two local nodes may carry a point.
     midpoints: EdgeMidpoints,
     nn: usize,
@@ -225,25 +226,20 @@ impl<'m> Polygons<'m> {
         // face's corners and edge midpoints are local nodes or corners of
         // halo elements. Those that are not a local element's corners (the
         // corners of a split coarse face's pieces, the midpoints of face
-        // edges) lie inside a coarse kept element's face or edge: they
-        // hang, when they are local nodes. So the set searched holds the
-        // hanging nodes and the halo's corners only, and knows which
-        // hanging node each point is (their keys come first, in node
-        // order).
+        // edges) lie in the middle of a coarse kept element's face or edge:
+        // they hang on it, when they are local nodes, and are found by that
+        // face's corners or that edge's ends. Only the halo's corners are
+        // searched by their points.
         let nn = mesh.num_nodes();
         let ni = mesh.num_independent();
-        let keys: Vec<u64> = (mesh.hanging_lattice().into_iter())
-            .chain(halo_corners(mesh))
-            .map(point_key)
-            .collect();
-        let (set, hanging_of) = PointIndex::with_first(keys, nn - ni);
+        let halo = PointIndex::new(halo_corners(mesh).map(point_key).collect());
         Polygons {
             faces: faces.faces(),
             halo_start: faces.halo_range().start,
             elements: mesh.elements(),
             conn: mesh.connectivity(),
-            set,
-            hanging_of,
+            hanging: mesh.hanging_index(),
+            halo,
             midpoints: EdgeMidpoints::new(mesh),
             nn,
             ni,
@@ -251,18 +247,53 @@ impl<'m> Polygons<'m> {
         }
     }
 
-    /// How many point numbers there are.
+    /// How many point numbers there are: the local nodes, then the halo's
+    /// corners (`nn + j` for place `j` of `halo`).
     fn num_points(&self) -> usize {
-        self.nn + self.set.len()
+        self.nn + self.halo.len()
     }
 
-    /// The point number of place `j` of the set: its hanging node, or
-    /// `nn + j`.
-    fn point_of(&self, j: usize) -> u32 {
-        match self.hanging_of[j] {
-            u32::MAX => (self.nn + j) as u32,
-            h => (self.ni + h as usize) as u32,
+    /// The local node at `x`, in the middle of an edge or a face of the
+    /// cube `(c, s)` whose corner nodes are `row`, if it hangs there.
+    fn hanging_on(&self, (c, s): ([u32; 3], u32), row: &[u32; 8], x: [u32; 3]) -> Option<u32> {
+        // The Morton corner bits of the axes where `x` is on the high side,
+        // and the axes where it is in the middle.
+        let (mut high, mut middle) = (0usize, [0usize; 2]);
+        let mut n = 0;
+        for a in 0..3 {
+            match x[a].wrapping_sub(c[a]) {
+                0 => {}
+                d if d == s => high |= 1 << a,
+                d if 2 * d == s && n < 2 => {
+                    middle[n] = 1 << a;
+                    n += 1;
+                }
+                _ => return None,
+            }
         }
+        let node = |m: usize| row[VTK_TO_MORTON[m]];
+        let (a, b) = match n {
+            1 => (node(high), node(high | middle[0])),
+            2 => {
+                let [u, v] = middle;
+                face_diagonal([
+                    node(high),
+                    node(high | u),
+                    node(high | v),
+                    node(high | u | v),
+                ])
+            }
+            _ => return None,
+        };
+        let k = self.hanging.find(a, b)?;
+        Some((self.ni + k) as u32)
+    }
+
+    /// The point at `x` that is no corner of the cube `(c, s)` (corner
+    /// nodes `row`): a node hanging on it, or a corner of the halo.
+    fn off_corner(&mut self, cube: ([u32; 3], u32), row: &[u32; 8], x: [u32; 3]) -> Option<u32> {
+        self.hanging_on(cube, row, x)
+            .or_else(|| Some((self.nn + self.halo.find(point_key(x))?) as u32))
     }
 
     /// The local element whose whole face `f` is: the owner, or a finer
@@ -282,22 +313,29 @@ impl<'m> Polygons<'m> {
         (o.coords(), o.side())
     }
 
-    /// The point on the edge from `xa` to `xb` (local nodes `a`, `b` when
-    /// known) in its middle, if there is one.
+    /// The point in the middle of the edge from `xa` to `xb`, if there is
+    /// one; the edge lies on the cube `(c, s)` (corner nodes `row`), and
+    /// `ends` are its ends' local nodes when they are the cube's corners.
     fn midpoint(
         &mut self,
+        (cube, row): (([u32; 3], u32), &[u32; 8]),
         ends: Option<(usize, usize)>,
         xa: [u32; 3],
         xb: [u32; 3],
     ) -> Option<(u32, [u32; 3])> {
         let m = edge_midpoint(xa, xb)?;
-        if let Some((a, b)) = ends {
-            if !self.midpoints.may_hold(a, b, m) {
-                return None;
+        let hanging = match ends {
+            Some((a, b)) => {
+                if !self.midpoints.may_hold(a, b, m) {
+                    return None;
+                }
+                let k = self.hanging.find(a as u32, b as u32);
+                k.map(|k| (self.ni + k) as u32)
             }
-        }
-        let j = self.set.find(point_key(m))?;
-        Some((self.point_of(j), m))
+            None => self.hanging_on(cube, row, m),
+        };
+        let p = hanging.or_else(|| Some((self.nn + self.halo.find(point_key(m))?) as u32))?;
+        Some((p, m))
     }
 
     /// Appends face `i`'s points, in order, to `poly`.
@@ -316,7 +354,8 @@ impl<'m> Polygons<'m> {
                 self.last = (e, self.cube(e));
             }
             let (c, s) = self.last.1;
-            let row = &self.conn[e as usize];
+            let conn = self.conn;
+            let row = &conn[e as usize];
             // A loop, not `map`, which was not inlined and handed its
             // result back through memory.
             let mut nodes = [(0usize, [0u32; 3]); 4];
@@ -327,7 +366,7 @@ impl<'m> Polygons<'m> {
                 let ((a, xa), (b, xb)) = (nodes[k], nodes[(k + 1) % 4]);
                 poly.push((a as u32, xa));
                 if self.midpoints.may_hold_ends(a, b) {
-                    poly.extend(self.midpoint(Some((a, b)), xa, xb));
+                    poly.extend(self.midpoint(((c, s), row), Some((a, b)), xa, xb));
                 }
             }
             return Ok(());
@@ -335,25 +374,23 @@ impl<'m> Polygons<'m> {
         let c = f.corners();
         let e = self.emitter(f).unwrap_or(f.owner());
         let cube = self.cube(e);
-        let row = &self.conn[e as usize];
+        let conn = self.conn;
+        let row = &conn[e as usize];
         let nodes = c.map(|x| corner_at(cube.0, cube.1, x).map(|m| row[VTK_TO_MORTON[m]] as usize));
         for k in 0..4 {
             let p = match nodes[k] {
                 Some(n) => n as u32,
-                None => {
-                    let j = self.set.find(point_key(c[k])).ok_or_else(|| {
-                        Error::new(
-                            ErrorKind::Internal,
-                            format!("face corner {:?} is no element's corner", c[k]),
-                        )
-                    })?;
-                    self.point_of(j)
-                }
+                None => self.off_corner(cube, row, c[k]).ok_or_else(|| {
+                    Error::new(
+                        ErrorKind::Internal,
+                        format!("face corner {:?} is no element's corner", c[k]),
+                    )
+                })?,
             };
             poly.push((p, c[k]));
             let (xa, xb) = (c[k], c[(k + 1) % 4]);
             let ends = nodes[k].zip(nodes[(k + 1) % 4]);
-            poly.extend(self.midpoint(ends, xa, xb));
+            poly.extend(self.midpoint((cube, row), ends, xa, xb));
         }
         if i >= self.halo_start {
             // Both sides start at the lowest point.

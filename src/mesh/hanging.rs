@@ -160,3 +160,126 @@ impl Hanging {
         })
     }
 }
+
+/// The hanging nodes found by the independent nodes they depend on, for
+/// callers that meet a hanging point as the middle of a known edge or face
+/// (the OpenFOAM writer's polygons). An edge-hanging node is known by its
+/// edge's two ends, a face-hanging node by the diagonal of its face that
+/// holds the face's lowest node: two nodes either way, and never the same
+/// two (an edge's ends differ along one axis, a diagonal's along two).
+/// Entries are grouped by the lower of the two (a counting sort), so a
+/// look-up reads the few entries of one node.
+#[derive(Debug, Default)]
+pub(crate) struct DepsIndex {
+    /// Entries of independent node `a`: `start[a]..start[a + 1]`.
+    start: Vec<u32>,
+    /// The higher node of the two; the hanging node (`k` for local node
+    /// `num_independent + k`).
+    entries: Vec<(u32, u32)>,
+}
+
+/// The two nodes a face-hanging node is known by, from its face's corners
+/// in Morton order (`d[0]`, `d[3]` and `d[1]`, `d[2]` are diagonals): the
+/// diagonal with the lowest node.
+#[inline]
+pub(crate) fn face_diagonal(d: [u32; 4]) -> (u32, u32) {
+    if d[0].min(d[3]) < d[1].min(d[2]) {
+        (d[0], d[3])
+    } else {
+        (d[1], d[2])
+    }
+}
+
+impl DepsIndex {
+    /// The index of `hanging`'s nodes; `ni` independent nodes,
+    /// `connectivity` the mesh's.
+    pub fn new(hanging: &Hanging, connectivity: &[[u32; 8]], ni: usize) -> DepsIndex {
+        let pair = |k: usize| -> Option<(usize, u32)> {
+            let d = hanging.deps(k, connectivity);
+            let (a, b) = match d.len() {
+                4 => face_diagonal([d[0], d[1], d[2], d[3]]),
+                _ => (d[0], d[1]),
+            };
+            // Dependencies are independent nodes; anything else is no
+            // entry any query could find.
+            ((a.max(b) as usize) < ni).then_some((a.min(b) as usize, a.max(b)))
+        };
+        let mut start = vec![0u32; ni + 1];
+        for k in 0..hanging.len() {
+            if let Some((a, _)) = pair(k) {
+                start[a + 1] += 1;
+            }
+        }
+        for a in 0..ni {
+            start[a + 1] += start[a];
+        }
+        let mut entries = vec![(0u32, 0u32); start[ni] as usize];
+        // `start[a]` runs to the end of `a`'s entries, then all move back.
+        for k in 0..hanging.len() {
+            if let Some((a, b)) = pair(k) {
+                entries[start[a] as usize] = (b, k as u32);
+                start[a] += 1;
+            }
+        }
+        start.copy_within(0..ni, 1);
+        start[0] = 0;
+        DepsIndex { start, entries }
+    }
+
+    /// The hanging node (`k`, local node `num_independent + k`) known by
+    /// local nodes `a` and `b` (any order), if one is.
+    #[inline]
+    pub fn find(&self, a: u32, b: u32) -> Option<usize> {
+        let (a, b) = (a.min(b) as usize, a.max(b));
+        if a + 1 >= self.start.len() {
+            return None;
+        }
+        let run = &self.entries[self.start[a] as usize..self.start[a + 1] as usize];
+        run.iter().find(|e| e.0 == b).map(|e| e.1 as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn deps_index_knows_each_hanging_node_by_its_two_nodes_only() {
+        let m = crate::testutil::sphere_mesh(5);
+        let index = m.hanging_index();
+        let (ni, nh) = (m.num_independent() as u32, m.num_hanging());
+        assert!(m.num_face_hanging() > 0 && nh > m.num_face_hanging());
+        let mut known = std::collections::HashSet::new();
+        for k in 0..nh {
+            let d = m.hanging_deps(k);
+            let (a, b) = match d.len() {
+                4 => face_diagonal([d[0], d[1], d[2], d[3]]),
+                _ => (d[0], d[1]),
+            };
+            assert_eq!(index.find(a, b), Some(k), "hanging node {k}");
+            assert_eq!(index.find(b, a), Some(k), "hanging node {k}");
+            if d.len() == 4 {
+                // The other diagonal names no node.
+                let (c, e) = if (a, b) == (d[0], d[3]) {
+                    (d[1], d[2])
+                } else {
+                    (d[0], d[3])
+                };
+                assert_eq!(index.find(c, e), None);
+            }
+            known.insert((a.min(b), a.max(b)));
+        }
+        let mut rng = crate::testutil::Rng(7);
+        let mut tried = 0;
+        for _ in 0..100_000 {
+            let a = rng.range(0, ni as i64 - 1) as u32;
+            // Near `a`, where the entries are.
+            let b = (a as i64 + rng.range(1, 200)).min(ni as i64 + 50) as u32;
+            if !known.contains(&(a, b)) {
+                tried += 1;
+                assert_eq!(index.find(a, b), None, "{a} {b}");
+            }
+        }
+        assert!(tried > 90_000);
+    }
+}

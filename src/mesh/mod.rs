@@ -491,19 +491,9 @@ impl Mesh {
         out
     }
 
-    /// Lattice coordinates of the hanging nodes, by node from
-    /// [`Mesh::num_independent`] on (a new vector). Every hanging node is
-    /// a local element's corner, so the independent nodes' points are not
-    /// made.
-    pub(crate) fn hanging_lattice(&self) -> Vec<[u32; 3]> {
-        let ni = self.num_independent();
-        let mut out = vec![[0u32; 3]; self.num_nodes() - ni];
-        self.for_each_corner(|n, x| {
-            if let Some(h) = (n as usize).checked_sub(ni) {
-                out[h] = x;
-            }
-        });
-        out
+    /// The hanging nodes found by the nodes they depend on (a new index).
+    pub(crate) fn hanging_index(&self) -> hanging::DepsIndex {
+        hanging::DepsIndex::new(&self.hanging, &self.connectivity, self.num_independent())
     }
 
     /// Calls `f(node, lattice point)` at every corner of every local

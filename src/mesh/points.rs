@@ -70,29 +70,6 @@ impl PointIndex {
         PointIndex { keys, hint: 0 }
     }
 
-    /// The set of the points with these keys, and for each of its points
-    /// the index of its key among the first `first` keys, if one of those
-    /// is its key (else `u32::MAX`): one sort that carries the keys'
-    /// indices, instead of a search per key.
-    pub fn with_first(mut keys: Vec<u64>, first: usize) -> (PointIndex, Vec<u32>) {
-        let mut idx: Vec<u32> = (0..keys.len() as u32).collect();
-        crate::sort::radix_sort_pairs_bits(&mut keys, &mut idx, 0, 63);
-        let mut which = Vec::with_capacity(keys.len());
-        let mut n = 0usize;
-        for i in 0..keys.len() {
-            if n == 0 || keys[i] != keys[n - 1] {
-                keys[n] = keys[i];
-                n += 1;
-                which.push(u32::MAX);
-            }
-            if (idx[i] as usize) < first {
-                which[n - 1] = idx[i];
-            }
-        }
-        keys.truncate(n);
-        (PointIndex { keys, hint: 0 }, which)
-    }
-
     /// Number of points.
     pub fn len(&self) -> usize {
         self.keys.len()
@@ -349,17 +326,6 @@ pub fn face_polygon(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn with_first_names_the_first_keys_places() {
-        // The first three keys are named; the others only add points.
-        let keys = vec![50, 10, 30, 10, 70, 30, 5];
-        let (mut idx, which) = PointIndex::with_first(keys, 3);
-        assert_eq!(idx.len(), 5);
-        assert_eq!(which, vec![u32::MAX, 1, 2, 0, u32::MAX]);
-        assert_eq!(idx.find(30), Some(2));
-        assert_eq!(idx.find(31), None);
-    }
 
     #[test]
     fn near_cells_miss_no_touching_octant() {
