@@ -898,7 +898,7 @@ impl<F: FnMut(&[u32; 8])> Walker<'_, F> {
 /// sides whose leaf is also on the side across axis `d`; the sides with a
 /// leaf; the sides whose leaf is not local (or none).
 #[inline]
-fn side_masks(refs: &[u32; 8], local: &std::ops::Range<usize>) -> ([u8; 3], u8, u8) {
+pub(crate) fn side_masks(refs: &[u32; 8], local: &std::ops::Range<usize>) -> ([u8; 3], u8, u8) {
     #[cfg(target_arch = "x86_64")]
     {
         side_masks_sse2(refs, local)

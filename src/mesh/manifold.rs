@@ -32,7 +32,7 @@
 
 use crate::comm::Comm;
 use crate::ghost::GhostLayer;
-use crate::mesh::dual::{leaf_at, walk_points, DualTree, Merged};
+use crate::mesh::dual::{leaf_at, side_masks, walk_points, DualTree, Merged};
 use crate::octant::{morton_encode, Octant, ROOT_LEN};
 use crate::octree::LinearOctree;
 
@@ -161,27 +161,31 @@ fn first_sweep(
     // corner block drops it.
     const GOES: u8 = 0x80;
     let mut seen = vec![0u8; le - lb];
+    let local_kept = lb..le;
+    let drop_masks = block_drop_masks();
     walk_points(&DualTree::new(&merged), |refs| {
-        let status: [bool; 8] = std::array::from_fn(|p| leaf_at(refs[p]).is_some());
-        let drops = block_drop_masks()[status_byte(&status)];
-        for p in 0..8 {
+        // `status` bit `p`: a kept leaf on side `p`. A leaf on two sides
+        // is on two sides across an axis too (it is a box), so a leaf
+        // alone on its side is on no side across from it: the point is one
+        // of its corners.
+        let (same, status, remote) = side_masks(refs, &local_kept);
+        let drops = drop_masks[status as usize];
+        let mut mine = status & !remote & !(same[0] | same[1] | same[2]);
+        while mine != 0 {
+            let p = mine.trailing_zeros() as usize;
+            mine &= mine - 1;
             let Some(j) = leaf_at(refs[p]) else { continue };
-            // Local, and the point one of its corners (it fills side `p`
-            // alone).
-            if !(lb..le).contains(&j) || (0..8).any(|q| q != p && refs[q] == refs[p]) {
-                continue;
-            }
-            let mine = &mut seen[j - lb];
+            let bits = &mut seen[j - lb];
             for a in 0..3 {
                 // On the high side of the point along `a`, the leaf has the
                 // point on its low face.
                 let high = (p >> a) & 1 == 0;
-                if status[p ^ (1 << a)] {
-                    *mine |= 1 << (2 * a + high as usize);
+                if status >> (p ^ (1 << a)) & 1 == 1 {
+                    *bits |= 1 << (2 * a + high as usize);
                 }
             }
             if drops >> p & 1 == 1 {
-                *mine |= GOES;
+                *bits |= GOES;
             }
         }
     });
@@ -470,5 +474,42 @@ mod tests {
         let b = block(&[1, 2, 4, 5, 6, 7]);
         let gone: Vec<usize> = (0..8).filter(|&k| b[k] && block_drops(&b, k)).collect();
         assert_eq!(gone, vec![1]);
+    }
+
+    #[test]
+    fn first_sweep_drops_what_the_lookup_rules_drop() {
+        use crate::classify::{classify_leaves, keeps, CutRule, Keep};
+        use crate::comm::{CommRef, SerialComm};
+        use crate::domain::Domain;
+        use crate::octant::Connectivity;
+        use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+        let mut dropped = 0;
+        for (name, level) in [("torus", 5), ("sphere", 6)] {
+            let comm: CommRef = std::rc::Rc::new(SerialComm);
+            let s = crate::geometry::load_surface(name).unwrap();
+            let b = s.bbox();
+            // A loose fit: thin walls and corner contacts to drop.
+            let domain = Domain::around(b.min, b.max, 0.95).unwrap();
+            let index = SurfaceIndex::new(&s, &domain);
+            let mut t = build_from_surface(comm, &index, level, NO_LIMIT).unwrap();
+            t.balance(Connectivity::Corner).unwrap();
+            let class = classify_leaves(t.leaves(), &index);
+            for keep in [Keep::Inside, Keep::Outside] {
+                let kept = move |c: u8| keeps(keep, CutRule::Center, c);
+                let leaves = t.leaves();
+                let view = View {
+                    leaves,
+                    class: &class,
+                    kept: &kept,
+                };
+                let want: Vec<usize> = (0..leaves.len())
+                    .filter(|&i| kept(class[i]) && view.must_go(i))
+                    .collect();
+                let got = first_sweep(leaves, &class, 0..leaves.len(), kept);
+                assert_eq!(got, want, "{name} level {level}");
+                dropped += got.len();
+            }
+        }
+        assert!(dropped > 0, "no case drops a leaf");
     }
 }
