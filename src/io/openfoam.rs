@@ -292,8 +292,12 @@ impl<'m> Polygons<'m> {
     /// The point at `x` that is no corner of the cube `(c, s)` (corner
     /// nodes `row`): a node hanging on it, or a corner of the halo.
     fn off_corner(&mut self, cube: ([u32; 3], u32), row: &[u32; 8], x: [u32; 3]) -> Option<u32> {
-        self.hanging_on(cube, row, x)
-            .or_else(|| Some((self.nn + self.halo.find(point_key(x))?) as u32))
+        self.hanging_on(cube, row, x).or_else(|| self.halo_point(x))
+    }
+
+    /// The number of the halo's corner at `x` (`nn + j`), if `x` is one.
+    fn halo_point(&mut self, x: [u32; 3]) -> Option<u32> {
+        Some((self.nn + self.halo.find(point_key(x))?) as u32)
     }
 
     /// The local element whose whole face `f` is: the owner, or a finer
@@ -334,7 +338,7 @@ impl<'m> Polygons<'m> {
             }
             None => self.hanging_on(cube, row, m),
         };
-        let p = hanging.or_else(|| Some((self.nn + self.halo.find(point_key(m))?) as u32))?;
+        let p = hanging.or_else(|| self.halo_point(m))?;
         Some((p, m))
     }
 

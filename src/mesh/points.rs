@@ -111,9 +111,15 @@ impl PointFilter {
         let n = (16 * points.clone().count().max(1))
             .next_power_of_two()
             .max(64);
+        Self::with_bits(points, n.trailing_zeros())
+    }
+
+    /// The filter of `points` in `2^log2_bits` bits (at least 64).
+    pub fn with_bits(points: impl Iterator<Item = [u32; 3]>, log2_bits: u32) -> PointFilter {
+        let log2_bits = log2_bits.max(6);
         let mut f = PointFilter {
-            bits: vec![0; n / 64],
-            shift: 64 - n.trailing_zeros(),
+            bits: vec![0; 1 << (log2_bits - 6)],
+            shift: 64 - log2_bits,
         };
         for p in points {
             let h = f.slot(p);
@@ -233,7 +239,8 @@ impl EdgeMidpoints {
 /// down, whose cells are marked.
 #[derive(Clone, Debug)]
 struct NearCells {
-    bits: Vec<u64>,
+    /// The marked cells, by their coordinates in cells.
+    cells: PointFilter,
 }
 
 impl NearCells {
@@ -243,31 +250,18 @@ impl NearCells {
     const FILTER_BITS: u32 = 21;
 
     fn new(set: &[crate::octant::Octant]) -> NearCells {
-        let mut f = NearCells {
-            bits: vec![0; 1 << (Self::FILTER_BITS - 6)],
-        };
         let k = Self::SIDE_BITS;
-        for h in set {
+        let cells = set.iter().flat_map(|h| {
             let (c, s) = (h.coords(), h.side());
             let lo = c.map(|v| v.saturating_sub(1) >> k);
             let hi = c.map(|v| (v + s) >> k);
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        let b = Self::slot([x, y, z]);
-                        f.bits[b >> 6] |= 1 << (b & 63);
-                    }
-                }
-            }
+            (lo[2]..=hi[2]).flat_map(move |z| {
+                (lo[1]..=hi[1]).flat_map(move |y| (lo[0]..=hi[0]).map(move |x| [x, y, z]))
+            })
+        });
+        NearCells {
+            cells: PointFilter::with_bits(cells, Self::FILTER_BITS),
         }
-        f
-    }
-
-    fn slot(cell: [u32; 3]) -> usize {
-        // Cells past 21 bits per axis only fold onto others: more "maybe",
-        // never a miss.
-        let k = cell[0] as u64 ^ (cell[1] as u64) << 21 ^ (cell[2] as u64) << 42;
-        (k.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - Self::FILTER_BITS)) as usize
     }
 
     /// Whether `o` may touch an octant of the set.
@@ -276,8 +270,8 @@ impl NearCells {
         if o.side() > 1 << Self::SIDE_BITS {
             return true;
         }
-        let b = Self::slot(o.coords().map(|v| v >> Self::SIDE_BITS));
-        self.bits[b >> 6] >> (b & 63) & 1 == 1
+        self.cells
+            .may_hold(o.coords().map(|v| v >> Self::SIDE_BITS))
     }
 }
 
@@ -330,13 +324,8 @@ mod tests {
     #[test]
     fn near_cells_miss_no_touching_octant() {
         use crate::octant::{Octant, ROOT_LEN};
-        let mut x = 12_345u64;
-        let mut next = |n: u32| {
-            x = x
-                .wrapping_mul(6_364_136_223_846_793_005)
-                .wrapping_add(1_442_695_040_888_963_407);
-            ((x >> 33) % n as u64) as u32
-        };
+        let mut rng = crate::testutil::Rng(12_345);
+        let mut next = |n: u32| rng.range(0, n as i64 - 1) as u32;
         // Octants of levels around the cell's (level 7), near each other.
         let random = |next: &mut dyn FnMut(u32) -> u32| {
             let level = 4 + next(8) as u8;
