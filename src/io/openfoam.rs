@@ -23,8 +23,11 @@
 //!   the domain on a boundary).
 //! - Every face lists every mesh point on its edges, so a face with a
 //!   hanging point on an edge is a polygon with that point (as OpenFOAM's
-//!   `hexRef8` leaves them). Points are this rank's: the corners of its
-//!   faces, in the order its faces first use them.
+//!   `hexRef8` leaves them). Points are this rank's: its local nodes in
+//!   their order (but the few that are no corner of a face, only a hanging
+//!   node's dependency, whose labels the last nodes take), then the
+//!   corners of halo elements that its faces use and that are no local
+//!   node, in the order the faces first use them.
 //! - Both sides of a processor patch list the shared faces in the same
 //!   order ([`crate::mesh::faces`]), each starting at the same point (the
 //!   lowest in lattice order); the higher rank's then run the other way.
@@ -92,135 +95,282 @@ pub struct FoamCounts {
     pub cells: u64,
 }
 
-/// Turns each face of `faces`, in order, into its polygon of point
-/// labels and hands it to `emit`; hands each point to `first_use` when a
-/// face first uses it, as its number (a local node `n < nn`, or `nn + j`
-/// for the point at place `j` of the searched set that is no local node)
-/// and its lattice point. Labels follow the order in which the faces first
-/// use the points; returns their count. No list of every label or every
-/// point is kept: the caller streams them.
+/// The labels of one rank's local nodes in its case.
 ///
-/// With `spare_core`, a second thread makes the polygons (the searches)
-/// a chunk ahead while this one labels and hands them on: the same labels
-/// in the same order (and all of it here if the thread cannot start).
-fn face_polygons(
-    mesh: &Mesh,
-    faces: &Faces,
-    spare_core: bool,
-    mut emit: impl FnMut(&[u32]) -> Result<()>,
-    mut first_use: impl FnMut(u32, [u32; 3]) -> Result<()>,
-) -> Result<u32> {
-    let mut maker = Polygons::new(mesh, faces);
-    // Labels are stored plus one: zero is "none yet", and the pages of
-    // points never used are never touched.
-    let mut label = vec![0u32; maker.num_points()];
-    let mut count = 0u32;
-    let mut total = 0usize;
-    let mut labels: Vec<u32> = Vec::with_capacity(8);
-    let mut take = |poly: &[(u32, [u32; 3])]| -> Result<()> {
-        labels.clear();
-        for &(p, x) in poly {
-            let l = &mut label[p as usize];
-            if *l == 0 {
-                count += 1;
-                *l = count;
-                first_use(p, x)?;
-            }
-            labels.push(*l - 1);
+/// A rank's points are its local nodes and the halo's corners that its
+/// faces use and that are no local node. Every local node is a corner of a
+/// face but for the few that are only a dependency of a hanging node (at
+/// partition boundaries), so the nodes keep their numbers as labels, the
+/// last ones moving into the places the unused ones leave below
+/// `direct`; the halo's points follow ([`Labeller`]), in the order the
+/// faces first use them. A label is then found without a table for nearly
+/// every point.
+///
+/// ```text
+///   node   0  1  2  3  4  5  6  7      node 3 unused: direct = 7
+///   label  0  1  2  -  4  5  6  3      node 7 takes label 3
+/// ```
+struct NodeLabels {
+    /// Local nodes below this are their own labels.
+    direct: u32,
+    /// Local nodes.
+    nn: u32,
+    /// The labels of nodes `direct..nn` (`u32::MAX` for an unused one).
+    tail: Vec<u32>,
+    /// `(label, node)` for each label below `direct` that is not its
+    /// node's number, by label.
+    moved: Vec<(u32, u32)>,
+}
+
+impl NodeLabels {
+    fn new(mesh: &Mesh) -> NodeLabels {
+        let nn = mesh.num_nodes() as u32;
+        let unused: Vec<u32> = mesh.dependency_only_nodes().collect();
+        let direct = nn - unused.len() as u32;
+        let movers = (direct..nn).filter(|n| unused.binary_search(n).is_err());
+        let holes = unused.iter().copied().take_while(|&n| n < direct);
+        let moved: Vec<(u32, u32)> = holes.zip(movers).collect();
+        let mut tail = vec![u32::MAX; (nn - direct) as usize];
+        for &(l, n) in &moved {
+            tail[(n - direct) as usize] = l;
         }
-        total += labels.len();
+        NodeLabels {
+            direct,
+            nn,
+            tail,
+            moved,
+        }
+    }
+
+    /// The node of label `l` below `direct`, for labels asked in
+    /// increasing order; `at` counts the entries of `moved` passed.
+    #[inline]
+    fn node(&self, l: u32, at: &mut usize) -> u32 {
+        match self.moved.get(*at) {
+            Some(&(h, n)) if h == l => {
+                *at += 1;
+                n
+            }
+            _ => l,
+        }
+    }
+}
+
+/// Labels point numbers (see [`Polygons::polygon`]) in face order: the
+/// nodes by their [`NodeLabels`], the halo's points as they are first
+/// used.
+struct Labeller<'a> {
+    nodes: &'a NodeLabels,
+    /// Each halo point's label plus one (zero: not used yet), by its
+    /// place in the searched set.
+    halo: Vec<u32>,
+    /// The used halo points' places, in label order.
+    order: Vec<u32>,
+    /// A face used an unused node (an inconsistent mesh).
+    unused_hit: bool,
+}
+
+impl Labeller<'_> {
+    #[inline]
+    fn of(&mut self, id: u32) -> u32 {
+        if id < self.nodes.direct {
+            id
+        } else {
+            self.rare(id)
+        }
+    }
+
+    #[cold]
+    fn rare(&mut self, id: u32) -> u32 {
+        let nodes = self.nodes;
+        if id < nodes.nn {
+            let l = nodes.tail[(id - nodes.direct) as usize];
+            self.unused_hit |= l == u32::MAX;
+            return l;
+        }
+        let j = (id - nodes.nn) as usize;
+        if self.halo[j] == 0 {
+            self.order.push(j as u32);
+            self.halo[j] = nodes.direct + self.order.len() as u32;
+        }
+        self.halo[j] - 1
+    }
+}
+
+/// Turns each face of `faces`, in order, into its polygon of point labels
+/// (`nodes` for the local nodes, the halo's points labelled as they come)
+/// and hands them on in chunks to `emit`; returns the halo points used, in
+/// label order. No list of every label is kept: the caller streams them.
+///
+/// `side` is other work for this thread, in short steps (it answers
+/// whether there is more): with `spare_core`, a second thread makes
+/// polygons while this one does those steps, then both take the chunks of
+/// faces as they come, and this one labels and hands them on in order.
+/// The same labels come out either way.
+fn face_polygons(
+    (mesh, faces): (&Mesh, &Faces),
+    nodes: &NodeLabels,
+    spare_core: bool,
+    mut side: impl FnMut() -> Result<bool>,
+    mut emit: impl FnMut(&Chunk) -> Result<()>,
+) -> Result<Vec<[u32; 3]>> {
+    use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+    let nf = faces.faces().len();
+    let chunks = nf.div_ceil(POLYGON_CHUNK);
+    let two = spare_core && chunks >= 2;
+    if !two {
+        // Alone, the side work goes first: what it holds is freed before
+        // the index is made.
+        while side()? {}
+    }
+    let ix = PolygonIndex::new(mesh, faces);
+    let mut labels = Labeller {
+        nodes,
+        halo: vec![0; ix.halo.len()],
+        order: Vec::new(),
+        unused_hit: false,
+    };
+    let mut total = 0usize;
+    let mut take = |c: &mut Chunk| -> Result<()> {
+        for id in &mut c.ids {
+            *id = labels.of(*id);
+        }
+        total += c.ids.len();
         if total > i32::MAX as usize {
             return Err(Error::new(
                 ErrorKind::Limit,
                 "more than 2^31 face labels on one rank",
             ));
         }
-        emit(&labels)
+        emit(c)
     };
-    let nf = faces.faces().len();
-    // Faces labelled so far; the rest, if the thread cannot start, here.
-    let mut next = 0;
-    if spare_core && nf >= 2 * POLYGON_CHUNK {
-        std::thread::scope(|scope| -> Result<()> {
-            let (ready, chunks) = std::sync::mpsc::sync_channel::<Result<Chunk>>(2);
-            let (done, spare) = std::sync::mpsc::channel::<Chunk>();
-            let maker = &mut maker;
-            let started = std::thread::Builder::new()
+    let range = |k: usize| k * POLYGON_CHUNK..nf.min((k + 1) * POLYGON_CHUNK);
+    // The next chunk to make, whichever thread takes it.
+    let next = AtomicUsize::new(0);
+    let mut mine = Polygons::new(&ix);
+    std::thread::scope(|scope| -> Result<()> {
+        let (ready, arrived) = std::sync::mpsc::sync_channel::<(usize, Result<Chunk>)>(4);
+        let (done, spare) = std::sync::mpsc::channel::<Chunk>();
+        let (next, ix) = (&next, &ix);
+        // Stops the other thread at its next chunk when this one fails.
+        struct Stop<'s>(&'s AtomicUsize, usize);
+        impl Drop for Stop<'_> {
+            fn drop(&mut self) {
+                self.0.store(self.1, Relaxed);
+            }
+        }
+        let _stop = Stop(next, chunks);
+        let helper = two
+            && std::thread::Builder::new()
                 .name("octmesh-polygons".into())
                 .spawn_scoped(scope, move || {
-                    for lo in (0..nf).step_by(POLYGON_CHUNK) {
+                    let mut maker = Polygons::new(ix);
+                    loop {
+                        let k = next.fetch_add(1, Relaxed);
+                        if k >= chunks {
+                            return;
+                        }
                         let mut c = spare.try_recv().unwrap_or_default();
-                        c.poly.clear();
-                        c.lens.clear();
-                        let made = (lo..nf.min(lo + POLYGON_CHUNK)).try_for_each(|i| {
-                            let start = c.poly.len();
-                            maker.polygon(i, &mut c.poly)?;
-                            c.lens.push((c.poly.len() - start) as u8);
-                            Ok(())
-                        });
+                        let made = maker.chunk(range(k), &mut c);
                         let failed = made.is_err();
                         // A closed channel: the labelling side stopped.
-                        if ready.send(made.map(|()| c)).is_err() || failed {
+                        if ready.send((k, made.map(|()| c))).is_err() || failed {
                             return;
                         }
                     }
-                });
-            if started.is_err() {
-                return Ok(());
-            }
-            for c in chunks {
-                let c = c?;
-                let mut at = 0;
-                for &n in &c.lens {
-                    take(&c.poly[at..at + n as usize])?;
-                    at += n as usize;
+                })
+                .is_ok();
+        let mut more_side = two;
+        // Chunks made ahead of their turn, and emptied ones to reuse.
+        let mut held: std::collections::BTreeMap<usize, Chunk> = Default::default();
+        let mut pool: Vec<Chunk> = Vec::new();
+        let mut want = 0;
+        while want < chunks {
+            if let Some(mut c) = held.remove(&want) {
+                take(&mut c)?;
+                want += 1;
+                if helper && pool.len() >= 2 {
+                    let _ = done.send(c);
+                } else {
+                    pool.push(c);
                 }
-                next += c.lens.len();
-                let _ = done.send(c);
+                continue;
             }
-            Ok(())
-        })?;
+            let got = match helper {
+                true => arrived.try_recv().ok(),
+                false => None,
+            };
+            if let Some((k, c)) = got {
+                held.insert(k, c?);
+                continue;
+            }
+            if more_side {
+                more_side = side()?;
+                continue;
+            }
+            let k = next.fetch_add(1, Relaxed);
+            if k < chunks {
+                let mut c = pool.pop().unwrap_or_default();
+                mine.chunk(range(k), &mut c)?;
+                held.insert(k, c);
+            } else {
+                if !helper {
+                    return Err(Error::new(ErrorKind::Internal, "a chunk of faces was lost"));
+                }
+                // The rest is the other thread's: wait for it.
+                let (k, c) = arrived
+                    .recv()
+                    .map_err(|_| Error::new(ErrorKind::Internal, "the polygon thread stopped"))?;
+                held.insert(k, c?);
+            }
+        }
+        while more_side {
+            more_side = side()?;
+        }
+        Ok(())
+    })?;
+    if labels.unused_hit {
+        return Err(Error::new(
+            ErrorKind::Internal,
+            "a face uses a node that no local element has as a corner",
+        ));
     }
-    let mut poly = Vec::with_capacity(8);
-    for i in next..nf {
-        poly.clear();
-        maker.polygon(i, &mut poly)?;
-        take(&poly)?;
-    }
-    Ok(count)
+    Ok(labels
+        .order
+        .iter()
+        .map(|&j| ix.halo.point(j as usize))
+        .collect())
 }
 
-/// Faces per chunk handed from the polygon thread to the labelling one.
+/// Faces per chunk of polygons.
 const POLYGON_CHUNK: usize = 1 << 13;
 
-/// Polygons of consecutive faces: their points, then each face's count.
+/// Polygons of consecutive faces: their points (numbers, then labels),
+/// then each face's count.
 #[derive(Default)]
 struct Chunk {
-    poly: Vec<(u32, [u32; 3])>,
+    ids: Vec<u32>,
     lens: Vec<u8>,
 }
 
-/// The part of [`face_polygons`] that needs no labels: each face's points
-/// as numbers with their lattice points.
-struct Polygons<'m> {
+/// What the polygons are made from, made once for the threads that make
+/// them (the parts of the mesh they read, and the indexes).
+struct PolygonIndex<'m> {
     faces: &'m [Face],
     halo_start: usize,
     elements: &'m [crate::octant::Octant],
     conn: &'m [[u32; 8]],
+    nn: usize,
+    ni: usize,
     /// The hanging nodes by the nodes they depend on.
     hanging: DepsIndex,
     /// The halo's corners.
     halo: PointIndex,
     /// Whether an edge between two local nodes may carry a point.
     midpoints: EdgeMidpoints,
-    nn: usize,
-    ni: usize,
-    /// The last emitter and its cube: faces come by owner, so a few in a
-    /// row share it.
-    last: (u32, ([u32; 3], u32)),
 }
 
-impl<'m> Polygons<'m> {
+impl<'m> PolygonIndex<'m> {
     fn new(mesh: &'m Mesh, faces: &'m Faces) -> Self {
         // Every corner of a kept element near this rank is a mesh point. A
         // face's corners and edge midpoints are local nodes or corners of
@@ -230,27 +380,54 @@ impl<'m> Polygons<'m> {
         // they hang on it, when they are local nodes, and are found by that
         // face's corners or that edge's ends. Only the halo's corners are
         // searched by their points.
-        let nn = mesh.num_nodes();
-        let ni = mesh.num_independent();
-        let halo = PointIndex::new(halo_corners(mesh).map(point_key).collect());
-        Polygons {
+        PolygonIndex {
             faces: faces.faces(),
             halo_start: faces.halo_range().start,
             elements: mesh.elements(),
             conn: mesh.connectivity(),
+            nn: mesh.num_nodes(),
+            ni: mesh.num_independent(),
             hanging: mesh.hanging_index(),
-            halo,
+            halo: PointIndex::new(halo_corners(mesh).map(point_key).collect()),
             midpoints: EdgeMidpoints::new(mesh),
-            nn,
-            ni,
-            last: (u32::MAX, ([0; 3], 0)),
         }
     }
+}
 
-    /// How many point numbers there are: the local nodes, then the halo's
-    /// corners (`nn + j` for place `j` of `halo`).
-    fn num_points(&self) -> usize {
-        self.nn + self.halo.len()
+/// The part of [`face_polygons`] that needs no labels, one per thread:
+/// each face's points as numbers.
+struct Polygons<'m> {
+    // The index's parts, copied: read through `&mut self` in the hot
+    // loop, one load each, not two.
+    faces: &'m [Face],
+    halo_start: usize,
+    elements: &'m [crate::octant::Octant],
+    conn: &'m [[u32; 8]],
+    hanging: &'m DepsIndex,
+    midpoints: &'m EdgeMidpoints,
+    nn: usize,
+    ni: usize,
+    /// A copy of the index's: the searches' hint is this thread's.
+    halo: PointIndex,
+    /// The last emitter and its cube: faces come by owner, so a few in a
+    /// row share it.
+    last: (u32, ([u32; 3], u32)),
+}
+
+impl<'m> Polygons<'m> {
+    fn new(ix: &'m PolygonIndex<'m>) -> Self {
+        Polygons {
+            faces: ix.faces,
+            halo_start: ix.halo_start,
+            elements: ix.elements,
+            conn: ix.conn,
+            hanging: &ix.hanging,
+            midpoints: &ix.midpoints,
+            nn: ix.nn,
+            ni: ix.ni,
+            halo: ix.halo.clone(),
+            last: (u32::MAX, ([0; 3], 0)),
+        }
     }
 
     /// The local node at `x`, in the middle of an edge or a face of the
@@ -342,10 +519,24 @@ impl<'m> Polygons<'m> {
         Some((p, m))
     }
 
-    /// Appends face `i`'s points, in order, to `poly`.
-    fn polygon(&mut self, i: usize, poly: &mut Vec<(u32, [u32; 3])>) -> Result<()> {
+    /// Makes the polygons of faces `range` into `c`, its lists cleared
+    /// first.
+    fn chunk(&mut self, range: std::ops::Range<usize>, c: &mut Chunk) -> Result<()> {
+        c.ids.clear();
+        c.lens.clear();
+        for i in range {
+            let start = c.ids.len();
+            self.polygon(i, &mut c.ids)?;
+            c.lens.push((c.ids.len() - start) as u8);
+        }
+        Ok(())
+    }
+
+    /// Appends face `i`'s points, in order, to `poly`, as numbers: a local
+    /// node `n < nn`, or `nn + j` for the point at place `j` of the halo's
+    /// corners.
+    fn polygon(&mut self, i: usize, poly: &mut Vec<u32>) -> Result<()> {
         let f = &self.faces[i];
-        let start = poly.len();
         // Most faces are the whole face of a local element: their corners
         // are its nodes, and an edge's midpoint is looked for only when
         // both ends may carry one.
@@ -368,9 +559,10 @@ impl<'m> Polygons<'m> {
             }
             for k in 0..4 {
                 let ((a, xa), (b, xb)) = (nodes[k], nodes[(k + 1) % 4]);
-                poly.push((a as u32, xa));
+                poly.push(a as u32);
                 if self.midpoints.may_hold_ends(a, b) {
-                    poly.extend(self.midpoint(((c, s), row), Some((a, b)), xa, xb));
+                    let m = self.midpoint(((c, s), row), Some((a, b)), xa, xb);
+                    poly.extend(m.map(|m| m.0));
                 }
             }
             return Ok(());
@@ -381,6 +573,9 @@ impl<'m> Polygons<'m> {
         let conn = self.conn;
         let row = &conn[e as usize];
         let nodes = c.map(|x| corner_at(cube.0, cube.1, x).map(|m| row[VTK_TO_MORTON[m]] as usize));
+        // At most a corner and a midpoint per side.
+        let mut face = [(0u32, [0u32; 3]); 8];
+        let mut n = 0;
         for k in 0..4 {
             let p = match nodes[k] {
                 Some(n) => n as u32,
@@ -391,19 +586,22 @@ impl<'m> Polygons<'m> {
                     )
                 })?,
             };
-            poly.push((p, c[k]));
+            face[n] = (p, c[k]);
+            n += 1;
             let (xa, xb) = (c[k], c[(k + 1) % 4]);
             let ends = nodes[k].zip(nodes[(k + 1) % 4]);
-            poly.extend(self.midpoint((cube, row), ends, xa, xb));
+            if let Some(m) = self.midpoint((cube, row), ends, xa, xb) {
+                face[n] = m;
+                n += 1;
+            }
         }
+        let face = &mut face[..n];
         if i >= self.halo_start {
             // Both sides start at the lowest point.
-            let face = &mut poly[start..];
-            let at = (0..face.len())
-                .min_by_key(|&k| point_key(face[k].1))
-                .unwrap_or(0);
+            let at = (0..n).min_by_key(|&k| point_key(face[k].1)).unwrap_or(0);
             face.rotate_left(at);
         }
+        poly.extend(face.iter().map(|p| p.0));
         Ok(())
     }
 }
@@ -609,12 +807,80 @@ fn write_raw<T: Raw>(out: &mut impl Write, v: &[T]) -> std::io::Result<()> {
     }
 }
 
-/// The `points` file, filled as the faces first use the points (user
-/// units: the moved positions on a snapped mesh, the lattice's otherwise).
-/// In binary the positions stream to the file in label order and the
-/// count goes last over room left for it, as in `faces`: no array of every
-/// point is made. ASCII cases (small ones) keep the positions and write
-/// them at the end.
+/// The local nodes' positions, written to [`PointsOut`] in label order in
+/// short steps: on a mesh that is not snapped, the nodes' lattice points
+/// are gathered from the elements' corners first.
+struct NodeFill<'m> {
+    nodes: &'m NodeLabels,
+    elements: &'m [crate::octant::Octant],
+    conn: &'m [[u32; 8]],
+    /// By node; empty on a snapped mesh.
+    lattice: Vec<[u32; 3]>,
+    /// Elements whose corners are in `lattice`.
+    gathered: usize,
+    /// Labels written, and the entries of `nodes.moved` passed.
+    written: u32,
+    moved_at: usize,
+}
+
+impl<'m> NodeFill<'m> {
+    /// Elements, or labels, per step.
+    const STEP: usize = 1 << 15;
+
+    fn new(mesh: &'m Mesh, nodes: &'m NodeLabels) -> Self {
+        let lattice = match mesh.moved() {
+            Some(_) => Vec::new(),
+            None => vec![[0; 3]; mesh.num_nodes()],
+        };
+        NodeFill {
+            nodes,
+            elements: mesh.elements(),
+            conn: mesh.connectivity(),
+            lattice,
+            gathered: 0,
+            written: 0,
+            moved_at: 0,
+        }
+    }
+
+    /// One step into `out`; whether there are more.
+    fn step(&mut self, out: &mut PointsOut) -> Result<bool> {
+        let snapped = out.mesh.moved();
+        if snapped.is_none() && self.gathered < self.elements.len() {
+            let r = self.gathered..self.elements.len().min(self.gathered + Self::STEP);
+            for (e, row) in self.elements[r.clone()].iter().zip(&self.conn[r.clone()]) {
+                let (a, s) = (e.coords(), e.side());
+                for (v, &n) in row.iter().enumerate() {
+                    self.lattice[n as usize] = corner_coords(a, s, VTK_TO_MORTON[v]);
+                }
+            }
+            self.gathered = r.end;
+            return Ok(true);
+        }
+        let direct = self.nodes.direct;
+        let end = direct.min(self.written + Self::STEP as u32);
+        let domain = out.mesh.domain();
+        for l in self.written..end {
+            let n = self.nodes.node(l, &mut self.moved_at) as usize;
+            out.put(match snapped {
+                Some(m) => m[n],
+                None => domain.from_lattice(self.lattice[n].map(f64::from)),
+            })?;
+        }
+        self.written = end;
+        if end == direct {
+            self.lattice = Vec::new();
+        }
+        Ok(end < direct)
+    }
+}
+
+/// The `points` file in label order ([`Labels`]): the local nodes, then
+/// the halo points the faces used (user units: the moved positions on a
+/// snapped mesh, the lattice's otherwise). In binary the positions stream
+/// to the file and the count goes last over room left for it, as in
+/// `faces`: no array of every position is made. ASCII cases (small ones)
+/// keep the positions and write them at the end.
 struct PointsOut<'m> {
     mesh: &'m Mesh,
     fmt: FoamFormat,
@@ -625,9 +891,9 @@ struct PointsOut<'m> {
     data_at: u64,
     /// Binary: the positions not yet handed to `w`; ASCII: all of them.
     block: Vec<[f64; 3]>,
-    /// On a snapped mesh, the points that are no local node, with their
-    /// labels: their positions are the means of moved corners, found in
-    /// one pass at the end (NaN until then).
+    /// On a snapped mesh, the halo points with their labels: their
+    /// positions are the means of moved corners, found in one pass at the
+    /// end (NaN until then).
     off_node: Vec<([u32; 3], u32)>,
     count: u32,
 }
@@ -656,17 +922,23 @@ impl<'m> PointsOut<'m> {
         })
     }
 
-    /// The next point: local node or searched point number `id` (see
-    /// [`face_polygons`]) at lattice point `x`.
-    fn push(&mut self, id: u32, x: [u32; 3]) -> Result<()> {
-        let p = match self.mesh.moved() {
-            Some(m) if (id as usize) < m.len() => m[id as usize],
-            Some(_) => {
-                self.off_node.push((x, self.count));
-                [f64::NAN; 3]
-            }
-            None => self.mesh.domain().from_lattice(x.map(f64::from)),
-        };
+    /// The halo points at lattice points `xs`, in label order, after the
+    /// nodes.
+    fn halo(&mut self, xs: &[[u32; 3]]) -> Result<()> {
+        xs.iter().try_for_each(|&x| {
+            let p = match self.mesh.moved() {
+                Some(_) => {
+                    self.off_node.push((x, self.count));
+                    [f64::NAN; 3]
+                }
+                None => self.mesh.domain().from_lattice(x.map(f64::from)),
+            };
+            self.put(p)
+        })
+    }
+
+    /// The next position.
+    fn put(&mut self, p: [f64; 3]) -> Result<()> {
         self.count += 1;
         self.block.push(p);
         if let Some(w) = &mut self.w {
@@ -738,19 +1010,18 @@ fn points_head(fmt: FoamFormat, loc: &str, count: u32) -> std::io::Result<Vec<u8
 const COUNT_WIDTH: usize = 20;
 
 /// Writes the `faces` file of this rank, the face polygons streamed from
-/// [`face_polygons`], and hands the points to `points` as they are first
-/// used.
+/// [`face_polygons`] (which runs the steps of `side` on the way); returns
+/// the halo points they used, in label order.
 fn write_faces(
     path: &Path,
-    fmt: FoamFormat,
-    loc: &str,
-    mesh: &Mesh,
-    faces: &Faces,
+    (fmt, loc): (FoamFormat, &str),
+    mesh: (&Mesh, &Faces),
+    nodes: &NodeLabels,
     spare_core: bool,
-    points: &mut PointsOut,
-) -> Result<()> {
+    side: impl FnMut() -> Result<bool>,
+) -> Result<Vec<[u32; 3]>> {
     let io = |e: std::io::Error| io_err(path, e);
-    let nf = faces.faces().len();
+    let nf = mesh.1.faces().len();
     match fmt {
         FoamFormat::Binary => {
             // A faceCompactList: the offsets, then the labels. Both go to
@@ -769,33 +1040,19 @@ fn write_faces(
             w.restart_at(data_at as u64).map_err(io)?;
             let mut wo = DirectWriter::open(path).map_err(io)?;
             wo.restart_at(head.len() as u64).map_err(io)?;
-            const CHUNK: usize = 1 << 14;
-            let mut offsets = Vec::with_capacity(CHUNK);
+            let mut offsets = Vec::with_capacity(POLYGON_CHUNK + 1);
             offsets.push(0u32);
-            let mut labels = Vec::with_capacity(CHUNK + 8);
             let mut total = 0u32;
-            face_polygons(
-                mesh,
-                faces,
-                spare_core,
-                |l| {
-                    total += l.len() as u32;
-                    offsets.push(total);
-                    labels.extend_from_slice(l);
-                    if offsets.len() == CHUNK {
-                        write_raw(&mut wo, &offsets).map_err(io)?;
-                        offsets.clear();
-                    }
-                    if labels.len() >= CHUNK {
-                        write_raw(&mut w, &labels).map_err(io)?;
-                        labels.clear();
-                    }
-                    Ok(())
-                },
-                |id, x| points.push(id, x),
-            )?;
+            let halo = face_polygons(mesh, nodes, spare_core, side, |c| {
+                offsets.extend(c.lens.iter().map(|&n| {
+                    total += n as u32;
+                    total
+                }));
+                write_raw(&mut wo, &offsets).map_err(io)?;
+                offsets.clear();
+                write_raw(&mut w, &c.ids).map_err(io)
+            })?;
             write_raw(&mut wo, &offsets).map_err(io)?;
-            write_raw(&mut w, &labels).map_err(io)?;
             w.write_all(b")\n").map_err(io)?;
             w.flush().map_err(io)?;
             drop(w);
@@ -803,18 +1060,19 @@ fn write_faces(
             wo.restart_at(0).map_err(io)?;
             wo.write_all(&head).map_err(io)?;
             wo.flush().map_err(io)?;
-            Ok(())
+            Ok(halo)
         }
         FoamFormat::Ascii => {
             let mut w = create(path)?;
             header(&mut w, fmt, "faceList", loc, "faces", None).map_err(io)?;
             writeln!(w, "{nf}\n(").map_err(io)?;
-            face_polygons(
-                mesh,
-                faces,
-                spare_core,
-                |l| {
-                    (|| -> std::io::Result<()> {
+            let halo = face_polygons(mesh, nodes, spare_core, side, |c| {
+                let mut at = 0;
+                c.lens
+                    .iter()
+                    .try_for_each(|&n| -> std::io::Result<()> {
+                        let l = &c.ids[at..at + n as usize];
+                        at += n as usize;
                         write!(w, "{}(", l.len())?;
                         for (k, x) in l.iter().enumerate() {
                             if k > 0 {
@@ -823,14 +1081,12 @@ fn write_faces(
                             write!(w, "{x}")?;
                         }
                         writeln!(w, ")")
-                    })()
+                    })
                     .map_err(io)
-                },
-                |id, x| points.push(id, x),
-            )?;
+            })?;
             writeln!(w, ")").map_err(io)?;
             w.flush().map_err(io)?;
-            Ok(())
+            Ok(halo)
         }
     }
 }
@@ -855,16 +1111,18 @@ fn write_polymesh(
         format!("processor{me}/constant/polyMesh")
     };
     let loc = location.as_str();
+    let nodes = NodeLabels::new(mesh);
     let mut points = PointsOut::new(&dir.join("points"), fmt, loc, mesh)?;
-    write_faces(
+    let mut fill = NodeFill::new(mesh, &nodes);
+    let halo = write_faces(
         &dir.join("faces"),
-        fmt,
-        loc,
-        mesh,
-        faces,
+        (fmt, loc),
+        (mesh, faces),
+        &nodes,
         spare_core,
-        &mut points,
+        || fill.step(&mut points),
     )?;
+    points.halo(&halo)?;
     let num_points = points.finish(loc)?;
     let nf = faces.faces().len();
     let ni = faces.num_internal();
@@ -1085,27 +1343,33 @@ mod tests {
     use super::*;
     use crate::testutil::sphere_mesh;
 
-    /// Each face's labels, then each point's number and lattice point.
-    type Written = (Vec<Vec<u32>>, Vec<(u32, [u32; 3])>);
+    /// Each face's labels, then each label's lattice point.
+    type Written = (Vec<Vec<u32>>, Vec<[u32; 3]>);
 
     /// The labels of every face and the points in label order.
     fn polygons(mesh: &Mesh, faces: &Faces, spare_core: bool) -> Written {
-        let (mut out, mut points) = (Vec::new(), Vec::new());
-        let n = face_polygons(
-            mesh,
-            faces,
+        let mut out = Vec::new();
+        let labels = NodeLabels::new(mesh);
+        let halo = face_polygons(
+            (mesh, faces),
+            &labels,
             spare_core,
-            |l| {
-                out.push(l.to_vec());
-                Ok(())
-            },
-            |id, x| {
-                points.push((id, x));
+            || Ok(false),
+            |c| {
+                let mut at = 0;
+                for &n in &c.lens {
+                    out.push(c.ids[at..at + n as usize].to_vec());
+                    at += n as usize;
+                }
                 Ok(())
             },
         )
         .unwrap();
-        assert_eq!(n as usize, points.len());
+        let (lattice, mut at) = (mesh.node_lattice(), 0);
+        let mut points: Vec<[u32; 3]> = (0..labels.direct)
+            .map(|l| lattice[labels.node(l, &mut at) as usize])
+            .collect();
+        points.extend(halo);
         (out, points)
     }
 
@@ -1121,5 +1385,43 @@ mod tests {
             "no polygon with a hanging point"
         );
         assert_eq!((serial, points), polygons(&mesh, &faces, true));
+    }
+
+    /// Every label is a distinct point that some face uses, and each face
+    /// is its four corners in order with the points between them on its
+    /// edges.
+    #[test]
+    fn labels_are_the_points_of_the_faces() {
+        let mesh = sphere_mesh(5);
+        let faces = mesh.faces().unwrap();
+        let (polys, points) = polygons(&mesh, &faces, false);
+        let mut keys: Vec<u64> = points.iter().map(|&x| point_key(x)).collect();
+        keys.sort_unstable();
+        keys.dedup();
+        assert_eq!(keys.len(), points.len(), "two labels at one point");
+        let mut used = vec![false; points.len()];
+        for (f, poly) in faces.faces().iter().zip(&polys) {
+            poly.iter().for_each(|&l| used[l as usize] = true);
+            let at: Vec<[u32; 3]> = poly.iter().map(|&l| points[l as usize]).collect();
+            let c = f.corners();
+            let corners: Vec<usize> = c
+                .iter()
+                .map(|x| at.iter().position(|y| y == x).expect("a corner is missing"))
+                .collect();
+            let mut extra = 0;
+            for k in 0..4 {
+                let (a, b) = (corners[k], corners[(k + 1) % 4]);
+                // The points after corner k up to corner k + 1 (cyclically).
+                let between = (b + at.len() - a - 1) % at.len();
+                assert!(between <= 1, "a side holds {between} points");
+                if between == 1 {
+                    let m = at[(a + 1) % at.len()];
+                    assert_eq!(Some(m), edge_midpoint(c[k], c[(k + 1) % 4]));
+                }
+                extra += between;
+            }
+            assert_eq!(at.len(), 4 + extra, "the corners out of order");
+        }
+        assert!(used.iter().all(|&u| u), "a point no face uses");
     }
 }

@@ -491,6 +491,13 @@ impl Mesh {
         out
     }
 
+    /// The independent nodes that are no local element's corner, only a
+    /// dependency of a hanging corner (at partition boundaries), in
+    /// increasing order: no face of a local element has them.
+    pub(crate) fn dependency_only_nodes(&self) -> impl Iterator<Item = u32> + '_ {
+        self.dep_only.iter().map(|&(n, _)| n)
+    }
+
     /// The hanging nodes found by the nodes they depend on (a new index).
     pub(crate) fn hanging_index(&self) -> hanging::DepsIndex {
         hanging::DepsIndex::new(&self.hanging, &self.connectivity, self.num_independent())
