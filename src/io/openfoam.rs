@@ -489,6 +489,7 @@ impl<'m> Polygons<'m> {
         }
     }
 
+    #[inline]
     fn cube(&self, e: u32) -> ([u32; 3], u32) {
         let o = self.elements[e as usize];
         (o.coords(), o.side())
@@ -497,6 +498,7 @@ impl<'m> Polygons<'m> {
     /// The point in the middle of the edge from `xa` to `xb`, if there is
     /// one; the edge lies on the cube `(c, s)` (corner nodes `row`), and
     /// `ends` are its ends' local nodes when they are the cube's corners.
+    #[inline]
     fn midpoint(
         &mut self,
         (cube, row): (([u32; 3], u32), &[u32; 8]),

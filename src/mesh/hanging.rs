@@ -105,22 +105,37 @@ impl Hanging {
         } else {
             (self.edge.coarse[k - nf], self.edge.mask[k - nf])
         };
-        let at = |m: usize| -> u32 {
-            if c & GHOST != 0 {
-                self.ghost_rows[(c & !GHOST) as usize][m]
-            } else {
-                connectivity[c as usize][VTK_TO_MORTON[m]]
-            }
-        };
         let mut out = HangingDeps {
             len: 0,
             nodes: [0; 4],
         };
-        for m in (0..8).filter(|m| mask >> m & 1 == 1) {
-            out.nodes[out.len as usize] = at(m);
+        // A ghost's row is in Morton order, an element's in VTK order.
+        const SAME: [usize; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
+        let (row, place) = if c & GHOST != 0 {
+            (&self.ghost_rows[(c & !GHOST) as usize], &SAME)
+        } else {
+            (&connectivity[c as usize], &VTK_TO_MORTON)
+        };
+        // The set bits in increasing order (at most four).
+        let mut rest = mask;
+        while rest != 0 && out.len < 4 {
+            out.nodes[out.len as usize] = row[place[rest.trailing_zeros() as usize]];
             out.len += 1;
+            rest &= rest - 1;
         }
         out
+    }
+
+    /// Asks the processor for the row [`Hanging::deps`] reads for hanging
+    /// node `k` (if there is one), [`AHEAD`] calls before it: the coarse
+    /// elements come in the walk's order, not in memory's.
+    #[inline]
+    pub fn prefetch(&self, k: usize, connectivity: &[[u32; 8]]) {
+        if k < self.len() {
+            if let Some(c) = self.coarse_element(k) {
+                super::prefetch(connectivity, c);
+            }
+        }
     }
 
     /// The local element hanging node `k` lies on a face or edge of, if
@@ -141,6 +156,7 @@ impl Hanging {
         self.face_lists.get_or_init(|| {
             (0..self.num_face())
                 .map(|k| {
+                    self.prefetch(k + AHEAD, connectivity);
                     let d = self.deps(k, connectivity);
                     [d[0], d[1], d[2], d[3]]
                 })
@@ -153,6 +169,7 @@ impl Hanging {
         self.edge_lists.get_or_init(|| {
             (self.num_face()..self.len())
                 .map(|k| {
+                    self.prefetch(k + AHEAD, connectivity);
                     let d = self.deps(k, connectivity);
                     [d[0], d[1]]
                 })
@@ -160,6 +177,10 @@ impl Hanging {
         })
     }
 }
+
+/// How many hanging nodes ahead a pass over them asks for the rows it
+/// will read.
+const AHEAD: usize = 16;
 
 /// The hanging nodes found by the independent nodes they depend on, for
 /// callers that meet a hanging point as the middle of a known edge or face
@@ -206,6 +227,7 @@ impl DepsIndex {
         };
         let mut start = vec![0u32; ni + 1];
         for k in 0..hanging.len() {
+            hanging.prefetch(k + AHEAD, connectivity);
             if let Some((a, _)) = pair(k) {
                 start[a + 1] += 1;
             }
@@ -216,6 +238,7 @@ impl DepsIndex {
         let mut entries = vec![(0u32, 0u32); start[ni] as usize];
         // `start[a]` runs to the end of `a`'s entries, then all move back.
         for k in 0..hanging.len() {
+            hanging.prefetch(k + AHEAD, connectivity);
             if let Some((a, b)) = pair(k) {
                 entries[start[a] as usize] = (b, k as u32);
                 start[a] += 1;
