@@ -223,7 +223,7 @@ fn face_polygons(
         // the index is made.
         while side()? {}
     }
-    let ix = PolygonIndex::new(mesh, faces);
+    let ix = PolygonIndex::new(mesh, faces, two);
     let mut labels = Labeller {
         nodes,
         halo: vec![0; ix.halo.len()],
@@ -371,7 +371,9 @@ struct PolygonIndex<'m> {
 }
 
 impl<'m> PolygonIndex<'m> {
-    fn new(mesh: &'m Mesh, faces: &'m Faces) -> Self {
+    /// The index of `mesh` and `faces`; with `spare_core`, the hanging
+    /// nodes' part on a second thread.
+    fn new(mesh: &'m Mesh, faces: &'m Faces, spare_core: bool) -> Self {
         // Every corner of a kept element near this rank is a mesh point. A
         // face's corners and edge midpoints are local nodes or corners of
         // halo elements. Those that are not a local element's corners (the
@@ -380,6 +382,14 @@ impl<'m> PolygonIndex<'m> {
         // they hang on it, when they are local nodes, and are found by that
         // face's corners or that edge's ends. Only the halo's corners are
         // searched by their points.
+        let (hanging, (halo, midpoints)) = crate::cores::join(
+            spare_core,
+            || mesh.hanging_index(),
+            || {
+                let halo = PointIndex::new(halo_corners(mesh).map(point_key).collect());
+                (halo, EdgeMidpoints::new(mesh))
+            },
+        );
         PolygonIndex {
             faces: faces.faces(),
             halo_start: faces.halo_range().start,
@@ -387,9 +397,9 @@ impl<'m> PolygonIndex<'m> {
             conn: mesh.connectivity(),
             nn: mesh.num_nodes(),
             ni: mesh.num_independent(),
-            hanging: mesh.hanging_index(),
-            halo: PointIndex::new(halo_corners(mesh).map(point_key).collect()),
-            midpoints: EdgeMidpoints::new(mesh),
+            hanging,
+            halo,
+            midpoints,
         }
     }
 }

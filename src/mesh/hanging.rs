@@ -25,7 +25,7 @@
 //! ([`Hanging::face_lists`], [`Hanging::edge_lists`]) are made on first
 //! request for callers that want slices.
 
-use std::cell::OnceCell;
+use std::sync::OnceLock;
 
 use super::VTK_TO_MORTON;
 
@@ -66,8 +66,8 @@ pub(crate) struct Hanging {
     /// Local node indices at the Morton corners of the coarse elements held
     /// by other ranks (few: partition boundaries only).
     ghost_rows: Vec<[u32; 8]>,
-    face_lists: OnceCell<Vec<[u32; 4]>>,
-    edge_lists: OnceCell<Vec<[u32; 2]>>,
+    face_lists: OnceLock<Vec<[u32; 4]>>,
+    edge_lists: OnceLock<Vec<[u32; 2]>>,
 }
 
 impl Hanging {
@@ -80,8 +80,8 @@ impl Hanging {
             face,
             edge,
             ghost_rows,
-            face_lists: OnceCell::new(),
-            edge_lists: OnceCell::new(),
+            face_lists: OnceLock::new(),
+            edge_lists: OnceLock::new(),
         }
     }
 

@@ -74,8 +74,8 @@ use crate::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::report::PhaseTimer;
 
-use std::cell::OnceCell;
 use std::sync::Arc;
+use std::sync::OnceLock;
 
 pub use boundary::{Boundary, BoundaryFace};
 pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, SURFACE_PATCH};
@@ -160,7 +160,7 @@ pub struct Mesh {
     elements: Elements,
     /// Class of each element (made on first request when every element
     /// has `uniform_class`).
-    element_class: OnceCell<Vec<u8>>,
+    element_class: OnceLock<Vec<u8>>,
     uniform_class: u8,
     connectivity: Vec<[u32; 8]>,
     num_owned: usize,
@@ -1028,8 +1028,8 @@ fn assemble(
         size: comm.size(),
         domain: *domain,
         element_class: match elements.class {
-            Some(class) => OnceCell::from(class),
-            None => OnceCell::new(),
+            Some(class) => OnceLock::from(class),
+            None => OnceLock::new(),
         },
         uniform_class: elements.uniform,
         elements: elements.leaves,
