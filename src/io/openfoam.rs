@@ -557,22 +557,28 @@ impl<'m> Polygons<'m> {
             .flatten()
             .and_then(|m| Some((self.emitter(f)?, m)));
         if let Some((e, m)) = whole {
-            if self.last.0 != e {
-                self.last = (e, self.cube(e));
-            }
-            let (c, s) = self.last.1;
             let conn = self.conn;
             let row = &conn[e as usize];
             // A loop, not `map`, which was not inlined and handed its
             // result back through memory.
-            let mut nodes = [(0usize, [0u32; 3]); 4];
+            let mut nodes = [0usize; 4];
             for k in 0..4 {
-                nodes[k] = (row[VTK_TO_MORTON[m[k]]] as usize, corner_coords(c, s, m[k]));
+                nodes[k] = row[VTK_TO_MORTON[m[k]]] as usize;
             }
             for k in 0..4 {
-                let ((a, xa), (b, xb)) = (nodes[k], nodes[(k + 1) % 4]);
+                let (a, b) = (nodes[k], nodes[(k + 1) % 4]);
                 poly.push(a as u32);
                 if self.midpoints.may_hold_ends(a, b) {
+                    // The element's cube only for an edge that may hold a
+                    // point: most hold none.
+                    if self.last.0 != e {
+                        self.last = (e, self.cube(e));
+                    }
+                    let (c, s) = self.last.1;
+                    let (xa, xb) = (
+                        corner_coords(c, s, m[k]),
+                        corner_coords(c, s, m[(k + 1) % 4]),
+                    );
                     let m = self.midpoint(((c, s), row), Some((a, b)), xa, xb);
                     poly.extend(m.map(|m| m.0));
                 }

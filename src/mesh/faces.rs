@@ -211,6 +211,33 @@ const SHAPES: [u16; 17] = {
 /// [`SHAPES`]' whole face.
 const WHOLE_SHAPE: u8 = 0;
 
+/// [`Face::whole_corner_octants`] by a face's bits 5-8 (normal axis, sign,
+/// high side): the emitting element's Morton corners in the order of
+/// [`Face::corners`].
+const WHOLE_CORNERS: [[u8; 4]; 16] = {
+    let mut out = [[0u8; 4]; 16];
+    let mut i = 0;
+    while i < 16 {
+        let (axis, negative, plus) = (i & 3, i >> 2 & 1 == 1, i >> 3 & 1);
+        // The (u, v) axes of `corners`.
+        let (u, v) = match axis {
+            0 => (1, 2),
+            1 => (2, 0),
+            _ => (0, 1),
+        };
+        let mut k = 0;
+        while axis < 3 && k < 4 {
+            // A negative normal sees the (u, v) order clockwise: reverse.
+            let j = if negative { (4 - k) % 4 } else { k };
+            let w = (SHAPES[WHOLE_SHAPE as usize] >> (4 * j)) as usize & 15;
+            out[i][k] = (plus << axis | ((w & 3) / 2) << u | ((w >> 2) / 2) << v) as u8;
+            k += 1;
+        }
+        i += 1;
+    }
+    out
+};
+
 impl Face {
     /// The local element on this side (the owner).
     #[inline]
@@ -284,19 +311,7 @@ impl Face {
         if self.code & 31 != WHOLE_SHAPE as u64 {
             return None;
         }
-        let axis = self.axis();
-        let plus = (self.code >> 8 & 1) as usize;
-        // The (u, v) axes of `corners`.
-        let (u, v) = match axis {
-            0 => (1, 2),
-            1 => (2, 0),
-            _ => (0, 1),
-        };
-        Some(std::array::from_fn(|k| {
-            let j = if self.negative() { (4 - k) % 4 } else { k };
-            let (a, b) = self.corner_halves(j);
-            plus << axis | (a as usize / 2) << u | (b as usize / 2) << v
-        }))
+        Some(WHOLE_CORNERS[(self.code >> 5 & 15) as usize].map(usize::from))
     }
 
     /// Corner `k` in halves, `(a, b)`, in the stored (counter-clockwise in
