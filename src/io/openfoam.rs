@@ -353,15 +353,22 @@ struct Chunk {
     lens: Vec<u8>,
 }
 
-/// What the polygons are made from, made once for the threads that make
-/// them (the parts of the mesh they read, and the indexes).
-struct PolygonIndex<'m> {
+/// The parts of the mesh and its faces the polygons are made from, copied
+/// into each thread's maker: read in the hot loop by one load each.
+#[derive(Clone, Copy)]
+struct MeshParts<'m> {
     faces: &'m [Face],
     halo_start: usize,
     elements: &'m [crate::octant::Octant],
     conn: &'m [[u32; 8]],
     nn: usize,
     ni: usize,
+}
+
+/// What the polygons are made from, made once for the threads that make
+/// them.
+struct PolygonIndex<'m> {
+    parts: MeshParts<'m>,
     /// The hanging nodes by the nodes they depend on.
     hanging: DepsIndex,
     /// The halo's corners.
@@ -391,12 +398,14 @@ impl<'m> PolygonIndex<'m> {
             },
         );
         PolygonIndex {
-            faces: faces.faces(),
-            halo_start: faces.halo_range().start,
-            elements: mesh.elements(),
-            conn: mesh.connectivity(),
-            nn: mesh.num_nodes(),
-            ni: mesh.num_independent(),
+            parts: MeshParts {
+                faces: faces.faces(),
+                halo_start: faces.halo_range().start,
+                elements: mesh.elements(),
+                conn: mesh.connectivity(),
+                nn: mesh.num_nodes(),
+                ni: mesh.num_independent(),
+            },
             hanging,
             halo,
             midpoints,
@@ -407,16 +416,9 @@ impl<'m> PolygonIndex<'m> {
 /// The part of [`face_polygons`] that needs no labels, one per thread:
 /// each face's points as numbers.
 struct Polygons<'m> {
-    // The index's parts, copied: read through `&mut self` in the hot
-    // loop, one load each, not two.
-    faces: &'m [Face],
-    halo_start: usize,
-    elements: &'m [crate::octant::Octant],
-    conn: &'m [[u32; 8]],
+    m: MeshParts<'m>,
     hanging: &'m DepsIndex,
     midpoints: &'m EdgeMidpoints,
-    nn: usize,
-    ni: usize,
     /// A copy of the index's: the searches' hint is this thread's.
     halo: PointIndex,
     /// The last emitter and its cube: faces come by owner, so a few in a
@@ -427,14 +429,9 @@ struct Polygons<'m> {
 impl<'m> Polygons<'m> {
     fn new(ix: &'m PolygonIndex<'m>) -> Self {
         Polygons {
-            faces: ix.faces,
-            halo_start: ix.halo_start,
-            elements: ix.elements,
-            conn: ix.conn,
+            m: ix.parts,
             hanging: &ix.hanging,
             midpoints: &ix.midpoints,
-            nn: ix.nn,
-            ni: ix.ni,
             halo: ix.halo.clone(),
             last: (u32::MAX, ([0; 3], 0)),
         }
@@ -473,7 +470,7 @@ impl<'m> Polygons<'m> {
             _ => return None,
         };
         let k = self.hanging.find(a, b)?;
-        Some((self.ni + k) as u32)
+        Some((self.m.ni + k) as u32)
     }
 
     /// The point at `x` that is no corner of the cube `(c, s)` (corner
@@ -484,13 +481,13 @@ impl<'m> Polygons<'m> {
 
     /// The number of the halo's corner at `x` (`nn + j`), if `x` is one.
     fn halo_point(&mut self, x: [u32; 3]) -> Option<u32> {
-        Some((self.nn + self.halo.find(point_key(x))?) as u32)
+        Some((self.m.nn + self.halo.find(point_key(x))?) as u32)
     }
 
     /// The local element whose whole face `f` is: the owner, or a finer
     /// local neighbour.
     fn emitter(&self, f: &Face) -> Option<u32> {
-        if self.elements[f.owner() as usize].side() == f.emitter_side() {
+        if self.m.elements[f.owner() as usize].side() == f.emitter_side() {
             return Some(f.owner());
         }
         match f.other() {
@@ -501,7 +498,7 @@ impl<'m> Polygons<'m> {
 
     #[inline]
     fn cube(&self, e: u32) -> ([u32; 3], u32) {
-        let o = self.elements[e as usize];
+        let o = self.m.elements[e as usize];
         (o.coords(), o.side())
     }
 
@@ -523,7 +520,7 @@ impl<'m> Polygons<'m> {
                     return None;
                 }
                 let k = self.hanging.find(a as u32, b as u32);
-                k.map(|k| (self.ni + k) as u32)
+                k.map(|k| (self.m.ni + k) as u32)
             }
             None => self.hanging_on(cube, row, m),
         };
@@ -548,16 +545,16 @@ impl<'m> Polygons<'m> {
     /// node `n < nn`, or `nn + j` for the point at place `j` of the halo's
     /// corners.
     fn polygon(&mut self, i: usize, poly: &mut Vec<u32>) -> Result<()> {
-        let f = &self.faces[i];
+        let f = &self.m.faces[i];
         // Most faces are the whole face of a local element: their corners
         // are its nodes, and an edge's midpoint is looked for only when
         // both ends may carry one.
-        let whole = (i < self.halo_start)
+        let whole = (i < self.m.halo_start)
             .then(|| f.whole_corner_octants())
             .flatten()
             .and_then(|m| Some((self.emitter(f)?, m)));
         if let Some((e, m)) = whole {
-            let conn = self.conn;
+            let conn = self.m.conn;
             let row = &conn[e as usize];
             // A loop, not `map`, which was not inlined and handed its
             // result back through memory.
@@ -588,7 +585,7 @@ impl<'m> Polygons<'m> {
         let c = f.corners();
         let e = self.emitter(f).unwrap_or(f.owner());
         let cube = self.cube(e);
-        let conn = self.conn;
+        let conn = self.m.conn;
         let row = &conn[e as usize];
         let nodes = c.map(|x| corner_at(cube.0, cube.1, x).map(|m| row[VTK_TO_MORTON[m]] as usize));
         // At most a corner and a midpoint per side.
@@ -614,7 +611,7 @@ impl<'m> Polygons<'m> {
             }
         }
         let face = &mut face[..n];
-        if i >= self.halo_start {
+        if i >= self.m.halo_start {
             // Both sides start at the lowest point.
             let at = (0..n).min_by_key(|&k| point_key(face[k].1)).unwrap_or(0);
             face.rotate_left(at);
@@ -830,8 +827,6 @@ fn write_raw<T: Raw>(out: &mut impl Write, v: &[T]) -> std::io::Result<()> {
 /// are gathered from the elements' corners first.
 struct NodeFill<'m> {
     nodes: &'m NodeLabels,
-    elements: &'m [crate::octant::Octant],
-    conn: &'m [[u32; 8]],
     /// By node; empty on a snapped mesh.
     lattice: Vec<[u32; 3]>,
     /// Elements whose corners are in `lattice`.
@@ -852,8 +847,6 @@ impl<'m> NodeFill<'m> {
         };
         NodeFill {
             nodes,
-            elements: mesh.elements(),
-            conn: mesh.connectivity(),
             lattice,
             gathered: 0,
             written: 0,
@@ -863,16 +856,13 @@ impl<'m> NodeFill<'m> {
 
     /// One step into `out`; whether there are more.
     fn step(&mut self, out: &mut PointsOut) -> Result<bool> {
-        let snapped = out.mesh.moved();
-        if snapped.is_none() && self.gathered < self.elements.len() {
-            let r = self.gathered..self.elements.len().min(self.gathered + Self::STEP);
-            for (e, row) in self.elements[r.clone()].iter().zip(&self.conn[r.clone()]) {
-                let (a, s) = (e.coords(), e.side());
-                for (v, &n) in row.iter().enumerate() {
-                    self.lattice[n as usize] = corner_coords(a, s, VTK_TO_MORTON[v]);
-                }
-            }
+        let (mesh, snapped) = (out.mesh, out.mesh.moved());
+        let ne = mesh.elements().len();
+        if snapped.is_none() && self.gathered < ne {
+            let r = self.gathered..ne.min(self.gathered + Self::STEP);
             self.gathered = r.end;
+            let lattice = &mut self.lattice;
+            mesh.for_each_corner_in(r, |n, x| lattice[n as usize] = x);
             return Ok(true);
         }
         let direct = self.nodes.direct;
@@ -893,7 +883,7 @@ impl<'m> NodeFill<'m> {
     }
 }
 
-/// The `points` file in label order ([`Labels`]): the local nodes, then
+/// The `points` file in label order ([`NodeLabels`]): the local nodes, then
 /// the halo points the faces used (user units: the moved positions on a
 /// snapped mesh, the lattice's otherwise). In binary the positions stream
 /// to the file and the count goes last over room left for it, as in

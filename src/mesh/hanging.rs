@@ -126,16 +126,22 @@ impl Hanging {
         out
     }
 
-    /// Asks the processor for the row [`Hanging::deps`] reads for hanging
-    /// node `k` (if there is one), [`AHEAD`] calls before it: the coarse
-    /// elements come in the walk's order, not in memory's.
-    #[inline]
-    pub fn prefetch(&self, k: usize, connectivity: &[[u32; 8]]) {
-        if k < self.len() {
-            if let Some(c) = self.coarse_element(k) {
+    /// [`Hanging::deps`] of the hanging nodes of `range`, in order, each
+    /// coarse element's row asked of the processor [`AHEAD`] nodes before
+    /// it is read: the coarse elements come in the walk's order, not in
+    /// memory's.
+    pub fn deps_in<'a>(
+        &'a self,
+        range: std::ops::Range<usize>,
+        connectivity: &'a [[u32; 8]],
+    ) -> impl Iterator<Item = HangingDeps> + 'a {
+        range.map(move |k| {
+            let ahead = (k + AHEAD < self.len()).then(|| self.coarse_element(k + AHEAD));
+            if let Some(c) = ahead.flatten() {
                 super::prefetch(connectivity, c);
             }
-        }
+            self.deps(k, connectivity)
+        })
     }
 
     /// The local element hanging node `k` lies on a face or edge of, if
@@ -154,12 +160,8 @@ impl Hanging {
     /// The face-hanging nodes' dependency lists (made on first request).
     pub fn face_lists(&self, connectivity: &[[u32; 8]]) -> &[[u32; 4]] {
         self.face_lists.get_or_init(|| {
-            (0..self.num_face())
-                .map(|k| {
-                    self.prefetch(k + AHEAD, connectivity);
-                    let d = self.deps(k, connectivity);
-                    [d[0], d[1], d[2], d[3]]
-                })
+            self.deps_in(0..self.num_face(), connectivity)
+                .map(|d| [d[0], d[1], d[2], d[3]])
                 .collect()
         })
     }
@@ -167,12 +169,8 @@ impl Hanging {
     /// The edge-hanging nodes' dependency lists (made on first request).
     pub fn edge_lists(&self, connectivity: &[[u32; 8]]) -> &[[u32; 2]] {
         self.edge_lists.get_or_init(|| {
-            (self.num_face()..self.len())
-                .map(|k| {
-                    self.prefetch(k + AHEAD, connectivity);
-                    let d = self.deps(k, connectivity);
-                    [d[0], d[1]]
-                })
+            self.deps_in(self.num_face()..self.len(), connectivity)
+                .map(|d| [d[0], d[1]])
                 .collect()
         })
     }
@@ -215,8 +213,7 @@ impl DepsIndex {
     /// The index of `hanging`'s nodes; `ni` independent nodes,
     /// `connectivity` the mesh's.
     pub fn new(hanging: &Hanging, connectivity: &[[u32; 8]], ni: usize) -> DepsIndex {
-        let pair = |k: usize| -> Option<(usize, u32)> {
-            let d = hanging.deps(k, connectivity);
+        let pair = |d: HangingDeps| -> Option<(usize, u32)> {
             let (a, b) = match d.len() {
                 4 => face_diagonal([d[0], d[1], d[2], d[3]]),
                 _ => (d[0], d[1]),
@@ -226,9 +223,9 @@ impl DepsIndex {
             ((a.max(b) as usize) < ni).then_some((a.min(b) as usize, a.max(b)))
         };
         let mut start = vec![0u32; ni + 1];
-        for k in 0..hanging.len() {
-            hanging.prefetch(k + AHEAD, connectivity);
-            if let Some((a, _)) = pair(k) {
+        let all = || hanging.deps_in(0..hanging.len(), connectivity);
+        for d in all() {
+            if let Some((a, _)) = pair(d) {
                 start[a + 1] += 1;
             }
         }
@@ -237,9 +234,8 @@ impl DepsIndex {
         }
         let mut entries = vec![(0u32, 0u32); start[ni] as usize];
         // `start[a]` runs to the end of `a`'s entries, then all move back.
-        for k in 0..hanging.len() {
-            hanging.prefetch(k + AHEAD, connectivity);
-            if let Some((a, b)) = pair(k) {
+        for (k, d) in all().enumerate() {
+            if let Some((a, b)) = pair(d) {
                 entries[start[a] as usize] = (b, k as u32);
                 start[a] += 1;
             }

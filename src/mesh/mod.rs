@@ -506,8 +506,20 @@ impl Mesh {
     /// Calls `f(node, lattice point)` at every corner of every local
     /// element (a node once per element that has it; the nodes that are
     /// only a dependency never), each element's anchor decoded once.
-    pub(crate) fn for_each_corner(&self, mut f: impl FnMut(u32, [u32; 3])) {
-        for (e, c) in self.elements.iter().zip(&self.connectivity) {
+    pub(crate) fn for_each_corner(&self, f: impl FnMut(u32, [u32; 3])) {
+        self.for_each_corner_in(0..self.elements.len(), f);
+    }
+
+    /// [`Mesh::for_each_corner`] for the local elements of `range`.
+    pub(crate) fn for_each_corner_in(
+        &self,
+        range: std::ops::Range<usize>,
+        mut f: impl FnMut(u32, [u32; 3]),
+    ) {
+        for (e, c) in self.elements[range.clone()]
+            .iter()
+            .zip(&self.connectivity[range])
+        {
             let (a, s) = (e.coords(), e.side());
             for (v, &n) in c.iter().enumerate() {
                 f(n, dual::corner_coords(a, s, VTK_TO_MORTON[v]));
