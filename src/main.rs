@@ -1,6 +1,13 @@
 //! The `octmesh` command: parses the command line (or case file) into a
 //! configuration, runs the library's pipeline on it, prints the phase table
 //! on rank 0 and exits 0, or 2 after an error reported on every rank.
+//!
+//! A panic (an internal bug) on any rank prints one line naming the rank,
+//! `octmesh: internal error on rank r of P: <message> (at file:line)`, and
+//! ends the whole job at once with `MPI_Abort(MPI_COMM_WORLD, 3)`: the
+//! other ranks may be waiting in a collective for the panicking one. Run
+//! without an MPI launcher the command exits with status 3. A panic the
+//! library catches itself (around the STL parser) stays that call's error.
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -316,6 +323,86 @@ fn launched_by_mpi() -> bool {
     LAUNCHER_VARS.iter().any(|v| std::env::var_os(v).is_some())
 }
 
+/// Fault injection for the tests, not a user option:
+/// `OCTMESH_FAULT_PANIC_RANK=r` makes rank `r` panic before the run starts,
+/// while the other ranks go on into the run's collectives.
+fn inject_fault(rank: usize) {
+    let target = std::env::var("OCTMESH_FAULT_PANIC_RANK").ok();
+    if target.and_then(|r| r.trim().parse().ok()) == Some(rank) {
+        panic!("fault injected by OCTMESH_FAULT_PANIC_RANK={rank}");
+    }
+}
+
+/// Exit status (and `MPI_Abort` error code) after a panic on any rank.
+const INTERNAL_ERROR: i32 = 3;
+
+/// The last panic's message and place, kept by [`remember_panics`] for
+/// [`abort_job`].
+static LAST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);
+
+/// Replaces the default panic message by a note of the panic (a backtrace
+/// is printed when `RUST_BACKTRACE` asks for one): a panic that the library
+/// catches itself (the STL parser's) becomes its error message, and one that
+/// reaches `main` is reported once, by [`abort_job`].
+fn remember_panics() {
+    std::panic::set_hook(Box::new(|info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<&str>()
+            .copied()
+            .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+            .unwrap_or("(no message)");
+        let at = info
+            .location()
+            .map(|l| format!(" (at {}:{})", l.file(), l.line()))
+            .unwrap_or_default();
+        let trace = std::backtrace::Backtrace::capture();
+        if trace.status() == std::backtrace::BacktraceStatus::Captured {
+            let _ = writeln!(std::io::stderr(), "{trace}");
+        }
+        if let Ok(mut last) = LAST_PANIC.lock() {
+            *last = Some(format!("{message}{at}"));
+        }
+    }));
+}
+
+/// Ends the job after a panic reached `main` on this rank: prints one line
+/// naming the rank, then `MPI_Abort` on `MPI_COMM_WORLD` (the other ranks
+/// may be waiting in a collective for this one; unwinding into
+/// `MPI_Finalize` would hang them all), or a plain exit without MPI. It
+/// calls the MPI C API directly: the communicator may be mid-operation.
+fn abort_job(rank: usize, size: usize) -> ! {
+    let what = LAST_PANIC
+        .lock()
+        .ok()
+        .and_then(|mut l| l.take())
+        .unwrap_or_else(|| "(no message)".to_string());
+    let (mut initialized, mut finalized) = (0, 0);
+    // SAFETY: both may be called at any time, before MPI_Init and after
+    // MPI_Finalize too.
+    unsafe {
+        mpi::ffi::MPI_Initialized(&mut initialized);
+        mpi::ffi::MPI_Finalized(&mut finalized);
+    }
+    let mpi_up = initialized != 0 && finalized == 0;
+    let then = if mpi_up {
+        "aborting the MPI job"
+    } else {
+        "exiting"
+    };
+    let line = format!("octmesh: internal error on rank {rank} of {size}: {what}; {then}\n");
+    // One write, so that ranks' reports do not interleave.
+    let _ = std::io::stderr().write_all(line.as_bytes());
+    if mpi_up {
+        // SAFETY: MPI is initialised and not finalised; MPI_Abort does not
+        // return (Open MPI ends every process of the job).
+        unsafe {
+            mpi::ffi::MPI_Abort(mpi::ffi::RSMPI_COMM_WORLD, INTERNAL_ERROR);
+        }
+    }
+    std::process::exit(INTERNAL_ERROR);
+}
+
 fn main() -> ExitCode {
     keep_freed_memory();
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -333,7 +420,14 @@ fn main() -> ExitCode {
         None => Rc::new(SerialComm),
     };
     let (rank, size) = (comm.rank(), comm.size());
-    let result = run(&comm, &args);
+    remember_panics();
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        inject_fault(rank);
+        run(&comm, &args)
+    }));
+    let Ok(result) = result else {
+        abort_job(rank, size)
+    };
     // Report before MPI_Finalize: once one rank exits non-zero, mpirun may
     // kill the others before they print.
     if let Err(e) = &result {

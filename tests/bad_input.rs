@@ -1,11 +1,15 @@
 //! Bad input on 1 and 3 ranks, through the command (a clear message on every
 //! rank, a non-zero exit, no panic text, no hang) and through the C API
 //! (`tests/c/bad_input.c`: the expected status on every rank, the handle
-//! intact and still working), and octant limits.
+//! intact and still working), and octant limits. Also an internal error (a
+//! panic injected on one rank with the command's test-only
+//! `OCTMESH_FAULT_PANIC_RANK`): the whole job ends promptly with exit status
+//! 3 and one line naming the rank.
 
 mod common;
 use common::*;
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use std::time::Duration;
 
 fn expect_failure(np: usize, args: &[&str], needle: &str) {
@@ -131,6 +135,53 @@ fn bad_arguments_fail_cleanly_on_every_rank() {
             "limit of 1000 octants",
         );
     }
+}
+
+/// Checks the output of a run in which `rank` of `np` panicked.
+fn expect_internal_error(out: &Output, rank: usize, np: usize, how: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    let all = format!("{}{err}", String::from_utf8_lossy(&out.stdout));
+    assert!(!out.status.success(), "{how} should fail:\n{all}");
+    let line = format!("octmesh: internal error on rank {rank} of {np}: fault injected");
+    assert_eq!(err.matches(&line).count(), 1, "{how}: no '{line}':\n{all}");
+    // The command's hook replaces Rust's default panic message.
+    assert!(!all.contains("panicked"), "{how}: panic text:\n{all}");
+}
+
+/// The injected panic as the process environment sets it.
+fn fault_env(rank: usize) -> [(&'static str, String); 2] {
+    [
+        ("OCTMESH_FAULT_PANIC_RANK", rank.to_string()),
+        // No backtrace from the hook, whatever the caller's environment says.
+        ("RUST_BACKTRACE", "0".to_string()),
+    ]
+}
+
+#[test]
+fn a_panic_on_one_rank_aborts_the_whole_job() {
+    let args = ["mesh", "sphere", "--level", "4"];
+    for rank in [1, 0] {
+        let env = fault_env(rank);
+        let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+        // Before the hook, the other rank waited in a collective forever;
+        // mpirun_env panics when the job outlives the limit.
+        let out = mpirun_env(2, &octmesh_bin(), &args, &env, Duration::from_secs(60));
+        let how = format!("a panic on rank {rank} of 2");
+        expect_internal_error(&out, rank, 2, &how);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("aborting the MPI job"), "{how}:\n{err}");
+    }
+}
+
+#[test]
+fn a_panic_without_mpirun_exits_with_status_3() {
+    let mut cmd = Command::new(octmesh_bin());
+    cmd.args(["mesh", "sphere", "--level", "4"])
+        .env_remove("OCTMESH_MPI")
+        .envs(fault_env(0));
+    let out = run_with_limit(cmd, Duration::from_secs(60));
+    expect_internal_error(&out, 0, 1, "a panic without mpirun");
+    assert_eq!(out.status.code(), Some(3));
 }
 
 /// The C test program, built against this build's library.
