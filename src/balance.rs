@@ -121,22 +121,31 @@ impl LinearOctree {
     }
 }
 
-/// Bit `i` of `SKIP[c]` is set when offset `i` from child `c` stays inside
-/// its parent (the neighbour is a sibling).
-fn sibling_masks() -> [u32; 8] {
-    let offs = Connectivity::Corner.offsets();
+/// For a family parent that is child `c` of its own parent `pp`, the
+/// distinct steps from `pp` to the parents `q` of its counted neighbours
+/// outside `pp`: along axis `k`, 0 (the neighbour stays in `pp`'s slab) or
+/// 1 (it lies beyond `pp` on the side where `c` sits, bit `k` of `c`); never
+/// all 0. Up to 7 for corner contacts, 6 for edges, 3 for faces.
+///
+/// ```text
+///   pp's row along x:   [ q  ][    pp    ][ q' ]
+///                              [c0][c1]
+///   child c0 (bit clear) reaches q below, c1 (bit set) q' above; offsets
+///   that stay inside pp (c0 + 1, c1 - 1) reach no other parent.
+/// ```
+fn probe_steps(offsets: &[[i32; 3]]) -> [([[u8; 3]; 7], usize); 8] {
     std::array::from_fn(|c| {
-        let mut mask = 0u32;
-        for (i, d) in offs.iter().enumerate() {
-            let inside = (0..3).all(|k| {
-                let bit = (c >> k) & 1;
-                d[k] == 0 || (d[k] == 1 && bit == 0) || (d[k] == -1 && bit == 1)
-            });
-            if inside {
-                mask |= 1 << i;
+        let mut steps = [[0u8; 3]; 7];
+        let mut n = 0;
+        for d in offsets {
+            let side = |k: usize| if c >> k & 1 == 1 { 1 } else { -1 };
+            let e: [u8; 3] = std::array::from_fn(|k| (d[k] == side(k)) as u8);
+            if e != [0; 3] && !steps[..n].contains(&e) {
+                steps[n] = e;
+                n += 1;
             }
         }
-        mask
+        (steps, n)
     })
 }
 
@@ -144,13 +153,13 @@ fn sibling_masks() -> [u32; 8] {
 const RECENT_BITS: u32 = 14;
 
 struct Balancer {
-    offsets: &'static [[i32; 3]],
     /// The domain's root cells: families in the void, and probes leaving
     /// the brick, are skipped (p4est's brick has nothing there).
     brick: Brick,
     /// Upper lattice bounds of the brick.
     hi: [i64; 3],
-    skip: [u32; 8],
+    /// [`probe_steps`] of the connectivity.
+    steps: [([[u8; 3]; 7], usize); 8],
     begin: u64,
     end: u64,
     first_cell: Vec<u64>,
@@ -188,10 +197,9 @@ impl Balancer {
         let brick = tree.brick();
         Balancer {
             made: Vec::new(),
-            offsets: conn.offsets(),
+            steps: probe_steps(conn.offsets()),
             brick,
             hi: brick.hi().map(|v| v as i64),
-            skip: sibling_masks(),
             begin,
             end,
             first_cell: tree.first_cells().to_vec(),
@@ -273,37 +281,32 @@ impl Balancer {
         if self.brick.is_void(p) {
             return;
         }
-        let skip = self.skip[p.child_id() as usize];
+        let (steps, n) = &self.steps[p.child_id() as usize];
         let c = p.coords();
         let len = p.side() as i64;
         let qmask = !(2 * p.side() - 1);
         let qlevel = p.level() - 1;
-        // Per axis, the parent's coordinate one side below, at and above,
-        // cut to the probe's level and spread into its Morton bits (`None`
-        // outside the domain): each probe's code is then three of them
-        // or-ed, nine spreads per family instead of three per probe.
-        let spread: [[Option<u64>; 3]; 3] = std::array::from_fn(|k| {
-            std::array::from_fn(|j| {
-                let v = c[k] as i64 + (j as i64 - 1) * len;
-                (v >= 0 && v < self.hi[k]).then(|| spread3(v as u32 & qmask) << k)
-            })
+        // Per axis, `pp`'s coordinate and the one a step beyond it (`None`
+        // outside the domain), spread into their Morton bits: each probe's
+        // code is then three of them or-ed.
+        let spread: [[Option<u64>; 2]; 3] = std::array::from_fn(|k| {
+            let beyond = c[k] as i64
+                + if p.child_id() >> k & 1 == 1 {
+                    len
+                } else {
+                    -len
+                };
+            [
+                Some(spread3(c[k] & qmask) << k),
+                (beyond >= 0 && beyond < self.hi[k]).then(|| spread3(beyond as u32 & qmask) << k),
+            ]
         });
-        let mut seen = [u64::MAX; 8];
-        let mut nseen = 0;
-        for (i, d) in self.offsets.iter().enumerate() {
-            if skip & (1 << i) != 0 {
-                continue;
-            }
-            let at = |k: usize| spread[k][(d[k] + 1) as usize];
+        for e in &steps[..*n] {
+            let at = |k: usize| spread[k][e[k] as usize];
             let (Some(x), Some(y), Some(z)) = (at(0), at(1), at(2)) else {
                 continue;
             };
             let qb = x | y | z;
-            if seen[..nseen].contains(&qb) {
-                continue;
-            }
-            seen[nseen] = qb;
-            nseen += 1;
             let q = Octant::from_parts(qb, qlevel);
             let qe = q.cell_end();
             if qb >= self.begin && qe <= self.end {
@@ -540,6 +543,46 @@ mod tests {
         assert!(e.is_err());
         assert_eq!(t.leaves(), full.leaves());
         assert_eq!(t.balanced(), Some(Connectivity::Corner));
+    }
+
+    #[test]
+    fn probe_steps_reach_the_parents_of_the_outside_neighbours() {
+        // An interior family parent at level 5, each child position: the
+        // parents of its neighbours outside its own parent, found one
+        // neighbour at a time, are the steps' parents exactly.
+        let pp = Octant::ROOT.child(3).child(5).child(6).child(1);
+        for conn in [Connectivity::Face, Connectivity::Edge, Connectivity::Corner] {
+            let steps = probe_steps(conn.offsets());
+            for c in 0..8u32 {
+                let p = pp.child(c);
+                let mut brute: Vec<Octant> = (conn.offsets().iter())
+                    .map(|&d| p.neighbor(d).unwrap().parent())
+                    .filter(|&q| q != pp)
+                    .collect();
+                brute.sort_unstable();
+                brute.dedup();
+                let (list, n) = steps[c as usize];
+                let mut got: Vec<Octant> = list[..n]
+                    .iter()
+                    .map(|e| {
+                        let d = std::array::from_fn(|k| {
+                            e[k] as i32 * if c >> k & 1 == 1 { 1 } else { -1 }
+                        });
+                        pp.neighbor(d).unwrap()
+                    })
+                    .collect();
+                got.sort_unstable();
+                assert_eq!(got.len(), n, "{conn:?} child {c}: a repeated step");
+                got.dedup();
+                assert_eq!(got, brute, "{conn:?} child {c}");
+                let want = match conn {
+                    Connectivity::Face => 3,
+                    Connectivity::Edge => 6,
+                    Connectivity::Corner => 7,
+                };
+                assert_eq!(n, want);
+            }
+        }
     }
 
     #[test]
