@@ -37,6 +37,20 @@ pub fn avx512() -> bool {
     false
 }
 
+/// Whether this processor has AVX2 (four `f64` lanes): where AVX-512F is
+/// missing, refinement's box tests take four children at a time with it
+/// ([`crate::geometry::intersect::wide4`]); the same bits as the scalar
+/// code.
+pub fn avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        static HAS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *HAS.get_or_init(|| std::is_x86_feature_detected!("avx2"))
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// Runs `a` and `b` and returns both results: with `spare`, `a` on a
 /// second thread while this one runs `b`; else (or when the thread cannot
 /// start) one after the other on this thread. A panic in either reaches

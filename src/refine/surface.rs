@@ -6,7 +6,7 @@ use crate::comm::{agree, CommRef};
 use crate::error::Result;
 use crate::geometry::intersect::triangle_box_overlap;
 #[cfg(target_arch = "x86_64")]
-use crate::geometry::intersect::wide;
+use crate::geometry::intersect::{wide, wide4};
 use crate::geometry::{Aabb, Triangle};
 use crate::octant::Octant;
 use crate::octree::LinearOctree;
@@ -284,6 +284,7 @@ impl LinearOctree {
             out: Vec::with_capacity(self.local_len()),
             limit: limit.min(usize::MAX as u64) as usize,
             wide: crate::cores::avx512(),
+            four: crate::cores::avx2(),
         };
         let mut result = Ok(());
         let leaves = self.leaves();
@@ -362,6 +363,9 @@ pub(crate) struct SurfaceWalker<'a> {
     /// The processor has AVX-512F ([`crate::cores::avx512`]): a triangle
     /// is tested against eight children at once, with the same verdicts.
     pub(crate) wide: bool,
+    /// Else, the processor has AVX2 ([`crate::cores::avx2`]): four
+    /// children at a time, with the same verdicts.
+    pub(crate) four: bool,
 }
 
 impl SurfaceWalker<'_> {
@@ -430,12 +434,12 @@ impl SurfaceWalker<'_> {
 
     /// The children of `o` that a triangle of `buf[lo..hi]` touches
     /// ([`triangle_box_overlap`]), given each one's box mask in `masks`.
-    /// With AVX-512 a triangle is tested against its children at once;
+    /// With AVX-512 or AVX2 a triangle is tested against its children at once;
     /// either way, the first triangle touching a child decides it.
     fn touched(&self, o: Octant, lo: usize, hi: usize) -> u8 {
         let list = &self.buf[lo..hi];
         #[cfg(target_arch = "x86_64")]
-        if self.wide {
+        if self.wide || self.four {
             let (mut cmin, mut cmax) = ([[0.0; 8]; 3], [[0.0; 8]; 3]);
             for i in 0..8 {
                 let (a, b) = o.child(i as u32).bounds_f64();
@@ -447,9 +451,15 @@ impl SurfaceWalker<'_> {
             for (&t, &m) in list.iter().zip(&self.masks) {
                 let want = m & !touched;
                 if want != 0 {
-                    // SAFETY: `wide` is set only where AVX-512F is.
+                    let tri = &self.tris[t as usize];
+                    // SAFETY: `wide` is set only where AVX-512F is, `four`
+                    // only where AVX2 is.
                     touched |= unsafe {
-                        wide::triangle_boxes_overlap(&self.tris[t as usize], &cmin, &cmax, want)
+                        if self.wide {
+                            wide::triangle_boxes_overlap(tri, &cmin, &cmax, want)
+                        } else {
+                            wide4::triangle_boxes_overlap(tri, &cmin, &cmax, want)
+                        }
                     };
                 }
             }
