@@ -40,7 +40,7 @@
 use crate::brick::Brick;
 use crate::error::Result;
 use crate::octant::{spread3, Connectivity, Octant, MAX_LEVEL};
-use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
+use crate::octree::{owner_of_cell, LinearOctree};
 use crate::refine::{limit_error, NO_LIMIT};
 use crate::sort::{gallop_last_le, radix_sort_bits};
 
@@ -382,17 +382,24 @@ impl Balancer {
         self.made = made;
     }
 
-    /// Applies probes received from other ranks.
-    fn apply_probes(&mut self, probes: Vec<Octant>) {
+    /// Applies probes received from other ranks: sorted, then found by a
+    /// galloping sweep, as the local ones (they are few, near the ends of
+    /// the range: an index of every leaf would cost more than they do).
+    fn apply_probes(&mut self, mut probes: Vec<Octant>) {
+        probes.sort_unstable();
         let mut splits = Vec::new();
-        let index = LeafIndex::new(&self.leaves, self.begin, self.end);
+        let (n, mut i) = (self.leaves.len(), 0);
         for m in probes {
             if m.cell_begin() < self.begin || m.cell_end() > self.end {
                 continue; // stale: cannot happen with a consistent partition
             }
-            let idx = index.find(&self.leaves, m.cell_begin());
-            if self.leaves[idx].level() < m.level() {
-                splits.push((idx, m));
+            let leaves = &self.leaves;
+            // The leaves cover the range: some leaf starts at or before it.
+            if let Some(j) = gallop_last_le(n, i, m.cell_begin(), |k| leaves[k].cell_begin()) {
+                i = j;
+            }
+            if self.leaves[i].level() < m.level() {
+                splits.push((i, m));
             }
         }
         if !splits.is_empty() {
