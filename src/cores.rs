@@ -39,7 +39,7 @@ pub fn avx512() -> bool {
 
 /// Whether this processor has AVX2 (four `f64` lanes): where AVX-512F is
 /// missing, refinement's box tests take four children at a time with it
-/// ([`crate::geometry::intersect::wide4`]); the same bits as the scalar
+/// (`geometry::intersect::wide4`); the same bits as the scalar
 /// code.
 pub fn avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
