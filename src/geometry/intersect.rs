@@ -143,6 +143,117 @@ fn separates(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> bool {
     t_min > b_max || t_max < b_min
 }
 
+/// The separating-axis test of [`triangle_box_overlap`] for one triangle
+/// against several boxes at once, a box per vector lane, written once for
+/// every vector width. The module that expands it defines the vector type
+/// `V` and names the target feature and the intrinsics for `splat`, `sub`,
+/// `mul` and `add`; it defines these primitives too (each lane by lane, with
+/// the scalar operation's rounding): `min` and `max` (with `f64::min`'s and
+/// `f64::max`'s answers for NaN), `gt` and `lt` (the lanes' bits of an
+/// ordered comparison), `is_zero`, and `split_add(b_min, b_max, t)` (`t`
+/// added to `b_max` where it is positive, to `b_min` elsewhere).
+///
+/// Each lane does the scalar test's operations in its order, with no fused
+/// multiply-adds, so every lane has the scalar test's verdict; the lanes
+/// are only not cut short at their first separating axis.
+#[cfg(target_arch = "x86_64")]
+macro_rules! box_lanes {
+    ($feature:literal, $splat:ident, $sub:ident, $mul:ident, $add:ident) => {
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn splat(x: f64) -> V {
+            $splat(x)
+        }
+
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn sub(a: V, b: V) -> V {
+            $sub(a, b)
+        }
+
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn mul(a: V, b: V) -> V {
+            $mul(a, b)
+        }
+
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn add(a: V, b: V) -> V {
+            $add(a, b)
+        }
+
+        /// The lanes of `want` whose box `[bmin, bmax]` the closed triangle
+        /// touches.
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn overlap(tri: &Triangle, bmin: [V; 3], bmax: [V; 3], want: u8) -> u8 {
+            let [p, q, r] = tri.v;
+            let mut open = want;
+            for k in 0..3 {
+                let tlo = p[k].min(q[k]).min(r[k]);
+                let thi = p[k].max(q[k]).max(r[k]);
+                let out = gt(bmin[k], bmax[k]) | gt(splat(tlo), bmax[k]) | lt(splat(thi), bmin[k]);
+                open &= !out;
+            }
+            if open == 0 {
+                return 0;
+            }
+            let at = |x: [f64; 3]| -> [V; 3] { std::array::from_fn(|k| sub(splat(x[k]), bmin[k])) };
+            let vsub =
+                |a: [V; 3], b: [V; 3]| -> [V; 3] { std::array::from_fn(|k| sub(a[k], b[k])) };
+            let v = [at(p), at(q), at(r)];
+            let h: [V; 3] = std::array::from_fn(|k| sub(bmax[k], bmin[k]));
+            let e = [vsub(v[1], v[0]), vsub(v[2], v[1]), vsub(v[0], v[2])];
+            open &= !separates(cross(e[0], e[1]), &v, h);
+            let (one, zero) = (splat(1.0), splat(0.0));
+            let axes = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
+            for edge in &e {
+                for axis in &axes {
+                    if open == 0 {
+                        return 0;
+                    }
+                    open &= !separates(cross(*edge, *axis), &v, h);
+                }
+            }
+            open
+        }
+
+        /// `super::super::cross`, lane by lane.
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn cross(a: [V; 3], b: [V; 3]) -> [V; 3] {
+            [
+                sub(mul(a[1], b[2]), mul(a[2], b[1])),
+                sub(mul(a[2], b[0]), mul(a[0], b[2])),
+                sub(mul(a[0], b[1]), mul(a[1], b[0])),
+            ]
+        }
+
+        /// `super::separates`, lane by lane: the lanes where `axis`
+        /// separates the triangle `v` from the box `[0, h]`.
+        #[target_feature(enable = $feature)]
+        #[inline]
+        fn separates(axis: [V; 3], v: &[[V; 3]; 3], h: [V; 3]) -> u8 {
+            let null = is_zero(axis[0]) & is_zero(axis[1]) & is_zero(axis[2]);
+            let dot = |b: [V; 3]| {
+                add(
+                    add(mul(axis[0], b[0]), mul(axis[1], b[1])),
+                    mul(axis[2], b[2]),
+                )
+            };
+            let d = [dot(v[0]), dot(v[1]), dot(v[2])];
+            let t_min = min(min(d[0], d[1]), d[2]);
+            let t_max = max(max(d[0], d[1]), d[2]);
+            let (mut b_min, mut b_max) = (splat(0.0), splat(0.0));
+            for k in 0..3 {
+                (b_min, b_max) = split_add(b_min, b_max, mul(axis[k], h[k]));
+            }
+            (gt(t_min, b_max) | lt(t_max, b_min)) & !null
+        }
+    };
+}
+
 /// [`triangle_box_overlap`] of one triangle against eight boxes at once
 /// with AVX-512 (the children of an octant, one per lane).
 #[cfg(target_arch = "x86_64")]
@@ -150,16 +261,18 @@ pub(crate) mod wide {
     use super::Triangle;
     use std::arch::x86_64::*;
 
-    type V3 = [__m512d; 3];
+    type V = __m512d;
+    box_lanes!(
+        "avx512f",
+        _mm512_set1_pd,
+        _mm512_sub_pd,
+        _mm512_mul_pd,
+        _mm512_add_pd
+    );
 
     /// The boxes of `want` that the closed triangle touches: bit `i` when
     /// `triangle_box_overlap(tri, [lo[0][i], lo[1][i], lo[2][i]], ..hi..)`
-    /// holds. Each lane does the scalar test's operations in its order
-    /// (the translated vertices, the edges, every product and sum, with no
-    /// fused multiply-adds), and the minima and maxima keep `f64::min`'s
-    /// and `f64::max`'s answers, so every lane has the scalar test's
-    /// verdict; the lanes are only not cut short at their first
-    /// separating axis.
+    /// holds (see `box_lanes`).
     ///
     /// # Safety
     /// The processor must have AVX-512F.
@@ -170,99 +283,60 @@ pub(crate) mod wide {
         hi: &[[f64; 8]; 3],
         want: u8,
     ) -> u8 {
-        let (sub, gt, lt) = (
-            _mm512_sub_pd,
-            |x, y| _mm512_cmp_pd_mask::<_CMP_GT_OQ>(x, y),
-            |x, y| _mm512_cmp_pd_mask::<_CMP_LT_OQ>(x, y),
-        );
         // SAFETY: loads of eight values from arrays of eight.
         let load = |v: &[f64; 8]| unsafe { _mm512_loadu_pd(v.as_ptr()) };
-        let (bmin, bmax) = (lo.map(|v| load(&v)), hi.map(|v| load(&v)));
-        let [p, q, r] = tri.v;
-        let mut open = want;
-        for k in 0..3 {
-            let tlo = p[k].min(q[k]).min(r[k]);
-            let thi = p[k].max(q[k]).max(r[k]);
-            let out = gt(bmin[k], bmax[k])
-                | gt(_mm512_set1_pd(tlo), bmax[k])
-                | lt(_mm512_set1_pd(thi), bmin[k]);
-            open &= !out;
-        }
-        if open == 0 {
-            return 0;
-        }
-        let at =
-            |x: [f64; 3]| -> V3 { std::array::from_fn(|k| sub(_mm512_set1_pd(x[k]), bmin[k])) };
-        let vsub = |a: V3, b: V3| -> V3 { std::array::from_fn(|k| sub(a[k], b[k])) };
-        let v = [at(p), at(q), at(r)];
-        let h: V3 = std::array::from_fn(|k| sub(bmax[k], bmin[k]));
-        let e = [vsub(v[1], v[0]), vsub(v[2], v[1]), vsub(v[0], v[2])];
-        open &= !separates(cross(e[0], e[1]), &v, h);
-        let one = _mm512_set1_pd(1.0);
-        let zero = _mm512_setzero_pd();
-        let axes = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
-        for edge in &e {
-            for axis in &axes {
-                if open == 0 {
-                    return 0;
-                }
-                open &= !separates(cross(*edge, *axis), &v, h);
-            }
-        }
-        open
+        overlap(tri, lo.map(|v| load(&v)), hi.map(|v| load(&v)), want)
     }
 
-    /// `super::super::cross`, lane by lane.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    fn cross(a: V3, b: V3) -> V3 {
-        let (mul, sub) = (_mm512_mul_pd, _mm512_sub_pd);
-        [
-            sub(mul(a[1], b[2]), mul(a[2], b[1])),
-            sub(mul(a[2], b[0]), mul(a[0], b[2])),
-            sub(mul(a[0], b[1]), mul(a[1], b[0])),
-        ]
+    fn gt(a: V, b: V) -> u8 {
+        _mm512_cmp_pd_mask::<_CMP_GT_OQ>(a, b)
     }
 
-    /// `f64::min` or `f64::max` lane by lane, from `vminpd`'s or
-    /// `vmaxpd`'s answer `m` for `(a, b)`: that instruction answers `b`
-    /// when either is NaN, where `f64`'s answer `a` when `b` is NaN.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    fn unless_nan(m: __m512d, a: __m512d, b: __m512d) -> __m512d {
-        _mm512_mask_mov_pd(m, _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(b, b), a)
+    fn lt(a: V, b: V) -> u8 {
+        _mm512_cmp_pd_mask::<_CMP_LT_OQ>(a, b)
     }
 
-    /// `super::separates`, lane by lane: the lanes where `axis` separates
-    /// the triangle `v` from the box `[0, h]`.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    fn separates(axis: V3, v: &[V3; 3], h: V3) -> u8 {
-        let (mul, add) = (_mm512_mul_pd, _mm512_add_pd);
-        let zero = _mm512_setzero_pd();
-        let eq = |x| _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(x, zero);
-        let null = eq(axis[0]) & eq(axis[1]) & eq(axis[2]);
-        let dot = |b: V3| {
-            add(
-                add(mul(axis[0], b[0]), mul(axis[1], b[1])),
-                mul(axis[2], b[2]),
-            )
-        };
-        let d = [dot(v[0]), dot(v[1]), dot(v[2])];
-        let min = |a, b| unless_nan(_mm512_min_pd(a, b), a, b);
-        let max = |a, b| unless_nan(_mm512_max_pd(a, b), a, b);
-        let t_min = min(min(d[0], d[1]), d[2]);
-        let t_max = max(max(d[0], d[1]), d[2]);
-        let (mut b_min, mut b_max) = (zero, zero);
-        for k in 0..3 {
-            let t = mul(axis[k], h[k]);
-            let pos = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(t, zero);
-            b_max = _mm512_mask_add_pd(b_max, pos, b_max, t);
-            b_min = _mm512_mask_add_pd(b_min, !pos, b_min, t);
-        }
-        let apart = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(t_min, b_max)
-            | _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t_max, b_min);
-        apart & !null
+    fn is_zero(a: V) -> u8 {
+        _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(a, _mm512_setzero_pd())
+    }
+
+    /// `f64::min` lane by lane: `vminpd` answers `b` when either is NaN,
+    /// `f64::min` answers `a` when `b` is.
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn min(a: V, b: V) -> V {
+        _mm512_mask_mov_pd(
+            _mm512_min_pd(a, b),
+            _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(b, b),
+            a,
+        )
+    }
+
+    /// `f64::max` lane by lane, as [`min`].
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn max(a: V, b: V) -> V {
+        _mm512_mask_mov_pd(
+            _mm512_max_pd(a, b),
+            _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(b, b),
+            a,
+        )
+    }
+
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn split_add(b_min: V, b_max: V, t: V) -> (V, V) {
+        let pos = gt(t, _mm512_setzero_pd());
+        (
+            _mm512_mask_add_pd(b_min, !pos, b_min, t),
+            _mm512_mask_add_pd(b_max, pos, b_max, t),
+        )
     }
 }
 
@@ -273,14 +347,17 @@ pub(crate) mod wide4 {
     use super::Triangle;
     use std::arch::x86_64::*;
 
-    type V3 = [__m256d; 3];
+    type V = __m256d;
+    box_lanes!(
+        "avx2",
+        _mm256_set1_pd,
+        _mm256_sub_pd,
+        _mm256_mul_pd,
+        _mm256_add_pd
+    );
 
-    /// The boxes of `want` that the closed triangle touches, as
-    /// [`super::wide::triangle_boxes_overlap`]: bit `i` when
-    /// `triangle_box_overlap(tri, [lo[0][i], lo[1][i], lo[2][i]], ..hi..)`
-    /// holds. Lanes `0..4`, then `4..8`; each lane does the scalar test's
-    /// operations in its order (no fused multiply-adds, `f64::min` and
-    /// `f64::max` answers for NaN), so every lane has its verdict.
+    /// As [`super::wide::triangle_boxes_overlap`]: lanes `0..4`, then
+    /// `4..8`.
     ///
     /// # Safety
     /// The processor must have AVX2.
@@ -292,115 +369,57 @@ pub(crate) mod wide4 {
         want: u8,
     ) -> u8 {
         let mut out = 0u8;
-        for half in 0..2 {
-            let w = want >> (4 * half) & 0xf;
+        for first in [0, 4] {
+            let w = want >> first & 0xf;
             if w != 0 {
-                out |= four(tri, lo, hi, 4 * half, w) << (4 * half);
+                // SAFETY: four values from `first <= 4` on, in arrays of 8.
+                let load = |v: &[f64; 8]| unsafe { _mm256_loadu_pd(v.as_ptr().add(first)) };
+                out |= overlap(tri, lo.map(|v| load(&v)), hi.map(|v| load(&v)), w) << first;
             }
         }
         out
     }
 
-    /// Lanes `first..first + 4` of [`triangle_boxes_overlap`], for the four bits
-    /// of `want`.
-    #[target_feature(enable = "avx2")]
-    fn four(tri: &Triangle, lo: &[[f64; 8]; 3], hi: &[[f64; 8]; 3], first: usize, want: u8) -> u8 {
-        let sub = _mm256_sub_pd;
-        let bits = |m: __m256d| _mm256_movemask_pd(m) as u8;
-        let gt = |x, y| bits(_mm256_cmp_pd::<_CMP_GT_OQ>(x, y));
-        let lt = |x, y| bits(_mm256_cmp_pd::<_CMP_LT_OQ>(x, y));
-        // SAFETY: loads of four values from `first..first + 4 <= 8` of
-        // arrays of 8.
-        let load = |v: &[f64; 8]| unsafe { _mm256_loadu_pd(v.as_ptr().add(first)) };
-        let (bmin, bmax) = (lo.map(|v| load(&v)), hi.map(|v| load(&v)));
-        let [p, q, r] = tri.v;
-        let mut open = want;
-        for k in 0..3 {
-            let tlo = p[k].min(q[k]).min(r[k]);
-            let thi = p[k].max(q[k]).max(r[k]);
-            let out = gt(bmin[k], bmax[k])
-                | gt(_mm256_set1_pd(tlo), bmax[k])
-                | lt(_mm256_set1_pd(thi), bmin[k]);
-            open &= !out;
-        }
-        if open == 0 {
-            return 0;
-        }
-        let at =
-            |x: [f64; 3]| -> V3 { std::array::from_fn(|k| sub(_mm256_set1_pd(x[k]), bmin[k])) };
-        let vsub = |a: V3, b: V3| -> V3 { std::array::from_fn(|k| sub(a[k], b[k])) };
-        let v = [at(p), at(q), at(r)];
-        let h: V3 = std::array::from_fn(|k| sub(bmax[k], bmin[k]));
-        let e = [vsub(v[1], v[0]), vsub(v[2], v[1]), vsub(v[0], v[2])];
-        open &= !separates(cross(e[0], e[1]), &v, h);
-        let one = _mm256_set1_pd(1.0);
-        let zero = _mm256_setzero_pd();
-        let axes = [[one, zero, zero], [zero, one, zero], [zero, zero, one]];
-        for edge in &e {
-            for axis in &axes {
-                if open == 0 {
-                    return 0;
-                }
-                open &= !separates(cross(*edge, *axis), &v, h);
-            }
-        }
-        open
-    }
-
-    /// `super::super::cross`, lane by lane.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn cross(a: V3, b: V3) -> V3 {
-        let (mul, sub) = (_mm256_mul_pd, _mm256_sub_pd);
-        [
-            sub(mul(a[1], b[2]), mul(a[2], b[1])),
-            sub(mul(a[2], b[0]), mul(a[0], b[2])),
-            sub(mul(a[0], b[1]), mul(a[1], b[0])),
-        ]
+    fn gt(a: V, b: V) -> u8 {
+        _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(a, b)) as u8
     }
 
-    /// `f64::min` or `f64::max` lane by lane, from `vminpd`'s or
-    /// `vmaxpd`'s answer `m` for `(a, b)` (`b` when either is NaN, where
-    /// `f64`'s answer is `a` when `b` is NaN).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn unless_nan(m: __m256d, a: __m256d, b: __m256d) -> __m256d {
-        _mm256_blendv_pd(m, a, _mm256_cmp_pd::<_CMP_UNORD_Q>(b, b))
+    fn lt(a: V, b: V) -> u8 {
+        _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(a, b)) as u8
     }
 
-    /// `super::separates`, lane by lane: the lanes where `axis` separates
-    /// the triangle `v` from the box `[0, h]`.
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn separates(axis: V3, v: &[V3; 3], h: V3) -> u8 {
-        let (mul, add) = (_mm256_mul_pd, _mm256_add_pd);
-        let zero = _mm256_setzero_pd();
-        let eq = |x| _mm256_cmp_pd::<_CMP_EQ_OQ>(x, zero);
-        let null = _mm256_and_pd(_mm256_and_pd(eq(axis[0]), eq(axis[1])), eq(axis[2]));
-        let dot = |b: V3| {
-            add(
-                add(mul(axis[0], b[0]), mul(axis[1], b[1])),
-                mul(axis[2], b[2]),
-            )
-        };
-        let d = [dot(v[0]), dot(v[1]), dot(v[2])];
-        let min = |a, b| unless_nan(_mm256_min_pd(a, b), a, b);
-        let max = |a, b| unless_nan(_mm256_max_pd(a, b), a, b);
-        let t_min = min(min(d[0], d[1]), d[2]);
-        let t_max = max(max(d[0], d[1]), d[2]);
-        let (mut b_min, mut b_max) = (zero, zero);
-        for k in 0..3 {
-            let t = mul(axis[k], h[k]);
-            let pos = _mm256_cmp_pd::<_CMP_GT_OQ>(t, zero);
-            // The scalar test adds `t` to one sum or the other.
-            b_max = _mm256_blendv_pd(b_max, add(b_max, t), pos);
-            b_min = _mm256_blendv_pd(add(b_min, t), b_min, pos);
-        }
-        let apart = _mm256_or_pd(
-            _mm256_cmp_pd::<_CMP_GT_OQ>(t_min, b_max),
-            _mm256_cmp_pd::<_CMP_LT_OQ>(t_max, b_min),
-        );
-        _mm256_movemask_pd(_mm256_andnot_pd(null, apart)) as u8
+    fn is_zero(a: V) -> u8 {
+        _mm256_movemask_pd(_mm256_cmp_pd::<_CMP_EQ_OQ>(a, _mm256_setzero_pd())) as u8
+    }
+
+    /// `f64::min` lane by lane, as [`super::wide`]'s.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn min(a: V, b: V) -> V {
+        _mm256_blendv_pd(_mm256_min_pd(a, b), a, _mm256_cmp_pd::<_CMP_UNORD_Q>(b, b))
+    }
+
+    /// `f64::max` lane by lane, as [`super::wide`]'s.
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn max(a: V, b: V) -> V {
+        _mm256_blendv_pd(_mm256_max_pd(a, b), a, _mm256_cmp_pd::<_CMP_UNORD_Q>(b, b))
+    }
+
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    fn split_add(b_min: V, b_max: V, t: V) -> (V, V) {
+        let pos = _mm256_cmp_pd::<_CMP_GT_OQ>(t, _mm256_setzero_pd());
+        (
+            _mm256_blendv_pd(_mm256_add_pd(b_min, t), b_min, pos),
+            _mm256_blendv_pd(b_max, _mm256_add_pd(b_max, t), pos),
+        )
     }
 }
 
