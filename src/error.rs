@@ -129,5 +129,18 @@ impl fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
+/// The message a panic carried (its payload, as `panic!` makes it), for
+/// reports of internal errors at the C ABI's panic boundary and in the
+/// command.
+pub fn panic_message(p: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = p.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = p.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "unknown panic payload".to_string()
+    }
+}
+
 /// Result alias used throughout octmesh.
 pub type Result<T> = std::result::Result<T, Error>;

@@ -17,6 +17,7 @@ use octmesh::classify::InsideRule;
 use octmesh::comm::{agree, CommRef, MpiComm, SerialComm};
 use octmesh::config::cli::{self, Invocation};
 use octmesh::config::{Command, Config};
+use octmesh::error::panic_message;
 use octmesh::geometry::diagnostics::diagnose;
 use octmesh::geometry::load_surface;
 use octmesh::pipeline::{Event, Observer, Session};
@@ -346,12 +347,7 @@ static LAST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None
 /// reaches `main` is reported once, by [`abort_job`].
 fn remember_panics() {
     std::panic::set_hook(Box::new(|info| {
-        let payload = info.payload();
-        let message = payload
-            .downcast_ref::<&str>()
-            .copied()
-            .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
-            .unwrap_or("(no message)");
+        let message = panic_message(info.payload());
         let at = info
             .location()
             .map(|l| format!(" (at {}:{})", l.file(), l.line()))

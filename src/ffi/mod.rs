@@ -63,13 +63,12 @@ pub mod snap;
 pub mod surface;
 pub mod transfer;
 
-use std::any::Any;
 use std::cell::RefCell;
 use std::ffi::{c_char, CStr, CString};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::PathBuf;
 
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{panic_message, Error, ErrorKind, Result};
 
 pub use handle::octmesh_t;
 
@@ -362,16 +361,6 @@ pub(crate) fn fail_without_handle(e: &Error) -> octmesh_status_t {
 /// until the next such failure on this thread).
 pub(crate) fn no_handle_error() -> *const c_char {
     NO_HANDLE_ERROR.with(|m| m.borrow().as_ptr())
-}
-
-fn panic_message(p: &(dyn Any + Send)) -> String {
-    if let Some(s) = p.downcast_ref::<&str>() {
-        (*s).to_string()
-    } else if let Some(s) = p.downcast_ref::<String>() {
-        s.clone()
-    } else {
-        "unknown panic payload".to_string()
-    }
 }
 
 /// Runs `f`; `Err` carries the message of a panic.

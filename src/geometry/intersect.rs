@@ -145,9 +145,11 @@ fn separates(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> bool {
 
 /// The separating-axis test of [`triangle_box_overlap`] for one triangle
 /// against several boxes at once, a box per vector lane, written once for
-/// every vector width. The module that expands it defines the vector type
-/// `V` and names the target feature and the intrinsics for `splat`, `sub`,
-/// `mul` and `add`; it defines these primitives too (each lane by lane, with
+/// every vector width, with its entry point `triangle_boxes_overlap` (eight
+/// boxes, a vector's lanes at a time). The module that expands it defines
+/// the vector type `V` and names the target feature, the number of lanes
+/// and the intrinsics for the load, `splat`, `sub`, `mul` and `add`; it
+/// defines these primitives too (each lane by lane, with
 /// the scalar operation's rounding): `min` and `max` (with `f64::min`'s and
 /// `f64::max`'s answers for NaN), `gt` and `lt` (the lanes' bits of an
 /// ordered comparison), `is_zero`, and `split_add(b_min, b_max, t)` (`t`
@@ -158,7 +160,36 @@ fn separates(axis: [f64; 3], v: &[[f64; 3]; 3], h: [f64; 3]) -> bool {
 /// are only not cut short at their first separating axis.
 #[cfg(target_arch = "x86_64")]
 macro_rules! box_lanes {
-    ($feature:literal, $splat:ident, $sub:ident, $mul:ident, $add:ident) => {
+    ($feature:literal, $lanes:literal, $load:ident, $splat:ident, $sub:ident, $mul:ident, $add:ident) => {
+        /// The boxes of `want` that the closed triangle touches: bit `i`
+        /// when `triangle_box_overlap(tri, [lo[0][i], lo[1][i], lo[2][i]],
+        /// ..hi..)` holds, the boxes taken as many at a time as a vector
+        /// has lanes.
+        ///
+        /// # Safety
+        /// The processor must have the module's target feature.
+        #[target_feature(enable = $feature)]
+        pub(crate) unsafe fn triangle_boxes_overlap(
+            tri: &Triangle,
+            lo: &[[f64; 8]; 3],
+            hi: &[[f64; 8]; 3],
+            want: u8,
+        ) -> u8 {
+            const LANES: usize = $lanes;
+            let mask = (0xffu16 >> (8 - LANES)) as u8;
+            let mut out = 0u8;
+            for first in (0..8).step_by(LANES) {
+                let w = want >> first & mask;
+                if w != 0 {
+                    // SAFETY: `LANES` values from `first`, within the
+                    // arrays of eight.
+                    let load = |v: &[f64; 8]| unsafe { $load(v.as_ptr().add(first)) };
+                    out |= overlap(tri, lo.map(|v| load(&v)), hi.map(|v| load(&v)), w) << first;
+                }
+            }
+            out
+        }
+
         #[target_feature(enable = $feature)]
         #[inline]
         fn splat(x: f64) -> V {
@@ -264,29 +295,13 @@ pub(crate) mod wide {
     type V = __m512d;
     box_lanes!(
         "avx512f",
+        8,
+        _mm512_loadu_pd,
         _mm512_set1_pd,
         _mm512_sub_pd,
         _mm512_mul_pd,
         _mm512_add_pd
     );
-
-    /// The boxes of `want` that the closed triangle touches: bit `i` when
-    /// `triangle_box_overlap(tri, [lo[0][i], lo[1][i], lo[2][i]], ..hi..)`
-    /// holds (see `box_lanes`).
-    ///
-    /// # Safety
-    /// The processor must have AVX-512F.
-    #[target_feature(enable = "avx512f")]
-    pub(crate) unsafe fn triangle_boxes_overlap(
-        tri: &Triangle,
-        lo: &[[f64; 8]; 3],
-        hi: &[[f64; 8]; 3],
-        want: u8,
-    ) -> u8 {
-        // SAFETY: loads of eight values from arrays of eight.
-        let load = |v: &[f64; 8]| unsafe { _mm512_loadu_pd(v.as_ptr()) };
-        overlap(tri, lo.map(|v| load(&v)), hi.map(|v| load(&v)), want)
-    }
 
     #[target_feature(enable = "avx512f")]
     #[inline]
@@ -350,35 +365,13 @@ pub(crate) mod wide4 {
     type V = __m256d;
     box_lanes!(
         "avx2",
+        4,
+        _mm256_loadu_pd,
         _mm256_set1_pd,
         _mm256_sub_pd,
         _mm256_mul_pd,
         _mm256_add_pd
     );
-
-    /// As [`super::wide::triangle_boxes_overlap`]: lanes `0..4`, then
-    /// `4..8`.
-    ///
-    /// # Safety
-    /// The processor must have AVX2.
-    #[target_feature(enable = "avx2")]
-    pub(crate) unsafe fn triangle_boxes_overlap(
-        tri: &Triangle,
-        lo: &[[f64; 8]; 3],
-        hi: &[[f64; 8]; 3],
-        want: u8,
-    ) -> u8 {
-        let mut out = 0u8;
-        for first in [0, 4] {
-            let w = want >> first & 0xf;
-            if w != 0 {
-                // SAFETY: four values from `first <= 4` on, in arrays of 8.
-                let load = |v: &[f64; 8]| unsafe { _mm256_loadu_pd(v.as_ptr().add(first)) };
-                out |= overlap(tri, lo.map(|v| load(&v)), hi.map(|v| load(&v)), w) << first;
-            }
-        }
-        out
-    }
 
     #[target_feature(enable = "avx2")]
     #[inline]
