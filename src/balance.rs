@@ -152,6 +152,46 @@ fn probe_steps(offsets: &[[i32; 3]]) -> [([[u8; 3]; 7], usize); 8] {
 /// Slots of [`Balancer::recent`]: `2^RECENT_BITS` (128 KiB).
 const RECENT_BITS: u32 = 14;
 
+/// Splits of a pass not yet moved into the leaf buffer: a leaf split in
+/// the pass is replaced, in the buffer, only at the pass's end, and until
+/// then its pieces are looked up here.
+///
+/// ```text
+///   leaves:   [ a ][ b ][      c      ][ d ]     groups: (c, arena[4..12])
+///   arena:    [ · · · · | c0 c1 c2 c3 c4 c5 c6 c7 ]
+///   merged:   [ a ][ b ][c0][c1] ... [c7][ d ]
+/// ```
+///
+/// A group whose pieces are split again at a coarser level gets its new
+/// pieces at the arena's end; the old ones stay unused until the merge.
+#[derive(Default)]
+struct Overlay {
+    /// By leaf index.
+    groups: Vec<Group>,
+    /// The pieces of every group, each group's in Morton order.
+    arena: Vec<Octant>,
+    /// Octants the groups add to the buffer (each replaces one leaf).
+    added: usize,
+    /// Scratch: a level's new groups.
+    fresh: Vec<Group>,
+}
+
+/// Leaf `idx` is replaced by `arena[start..start + len]`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Group {
+    idx: usize,
+    start: usize,
+    len: usize,
+}
+
+impl Overlay {
+    /// The pieces of group `g`.
+    fn pieces(&self, g: usize) -> &[Octant] {
+        let grp = self.groups[g];
+        &self.arena[grp.start..grp.start + grp.len]
+    }
+}
+
 struct Balancer {
     /// The domain's root cells: families in the void, and probes leaving
     /// the brick, are skipped (p4est's brick has nothing there).
@@ -164,8 +204,8 @@ struct Balancer {
     end: u64,
     first_cell: Vec<u64>,
     leaves: Vec<Octant>,
-    /// Scratch: the octants replacing split leaves.
-    made: Vec<Octant>,
+    /// Splits made but not yet moved into `leaves`.
+    overlay: Overlay,
     /// `pending[l]`: parents of families at level `l` still to process.
     pending: Vec<Vec<Octant>>,
     outbox: Vec<Vec<u64>>,
@@ -196,7 +236,7 @@ impl Balancer {
         }
         let brick = tree.brick();
         Balancer {
-            made: Vec::new(),
+            overlay: Overlay::default(),
             steps: probe_steps(conn.offsets()),
             brick,
             hi: brick.hi().map(|v| v as i64),
@@ -213,8 +253,14 @@ impl Balancer {
     }
 
     /// Processes all pending families, finest level first.
+    ///
+    /// The splits of each level go to the overlay, and the leaf buffer is
+    /// rewritten once at the end: each level's few splits would otherwise
+    /// move every leaf after the first of them (a coarse level's handful of
+    /// splits cost as much as the finest level's hundreds of thousands).
     fn local_pass(&mut self) {
         let mut splits: Vec<(usize, Octant)> = Vec::new();
+        let mut nested: Vec<(usize, usize, Octant)> = Vec::new();
         let mut probes: Vec<u64> = Vec::new();
         let mut tmp: Vec<u64> = Vec::new();
         // A family at level `l <= k + 1` (k: the trees' level) asks only
@@ -223,7 +269,7 @@ impl Balancer {
         let lowest = (self.brick.level() as usize + 2).max(2);
         for l in (lowest..=MAX_LEVEL as usize).rev() {
             if self.over {
-                return;
+                break;
             }
             let mut fams = std::mem::take(&mut self.pending[l]);
             if fams.is_empty() {
@@ -247,25 +293,40 @@ impl Balancer {
             radix_sort_bits(&mut probes, &mut tmp, low, 57);
             probes.dedup();
             splits.clear();
-            let mut i = 0usize;
+            nested.clear();
+            let (mut i, mut g) = (0usize, 0usize);
             let n = self.leaves.len();
+            let groups = &self.overlay.groups;
             for &q in &probes {
                 // Galloping: the coarse levels' few probes skip most leaves.
                 let leaves = &self.leaves;
                 if let Some(j) = gallop_last_le(n, i, q, |k| leaves[k].cell_begin()) {
                     i = j;
                 }
+                let member = Octant::from_parts(q, qlevel + 1);
+                // A leaf split earlier in this pass: look among its pieces.
+                if let Some(h) = gallop_last_le(groups.len(), g, i as u64, |k| groups[k].idx as u64)
+                {
+                    g = h;
+                    if groups[h].idx == i {
+                        let piece = self.overlay.pieces(h);
+                        let k = piece.partition_point(|o| o.cell_begin() <= q) - 1;
+                        if piece[k].level() <= qlevel {
+                            nested.push((h, k, member));
+                        }
+                        continue;
+                    }
+                }
                 if self.leaves[i].level() <= qlevel {
                     // q is a leaf or inside one: it must be split.
-                    splits.push((i, Octant::from_parts(q, qlevel + 1)));
+                    splits.push((i, member));
                 }
             }
             self.pending[l] = fams; // keep the allocation
             self.pending[l].clear();
-            if !splits.is_empty() {
-                self.apply_splits(&mut splits);
-            }
+            self.defer_splits(&mut splits, &mut nested);
         }
+        self.merge_overlay();
     }
 
     /// For family parent `p` (level `l - 1`), collects the octants `q` at
@@ -326,24 +387,80 @@ impl Balancer {
 
     /// Replaces each leaf named in `splits` by the coarsest set of octants
     /// that covers every required octant inside it.
-    ///
-    /// In place: the new octants are made first (a few per split), then the
-    /// leaves are moved to their final places from the back, so the leaf
-    /// buffer is not copied into a second one of the same size (whose pages
-    /// would all be faulted in).
     fn apply_splits(&mut self, splits: &mut [(usize, Octant)]) {
+        self.defer_splits(splits, &mut []);
+        self.merge_overlay();
+    }
+
+    /// Records in the overlay the splits of one level: leaf `i` to be
+    /// replaced by the coarsest set of octants in which every `member` of
+    /// its pairs in `splits` is a leaf or has leaves below it, and piece
+    /// `k` of group `g` for the triples `(g, k, member)` of `nested`. The
+    /// new octants are queued for their own levels. Sets `over` instead
+    /// when the leaves would exceed the limit.
+    fn defer_splits(
+        &mut self,
+        splits: &mut [(usize, Octant)],
+        nested: &mut [(usize, usize, Octant)],
+    ) {
+        if splits.is_empty() && nested.is_empty() {
+            return;
+        }
         splits.sort_unstable();
-        // Each split leaf becomes at least 8: refuse before allocating.
-        let split_leaves = 1 + splits.windows(2).filter(|w| w[0].0 != w[1].0).count();
-        if self.leaves.len().saturating_add(7 * split_leaves) > self.limit {
+        nested.sort_unstable();
+        // Each split octant becomes at least 8: refuse before allocating.
+        let distinct = |n: usize, same: &dyn Fn(usize) -> bool| {
+            (n > 0) as usize + (1..n).filter(|&k| !same(k)).count()
+        };
+        let split = distinct(splits.len(), &|k| splits[k].0 == splits[k - 1].0)
+            + distinct(nested.len(), &|k| {
+                nested[k].0 == nested[k - 1].0 && nested[k].1 == nested[k - 1].1
+            });
+        let after = self.leaves.len() + self.overlay.added;
+        if after.saturating_add(7 * split) > self.limit {
             self.over = true;
             return;
         }
-        // (leaf index, its replacement `made[start..end]`), in leaf order.
-        let mut groups: Vec<(usize, usize, usize)> = Vec::with_capacity(split_leaves);
-        let mut made = std::mem::take(&mut self.made);
-        made.clear();
+        let Overlay {
+            groups,
+            arena,
+            added,
+            fresh,
+        } = &mut self.overlay;
+        let pending = &mut self.pending;
         let mut members = Vec::new();
+        // Pieces split again: each group's new pieces go to the arena's end.
+        let mut x = 0;
+        let mut old = Vec::new();
+        while x < nested.len() {
+            let g = nested[x].0;
+            let grp = groups[g];
+            old.clear();
+            old.extend_from_slice(&arena[grp.start..grp.start + grp.len]);
+            let start = arena.len();
+            for (k, &piece) in old.iter().enumerate() {
+                members.clear();
+                while x < nested.len() && nested[x].0 == g && nested[x].1 == k {
+                    if members.last() != Some(&nested[x].2) {
+                        members.push(nested[x].2);
+                    }
+                    x += 1;
+                }
+                if members.is_empty() {
+                    arena.push(piece);
+                    continue;
+                }
+                let from = arena.len();
+                refine_to(piece, &members, arena);
+                for &o in &arena[from..] {
+                    queue_family(pending, o);
+                }
+            }
+            let len = arena.len() - start;
+            *added += len - grp.len;
+            groups[g] = Group { start, len, ..grp };
+        }
+        // Leaves split for the first time: new groups, merged in by leaf.
         let mut i = 0;
         while i < splits.len() {
             let idx = splits[i].0;
@@ -354,32 +471,68 @@ impl Balancer {
                 }
                 i += 1;
             }
-            let start = made.len();
-            refine_to(self.leaves[idx], &members, &mut made);
-            for &o in &made[start..] {
-                queue_family(&mut self.pending, o);
+            let start = arena.len();
+            refine_to(self.leaves[idx], &members, arena);
+            for &o in &arena[start..] {
+                queue_family(pending, o);
             }
-            groups.push((idx, start, made.len()));
+            let len = arena.len() - start;
+            *added += len - 1;
+            fresh.push(Group { idx, start, len });
+        }
+        // In place from the back: no second buffer of every group.
+        let (mut a, mut b) = (groups.len(), fresh.len());
+        groups.resize(a + b, Group::default());
+        for w in (0..a + b).rev() {
+            if b == 0 {
+                break;
+            }
+            if a > 0 && groups[a - 1].idx > fresh[b - 1].idx {
+                a -= 1;
+                groups[w] = groups[a];
+            } else {
+                b -= 1;
+                groups[w] = fresh[b];
+            }
+        }
+        fresh.clear();
+        crate::progress::set_done((self.leaves.len() + self.overlay.added) as u64);
+    }
+
+    /// Moves the overlay's pieces into the leaf buffer, in place: the
+    /// leaves are moved to their final places from the back, so the buffer
+    /// is not copied into a second one of the same size (whose pages would
+    /// all be faulted in).
+    fn merge_overlay(&mut self) {
+        let Overlay {
+            groups,
+            arena,
+            added,
+            ..
+        } = &mut self.overlay;
+        if groups.is_empty() {
+            return;
         }
         let old_len = self.leaves.len();
-        let new_len = old_len - groups.len() + made.len();
-        crate::progress::set_done(new_len as u64);
+        let new_len = old_len + *added;
         self.leaves.resize(new_len, Octant::ROOT);
         // From the back: the leaves after each split leaf move up by the
-        // number of octants added before them, then its replacement goes in.
+        // number of octants added before them, then its pieces go in.
         let mut tail = old_len; // leaves[idx + 1..tail] still at their old place
         let mut write = new_len;
-        for &(idx, start, end) in groups.iter().rev() {
-            let n = tail - (idx + 1);
-            self.leaves.copy_within(idx + 1..tail, write - n);
+        for grp in groups.iter().rev() {
+            let n = tail - (grp.idx + 1);
+            self.leaves.copy_within(grp.idx + 1..tail, write - n);
             write -= n;
-            let k = end - start;
-            self.leaves[write - k..write].copy_from_slice(&made[start..end]);
-            write -= k;
-            tail = idx;
+            self.leaves[write - grp.len..write]
+                .copy_from_slice(&arena[grp.start..grp.start + grp.len]);
+            write -= grp.len;
+            tail = grp.idx;
         }
         debug_assert_eq!(write, tail);
-        self.made = made;
+        groups.clear();
+        arena.clear();
+        *added = 0;
     }
 
     /// Applies probes received from other ranks: sorted, then found by a
