@@ -428,6 +428,9 @@ impl Balancer {
             fresh,
         } = &mut self.overlay;
         let pending = &mut self.pending;
+        // Each split octant makes at least 8 pieces: one allocation of that
+        // size, not a doubling series whose every buffer is fresh memory.
+        arena.reserve(8 * split);
         let mut members = Vec::new();
         // Pieces split again: each group's new pieces go to the arena's end.
         let mut x = 0;
