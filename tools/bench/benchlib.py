@@ -108,9 +108,11 @@ def missing_note(surface):
     return "%s not found" % (surface if surface.endswith(".stl") else DATA / (surface + ".stl"))
 
 
-def octmesh_stats(np_, args, stats_path, env):
-    """Runs `mpirun -np np_ octmesh ARGS --quiet --stats FILE` and returns the stats."""
-    run(mpirun(np_) + [OCTMESH] + list(args) + ["--quiet", "--stats", stats_path], env)
+def octmesh_stats(np_, args, stats_path, env, mpirun_args=()):
+    """Runs `mpirun -np np_ [MPIRUN_ARGS] octmesh ARGS --quiet --stats FILE` and returns the
+    stats."""
+    run(mpirun(np_) + list(mpirun_args) + [OCTMESH] + list(args)
+        + ["--quiet", "--stats", stats_path], env)
     with open(stats_path) as f:
         return json.load(f)
 

@@ -8,6 +8,9 @@ through the page cache with a final fdatasync (conv=fdatasync, what an ordinary 
 the disk). Each write starts after `sync` and a pause, so none inherits the other's cached pages.
 
     python3 tools/bench/writer_speed.py --surface sphere --level 11 --np 1 2 --repeat 3
+
+With --bind-to-none a lone rank may use the node's other core (the writer makes polygons on a
+second thread when it has one).
 """
 
 import argparse
@@ -46,6 +49,10 @@ def main():
     ap.add_argument("--keep", default="inside")
     ap.add_argument("--np", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--bind-to-none", action="store_true",
+                    help="run octmesh under `mpirun --bind-to none`: Open MPI binds each rank to one "
+                         "core when there are at most two ranks, which leaves a lone rank no spare "
+                         "core for the writer's second thread")
     started = bl.start_on_surface(ap, "OpenFOAM case against dd")
     if started is None:
         return 0
@@ -60,7 +67,8 @@ def main():
             settle()
             s = bl.octmesh_stats(np_, ["mesh", surface, "--level", str(args.level), "--keep",
                                        args.keep, "--openfoam", str(case)],
-                                 bl.WORK / "writer.json", env)
+                                 bl.WORK / "writer.json", env,
+                                 ["--bind-to", "none"] if args.bind_to_none else [])
             nbytes = dir_bytes(case)
             shutil.rmtree(case, ignore_errors=True)
             settle()
