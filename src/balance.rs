@@ -184,11 +184,10 @@ struct Group {
     len: usize,
 }
 
-impl Overlay {
-    /// The pieces of group `g`.
-    fn pieces(&self, g: usize) -> &[Octant] {
-        let grp = self.groups[g];
-        &self.arena[grp.start..grp.start + grp.len]
+impl Group {
+    /// Where its pieces are in the arena.
+    fn pieces(&self) -> std::ops::Range<usize> {
+        self.start..self.start + self.len
     }
 }
 
@@ -309,7 +308,7 @@ impl Balancer {
                 {
                     g = h;
                     if groups[h].idx == i {
-                        let piece = self.overlay.pieces(h);
+                        let piece = &self.overlay.arena[groups[h].pieces()];
                         let k = piece.partition_point(|o| o.cell_begin() <= q) - 1;
                         if piece[k].level() <= qlevel {
                             nested.push((h, k, member));
@@ -409,13 +408,18 @@ impl Balancer {
         splits.sort_unstable();
         nested.sort_unstable();
         // Each split octant becomes at least 8: refuse before allocating.
-        let distinct = |n: usize, same: &dyn Fn(usize) -> bool| {
-            (n > 0) as usize + (1..n).filter(|&k| !same(k)).count()
-        };
-        let split = distinct(splits.len(), &|k| splits[k].0 == splits[k - 1].0)
-            + distinct(nested.len(), &|k| {
-                nested[k].0 == nested[k - 1].0 && nested[k].1 == nested[k - 1].1
-            });
+        // Sorted, its entries come in runs, one per split octant.
+        let runs = |n: usize, starts: usize| (n > 0) as usize + starts;
+        let split = runs(
+            splits.len(),
+            splits.windows(2).filter(|w| w[0].0 != w[1].0).count(),
+        ) + runs(
+            nested.len(),
+            nested
+                .windows(2)
+                .filter(|w| w[0].0 != w[1].0 || w[0].1 != w[1].1)
+                .count(),
+        );
         let after = self.leaves.len() + self.overlay.added;
         if after.saturating_add(7 * split) > self.limit {
             self.over = true;
@@ -428,6 +432,15 @@ impl Balancer {
             fresh,
         } = &mut self.overlay;
         let pending = &mut self.pending;
+        // `piece` replaced by the coarsest cover of `members` at the arena's
+        // end, the new octants queued for their own levels.
+        let mut split_into = |arena: &mut Vec<Octant>, piece: Octant, members: &[Octant]| {
+            let from = arena.len();
+            refine_to(piece, members, arena);
+            for &o in &arena[from..] {
+                queue_family(pending, o);
+            }
+        };
         // Each split octant makes at least 8 pieces: one allocation of that
         // size, not a doubling series whose every buffer is fresh memory.
         arena.reserve(8 * split);
@@ -439,7 +452,7 @@ impl Balancer {
             let g = nested[x].0;
             let grp = groups[g];
             old.clear();
-            old.extend_from_slice(&arena[grp.start..grp.start + grp.len]);
+            old.extend_from_slice(&arena[grp.pieces()]);
             let start = arena.len();
             for (k, &piece) in old.iter().enumerate() {
                 members.clear();
@@ -451,12 +464,8 @@ impl Balancer {
                 }
                 if members.is_empty() {
                     arena.push(piece);
-                    continue;
-                }
-                let from = arena.len();
-                refine_to(piece, &members, arena);
-                for &o in &arena[from..] {
-                    queue_family(pending, o);
+                } else {
+                    split_into(arena, piece, &members);
                 }
             }
             let len = arena.len() - start;
@@ -475,10 +484,7 @@ impl Balancer {
                 i += 1;
             }
             let start = arena.len();
-            refine_to(self.leaves[idx], &members, arena);
-            for &o in &arena[start..] {
-                queue_family(pending, o);
-            }
+            split_into(arena, self.leaves[idx], &members);
             let len = arena.len() - start;
             *added += len - 1;
             fresh.push(Group { idx, start, len });
@@ -527,8 +533,7 @@ impl Balancer {
             let n = tail - (grp.idx + 1);
             self.leaves.copy_within(grp.idx + 1..tail, write - n);
             write -= n;
-            self.leaves[write - grp.len..write]
-                .copy_from_slice(&arena[grp.start..grp.start + grp.len]);
+            self.leaves[write - grp.len..write].copy_from_slice(&arena[grp.pieces()]);
             write -= grp.len;
             tail = grp.idx;
         }
