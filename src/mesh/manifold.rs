@@ -58,11 +58,7 @@ pub(crate) fn clean_walls(
     let mut first = true;
     let b = ghosts.before;
     let nl = tree.local_len();
-    let mut leaves: Vec<Octant> = Vec::with_capacity(ghosts.len() + nl);
-    leaves.extend_from_slice(&ghosts.leaves[..b]);
-    leaves.extend_from_slice(tree.leaves());
-    leaves.extend_from_slice(&ghosts.leaves[b..]);
-    let mut class: Vec<u8> = Vec::with_capacity(leaves.len());
+    let mut class: Vec<u8> = Vec::with_capacity(ghosts.len() + nl);
     loop {
         // The ghosts stay; only their classes change from sweep to sweep.
         if !first {
@@ -72,8 +68,15 @@ pub(crate) fn clean_walls(
         class.extend(ghosts.data[..b].iter().map(|&w| w as u8));
         class.extend_from_slice(classes);
         class.extend(ghosts.data[b..].iter().map(|&w| w as u8));
+        // The ghosts and the local leaves in one run, without a copy of
+        // every leaf.
+        let leaves = Merged {
+            before: &ghosts.leaves[..b],
+            local: tree.leaves(),
+            after: &ghosts.leaves[b..],
+        };
         let view = View {
-            leaves: &leaves,
+            leaves,
             class: &class,
             kept: &kept,
         };
@@ -81,7 +84,7 @@ pub(crate) fn clean_walls(
         // Every kept local leaf in the first sweep; then the kept local
         // leaves around those dropped in the last sweep.
         let drop: Vec<usize> = if first {
-            first_sweep(&leaves, &class, local.clone(), kept)
+            first_sweep(leaves, &class, local.clone(), kept)
         } else {
             let mut candidates: Vec<usize> = Vec::new();
             for j in 0..leaves.len() {
@@ -129,7 +132,7 @@ pub(crate) fn clean_walls(
 /// dropped leaves, look their rings up instead ([`View::must_go`], the same
 /// rules).
 fn first_sweep(
-    leaves: &[Octant],
+    leaves: Merged,
     class: &[u8],
     local: std::ops::Range<usize>,
     kept: impl Fn(u8) -> bool,
@@ -143,7 +146,10 @@ fn first_sweep(
         Vec::with_capacity(leaves.len()),
         Vec::with_capacity(leaves.len()),
     );
-    for (j, (&o, &c)) in leaves.iter().zip(class).enumerate() {
+    let all = (leaves.before.iter())
+        .chain(leaves.local)
+        .chain(leaves.after);
+    for (j, (&o, &c)) in all.zip(class).enumerate() {
         if kept(c) {
             kl.push(o);
             at.push(j as u32);
@@ -200,7 +206,7 @@ fn first_sweep(
 
 /// Local and ghost leaves in Morton order with their class bytes.
 struct View<'a, K: Fn(u8) -> bool> {
-    leaves: &'a [Octant],
+    leaves: Merged<'a>,
     class: &'a [u8],
     kept: &'a K,
 }
@@ -214,15 +220,15 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
         }
         let m = morton_encode(x[0] as u32, x[1] as u32, x[2] as u32);
         let leaves = self.leaves;
-        let j = crate::sort::gallop_last_le(leaves.len(), hint, m, |k| leaves[k].cell_begin())?;
-        (self.leaves[j].cell_end() > m).then_some(j)
+        let j = crate::sort::gallop_last_le(leaves.len(), hint, m, |k| leaves.get(k).cell_begin())?;
+        (leaves.get(j).cell_end() > m).then_some(j)
     }
 
     /// Calls `f` with every leaf touching leaf `i` (some more than once):
     /// the leaves holding its [`ring_cells`], which under 2:1 balance are
     /// all of them.
     fn ring(&self, i: usize, mut f: impl FnMut(usize)) {
-        for (_, x) in ring_cells(self.leaves[i]) {
+        for (_, x) in ring_cells(self.leaves.get(i)) {
             if let Some(j) = self.at(x, i) {
                 f(j);
             }
@@ -231,7 +237,7 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
 
     /// Whether kept leaf `i` must go.
     fn must_go(&self, i: usize) -> bool {
-        let l = self.leaves[i];
+        let l = self.leaves.get(i);
         let (c, s) = (l.coords().map(|v| v as i64), l.side() as i64);
         let h = (s / 2).max(1);
         // Statuses of a 4x4x4 grid of half-size cells centred on the leaf
@@ -260,7 +266,10 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
             let status = (self.kept)(self.class[j]);
             // The leaf covers every grid cell inside its box: settle them
             // all with this one look-up.
-            let (lc, ls) = (self.leaves[j].coords(), self.leaves[j].side() as i64);
+            let (lc, ls) = (
+                self.leaves.get(j).coords(),
+                self.leaves.get(j).side() as i64,
+            );
             let lo: [i64; 3] = std::array::from_fn(|a| lc[a] as i64);
             let mut range = [(0usize, 0usize); 3];
             for a in 0..3 {
@@ -497,15 +506,20 @@ mod tests {
             for keep in [Keep::Inside, Keep::Outside] {
                 let kept = move |c: u8| keeps(keep, CutRule::Center, c);
                 let leaves = t.leaves();
+                let whole = Merged {
+                    before: &[],
+                    local: leaves,
+                    after: &[],
+                };
                 let view = View {
-                    leaves,
+                    leaves: whole,
                     class: &class,
                     kept: &kept,
                 };
                 let want: Vec<usize> = (0..leaves.len())
                     .filter(|&i| kept(class[i]) && view.must_go(i))
                     .collect();
-                let got = first_sweep(leaves, &class, 0..leaves.len(), kept);
+                let got = first_sweep(whole, &class, 0..leaves.len(), kept);
                 assert_eq!(got, want, "{name} level {level}");
                 dropped += got.len();
             }
