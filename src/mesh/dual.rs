@@ -89,6 +89,11 @@ impl<T: Copy> Merged<'_, T> {
         }
     }
 
+    /// The three runs in merged order: before, local, after.
+    pub fn parts(&self) -> [&[T]; 3] {
+        [self.before, self.local, self.after]
+    }
+
     /// Merged indices of the local leaves.
     pub fn local_range(&self) -> std::ops::Range<usize> {
         self.before.len()..self.before.len() + self.local.len()
@@ -519,7 +524,7 @@ fn build(leaves: &Merged) -> (Vec<[u32; 8]>, u32) {
         }
     };
     let mut i = 0u32;
-    for part in [leaves.before, leaves.local, leaves.after] {
+    for part in leaves.parts() {
         for o in part {
             let (m, level) = (o.morton(), o.level() as usize);
             // Leading base-8 digits shared with the last leaf: the open

@@ -146,9 +146,7 @@ fn first_sweep(
         Vec::with_capacity(leaves.len()),
         Vec::with_capacity(leaves.len()),
     );
-    let all = (leaves.before.iter())
-        .chain(leaves.local)
-        .chain(leaves.after);
+    let all = leaves.parts().into_iter().flatten();
     for (j, (&o, &c)) in all.zip(class).enumerate() {
         if kept(c) {
             kl.push(o);
@@ -266,10 +264,8 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
             let status = (self.kept)(self.class[j]);
             // The leaf covers every grid cell inside its box: settle them
             // all with this one look-up.
-            let (lc, ls) = (
-                self.leaves.get(j).coords(),
-                self.leaves.get(j).side() as i64,
-            );
+            let lj = self.leaves.get(j);
+            let (lc, ls) = (lj.coords(), lj.side() as i64);
             let lo: [i64; 3] = std::array::from_fn(|a| lc[a] as i64);
             let mut range = [(0usize, 0usize); 3];
             for a in 0..3 {
