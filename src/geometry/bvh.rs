@@ -59,8 +59,15 @@ impl Bvh {
             };
         }
         let boxes: Vec<Aabb> = tris.iter().map(Triangle::aabb).collect();
-        let centroids: Vec<[f64; 3]> = tris.iter().map(Triangle::centroid).collect();
-        let mut order: Vec<u32> = (0..n as u32).collect();
+        // Each triangle's centroid travels with its number: the splits
+        // compare and move contiguous items instead of looking centroids
+        // up through the numbers (a third less time on the dragon; the
+        // comparisons, hence the tree, are the same).
+        let mut items: Vec<([f64; 3], u32)> = tris
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.centroid(), i as u32))
+            .collect();
 
         let placeholder = Node {
             bbox: Aabb::empty(),
@@ -71,11 +78,11 @@ impl Bvh {
         nodes.push(placeholder);
         let mut work = vec![(0usize, 0usize, n)];
         while let Some((ni, start, end)) = work.pop() {
-            let range = &mut order[start..end];
+            let range = &mut items[start..end];
             if range.len() <= LEAF_SIZE {
                 let bbox = range
                     .iter()
-                    .fold(Aabb::empty(), |b, &i| b.union(&boxes[i as usize]));
+                    .fold(Aabb::empty(), |b, it| b.union(&boxes[it.1 as usize]));
                 nodes[ni] = Node {
                     bbox,
                     first: start as u32,
@@ -83,7 +90,7 @@ impl Bvh {
                 };
                 continue;
             }
-            let cb = Aabb::from_points(range.iter().map(|&i| centroids[i as usize]));
+            let cb = Aabb::from_points(range.iter().map(|it| it.0));
             let e = cb.extent();
             let axis = if e[0] >= e[1] && e[0] >= e[2] {
                 0
@@ -93,9 +100,7 @@ impl Bvh {
                 2
             };
             let half = range.len() / 2;
-            range.select_nth_unstable_by(half, |&a, &b| {
-                centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
-            });
+            range.select_nth_unstable_by(half, |a, b| a.0[axis].total_cmp(&b.0[axis]));
             let left = nodes.len();
             nodes.push(placeholder);
             nodes.push(placeholder);
@@ -107,6 +112,7 @@ impl Bvh {
             work.push((left, start, start + half));
             work.push((left + 1, start + half, end));
         }
+        let order: Vec<u32> = items.iter().map(|it| it.1).collect();
         // Internal boxes bottom-up (children come after their parent): one
         // union per node instead of one per triangle on every level.
         for i in (0..nodes.len()).rev() {

@@ -45,6 +45,7 @@ impl Session {
             self.config.output.stats.is_some() || self.inside == Some(InsideRule::Auto);
         let comm = self.comm.clone();
         let (tree_domain, domain_config) = (self.tree.as_ref().map(|t| t.1), &self.config.domain);
+        let spare = crate::cores::spare_core(&*comm);
         let loaded = self.timer.time(&*comm, "read", || -> Result<SurfaceState> {
             let mut surface = get()?;
             let mut dropped = None;
@@ -58,13 +59,20 @@ impl Session {
                 Some(d) => d,
                 None => domain_config.resolve(bbox.min, bbox.max)?,
             };
+            // The report and the index read the surface alone: a spare core
+            // makes them side by side.
+            let (found, index) = crate::cores::join(
+                spare && want_report,
+                || want_report.then(|| diagnose(&surface)),
+                || SurfaceIndex::new(&surface, &domain),
+            );
             let report = OnceCell::new();
-            if want_report {
-                let _ = report.set(diagnose(&surface));
+            if let Some(r) = found {
+                let _ = report.set(r);
             }
             Ok(SurfaceState {
                 name: name.to_string(),
-                index: SurfaceIndex::new(&surface, &domain),
+                index,
                 index_domain: domain,
                 volume: surface.signed_volume().abs(),
                 bbox,
