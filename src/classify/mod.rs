@@ -225,6 +225,16 @@ impl<'a> InsideClassifier<'a> {
     /// # Panics
     /// If some leaves overlap (and, in debug builds, if they are not sorted).
     pub fn classify(&self, leaves: &[Octant]) -> Vec<u8> {
+        self.classify_spare(leaves, false)
+    }
+
+    /// [`InsideClassifier::classify`]; with `spare` (a spare core, see
+    /// [`crate::cores`]) the two halves of `leaves` on two threads, each
+    /// walking down from the root. The same bytes either way.
+    ///
+    /// # Panics
+    /// As [`InsideClassifier::classify`].
+    pub fn classify_spare(&self, leaves: &[Octant], spare: bool) -> Vec<u8> {
         debug_assert!(
             leaves
                 .windows(2)
@@ -232,8 +242,24 @@ impl<'a> InsideClassifier<'a> {
             "leaves must be sorted and disjoint"
         );
         let mut out = vec![0u8; leaves.len()];
+        let mid = if spare {
+            leaves.len() / 2
+        } else {
+            leaves.len()
+        };
+        let (first, second) = out.split_at_mut(mid);
+        crate::cores::join(
+            spare,
+            || self.walk_from_root(&leaves[..mid], first),
+            || self.walk_from_root(&leaves[mid..], second),
+        );
+        out
+    }
+
+    /// Classifies `leaves` into `out`, walking down from the root.
+    fn walk_from_root(&self, leaves: &[Octant], out: &mut [u8]) {
         if leaves.is_empty() {
-            return out;
+            return;
         }
         let c = &self.c;
         let root_count = c.root_count();
@@ -254,10 +280,9 @@ impl<'a> InsideClassifier<'a> {
             0,
             n,
             leaves,
-            &mut out,
+            out,
             &mut buf,
             &mut masks,
         );
-        out
     }
 }

@@ -981,3 +981,26 @@ fn winding_on_an_unwelded_soup() {
     assert_eq!(sum.cap_triangles, 3 * s.len());
     assert_eq!(c.classify(&leaves), classify_leaves(&leaves, &index));
 }
+
+/// Two threads (each half of the leaves walked from the root) give the
+/// same bytes as one, under both rules, on a surface with holes (caps for
+/// the winding rule) and a closed one.
+#[test]
+fn classify_on_two_threads_is_the_same() {
+    for (surface, rule) in [
+        (default_torus(), InsideRule::Parity),
+        (default_torus(), InsideRule::Winding),
+        (holed_sphere(0.8), InsideRule::Winding),
+    ] {
+        let (_, index) = fitted(&surface);
+        let leaves = leaves_of(&index, 6, true);
+        let c = InsideClassifier::new(&index, rule);
+        let one = c.classify(&leaves);
+        assert_eq!(c.classify_spare(&leaves, true), one, "{rule:?}");
+        assert!(one.iter().any(|&b| b & CUT != 0) && one.iter().any(|&b| b & CENTER_INSIDE != 0));
+        // Odd lengths and a single leaf split unevenly.
+        assert_eq!(c.classify_spare(&leaves[1..], true), one[1..]);
+        assert_eq!(c.classify_spare(&leaves[..1], true), one[..1]);
+        assert!(c.classify_spare(&[], true).is_empty());
+    }
+}

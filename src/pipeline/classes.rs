@@ -40,12 +40,13 @@ impl Session {
         self.index_for(domain)?;
         let comm = self.comm.clone();
         let (tree, surface) = (&self.tree, &self.surface);
+        let spare = crate::cores::spare_core(&*comm);
         let (bits, summary) = self.timer.time(&*comm, "classify", || {
             let (Some((tree, _)), Some(surface)) = (tree, surface) else {
                 return (Vec::new(), None);
             };
             let c = InsideClassifier::new(&surface.index, rule);
-            (c.classify(tree.leaves()), c.summary().cloned())
+            (c.classify_spare(tree.leaves(), spare), c.summary().cloned())
         });
         self.report_phase(None);
         if let Some(w) = &summary {
