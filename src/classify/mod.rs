@@ -177,6 +177,10 @@ pub fn classify_leaves_with(leaves: &[Octant], index: &SurfaceIndex, rule: Insid
     InsideClassifier::new(index, rule).classify(leaves)
 }
 
+/// Leaves below which [`InsideClassifier::classify_spare`] stays on one
+/// thread (a few milliseconds of work).
+const SPARE_MIN_LEAVES: usize = 1 << 17;
+
 /// A surface prepared for classification under an [`InsideRule`]: built
 /// once, it classifies any number of runs of leaves.
 ///
@@ -229,8 +233,9 @@ impl<'a> InsideClassifier<'a> {
     }
 
     /// [`InsideClassifier::classify`]; with `spare` (a spare core, see
-    /// [`crate::cores`]) the two halves of `leaves` on two threads, each
-    /// walking down from the root. The same bytes either way.
+    /// [`crate::cores`]) and enough leaves, the two halves of `leaves` on
+    /// two threads, each walking down from the root. The same bytes either
+    /// way.
     ///
     /// # Panics
     /// As [`InsideClassifier::classify`].
@@ -242,6 +247,8 @@ impl<'a> InsideClassifier<'a> {
             "leaves must be sorted and disjoint"
         );
         let mut out = vec![0u8; leaves.len()];
+        // A thread's start costs more than classifying a small run.
+        let spare = spare && leaves.len() >= SPARE_MIN_LEAVES;
         let mid = if spare {
             leaves.len() / 2
         } else {

@@ -993,12 +993,17 @@ fn classify_on_two_threads_is_the_same() {
         (holed_sphere(0.8), InsideRule::Winding),
     ] {
         let (_, index) = fitted(&surface);
-        let leaves = leaves_of(&index, 6, true);
+        let leaves = leaves_of(&index, 8, true);
+        assert!(
+            leaves.len() >= 1 << 17,
+            "{} leaves: one thread",
+            leaves.len()
+        );
         let c = InsideClassifier::new(&index, rule);
         let one = c.classify(&leaves);
         assert_eq!(c.classify_spare(&leaves, true), one, "{rule:?}");
         assert!(one.iter().any(|&b| b & CUT != 0) && one.iter().any(|&b| b & CENTER_INSIDE != 0));
-        // Odd lengths and a single leaf split unevenly.
+        // An odd length, and runs too short to split.
         assert_eq!(c.classify_spare(&leaves[1..], true), one[1..]);
         assert_eq!(c.classify_spare(&leaves[..1], true), one[..1]);
         assert!(c.classify_spare(&[], true).is_empty());

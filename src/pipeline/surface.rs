@@ -14,6 +14,10 @@ use crate::report::peak_rss_bytes;
 use super::*;
 use crate::geometry::parts::PartLocator;
 
+/// Triangles below which the surface's report is not worth a second
+/// thread (a few milliseconds of work).
+const SPARE_MIN_TRIANGLES: usize = 50_000;
+
 impl Session {
     /// Reads the configured surface (`surface.file`: an STL file, `sphere`,
     /// `torus` or `hull`, and the `surface.others` meshed with it, each a
@@ -62,7 +66,7 @@ impl Session {
             // The report and the index read the surface alone: a spare core
             // makes them side by side.
             let (found, index) = crate::cores::join(
-                spare && want_report,
+                spare && want_report && surface.len() >= SPARE_MIN_TRIANGLES,
                 || want_report.then(|| diagnose(&surface)),
                 || SurfaceIndex::new(&surface, &domain),
             );
