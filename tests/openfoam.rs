@@ -26,7 +26,8 @@
 //! - The ASCII files read back here: every cell closes, each side patch
 //!   covers its side.
 //! - Bad input: an existing mesh without `--overwrite`, bad patch names, an
-//!   empty kept region, an unwritable directory.
+//!   empty kept region, an unwritable directory, a write failing on one
+//!   rank only.
 
 mod common;
 
@@ -696,6 +697,119 @@ fn bad_openfoam_requests_fail_clearly() {
         "/proc/octmesh-case",
     ]);
     assert!(e.contains("/proc/octmesh-case"), "{e}");
+}
+
+/// Files of every `processor<r>/constant/polyMesh` of `case` (empty when
+/// there is none), as (path below the case, bytes).
+fn processor_meshes(case: &Path, np: usize) -> Vec<(String, Vec<u8>)> {
+    let mut v = Vec::new();
+    for r in 0..np {
+        let dir = case.join(format!("processor{r}/constant/polyMesh"));
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        let mut names: Vec<_> = entries.flatten().map(|e| e.file_name()).collect();
+        names.sort();
+        for n in names {
+            let rel = format!("processor{r}/constant/polyMesh/{}", n.to_string_lossy());
+            v.push((rel.clone(), std::fs::read(case.join(&rel)).unwrap()));
+        }
+    }
+    v
+}
+
+/// A write that fails on one rank only (here rank 1 of 3, whose scratch
+/// directory cannot be made because a file stands in its place): every
+/// rank reports it and exits non-zero, no rank leaves a mesh or a scratch
+/// directory behind in a new case, and an existing case keeps every byte
+/// of its old mesh on every rank, even with `--overwrite`.
+#[test]
+fn a_write_failing_on_one_rank_fails_every_rank() {
+    let dir = scratch("openfoam_one_rank_fails");
+    let np = 3;
+    let run = |case: &Path, level: &str| {
+        let args = [
+            "mesh",
+            "sphere",
+            "--level",
+            level,
+            "--keep",
+            "outside",
+            "--openfoam",
+            case.to_str().unwrap(),
+            "--overwrite",
+            "--quiet",
+        ];
+        common::mpirun(np, &octmesh_bin(), &args, Duration::from_secs(300))
+    };
+    let block = |case: &Path| {
+        let constant = case.join("processor1/constant");
+        std::fs::create_dir_all(&constant).unwrap();
+        std::fs::write(constant.join("polyMesh.octmesh-partial"), b"in the way").unwrap();
+    };
+    let expect_failure = |out: &std::process::Output, tag: &str| {
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{tag}: should fail:\n{err}");
+        assert!(!err.contains("panicked"), "{tag}: panic text:\n{err}");
+        for r in 0..np {
+            let line = err
+                .lines()
+                .find(|l| l.contains(&format!("octmesh: error [rank {r} of {np}]:")))
+                .unwrap_or_else(|| panic!("{tag}: rank {r} printed no error:\n{err}"));
+            assert!(
+                line.contains("processor1") && line.contains("polyMesh.octmesh-partial"),
+                "{tag}: rank {r} says '{line}'"
+            );
+        }
+    };
+
+    // A new case: nothing of a mesh is left, on any rank.
+    let fresh = dir.join("fresh");
+    block(&fresh);
+    expect_failure(&run(&fresh, "3"), "new case");
+    assert!(processor_meshes(&fresh, np).is_empty(), "a mesh was left");
+    for r in [0, 2] {
+        let scratch = fresh.join(format!("processor{r}/constant/polyMesh.octmesh-partial"));
+        assert!(!scratch.exists(), "{} was left", scratch.display());
+    }
+
+    // An existing case: the old mesh stays, byte for byte, on every rank.
+    let case = dir.join("case");
+    let out = run(&case, "3");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let before = processor_meshes(&case, np);
+    assert_eq!(before.len(), 5 * np, "five polyMesh files per rank");
+    block(&case);
+    expect_failure(&run(&case, "4"), "existing case");
+    let after = processor_meshes(&case, np);
+    assert!(
+        before == after,
+        "the old mesh changed on some rank after a failed overwrite"
+    );
+    for r in [0, 2] {
+        let scratch = case.join(format!("processor{r}/constant/polyMesh.octmesh-partial"));
+        assert!(!scratch.exists(), "{} was left", scratch.display());
+    }
+    // Out of the way, the same command overwrites the case.
+    std::fs::remove_file(case.join("processor1/constant/polyMesh.octmesh-partial")).unwrap();
+    let out = run(&case, "4");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        processor_meshes(&case, np) != before,
+        "level 4 did not replace level 3"
+    );
+    println!(
+        "a write failing on rank 1 of {np}: every rank reported it, no mesh left in a new case, \
+         the old one intact in an existing case"
+    );
 }
 
 /// A box domain of 6 x 2 x 1 root cells around the sphere with a wake box
