@@ -115,6 +115,7 @@ fn checkmesh_accepts_the_cases_octmesh_writes() {
         ("sphere".into(), "outside", "5", 1),
         ("sphere".into(), "outside", "5", 3),
         ("torus".into(), "all", "5", 1),
+        ("torus".into(), "all", "5", 3),
         ("torus".into(), "inside", "6", 3),
     ];
     for (model, keep, level) in [
@@ -123,7 +124,9 @@ fn checkmesh_accepts_the_cases_octmesh_writes() {
         ("armadillo.stl", "inside", "7"),
     ] {
         if let Some(p) = shared_model(model) {
-            cases.push((p.to_string_lossy().into_owned(), keep, level, 1));
+            for np in [1, 3] {
+                cases.push((p.to_string_lossy().into_owned(), keep, level, np));
+            }
         }
     }
     for (k, (surface, keep, level, np)) in cases.iter().enumerate() {
