@@ -14,18 +14,8 @@ use std::time::Duration;
 
 fn expect_failure(np: usize, args: &[&str], needle: &str) {
     let out = mpirun(np, &octmesh_bin(), args, Duration::from_secs(120));
-    let err = String::from_utf8_lossy(&out.stderr);
-    let all = format!("{}{err}", String::from_utf8_lossy(&out.stdout));
-    assert!(
-        !out.status.success(),
-        "{args:?} on {np} ranks should fail:\n{all}"
-    );
-    assert!(!all.contains("panicked"), "{args:?}: panic text:\n{all}");
-    for r in 0..np {
-        let line = err
-            .lines()
-            .find(|l| l.contains(&format!("octmesh: error [rank {r} of {np}]:")));
-        let line = line.unwrap_or_else(|| panic!("{args:?}: rank {r} printed no error:\n{all}"));
+    let lines = rank_error_lines(&out, np, &format!("{args:?}"));
+    for (r, line) in lines.iter().enumerate() {
         assert!(
             line.contains(needle),
             "{args:?}: rank {r} says '{line}', expected '{needle}'"

@@ -751,14 +751,7 @@ fn a_write_failing_on_one_rank_fails_every_rank() {
         std::fs::write(constant.join("polyMesh.octmesh-partial"), b"in the way").unwrap();
     };
     let expect_failure = |out: &std::process::Output, tag: &str| {
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success(), "{tag}: should fail:\n{err}");
-        assert!(!err.contains("panicked"), "{tag}: panic text:\n{err}");
-        for r in 0..np {
-            let line = err
-                .lines()
-                .find(|l| l.contains(&format!("octmesh: error [rank {r} of {np}]:")))
-                .unwrap_or_else(|| panic!("{tag}: rank {r} printed no error:\n{err}"));
+        for (r, line) in common::rank_error_lines(out, np, tag).iter().enumerate() {
             assert!(
                 line.contains("processor1") && line.contains("polyMesh.octmesh-partial"),
                 "{tag}: rank {r} says '{line}'"

@@ -62,6 +62,29 @@ pub fn shared_model(name: &str) -> Option<PathBuf> {
     }
 }
 
+/// Each rank's line of a failed command's error report
+/// (`octmesh: error [rank r of np]: ...`), in rank order. Asserts that the
+/// command failed, that no panic text appeared, and that every rank
+/// printed its line; `what` names the command in the messages.
+pub fn rank_error_lines(out: &Output, np: usize, what: &str) -> Vec<String> {
+    let err = String::from_utf8_lossy(&out.stderr);
+    let all = format!("{}{err}", String::from_utf8_lossy(&out.stdout));
+    assert!(
+        !out.status.success(),
+        "{what} on {np} ranks should fail:\n{all}"
+    );
+    assert!(!all.contains("panicked"), "{what}: panic text:\n{all}");
+    (0..np)
+        .map(|r| {
+            let head = format!("octmesh: error [rank {r} of {np}]:");
+            err.lines()
+                .find(|l| l.contains(&head))
+                .unwrap_or_else(|| panic!("{what}: rank {r} printed no error:\n{all}"))
+                .to_string()
+        })
+        .collect()
+}
+
 /// Runs `prog args` under `mpirun -np np`, killing it after `limit`.
 /// Returns the output, or panics on a hang.
 pub fn mpirun(np: usize, prog: &Path, args: &[&str], limit: Duration) -> Output {
