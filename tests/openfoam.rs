@@ -750,6 +750,20 @@ fn a_write_failing_on_one_rank_fails_every_rank() {
         std::fs::create_dir_all(&constant).unwrap();
         std::fs::write(constant.join("polyMesh.octmesh-partial"), b"in the way").unwrap();
     };
+    let expect_success = |out: &std::process::Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    // Ranks 0 and 2 made their scratch directories: gone after the failure.
+    let expect_no_scratch = |case: &Path| {
+        for r in [0, 2] {
+            let scratch = case.join(format!("processor{r}/constant/polyMesh.octmesh-partial"));
+            assert!(!scratch.exists(), "{} was left", scratch.display());
+        }
+    };
     let expect_failure = |out: &std::process::Output, tag: &str| {
         for (r, line) in common::rank_error_lines(out, np, tag).iter().enumerate() {
             assert!(
@@ -764,19 +778,11 @@ fn a_write_failing_on_one_rank_fails_every_rank() {
     block(&fresh);
     expect_failure(&run(&fresh, "3"), "new case");
     assert!(processor_meshes(&fresh, np).is_empty(), "a mesh was left");
-    for r in [0, 2] {
-        let scratch = fresh.join(format!("processor{r}/constant/polyMesh.octmesh-partial"));
-        assert!(!scratch.exists(), "{} was left", scratch.display());
-    }
+    expect_no_scratch(&fresh);
 
     // An existing case: the old mesh stays, byte for byte, on every rank.
     let case = dir.join("case");
-    let out = run(&case, "3");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    expect_success(&run(&case, "3"));
     let before = processor_meshes(&case, np);
     assert_eq!(before.len(), 5 * np, "five polyMesh files per rank");
     block(&case);
@@ -786,18 +792,10 @@ fn a_write_failing_on_one_rank_fails_every_rank() {
         before == after,
         "the old mesh changed on some rank after a failed overwrite"
     );
-    for r in [0, 2] {
-        let scratch = case.join(format!("processor{r}/constant/polyMesh.octmesh-partial"));
-        assert!(!scratch.exists(), "{} was left", scratch.display());
-    }
+    expect_no_scratch(&case);
     // Out of the way, the same command overwrites the case.
     std::fs::remove_file(case.join("processor1/constant/polyMesh.octmesh-partial")).unwrap();
-    let out = run(&case, "4");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    expect_success(&run(&case, "4"));
     assert!(
         processor_meshes(&case, np) != before,
         "level 4 did not replace level 3"

@@ -995,7 +995,7 @@ fn classify_on_two_threads_is_the_same() {
         let (_, index) = fitted(&surface);
         let leaves = leaves_of(&index, 8, true);
         assert!(
-            leaves.len() >= 1 << 17,
+            leaves.len() >= SPARE_MIN_LEAVES,
             "{} leaves: one thread",
             leaves.len()
         );
