@@ -13,15 +13,15 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, SamplingMode, Throughput};
 
 use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::comm::{CommRef, SerialComm};
-use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::bvh::Bvh;
 use octmesh::geometry::intersect::triangle_box_overlap;
 use octmesh::geometry::{shapes, Triangle};
 use octmesh::mesh::{Mesh, MeshOptions};
-use octmesh::octant::{morton_decode, morton_encode, ROOT_LEN};
+use octmesh::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::octree::octant::{morton_decode, morton_encode, ROOT_LEN};
+use octmesh::octree::sort::radix_sort_bits;
+use octmesh::parallel::comm::{CommRef, SerialComm};
 use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
-use octmesh::sort::radix_sort_bits;
 use octmesh::{Connectivity, LinearOctree, Octant, MAX_LEVEL};
 
 /// Refinement level of the sphere octree used by the geometric benchmarks.

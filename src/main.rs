@@ -14,14 +14,14 @@ use std::process::ExitCode;
 use std::rc::Rc;
 
 use octmesh::classify::InsideRule;
-use octmesh::comm::{agree, CommRef, MpiComm, SerialComm};
 use octmesh::config::cli::{self, Invocation};
 use octmesh::config::{Command, Config};
 use octmesh::error::panic_message;
 use octmesh::geometry::diagnostics::diagnose;
 use octmesh::geometry::load_surface;
+use octmesh::parallel::comm::{agree, CommRef, MpiComm, SerialComm};
 use octmesh::pipeline::{Event, Observer, Session};
-use octmesh::progress::Style;
+use octmesh::run::progress::Style;
 use octmesh::Result;
 
 /// Prints to stdout, ignoring a closed pipe (`octmesh ... | head -1`).

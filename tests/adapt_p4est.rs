@@ -20,9 +20,9 @@ use std::path::{Path, PathBuf};
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::adapt::Adapt;
-use octmesh::comm::{CommRef, MpiComm};
 use octmesh::io::leaves::write_leaves;
+use octmesh::octree::adapt::Adapt;
+use octmesh::parallel::comm::{CommRef, MpiComm};
 use octmesh::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};
 

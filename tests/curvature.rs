@@ -212,7 +212,7 @@ fn the_fandisk_sharp_edges_reach_max() {
         let mut coarse = 0;
         for p in &midpoints {
             let q: [u32; 3] = std::array::from_fn(|k| ((p[k] - origin[k]) / unit) as u32);
-            let cell = octmesh::octant::morton_encode(q[0], q[1], q[2]);
+            let cell = octmesh::octree::octant::morton_encode(q[0], q[1], q[2]);
             let i = leaves.partition_point(|o| o.cell_begin() <= cell) - 1;
             coarse += usize::from(leaves[i].level() < max);
         }

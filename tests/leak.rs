@@ -23,12 +23,12 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 use octmesh::classify::{classify_leaves, CUT};
-use octmesh::comm::{CommRef, MpiComm};
-use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::{load_surface, shapes, Surface, Triangle};
 use octmesh::leak::find_leak;
-use octmesh::octant::ROOT_LEN;
+use octmesh::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::octree::octant::ROOT_LEN;
 use octmesh::octree::LinearOctree;
+use octmesh::parallel::comm::{CommRef, MpiComm};
 use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::{Connectivity, Octant, Result};
 

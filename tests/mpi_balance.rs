@@ -10,7 +10,7 @@ mod common;
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::parallel::comm::{CommRef, MpiComm, SerialComm};
 use octmesh::refine::{build_from_callback, NO_LIMIT};
 use octmesh::{Connectivity, LinearOctree, Octant};
 

@@ -19,11 +19,11 @@ use std::rc::Rc;
 use std::time::{Duration, Instant};
 
 use octmesh::classify::{CutRule, Keep};
-use octmesh::comm::{CommRef, MpiComm};
 use octmesh::config::Config;
-use octmesh::domain::Domain;
+use octmesh::octree::domain::Domain;
+use octmesh::octree::search::{locate, locate_elements, owner_ranks, Location};
+use octmesh::parallel::comm::{CommRef, MpiComm};
 use octmesh::pipeline::Session;
-use octmesh::search::{locate, locate_elements, owner_ranks, Location};
 use octmesh::{Connectivity, Octant};
 
 const CHILD: &str = "OCTMESH_SEARCH_CHILD";

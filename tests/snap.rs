@@ -35,12 +35,12 @@ use std::rc::Rc;
 use std::time::Duration;
 
 use octmesh::classify::Keep;
-use octmesh::comm::{CommRef, MpiComm, SerialComm};
 use octmesh::config::{Command, Config};
-use octmesh::domain::{Domain, DEFAULT_FIT};
 use octmesh::geometry::{load_surface, Bvh};
 use octmesh::mesh::snap::{hexahedron_volume, SnapReport};
 use octmesh::mesh::{Mesh, Other, SURFACE_PATCH};
+use octmesh::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::parallel::comm::{CommRef, MpiComm, SerialComm};
 use octmesh::pipeline::Session;
 
 const CHILD: &str = "OCTMESH_SNAP_CHILD";

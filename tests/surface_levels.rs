@@ -8,7 +8,7 @@
 mod common;
 
 use common::*;
-use octmesh::octant::Octant;
+use octmesh::octree::octant::Octant;
 use std::path::{Path, PathBuf};
 
 /// The refined leaves of `octmesh octree SURFACE ARGS`, in a fixed cube

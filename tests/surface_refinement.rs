@@ -5,10 +5,10 @@
 
 use std::rc::Rc;
 
-use octmesh::comm::{CommRef, SerialComm};
-use octmesh::domain::Domain;
 use octmesh::geometry::intersect::triangle_box_overlap;
 use octmesh::geometry::shapes;
+use octmesh::octree::domain::Domain;
+use octmesh::parallel::comm::{CommRef, SerialComm};
 use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::Octant;
 

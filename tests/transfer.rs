@@ -26,12 +26,12 @@ mod common;
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use octmesh::adapt::Adapt;
 use octmesh::classify::{CutRule, Keep};
-use octmesh::comm::{CommRef, MpiComm};
 use octmesh::config::Config;
-use octmesh::domain::Domain;
 use octmesh::mesh::{transfer_elements, transfer_nodes, ElementMap, Mesh, MeshOptions};
+use octmesh::octree::adapt::Adapt;
+use octmesh::octree::domain::Domain;
+use octmesh::parallel::comm::{CommRef, MpiComm};
 use octmesh::pipeline::{Event, Observer, Session};
 use octmesh::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};

@@ -7,11 +7,11 @@
 use std::rc::Rc;
 
 use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::comm::{CommRef, SerialComm};
-use octmesh::domain::Domain;
 use octmesh::geometry::diagnostics::{clean, diagnose};
 use octmesh::geometry::stl::read_stl_bytes;
 use octmesh::mesh::{Mesh, MeshOptions};
+use octmesh::octree::domain::Domain;
+use octmesh::parallel::comm::{CommRef, SerialComm};
 use octmesh::refine::{build_from_surface, estimate_leaves, SurfaceIndex};
 use octmesh::{Connectivity, ErrorKind};
 

@@ -20,7 +20,7 @@
 //! keep their class then (`inherit` false).
 
 use super::rules::CUT;
-use crate::octant::Octant;
+use crate::octree::octant::Octant;
 
 /// The class bytes of `new` from those of `old` (both sorted and covering
 /// the same cells, as a local refinement, coarsening or balance leaves

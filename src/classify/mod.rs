@@ -142,7 +142,7 @@
 
 use crate::geometry::diagnostics::diagnose;
 use crate::geometry::{Aabb, Surface};
-use crate::octant::{Octant, ROOT_LEN};
+use crate::octree::octant::{Octant, ROOT_LEN};
 use crate::refine::SurfaceIndex;
 
 mod carry;
@@ -234,7 +234,7 @@ impl<'a> InsideClassifier<'a> {
     }
 
     /// [`InsideClassifier::classify`]; with `spare` (a spare core, see
-    /// [`crate::cores`]) and enough leaves, the two halves of `leaves` on
+    /// [`crate::parallel::cores`]) and enough leaves, the two halves of `leaves` on
     /// two threads, each walking down from the root. The same bytes either
     /// way.
     ///
@@ -256,7 +256,7 @@ impl<'a> InsideClassifier<'a> {
             leaves.len()
         };
         let (first, second) = out.split_at_mut(mid);
-        crate::cores::join(
+        crate::parallel::cores::join(
             spare,
             || self.walk_from_root(&leaves[..mid], first),
             || self.walk_from_root(&leaves[mid..], second),

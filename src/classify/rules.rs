@@ -8,7 +8,7 @@ use crate::geometry::diagnostics::SurfaceReport;
 pub const CENTER_INSIDE: u8 = 1;
 /// Bit set when the leaf's closed box touches the surface.
 pub const CUT: u8 = 2;
-/// Bit set for a leaf outside a box domain (the void of [`crate::brick`]):
+/// Bit set for a leaf outside a box domain (the void of [`crate::octree::brick`]):
 /// never kept, never part of the leak search.
 pub const VOID: u8 = 4;
 

@@ -4,16 +4,16 @@
 use super::masks::*;
 use super::walk::*;
 use super::*;
-use crate::comm::{CommRef, SerialComm};
-use crate::domain::{Domain, DEFAULT_FIT};
 use crate::geometry::diagnostics::diagnose;
 use crate::geometry::intersect::triangle_box_overlap;
 use crate::geometry::predicates::*;
 use crate::geometry::shapes::{default_sphere, default_torus, sphere};
 use crate::geometry::winding::winding_number;
 use crate::geometry::{Surface, Triangle};
-use crate::octant::CELLS;
-use crate::octant::{Octant, MAX_LEVEL, ROOT_LEN};
+use crate::octree::domain::{Domain, DEFAULT_FIT};
+use crate::octree::octant::CELLS;
+use crate::octree::octant::{Octant, MAX_LEVEL, ROOT_LEN};
+use crate::parallel::comm::{CommRef, SerialComm};
 use crate::refine::SurfaceIndex;
 
 fn norm(p: [f64; 3]) -> f64 {
@@ -619,7 +619,7 @@ fn classify_batched_box_test_agrees() {
         touching > 2000 && sure > 5 * unsure && unsure > 100 && crossing > 300,
         "{touching} {sure} {unsure} {crossing}"
     );
-    if crate::cores::avx512() {
+    if crate::parallel::cores::avx512() {
         assert!(wide_cases > 3000, "{wide_cases}");
     } else {
         println!("no AVX-512F here: the child masks' lanes were not compared");
@@ -630,7 +630,7 @@ fn classify_batched_box_test_agrees() {
 /// bytes, on a closed surface (parity) and an open one (winding, caps).
 #[test]
 fn classify_wide_lanes_give_the_same_bytes() {
-    if !crate::cores::avx512() {
+    if !crate::parallel::cores::avx512() {
         println!("no AVX-512F here: nothing to compare");
         return;
     }

@@ -12,7 +12,7 @@ use crate::geometry::intersect::triangle_box_overlap;
 use crate::geometry::predicates::*;
 use crate::geometry::winding::{boundary_loops, orient_welded, WindingTree};
 use crate::geometry::{Aabb, Triangle};
-use crate::octant::{Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
+use crate::octree::octant::{Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
 use crate::refine::{scatter_by_child, SurfaceIndex};
 
 /// The surface prepared for classification.
@@ -48,7 +48,7 @@ pub(crate) struct Classifier<'a> {
     pub(crate) cap_ids: Vec<u32>,
     pub(crate) summary: Option<WindingSummary>,
     /// The processor has AVX-512F: the child masks take the eight children
-    /// side by side ([`crate::cores::avx512`]; the same bits).
+    /// side by side ([`crate::parallel::cores::avx512`]; the same bits).
     pub(crate) wide: bool,
 }
 
@@ -200,7 +200,7 @@ impl<'a> Classifier<'a> {
             caps,
             cap_ids,
             summary,
-            wide: crate::cores::avx512(),
+            wide: crate::parallel::cores::avx512(),
         }
     }
 

@@ -13,11 +13,11 @@ use clap::{Args, Parser, Subcommand};
 
 use super::case::CaseFile;
 use super::{Balance, Command, Config, ConfigError};
-use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
 use crate::error::{Error, Result};
 use crate::io::openfoam::FoamFormat;
-use crate::regions::Region;
+use crate::refine::regions::Region;
+use crate::run::budget::ByteSize;
 
 /// The option that fills each key.
 pub const OPTIONS: &[(&str, &str)] = &[

@@ -79,13 +79,13 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use crate::budget::ByteSize;
 use crate::classify::{CutRule, InsideRule, Keep};
-use crate::domain::{Domain, DEFAULT_FIT};
 use crate::io::openfoam::FoamFormat;
 use crate::mesh::patches::PatchNames;
-use crate::octant::{Connectivity, MAX_LEVEL};
-use crate::regions::Region;
+use crate::octree::domain::{Domain, DEFAULT_FIT};
+use crate::octree::octant::{Connectivity, MAX_LEVEL};
+use crate::refine::regions::Region;
+use crate::run::budget::ByteSize;
 
 crate::named_enum! {
     /// What a run builds.
@@ -263,7 +263,7 @@ pub struct OctreeConfig {
     pub max_octants: Option<u64>,
     /// Memory each rank may use, in bytes or with a unit (`"4GiB"`): a run
     /// expected to need more stops before refining, and one that grows past
-    /// it stops before allocating (see [`crate::budget`]). Unset: the
+    /// it stops before allocating (see [`crate::run::budget`]). Unset: the
     /// node's available memory shared among its ranks.
     pub memory_budget: Option<ByteSize>,
 }
@@ -735,7 +735,7 @@ impl Config {
             }
         }
         let roots = d.roots.unwrap_or([1, 1, 1]);
-        let brick = crate::brick::Brick::new(roots)
+        let brick = crate::octree::brick::Brick::new(roots)
             .map_err(|e| ConfigError::new("domain.roots", format!("is invalid: {e}")))?;
         Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], roots)
             .map_err(|e| ConfigError::new("domain.box", format!("is invalid: {e}")))?;
@@ -869,7 +869,7 @@ impl Config {
     pub fn with_sizes(&self, side: f64) -> crate::Result<Config> {
         let mut c = self.clone();
         let o = &mut c.octree;
-        let level = |s: f64| crate::regions::level_for_size(side, s);
+        let level = |s: f64| crate::refine::regions::level_for_size(side, s);
         if let Some(s) = o.size.take() {
             o.level = Some(level(s)?);
         }
@@ -1011,7 +1011,7 @@ mod tests {
         c.domain.cube = Some([-2.0, -2.0, -2.0, 4.0]);
         c.octree.balance = Balance::Edge;
         c.octree.max_octants = Some(123_456);
-        c.octree.memory_budget = Some(crate::budget::ByteSize(3 << 30));
+        c.octree.memory_budget = Some(crate::run::budget::ByteSize(3 << 30));
         c.classify.inside = Some(InsideRule::Winding);
         c.leak.inside_point = Some([0.0, 0.1, 0.2]);
         c.leak.path = Some("leak.csv".into());

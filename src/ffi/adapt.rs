@@ -1,6 +1,6 @@
 //! Adaptation of the octree between simulation steps: refine once,
 //! coarsen families, adapt leaf by leaf, partition keeping families
-//! together (the C side of [`crate::adapt`]).
+//! together (the C side of [`crate::octree::adapt`]).
 
 use std::ffi::c_void;
 
@@ -8,9 +8,9 @@ use super::data::{octmesh_replace_fn, replacer};
 use super::handle::octmesh_t;
 use super::octree::{level_arg, octmesh_refine_fn, octmesh_weight_fn};
 use super::{octmesh_gloidx_t, octmesh_octant_t, octmesh_status_t, with_mut, write_out};
-use crate::adapt::{Adapt, AdaptStats};
 use crate::error::{Error, Result};
-use crate::leaf_data::ReplaceFn;
+use crate::octree::adapt::{Adapt, AdaptStats};
+use crate::octree::leaf_data::ReplaceFn;
 use crate::Octant;
 
 /// Coarsening callback: `family` points to the eight sibling leaves of a

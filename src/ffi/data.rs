@@ -1,4 +1,4 @@
-//! User data per leaf (the C side of [`crate::leaf_data`]): its size, the
+//! User data per leaf (the C side of [`crate::octree::leaf_data`]): its size, the
 //! local array, and the replace callback the `_ext` adaptation and balance
 //! functions take.
 
@@ -7,7 +7,7 @@ use std::ffi::c_void;
 use super::handle::octmesh_t;
 use super::{non_null, octmesh_locidx_t, octmesh_octant_t, octmesh_status_t, with_mut, write_out};
 use crate::error::{Error, ErrorKind, Result};
-use crate::leaf_data::Replace;
+use crate::octree::leaf_data::Replace;
 
 /// Replace callback: `num_outgoing` leaves `outgoing` (with their data,
 /// `outgoing_data`, the data size bytes each, in the same order) are replaced

@@ -12,11 +12,11 @@ use super::{
     c_string, catch, fail_without_handle, no_handle_error, non_null, octmesh_status_t, slice_arg,
     with_mut, with_ref, write_out,
 };
-use crate::budget::ByteSize;
-use crate::comm::{agree, CommRef, MpiComm};
 use crate::config::Config;
 use crate::error::{Error, ErrorKind, Result};
+use crate::parallel::comm::{agree, CommRef, MpiComm};
 use crate::pipeline::Session;
+use crate::run::budget::ByteSize;
 
 /// Options of a handle, read once by `octmesh_create`. Initialise with
 /// `octmesh_options_default`, then change fields. They fill the same
@@ -294,7 +294,7 @@ pub extern "C" fn octmesh_domain_set(
     with_mut(h, |h| {
         // SAFETY: NULL or 3 values (requirement of the C API).
         let d = unsafe { slice_arg(origin, 3, "origin") }
-            .and_then(|o| crate::domain::Domain::cube([o[0], o[1], o[2]], side));
+            .and_then(|o| crate::octree::domain::Domain::cube([o[0], o[1], o[2]], side));
         let d = h.agree(d)?;
         let c = h.session.config_mut();
         c.domain = crate::config::DomainConfig {
@@ -357,7 +357,7 @@ pub extern "C" fn octmesh_domain_set_box(
             }
             let r = [roots[0] as u32, roots[1] as u32, roots[2] as u32];
             let b = [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]];
-            crate::domain::Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], r)?;
+            crate::octree::domain::Domain::brick([b[0], b[1], b[2]], [b[3], b[4], b[5]], r)?;
             Ok((b, r))
         })();
         let (b, r) = h.agree(d)?;

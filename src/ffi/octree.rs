@@ -9,7 +9,7 @@ use super::{
 };
 use crate::error::{Error, ErrorKind, Result};
 use crate::octree::LinearOctree;
-use crate::regions::Region;
+use crate::refine::regions::Region;
 use crate::{Connectivity, Octant, MAX_LEVEL};
 
 /// Refinement callback: returns non-zero to refine the octant. It must give
@@ -330,7 +330,7 @@ pub extern "C" fn octmesh_octree_balance_ext(
     with_mut(h, |h| {
         let conn = h.agree(Connectivity::from_c(connect))?;
         let mut r = super::data::replacer(replace, ctx);
-        let r = r.as_mut().map(|r| r as crate::leaf_data::ReplaceFn);
+        let r = r.as_mut().map(|r| r as crate::octree::leaf_data::ReplaceFn);
         h.session.balance_replace(conn, r)
     })
 }

@@ -1,10 +1,10 @@
 //! Point location: the leaf or mesh element holding each of the caller's
-//! points (see [`crate::search`] for the tie rule).
+//! points (see [`crate::octree::search`] for the tie rule).
 
 use super::handle::octmesh_t;
 use super::{octmesh_gloidx_t, octmesh_locidx_t, octmesh_status_t, with_ref};
 use crate::error::{Error, ErrorKind, Result};
-use crate::search::{locate, locate_elements, Location};
+use crate::octree::search::{locate, locate_elements, Location};
 
 /// The points of a call and its two output arrays.
 type Arrays<'a> = (Vec<[f64; 3]>, &'a mut [i32], &'a mut [octmesh_gloidx_t]);

@@ -74,7 +74,7 @@ pub extern "C" fn octmesh_mesh_get_element_map(
     map: *mut octmesh_element_map_t,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
-        crate::comm::agree(&*h.comm, non_null(map, "map"))?;
+        crate::parallel::comm::agree(&*h.comm, non_null(map, "map"))?;
         let m = h.session.element_map()?;
         if m.old_first.len() > i32::MAX as usize {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
@@ -158,7 +158,7 @@ pub extern "C" fn octmesh_mesh_transfer_elements(
             // SAFETY: the caller's arrays (requirement of the C API).
             unsafe { field_args(ncomp, old_values, o, new_values, capacity, n) }
         });
-        let (n, old, out) = crate::comm::agree(&*h.comm, args)?;
+        let (n, old, out) = crate::parallel::comm::agree(&*h.comm, args)?;
         let values = h.session.transfer_elements(n, old)?;
         out[..values.len()].copy_from_slice(&values);
         Ok(())
@@ -196,7 +196,7 @@ pub extern "C" fn octmesh_mesh_transfer_nodes(
             // SAFETY: the caller's arrays (requirement of the C API).
             unsafe { field_args(ncomp, old_values, o, new_values, capacity, n) }
         });
-        let (n, old, out) = crate::comm::agree(&*h.comm, args)?;
+        let (n, old, out) = crate::parallel::comm::agree(&*h.comm, args)?;
         let (values, lost) = h.session.transfer_nodes(n, old)?;
         out[..values.len()].copy_from_slice(&values);
         if !missing.is_null() {

@@ -348,7 +348,7 @@ mod tests {
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn eight_at_once_give_the_same_bits() {
-        if !crate::cores::avx512() {
+        if !crate::parallel::cores::avx512() {
             eprintln!("skipped: this processor has no AVX-512F");
             return;
         }

@@ -651,7 +651,10 @@ mod tests {
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn eight_boxes_at_once_match_the_scalar_test() {
-        let (w8, w4) = (crate::cores::avx512(), crate::cores::avx2());
+        let (w8, w4) = (
+            crate::parallel::cores::avx512(),
+            crate::parallel::cores::avx2(),
+        );
         if !w8 && !w4 {
             println!("neither AVX-512F nor AVX2 here: the eight-box tests were not compared");
             return;

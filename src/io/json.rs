@@ -5,8 +5,8 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
+use crate::parallel::comm::{agree, Comm};
 
 /// Writes `value` as pretty JSON to `path` on rank 0; a failure there is
 /// reported on every rank. Collective.

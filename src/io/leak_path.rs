@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::octant::Octant;
+use crate::octree::octant::Octant;
 
 /// Writes a path of octants: `c` their centres and `s` their sizes (user
 /// units). With the extension `.vtk` a legacy VTK polyline with point data

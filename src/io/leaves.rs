@@ -4,7 +4,7 @@
 //! `.bin` is binary instead: the magic `OCTLEAF1`, a little-endian `u64`
 //! count, then four little-endian `i32` per leaf (x, y, z, level).
 //!
-//! An octree in a box domain ([`crate::brick`]) is written as p4est's forest
+//! An octree in a box domain ([`crate::octree::brick`]) is written as p4est's forest
 //! of the brick: a `# brick NX NY NZ` line, then `tree x y z level` per leaf
 //! with the tree in p4est's brick order, coordinates relative to the tree on
 //! its own `2^19` lattice and the level counted from the tree; leaves in the
@@ -15,11 +15,11 @@ use std::fs::{File, OpenOptions};
 use std::io::{BufRead, BufReader, BufWriter, Read, Write};
 use std::path::Path;
 
-use crate::brick::{Brick, TreeMap};
-use crate::comm::agree;
 use crate::error::{Error, Result};
-use crate::octant::Octant;
+use crate::octree::brick::{Brick, TreeMap};
+use crate::octree::octant::Octant;
 use crate::octree::LinearOctree;
+use crate::parallel::comm::agree;
 
 const MAGIC: &[u8; 8] = b"OCTLEAF1";
 const MAGIC_BRICK: &[u8; 8] = b"OCTLEAF2";
@@ -239,7 +239,7 @@ pub fn read_leaves(path: &Path) -> Result<Vec<Octant>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::{CommRef, SerialComm};
+    use crate::parallel::comm::{CommRef, SerialComm};
     use std::rc::Rc;
 
     #[test]

@@ -47,7 +47,6 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::direct::DirectWriter;
-use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::dual::corner_coords;
 use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
@@ -58,6 +57,7 @@ use crate::mesh::points::{
 };
 use crate::mesh::Mesh;
 use crate::mesh::VTK_TO_MORTON;
+use crate::parallel::comm::{agree, Comm};
 
 crate::named_enum! {
     /// Binary or ASCII list data.
@@ -359,7 +359,7 @@ struct Chunk {
 struct MeshParts<'m> {
     faces: &'m [Face],
     halo_start: usize,
-    elements: &'m [crate::octant::Octant],
+    elements: &'m [crate::octree::octant::Octant],
     conn: &'m [[u32; 8]],
     nn: usize,
     ni: usize,
@@ -389,7 +389,7 @@ impl<'m> PolygonIndex<'m> {
         // they hang on it, when they are local nodes, and are found by that
         // face's corners or that edge's ends. Only the halo's corners are
         // searched by their points.
-        let (hanging, (halo, midpoints)) = crate::cores::join(
+        let (hanging, (halo, midpoints)) = crate::parallel::cores::join(
             spare_core,
             || mesh.hanging_index(),
             || {
@@ -665,7 +665,7 @@ pub fn write_case(
     agree(comm, check)?;
     // A core no rank of this node runs on makes the polygons while this
     // rank labels them (a serial run on a workstation, say).
-    let spare_core = crate::cores::spare_core(comm);
+    let spare_core = crate::parallel::cores::spare_core(comm);
     let scratch = partial(&target);
     let written = (|| -> Result<FoamCounts> {
         let _ = fs::remove_dir_all(&scratch);

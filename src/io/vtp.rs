@@ -20,10 +20,10 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::direct::DirectWriter;
-use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::{Faces, Mesh, Other};
+use crate::parallel::comm::{agree, Comm};
 
 /// The PVTP path of the boundary beside `pvtu`: `NAME_boundary.pvtp`.
 pub fn boundary_path(pvtu: &Path) -> PathBuf {

@@ -37,8 +37,8 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::direct::DirectWriter;
-use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
+use crate::parallel::comm::{agree, Comm};
 
 /// One rank's part of a hexahedral mesh, ready to write.
 #[derive(Clone, Copy, Debug)]
@@ -533,7 +533,7 @@ pub fn piece_path(pvtu: &Path, rank: usize) -> PathBuf {
 ///
 /// A failure on any rank (invalid piece, unwritable directory, point field
 /// names other than rank 0's) becomes an error on every rank through
-/// [`crate::comm::agree`], never a hang; the PVTU is only written once every
+/// [`crate::parallel::comm::agree`], never a hang; the PVTU is only written once every
 /// piece is.
 pub fn write_parallel(comm: &dyn Comm, pvtu: &Path, piece: &VtuPiece) -> Result<PathBuf> {
     let fields = field_names(piece);
@@ -602,8 +602,8 @@ pub fn write_mesh(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::SerialComm;
     use crate::error::ErrorKind;
+    use crate::parallel::comm::SerialComm;
     use std::process::Command;
     use std::sync::atomic::{AtomicUsize, Ordering};
 

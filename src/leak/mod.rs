@@ -48,13 +48,13 @@
 //! balance is assumed.
 
 use crate::classify::CUT;
-use crate::comm::{agree, Comm};
-use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::Aabb;
-use crate::ghost::build_ghost_layer;
-use crate::octant::Octant;
+use crate::octree::domain::Domain;
+use crate::octree::ghost::build_ghost_layer;
+use crate::octree::octant::Octant;
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
+use crate::parallel::comm::{agree, Comm};
 
 mod path;
 mod search;
@@ -284,7 +284,7 @@ pub fn check_leak(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::{CommRef, SerialComm};
+    use crate::parallel::comm::{CommRef, SerialComm};
     use std::rc::Rc;
 
     fn comm() -> CommRef {

@@ -3,10 +3,10 @@
 
 use std::path::Path;
 
-use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::Aabb;
-use crate::octant::{Octant, ROOT_LEN};
+use crate::octree::domain::Domain;
+use crate::octree::octant::{Octant, ROOT_LEN};
 
 /// A path of face-adjacent open leaves from the domain boundary to the leaf
 /// holding the inside point: the evidence of a leak.

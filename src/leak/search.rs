@@ -4,11 +4,11 @@
 use std::collections::VecDeque;
 
 use crate::classify::CUT;
-use crate::comm::Comm;
-use crate::domain::Domain;
 use crate::error::{Error, Result};
-use crate::octant::Octant;
+use crate::octree::domain::Domain;
+use crate::octree::octant::Octant;
 use crate::octree::LeafIndex;
+use crate::parallel::comm::Comm;
 
 /// Distance of a leaf the search has not reached.
 pub(crate) const UNREACHED: u32 = u32::MAX;
@@ -217,9 +217,9 @@ impl Search<'_> {
 }
 
 /// The finest lattice cell holding `point` (user units, the tie rule of
-/// [`crate::search::point_cell`]), or an error if it is outside the domain.
+/// [`crate::octree::search::point_cell`]), or an error if it is outside the domain.
 pub(crate) fn point_cell(domain: &Domain, point: [f64; 3]) -> Result<u64> {
-    crate::search::point_cell(domain, point).ok_or_else(|| {
+    crate::octree::search::point_cell(domain, point).ok_or_else(|| {
         let top = domain.upper();
         let what = if domain.brick.is_cube() {
             "cube"

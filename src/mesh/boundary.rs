@@ -43,9 +43,9 @@
 //! node exchange lists; every rank holding a node then gives it the same
 //! patches.
 
-use crate::comm::Comm;
 use crate::error::Result;
-use crate::octant::morton_encode;
+use crate::octree::octant::morton_encode;
+use crate::parallel::comm::Comm;
 
 use super::faces::{Faces, Kept, Other, SURFACE_PATCH};
 use super::points::{face_polygon, point_key, PointIndex};

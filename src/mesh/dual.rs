@@ -16,7 +16,7 @@
 //! edge- or corner-balanced octree those corners never hang themselves.
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{Octant, LATTICE_BITS};
+use crate::octree::octant::{Octant, LATTICE_BITS};
 
 /// Reference to a pointer-tree entry: an internal node index (flagged
 /// [`BOTTOM`] when it has no internal child), `LEAF | i` for leaf `i` of
@@ -490,7 +490,7 @@ fn build(leaves: &Merged) -> (Vec<[u32; 8]>, u32) {
     let n = leaves.len();
     let mut nodes: Vec<[u32; 8]> = Vec::with_capacity(n / 24 + 1);
     let mut root = VOID;
-    let mut path = [0u32; crate::octant::MAX_LEVEL as usize + 1];
+    let mut path = [0u32; crate::octree::octant::MAX_LEVEL as usize + 1];
     let mut open = 0usize;
     let mut last = 0u64;
     // Child index of the octant with Morton code `m` within its parent at
@@ -1078,7 +1078,7 @@ mod tests {
 
     fn uniform(level: u8) -> Vec<Octant> {
         let n = 1u64 << (3 * level as u32);
-        let shift = 3 * (crate::octant::LATTICE_BITS - level as u32);
+        let shift = 3 * (crate::octree::octant::LATTICE_BITS - level as u32);
         (0..n)
             .map(|i| Octant::from_parts(i << shift, level))
             .collect()

@@ -49,7 +49,7 @@
 use std::ops::Range;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{Octant, LATTICE_BITS};
+use crate::octree::octant::{Octant, LATTICE_BITS};
 
 use super::dual::{walk_faces, FaceVisitor, Merged, FAMILY_FACES};
 use super::Mesh;
@@ -403,7 +403,7 @@ impl Halo {
     /// The kept ghosts of `ghosts`: `data` holds each ghost's class in the
     /// low byte and its global element number above it.
     pub(crate) fn from_ghosts(
-        ghosts: &crate::ghost::GhostLayer,
+        ghosts: &crate::octree::ghost::GhostLayer,
         keep: impl Fn(u8) -> bool,
     ) -> Halo {
         let mut h = Halo::default();
@@ -604,7 +604,7 @@ impl<'a> Kept<'a> {
         }
         let local = self.local;
         if let Some(j) =
-            crate::sort::gallop_last_le(local.len(), hint, c, |k| local[k].cell_begin())
+            crate::octree::sort::gallop_last_le(local.len(), hint, c, |k| local[k].cell_begin())
         {
             return Some((At::Local(j as u32), local[j]));
         }
@@ -618,7 +618,7 @@ impl<'a> Kept<'a> {
         // The halo's leaves are in Morton order (those before the local
         // ones, then those after).
         let h = &self.halo.leaves;
-        match crate::sort::gallop_last_le(h.len(), hint.get(), c, |k| h[k].cell_begin()) {
+        match crate::octree::sort::gallop_last_le(h.len(), hint.get(), c, |k| h[k].cell_begin()) {
             Some(k) => {
                 hint.set(k);
                 c < h[k].cell_end()
@@ -851,7 +851,7 @@ impl Mesh {
         self.faces_with(false)
     }
 
-    /// [`Mesh::faces`]; with `spare_core` (see [`crate::cores::spare_core`]),
+    /// [`Mesh::faces`]; with `spare_core` (see [`crate::parallel::cores::spare_core`]),
     /// a second thread has the kernel make the pages of the face list and
     /// of the scratch arrays while this one walks (the same faces).
     pub fn faces_with(&self, spare_core: bool) -> Result<Faces> {
@@ -888,8 +888,8 @@ impl Mesh {
         // Every element has six faces or more, each shared by two at most:
         // the list holds `3 nl` faces at least.
         let fresh = [
-            crate::cores::bytes_of(&covered),
-            crate::cores::bytes_of(&whole),
+            crate::parallel::cores::bytes_of(&covered),
+            crate::parallel::cores::bytes_of(&whole),
             (
                 faces.as_ptr() as usize,
                 3 * nl * std::mem::size_of::<Face>(),
@@ -898,7 +898,7 @@ impl Mesh {
         // Boundary faces per patch, counted as the internal ones are
         // listed (the walk has marked every element's covered quarters).
         let mut per_patch = [0usize; NUM_PATCHES];
-        crate::cores::with_pages_made(spare_core, &fresh, || {
+        crate::parallel::cores::with_pages_made(spare_core, &fresh, || {
             self.walk_faces(&mut covered, |found| match found {
                 Found::Pair { axis, low, high } => whole[3 * low as usize + axis] = high + 1,
                 Found::Quarter { axis, low, high, q } => {
@@ -964,7 +964,7 @@ impl Mesh {
         let num_boundary = patch_start[NUM_PATCHES] - num_internal;
         faces.reserve_exact(num_boundary + halo.len());
         let room = &mut faces.spare_capacity_mut()[..num_boundary];
-        crate::cores::make_pages(&[crate::cores::bytes_of(room)]);
+        crate::parallel::cores::make_pages(&[crate::parallel::cores::bytes_of(room)]);
         let mut next: Vec<usize> = patch_start.iter().map(|s| s - num_internal).collect();
         self.boundary_pieces(&covered, |f, p| {
             room[next[p as usize]].write(f);
@@ -1269,10 +1269,10 @@ mod tests {
         }
         // Every octant level, both sides, every shape.
         let mut x = 99u64;
-        for level in 0..=crate::octant::MAX_LEVEL {
+        for level in 0..=crate::octree::octant::MAX_LEVEL {
             for _ in 0..50 {
                 x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
-                let side = crate::octant::ROOT_LEN >> level;
+                let side = crate::octree::octant::ROOT_LEN >> level;
                 let c = [x >> 7, x >> 27, x >> 47].map(|v| v as u32 % (1 << level) * side);
                 let e = Octant::new(c[0], c[1], c[2], level).unwrap();
                 let (axis, plus) = ((x >> 3) as usize % 3, x & 1 == 1);
@@ -1314,7 +1314,7 @@ mod tests {
             let axis = normal / 2;
             // The low face of the element of side 4 at (4, 4, 4), its
             // normal either way.
-            let e = Octant::new(4, 4, 4, crate::octant::MAX_LEVEL - 1).unwrap();
+            let e = Octant::new(4, 4, 4, crate::octree::octant::MAX_LEVEL - 1).unwrap();
             let mut f = element_face(0, e, axis as usize, false, WHOLE_SHAPE, Other::Patch(0));
             if normal % 2 == 0 {
                 f = f.flipped(0, Other::Patch(0));

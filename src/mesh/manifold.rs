@@ -30,11 +30,11 @@
 //! its block); sweeps then repeat around the leaves dropped last, looking
 //! their neighbours up, until none is.
 
-use crate::comm::Comm;
-use crate::ghost::GhostLayer;
 use crate::mesh::dual::{leaf_at, side_masks, walk_points, DualTree, Merged};
-use crate::octant::{morton_encode, Octant, ROOT_LEN};
+use crate::octree::ghost::GhostLayer;
+use crate::octree::octant::{morton_encode, Octant, ROOT_LEN};
 use crate::octree::LinearOctree;
+use crate::parallel::comm::Comm;
 
 /// Class bit of a leaf the clean-up dropped.
 pub const REMOVED: u8 = 0x80;
@@ -218,7 +218,9 @@ impl<K: Fn(u8) -> bool> View<'_, K> {
         }
         let m = morton_encode(x[0] as u32, x[1] as u32, x[2] as u32);
         let leaves = self.leaves;
-        let j = crate::sort::gallop_last_le(leaves.len(), hint, m, |k| leaves.get(k).cell_begin())?;
+        let j = crate::octree::sort::gallop_last_le(leaves.len(), hint, m, |k| {
+            leaves.get(k).cell_begin()
+        })?;
         (leaves.get(j).cell_end() > m).then_some(j)
     }
 
@@ -484,9 +486,9 @@ mod tests {
     #[test]
     fn first_sweep_drops_what_the_lookup_rules_drop() {
         use crate::classify::{classify_leaves, keeps, CutRule, Keep};
-        use crate::comm::{CommRef, SerialComm};
-        use crate::domain::Domain;
-        use crate::octant::Connectivity;
+        use crate::octree::domain::Domain;
+        use crate::octree::octant::Connectivity;
+        use crate::parallel::comm::{CommRef, SerialComm};
         use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
         let mut dropped = 0;
         for (name, level) in [("torus", 5), ("sphere", 6)] {

@@ -1,7 +1,7 @@
 //! The distributed trilinear hexahedral mesh of a balanced octree.
 //!
 //! [`Mesh::build`] follows the seed paper's Algorithm 4: exchange the ghost
-//! layer ([`crate::ghost`]), find the nodes and which of them hang
+//! layer ([`crate::octree::ghost`]), find the nodes and which of them hang
 //! (`dual`), decide owners and global numbers (`numbering`), and write
 //! the element connectivity.
 //!
@@ -66,13 +66,13 @@ pub mod snap;
 pub mod transfer;
 
 use crate::classify::{keeps, CutRule, Keep, LeafClass, VOID};
-use crate::comm::{Comm, Traffic};
-use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
-use crate::ghost::build_ghost_layer;
-use crate::octant::{Connectivity, Octant};
+use crate::octree::domain::Domain;
+use crate::octree::ghost::build_ghost_layer;
+use crate::octree::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
-use crate::report::PhaseTimer;
+use crate::parallel::comm::{Comm, Traffic};
+use crate::run::report::PhaseTimer;
 
 use std::sync::Arc;
 use std::sync::OnceLock;
@@ -214,12 +214,14 @@ impl Mesh {
     ) -> Result<Mesh> {
         let comm: &dyn Comm = &**tree.comm();
         let check = check_inputs(tree, classes, opts);
-        crate::comm::agree(comm, check)?;
+        crate::parallel::comm::agree(comm, check)?;
         let mut timer = PhaseTimer::new();
         // Whatever earlier phases freed must not stay resident under the
         // mesh, which needs about 40 bytes per leaf: a free heap of more
         // than 4 bytes per leaf is given back.
-        crate::report::trim_heap_above(crate::report::TRIM_MIN_FREE.min(4 * tree.local_len()));
+        crate::run::report::trim_heap_above(
+            crate::run::report::TRIM_MIN_FREE.min(4 * tree.local_len()),
+        );
         // Leaves outside a box domain are never elements.
         let brick = domain.brick;
         let with_void: Vec<u8>;
@@ -295,17 +297,17 @@ impl Mesh {
             Ok((d, dual_tree, elements, counted))
         });
         let (d, dual_tree, elements, (face_hanging, edge_hanging)) =
-            crate::comm::agree(comm, nodes)?;
+            crate::parallel::comm::agree(comm, nodes)?;
 
         let numbering = timer.time(comm, "numbering", || {
             number_independent(comm, tree.first_cells(), &d, halo.around(&elements.leaves))
         });
-        let numbering = crate::comm::agree(comm, numbering)?;
+        let numbering = crate::parallel::comm::agree(comm, numbering)?;
 
         let mesh = timer.time(comm, "connectivity", || {
             assemble(comm, domain, (d, dual_tree), elements, halo, numbering)
         });
-        let mut mesh = crate::comm::agree(comm, mesh)?;
+        let mut mesh = crate::parallel::comm::agree(comm, mesh)?;
         mesh.first_element = first_element;
         mesh.first_cells = tree.first_cells().to_vec();
         let mut sums = [
@@ -353,13 +355,13 @@ impl Mesh {
     }
 
     /// Bytes this rank exchanged with other ranks in each of the phases of
-    /// [`Mesh::timings`] (rank-local, see [`crate::comm::Traffic`]).
+    /// [`Mesh::timings`] (rank-local, see [`crate::parallel::comm::Traffic`]).
     pub fn traffic(&self) -> &[(String, Traffic)] {
         self.timer.traffic()
     }
 
     /// Seconds this rank spent inside collectives in each of the phases of
-    /// [`Mesh::timings`] (rank-local, see [`crate::comm::Comm::comm_seconds`]).
+    /// [`Mesh::timings`] (rank-local, see [`crate::parallel::comm::Comm::comm_seconds`]).
     pub fn comm_seconds(&self) -> &[(String, f64)] {
         self.timer.waits()
     }
@@ -605,7 +607,7 @@ impl Mesh {
 
     /// A volume in finest lattice cells converted to user units.
     pub fn cells_to_volume(&self, cells: u64) -> f64 {
-        let h = self.domain.side / crate::octant::ROOT_LEN as f64;
+        let h = self.domain.side / crate::octree::octant::ROOT_LEN as f64;
         cells as f64 * h * h * h
     }
 }

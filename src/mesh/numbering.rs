@@ -12,10 +12,10 @@
 //! users. Three all-to-all exchanges, each carrying only
 //! nodes on partition boundaries.
 
-use crate::comm::Comm;
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{morton_encode, ROOT_LEN};
+use crate::octree::octant::{morton_encode, ROOT_LEN};
 use crate::octree::owner_of_cell;
+use crate::parallel::comm::Comm;
 
 /// Morton key of a lattice point (20 bits per coordinate: the upper domain
 /// boundary `ROOT_LEN` is a valid coordinate).

@@ -5,8 +5,8 @@
 //! Faces come in Morton order, so consecutive look-ups land near each
 //! other: each one gallops from the previous hit and stays in cache.
 
-use crate::octant::{morton_decode, morton_encode};
-use crate::sort::{gallop_last_le, radix_sort_bits};
+use crate::octree::octant::{morton_decode, morton_encode};
+use crate::octree::sort::{gallop_last_le, radix_sort_bits};
 
 /// A lattice point's Morton code (21 bits per axis, so the far corner of
 /// the root fits): sorted codes keep neighbouring points close together.
@@ -245,11 +245,11 @@ struct NearCells {
 
 impl NearCells {
     /// Log2 of a cell's side in lattice units.
-    const SIDE_BITS: u32 = crate::octant::LATTICE_BITS - 7;
+    const SIDE_BITS: u32 = crate::octree::octant::LATTICE_BITS - 7;
     /// Log2 of the filter's size in bits.
     const FILTER_BITS: u32 = 21;
 
-    fn new(set: &[crate::octant::Octant]) -> NearCells {
+    fn new(set: &[crate::octree::octant::Octant]) -> NearCells {
         let k = Self::SIDE_BITS;
         let cells = set.iter().flat_map(|h| {
             let (c, s) = (h.coords(), h.side());
@@ -266,7 +266,7 @@ impl NearCells {
 
     /// Whether `o` may touch an octant of the set.
     #[inline]
-    fn may_touch(&self, o: crate::octant::Octant) -> bool {
+    fn may_touch(&self, o: crate::octree::octant::Octant) -> bool {
         if o.side() > 1 << Self::SIDE_BITS {
             return true;
         }
@@ -323,7 +323,7 @@ mod tests {
 
     #[test]
     fn near_cells_miss_no_touching_octant() {
-        use crate::octant::{Octant, ROOT_LEN};
+        use crate::octree::octant::{Octant, ROOT_LEN};
         let mut rng = crate::testutil::Rng(12_345);
         let mut next = |n: u32| rng.range(0, n as i64 - 1) as u32;
         // Octants of levels around the cell's (level 7), near each other.

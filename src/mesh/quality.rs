@@ -93,7 +93,6 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::vtu::{write_vtu, VtuPiece};
 use crate::mesh::faces::{FaceKind, Faces, Other};
@@ -101,6 +100,7 @@ use crate::mesh::points::{
     corner_at, edge_points, face_polygon, point_key, PointFilter, PointIndex,
 };
 use crate::mesh::{Mesh, VTK_TO_MORTON};
+use crate::parallel::comm::{agree, Comm};
 
 /// For each corner (VTK order), its three neighbours along the edges, in a
 /// right-handed order on the undistorted element (see the module picture).
@@ -861,7 +861,7 @@ pub fn write_worst_vtu(path: &Path, worst: &[WorstElement]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::SerialComm;
+    use crate::parallel::comm::SerialComm;
     use crate::testutil::sphere_mesh;
 
     /// The unit cube's corners in VTK order, mapped by `f`.

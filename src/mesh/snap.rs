@@ -60,11 +60,11 @@
 
 use serde::Serialize;
 
-use crate::comm::{agree, Comm};
 use crate::error::{Error, Result};
 use crate::geometry::bvh::Bvh;
 use crate::geometry::distance::{closest_point_triangle, point_box2, point_triangle2};
 use crate::geometry::{Aabb, Surface, Triangle};
+use crate::parallel::comm::{agree, Comm};
 use crate::refine::SurfaceIndex;
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -112,7 +112,7 @@ const FIXED: f64 = 4294967296.0;
 /// second thread when the rank has a spare core: below it a thread's
 /// start costs more than it saves.
 const SPLIT_AT: usize = 1 << 15;
-/// The pieces such a pass is cut into ([`crate::cores::map_chunks`]).
+/// The pieces such a pass is cut into ([`crate::parallel::cores::map_chunks`]).
 const CHUNK: usize = 1 << 13;
 
 /// How [`Mesh::snap`] moves the nodes.
@@ -432,7 +432,7 @@ impl Region {
     /// The region of the nodes at `points` for cells of at most `largest`
     /// (lattice units) and a reach of `reach`.
     fn new(points: impl Iterator<Item = [f64; 3]>, largest: f64, reach: f64) -> Region {
-        let root = crate::octant::ROOT_LEN as f64;
+        let root = crate::octree::octant::ROOT_LEN as f64;
         // Cells of 16 of the largest surface cells, at most 128 a side.
         let side = (16.0 * largest).max(root / 128.0);
         let cells = (root / side).ceil() as usize;
@@ -748,9 +748,9 @@ struct Snapper<'a> {
     mesh: &'a Mesh,
     comm: &'a dyn Comm,
     /// Whether a second thread may take pieces of the long passes
-    /// ([`crate::cores::map_chunks`]).
+    /// ([`crate::parallel::cores::map_chunks`]).
     spare: bool,
-    /// The processor has AVX-512F ([`crate::cores::avx512`]).
+    /// The processor has AVX-512F ([`crate::parallel::cores::avx512`]).
     wide: bool,
     lists: Vec<(u32, Vec<u32>)>,
     ni: usize,
@@ -1054,8 +1054,8 @@ impl<'a> Snapper<'a> {
         // With a spare core two threads measure: they may place the same
         // hanging node (with the same bits), and each element's figure is
         // stored by the one that measures it.
-        let hanging = crate::cores::shared_f64(hanging.as_flattened_mut());
-        let least = crate::cores::shared_f64(&mut self.least);
+        let hanging = crate::parallel::cores::shared_f64(hanging.as_flattened_mut());
+        let least = crate::parallel::cores::shared_f64(&mut self.least);
         let m = Measure {
             conn,
             ni,
@@ -1068,7 +1068,7 @@ impl<'a> Snapper<'a> {
         };
         let measure = |part: std::ops::Range<usize>| m.part(&cands[part]);
         let spare = self.spare && cands.len() >= SPLIT_AT;
-        crate::cores::map_chunks(spare, cands.len(), CHUNK, measure).concat()
+        crate::parallel::cores::map_chunks(spare, cands.len(), CHUNK, measure).concat()
     }
 
     /// The active elements depending on the nodes `nodes`, once each:
@@ -1696,8 +1696,15 @@ impl Mesh {
         index: Option<&SurfaceIndex>,
         opts: &SnapOptions,
     ) -> Result<SnapReport> {
-        let spare = crate::cores::spare_core(comm);
-        self.snap_threads(comm, surface, index, opts, spare, crate::cores::avx512())
+        let spare = crate::parallel::cores::spare_core(comm);
+        self.snap_threads(
+            comm,
+            surface,
+            index,
+            opts,
+            spare,
+            crate::parallel::cores::avx512(),
+        )
     }
 
     /// [`Mesh::snap_indexed`], with a second thread where `spare` allows
@@ -1724,7 +1731,7 @@ impl Mesh {
             Some(ix) if spare && comm.size() == 1 && opts.feature_angle_deg < 180.0 => Some(ix),
             _ => None,
         };
-        let (found, (masks, mut s, side, reach, region)) = crate::cores::join(
+        let (found, (masks, mut s, side, reach, region)) = crate::parallel::cores::join(
             early.is_some(),
             || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, |_| true)),
             || {
@@ -1822,7 +1829,7 @@ impl Mesh {
             .iter()
             .map(|&n| super::numbering::node_key(s.lattice[n as usize]))
             .collect();
-        crate::sort::radix_sort_pairs_bits(&mut keys, &mut order, 0, 64);
+        crate::octree::sort::radix_sort_pairs_bits(&mut keys, &mut order, 0, 64);
         drop(keys);
         // A node's target depends on nothing but its point: the pieces of
         // the order may go to two threads. The elements that may change
@@ -1844,7 +1851,7 @@ impl Mesh {
                 .collect::<Vec<_>>()
         };
         let (targets, (layer, active, adj_start, adj)) =
-            crate::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
+            crate::parallel::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
                 s.moving_elements(&queried, &masks, opts)
             });
         for (&n, found) in order.iter().zip(targets.into_iter().flatten()) {
@@ -2101,8 +2108,8 @@ impl Mesh {
 mod tests {
     use super::*;
     use crate::classify::Keep;
-    use crate::comm::SerialComm;
     use crate::geometry::shapes::default_sphere;
+    use crate::parallel::comm::SerialComm;
     use crate::testutil::mesh_of;
 
     #[test]
@@ -2125,7 +2132,7 @@ mod tests {
         let one = run(false, false);
         assert!(one.1.len() > 2 * SPLIT_AT);
         // With AVX-512 (where the processor has it) too.
-        let wide = crate::cores::avx512();
+        let wide = crate::parallel::cores::avx512();
         for other in [run(true, false), run(false, wide), run(true, wide)] {
             assert_eq!(one.0, other.0);
             assert!(one
@@ -2143,13 +2150,14 @@ mod tests {
         let s = default_sphere();
         let b = s.bbox();
         let domain =
-            crate::domain::Domain::around(b.min, b.max, crate::domain::DEFAULT_FIT).unwrap();
+            crate::octree::domain::Domain::around(b.min, b.max, crate::octree::domain::DEFAULT_FIT)
+                .unwrap();
         let tris = SurfaceIndex::new(&s, &domain).tris;
         let (all_edges, all_corners) = features(&tris, 0.01, |_| true);
-        let mid = 0.5 * crate::octant::ROOT_LEN as f64;
+        let mid = 0.5 * crate::octree::octant::ROOT_LEN as f64;
         let side = |p: [f64; 3]| p[0] + 0.3 * p[1] < mid;
         let points = tris.iter().flat_map(|t| t.v).filter(|&p| side(p));
-        let largest = crate::octant::ROOT_LEN as f64 / 256.0;
+        let largest = crate::octree::octant::ROOT_LEN as f64 / 256.0;
         let region = Region::new(points, largest, FEATURE_REACH * largest);
         let (edges, corners) = features(&tris, 0.01, |b| region.meets(b));
         assert!(!corners.is_empty() && edges.len() < all_edges.len());
@@ -2288,7 +2296,7 @@ mod tests {
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn the_wide_test_gives_the_same_bits() {
-        if !crate::cores::avx512() {
+        if !crate::parallel::cores::avx512() {
             eprintln!("skipped: this processor has no AVX-512F");
             return;
         }

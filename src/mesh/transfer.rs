@@ -25,7 +25,7 @@
 //! at its position. A point on a face, edge or corner between old
 //! elements is evaluated in one canonical element: of the eight finest
 //! cells around the point, taken in the order of their offsets (the cell
-//! above the point along every axis first, as [`crate::search`]'s tie rule),
+//! above the point along every axis first, as [`crate::octree::search`]'s tie rule),
 //! the first that lies in an old element. The point goes to the old owners
 //! of those cells (one all-to-all, usually to a single rank), which answer
 //! with the value and the rank of the cell they used; so every rank, on any
@@ -40,11 +40,11 @@
 //! Values are interleaved per node (or element): component `c` of node `n`
 //! is `values[n * ncomp + c]`.
 
-use crate::comm::{offsets, Comm};
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{morton_encode, Octant, LATTICE_BITS};
+use crate::octree::octant::{morton_encode, Octant, LATTICE_BITS};
 use crate::octree::owner_of_cell;
-use crate::sort::gallop_last_le;
+use crate::octree::sort::gallop_last_le;
+use crate::parallel::comm::{offsets, Comm};
 
 use super::{Mesh, VTK_TO_MORTON};
 
@@ -175,7 +175,7 @@ impl ElementMap {
     /// must be of the same domain and ranks (an error on every rank
     /// otherwise).
     pub fn new(comm: &dyn Comm, old: &Mesh, new: &Mesh) -> Result<ElementMap> {
-        crate::comm::agree(comm, check_pair(old, new))?;
+        crate::parallel::comm::agree(comm, check_pair(old, new))?;
         let got = send_old(comm, old, new, 0, |_, _| {});
         let n = new.elements.len();
         let mut map = ElementMap {
@@ -242,7 +242,7 @@ pub fn transfer_elements(
     values: &[f64],
 ) -> Result<Vec<f64>> {
     let check = check_pair(old, new).and(check_len(values, ncomp, old.elements.len(), "element"));
-    crate::comm::agree(comm, check)?;
+    crate::parallel::comm::agree(comm, check)?;
     let got = send_old(comm, old, new, ncomp, |i, out| {
         out.extend(
             values[i * ncomp..(i + 1) * ncomp]
@@ -380,7 +380,7 @@ pub fn transfer_nodes(
     values: &[f64],
 ) -> Result<(Vec<f64>, u64)> {
     let check = check_pair(old, new).and(check_len(values, ncomp, old.num_nodes(), "node"));
-    crate::comm::agree(comm, check)?;
+    crate::parallel::comm::agree(comm, check)?;
     let p = comm.size();
     let hi = new.domain.brick.hi();
     let first = &old.first_cells;

@@ -1,7 +1,7 @@
 //! Stages for adaptive simulations: the session's octree refined once,
-//! coarsened or adapted by callbacks (see [`crate::adapt`]), and
+//! coarsened or adapted by callbacks (see [`crate::octree::adapt`]), and
 //! partitioned so that families stay together. Attached leaf data is kept
-//! (see [`crate::leaf_data`]): the replaced leaves go through the optional
+//! (see [`crate::octree::leaf_data`]): the replaced leaves go through the optional
 //! replace callback, new leaves' data is zero without one; on failure the
 //! octree and the data are as they were.
 
@@ -9,11 +9,11 @@ use super::classes::moving_classes;
 use super::data::{changing, moving};
 use super::octree::over_budget;
 use super::Session;
-use crate::adapt::{Adapt, AdaptStats};
-use crate::comm::agree;
 use crate::error::Result;
-use crate::leaf_data::{LeafData, ReplaceFn};
+use crate::octree::adapt::{Adapt, AdaptStats};
+use crate::octree::leaf_data::{LeafData, ReplaceFn};
 use crate::octree::LinearOctree;
+use crate::parallel::comm::agree;
 use crate::refine::check_level;
 use crate::Octant;
 

@@ -5,11 +5,11 @@ use std::path::Path;
 use std::sync::Arc;
 
 use crate::classify::{carry_classes, classify_leaves, InsideClassifier, InsideRule, LeafClass};
-use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
-use crate::leaf_data::LeafData;
 use crate::leak::find_leak;
+use crate::octree::leaf_data::LeafData;
 use crate::octree::LinearOctree;
+use crate::parallel::comm::agree;
 use crate::Octant;
 
 use super::*;
@@ -40,7 +40,7 @@ impl Session {
         self.index_for(domain)?;
         let comm = self.comm.clone();
         let (tree, surface) = (&self.tree, &self.surface);
-        let spare = crate::cores::spare_core(&*comm);
+        let spare = crate::parallel::cores::spare_core(&*comm);
         let (bits, summary) = self.timer.time(&*comm, "classify", || {
             let (Some((tree, _)), Some(surface)) = (tree, surface) else {
                 return (Vec::new(), None);

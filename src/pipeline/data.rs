@@ -1,12 +1,12 @@
-//! User data per leaf in a session (see [`crate::leaf_data`]): attached
+//! User data per leaf in a session (see [`crate::octree::leaf_data`]): attached
 //! with a size, kept by the adaptation stages, balance and partition,
 //! detached by the stages that build or refine the octree otherwise.
 
 use super::Session;
-use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
-use crate::leaf_data::{LeafData, ReplaceFn};
+use crate::octree::leaf_data::{LeafData, ReplaceFn};
 use crate::octree::LinearOctree;
+use crate::parallel::comm::agree;
 
 impl Session {
     /// Attaches `size` bytes of zeroed data to every local leaf; 0 detaches
@@ -53,7 +53,7 @@ pub(super) fn changing<T>(
     replace: Option<ReplaceFn>,
     op: impl FnOnce(&mut LinearOctree) -> Result<T>,
 ) -> Result<T> {
-    let mut zero = |_: crate::leaf_data::Replace<'_>| Ok(());
+    let mut zero = |_: crate::octree::leaf_data::Replace<'_>| Ok(());
     match (data, replace) {
         (None, None) => op(tree),
         (Some(d), r) => tree.change_with_data(d, r.unwrap_or(&mut zero), op),

@@ -3,7 +3,6 @@
 use std::path::{Path, PathBuf};
 
 use crate::classify::{CutRule, Keep};
-use crate::comm::agree;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::parts::PartLocator;
 use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
@@ -12,6 +11,7 @@ use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
 use crate::mesh::snap::{SnapOptions, SnapReport};
 use crate::mesh::{Boundary, Mesh, MeshOptions};
+use crate::parallel::comm::agree;
 
 use super::*;
 
@@ -168,7 +168,7 @@ impl Session {
                 }
             }
             let (locator, parts) = (&self.locator, self.parts.len());
-            let spare = crate::cores::spare_core(&*comm);
+            let spare = crate::parallel::cores::spare_core(&*comm);
             let faces = self.timer.time(&*comm, "faces", || match mesh {
                 Some(m) => {
                     let mut f = m.faces_with(spare)?;

@@ -32,20 +32,20 @@ mod transfer;
 
 use std::cell::OnceCell;
 
-use crate::budget::MemoryBudget;
 use crate::classify::{InsideRule, WindingSummary};
-use crate::comm::{agree, CommRef};
 use crate::config::{Command, Config};
-use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{diagnose, SurfaceReport};
 use crate::geometry::parts::PartLocator;
 use crate::geometry::{Aabb, Surface};
 use crate::mesh::{Boundary, Faces, Mesh};
+use crate::octree::domain::Domain;
 use crate::octree::LinearOctree;
-use crate::progress::{self, Progress, Style};
+use crate::parallel::comm::{agree, CommRef};
 use crate::refine::{LeafEstimate, SurfaceIndex};
-use crate::report::{peak_rss_bytes, PhaseTimer};
+use crate::run::budget::MemoryBudget;
+use crate::run::progress::{self, Progress, Style};
+use crate::run::report::{peak_rss_bytes, PhaseTimer};
 
 pub use observer::{Event, Observer, Silent};
 use transfer::Previous;
@@ -137,7 +137,7 @@ pub struct Session {
     /// The octree and the cube it was built in.
     tree: Option<(LinearOctree, Domain)>,
     /// User data per local leaf, when attached (`data.rs`).
-    data: Option<crate::leaf_data::LeafData>,
+    data: Option<crate::octree::leaf_data::LeafData>,
     classes: Classes,
     mesh: Option<Mesh>,
     /// The mesh before the octree last changed, kept for data transfer

@@ -5,9 +5,9 @@
 use std::path::Path;
 
 use crate::classify::{InsideRule, WindingSummary};
-use crate::domain::Domain;
 use crate::mesh::quality::Quality;
 use crate::mesh::MeshCounts;
+use crate::octree::domain::Domain;
 use crate::refine::LeafEstimate;
 
 /// One thing that happened in a session. Every rank sees the same events

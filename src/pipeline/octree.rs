@@ -3,24 +3,24 @@
 
 use std::path::Path;
 
-use crate::budget::{
-    available_on_node, BudgetSource, MemoryBudget, BASE_BYTES, BYTES_PER_OCTANT_MESH,
-    BYTES_PER_OCTANT_OCTREE, BYTES_PER_TRIANGLE,
-};
-use crate::comm::agree;
 use crate::config::Command;
-use crate::curvature::CurvatureRule;
-use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::io::leaves::write_leaves;
-use crate::leaf_data::ReplaceFn;
-use crate::octant::{Connectivity, Octant};
+use crate::octree::domain::Domain;
+use crate::octree::leaf_data::ReplaceFn;
+use crate::octree::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
+use crate::parallel::comm::agree;
+use crate::refine::curvature::CurvatureRule;
+use crate::refine::regions::RegionRules;
 use crate::refine::{
     check_estimate, check_level, construct_for_callback, construct_top_for_surface,
     estimate_leaves, SurfaceIndex,
 };
-use crate::regions::RegionRules;
+use crate::run::budget::{
+    available_on_node, BudgetSource, MemoryBudget, BASE_BYTES, BYTES_PER_OCTANT_MESH,
+    BYTES_PER_OCTANT_OCTREE, BYTES_PER_TRIANGLE,
+};
 
 use super::data;
 use super::*;
@@ -172,7 +172,7 @@ impl Session {
     /// Refines the leaves touching the surface further where it curves:
     /// up to `octree.max_level`, while the normals of the triangles
     /// touching a leaf differ by more than `octree.feature_angle` (see
-    /// [`crate::curvature`]). Phase `curvature`; nothing happens without a
+    /// [`crate::refine::curvature`]). Phase `curvature`; nothing happens without a
     /// maximum level above the surface level.
     pub fn refine_curvature(&mut self) -> Result<()> {
         let (level, max) = (self.config.octree.level, self.config.octree.max_level);
@@ -214,7 +214,7 @@ impl Session {
 
     /// Refines the octree by the configured minimum level and regions
     /// (`octree.min_level`, `regions`): a leaf is split while a rule asks
-    /// for more (see [`crate::regions`]). Within the octant limit and the
+    /// for more (see [`crate::refine::regions`]). Within the octant limit and the
     /// memory budget. Phase `regions`; nothing happens without rules.
     pub fn refine_regions(&mut self) -> Result<()> {
         let bands = self.config.octree.distance.clone();
@@ -244,7 +244,7 @@ impl Session {
         let refined = self.timer.time(&*comm, "regions", || -> Result<()> {
             let Some(tree) = tree else { return Ok(()) };
             check_level(rules.max_level())?;
-            let mut scratch = crate::regions::BandScratch::default();
+            let mut scratch = crate::refine::regions::BandScratch::default();
             tree.refine_all(
                 |leaves, out| rules.refine_leaves(leaves, out, &mut scratch, limit),
                 limit,
@@ -414,7 +414,7 @@ impl Session {
 
     /// [`Session::balance`] keeping the leaf data: each leaf balance splits
     /// goes through `replace` (without it, new leaves' data is zero), see
-    /// [`crate::leaf_data`]; on failure the octree and the data are as they
+    /// [`crate::octree::leaf_data`]; on failure the octree and the data are as they
     /// were. Phase `balance`.
     pub fn balance_replace(
         &mut self,
@@ -504,7 +504,7 @@ pub(super) fn over_budget<T>(
 }
 
 /// Checks a level counted from the root cells of `domain`: at most
-/// [`crate::octant::MAX_LEVEL`] less the trees' level.
+/// [`crate::octree::octant::MAX_LEVEL`] less the trees' level.
 pub(crate) fn check_user_level(level: u8, domain: &Domain) -> Result<()> {
     let most = domain.brick.max_user_level();
     if level > most && !domain.brick.is_cube() {

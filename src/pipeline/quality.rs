@@ -1,9 +1,9 @@
 //! Stage: the mesh's quality ([`crate::mesh::quality`]), measured only when
 //! a run asks for it (`--stats`, `--quality-out`).
 
-use crate::comm::agree;
 use crate::error::Result;
 use crate::mesh::quality::{write_worst_vtu, Quality};
+use crate::parallel::comm::agree;
 
 use super::*;
 

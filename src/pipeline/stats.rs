@@ -10,12 +10,12 @@ use serde::{Serialize, Serializer};
 
 use super::Session;
 use crate::classify::{CutRule, InsideRule, Keep};
-use crate::comm::Traffic;
 use crate::config::{Balance, Command};
 use crate::geometry::diagnostics::SurfaceReport;
 use crate::mesh::quality::Quality;
 use crate::mesh::MeshCounts;
-use crate::report::peak_rss_bytes;
+use crate::parallel::comm::Traffic;
+use crate::run::report::peak_rss_bytes;
 
 /// Values per phase, serialised as a JSON object in the order the phases
 /// ran.

@@ -3,13 +3,13 @@
 use std::cell::OnceCell;
 
 use crate::classify::InsideRule;
-use crate::comm::agree;
-use crate::domain::Domain;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{clean, diagnose};
 use crate::geometry::{load_surfaces, Surface};
+use crate::octree::domain::Domain;
+use crate::parallel::comm::agree;
 use crate::refine::{estimate_leaves, SurfaceIndex};
-use crate::report::peak_rss_bytes;
+use crate::run::report::peak_rss_bytes;
 
 use super::*;
 use crate::geometry::parts::PartLocator;
@@ -49,7 +49,7 @@ impl Session {
             self.config.output.stats.is_some() || self.inside == Some(InsideRule::Auto);
         let comm = self.comm.clone();
         let (tree_domain, domain_config) = (self.tree.as_ref().map(|t| t.1), &self.config.domain);
-        let spare = crate::cores::spare_core(&*comm);
+        let spare = crate::parallel::cores::spare_core(&*comm);
         let loaded = self.timer.time(&*comm, "read", || -> Result<SurfaceState> {
             let mut surface = get()?;
             let mut dropped = None;
@@ -65,7 +65,7 @@ impl Session {
             };
             // The report and the index read the surface alone: a spare core
             // makes them side by side.
-            let (found, index) = crate::cores::join(
+            let (found, index) = crate::parallel::cores::join(
                 spare && want_report && surface.len() >= SPARE_MIN_TRIANGLES,
                 || want_report.then(|| diagnose(&surface)),
                 || SurfaceIndex::new(&surface, &domain),

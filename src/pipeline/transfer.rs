@@ -4,9 +4,9 @@
 //! [`crate::mesh::transfer`]).
 
 use super::{report, Session};
-use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
 use crate::mesh::{transfer_elements, transfer_nodes, ElementMap, Mesh};
+use crate::parallel::comm::{agree, Comm};
 
 /// The previous mesh and what was computed against it.
 #[derive(Debug, Default)]

@@ -2,10 +2,10 @@
 //! and refusing a refinement that would exceed a limit.
 
 use super::*;
-use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::Triangle;
-use crate::octant::MAX_LEVEL;
+use crate::octree::octant::MAX_LEVEL;
+use crate::parallel::comm::{agree, CommRef};
 
 /// Ratio of the octants touching the surface at a level to the plane-piece
 /// prediction `P / h^2` (see [`estimate_leaves`]). The measured ratio of
@@ -36,7 +36,7 @@ pub struct LeafEstimate {
 }
 
 pub(crate) fn projected_area(tris: &[Triangle]) -> f64 {
-    let root = crate::octant::ROOT_LEN as f64;
+    let root = crate::octree::octant::ROOT_LEN as f64;
     let mut p = 0.0;
     for t in tris {
         let b = t.aabb();
@@ -96,7 +96,7 @@ pub fn estimate_leaves(surface: &SurfaceIndex, level: u8) -> LeafEstimate {
     let mut internal = 0.0f64; // C_0 + ... + C_(L-1)
     let mut above = 1.0f64; // C_(l-1), with the root's parent "1"
     for l in 0..level {
-        let h = (1u64 << (crate::octant::LATTICE_BITS - l as u32)) as f64;
+        let h = (1u64 << (crate::octree::octant::LATTICE_BITS - l as u32)) as f64;
         let all = 8f64.powi(l as i32);
         let mut c = if p.is_finite() {
             CUT_FACTOR * p / (h * h)

@@ -2,10 +2,10 @@
 //! queries.
 
 use super::*;
-use crate::domain::Domain;
 use crate::geometry::bvh::Bvh;
 use crate::geometry::{Aabb, Surface, Triangle};
-use crate::octant::Octant;
+use crate::octree::domain::Domain;
+use crate::octree::octant::Octant;
 
 /// A surface in lattice units, ready for octant queries.
 pub struct SurfaceIndex {

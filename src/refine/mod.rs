@@ -36,14 +36,16 @@
 //! limit. The limit itself is still enforced exactly while refining (and by
 //! [`LinearOctree::balance_with_limit`] while balancing).
 
-use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{Octant, MAX_LEVEL};
+use crate::octree::octant::{Octant, MAX_LEVEL};
+use crate::octree::partition::split_by_weight;
 use crate::octree::LinearOctree;
-use crate::partition::split_by_weight;
+use crate::parallel::comm::{agree, CommRef};
 
+pub mod curvature;
 mod estimate;
 mod index;
+pub mod regions;
 mod surface;
 
 #[cfg(test)]

@@ -2,14 +2,14 @@
 //! lists, then each rank refining its chunk top-down.
 
 use super::*;
-use crate::comm::{agree, CommRef};
 use crate::error::Result;
 use crate::geometry::intersect::triangle_box_overlap;
 #[cfg(target_arch = "x86_64")]
 use crate::geometry::intersect::{wide, wide4};
 use crate::geometry::{Aabb, Triangle};
-use crate::octant::Octant;
+use crate::octree::octant::Octant;
 use crate::octree::LinearOctree;
+use crate::parallel::comm::{agree, CommRef};
 
 /// The top of a surface refinement on this rank ([`construct_for_surface`])
 /// with, for each of its leaves, the triangles that may touch it. Refining
@@ -283,15 +283,15 @@ impl LinearOctree {
             masks: Vec::new(),
             out: Vec::with_capacity(self.local_len()),
             limit: limit.min(usize::MAX as u64) as usize,
-            wide: crate::cores::avx512(),
-            four: crate::cores::avx2(),
+            wide: crate::parallel::cores::avx512(),
+            four: crate::parallel::cores::avx2(),
         };
         let mut result = Ok(());
         let leaves = self.leaves();
         let mut skip = 0;
         for (i, &o) in leaves.iter().enumerate() {
             if i % 4096 == 0 {
-                crate::progress::set_done(w.out.len() as u64);
+                crate::run::progress::set_done(w.out.len() as u64);
             }
             if skip > 0 {
                 skip -= 1;
@@ -360,10 +360,10 @@ pub(crate) struct SurfaceWalker<'a> {
     pub(crate) masks: Vec<u8>,
     pub(crate) out: Vec<Octant>,
     pub(crate) limit: usize,
-    /// The processor has AVX-512F ([`crate::cores::avx512`]): a triangle
+    /// The processor has AVX-512F ([`crate::parallel::cores::avx512`]): a triangle
     /// is tested against eight children at once, with the same verdicts.
     pub(crate) wide: bool,
-    /// Else, the processor has AVX2 ([`crate::cores::avx2`]): four
+    /// Else, the processor has AVX2 ([`crate::parallel::cores::avx2`]): four
     /// children at a time, with the same verdicts.
     pub(crate) four: bool,
 }

@@ -1,9 +1,9 @@
 //! Tests of construction, surface and callback refinement, estimates.
 
 use super::*;
-use crate::comm::SerialComm;
-use crate::domain::Domain;
 use crate::geometry::{Surface, Triangle};
+use crate::octree::domain::Domain;
+use crate::parallel::comm::SerialComm;
 use std::rc::Rc;
 
 #[test]

@@ -184,7 +184,7 @@ pub fn assert_complete_linear(l: &[Octant]) {
     }
     assert_eq!(
         vol,
-        (octmesh::octant::ROOT_LEN as u128).pow(3),
+        (octmesh::octree::octant::ROOT_LEN as u128).pow(3),
         "volumes do not fill the root"
     );
 }
@@ -195,7 +195,7 @@ pub fn assert_complete_linear(l: &[Octant]) {
 /// buckets; within a bucket every pair is compared directly.
 pub fn assert_balanced(l: &[Octant], conn: octmesh::Connectivity) {
     const G: i64 = 16; // buckets per side
-    let root = octmesh::octant::ROOT_LEN as i64;
+    let root = octmesh::octree::octant::ROOT_LEN as i64;
     let cell = root / G;
     let mut buckets: Vec<Vec<usize>> = vec![Vec::new(); (G * G * G) as usize];
     for (i, o) in l.iter().enumerate() {
@@ -432,7 +432,7 @@ pub fn num(v: &serde_json::Value, k: &str) -> f64 {
 
 /// Gathers every rank's `v` on rank 0 (one vector per rank there, empty
 /// vectors elsewhere).
-pub fn gather(comm: &octmesh::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
+pub fn gather(comm: &octmesh::parallel::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
     let p = comm.size();
     let mut counts = vec![0; p];
     counts[0] = v.len();

@@ -25,11 +25,11 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::brick::Brick;
-use crate::domain::Domain;
 use crate::error::{Error, Result};
 use crate::geometry::distance::any_box_within;
-use crate::octant::{Octant, MAX_LEVEL};
+use crate::octree::brick::Brick;
+use crate::octree::domain::Domain;
+use crate::octree::octant::{Octant, MAX_LEVEL};
 use crate::refine::{scatter_by_child, SurfaceIndex};
 
 /// A refinement region with its level, user units.
@@ -717,7 +717,7 @@ fn child_slices(o: Octant, leaves: &[Octant]) -> [&[Octant]; 8] {
     let mut rest = leaves;
     o.children().map(|c| {
         let last = c.cell_end() - 1;
-        let k = crate::sort::gallop_last_le(rest.len(), 0, last, |j| rest[j].cell_begin())
+        let k = crate::octree::sort::gallop_last_le(rest.len(), 0, last, |j| rest[j].cell_begin())
             .map_or(0, |j| j + 1);
         let (mine, after) = rest.split_at(k);
         rest = after;

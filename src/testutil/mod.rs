@@ -39,10 +39,10 @@ pub(crate) fn mesh_of(
     keep: crate::classify::Keep,
 ) -> (crate::mesh::Mesh, crate::geometry::Surface) {
     use crate::classify::{classify_leaves, CutRule};
-    use crate::comm::{CommRef, SerialComm};
-    use crate::domain::{Domain, DEFAULT_FIT};
     use crate::mesh::{Mesh, MeshOptions};
-    use crate::octant::Connectivity;
+    use crate::octree::domain::{Domain, DEFAULT_FIT};
+    use crate::octree::octant::Connectivity;
+    use crate::parallel::comm::{CommRef, SerialComm};
     use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
     let comm: CommRef = std::rc::Rc::new(SerialComm);
     let s = crate::geometry::load_surface(name).unwrap();

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use crate::comm::{Comm, Traffic};
+use crate::parallel::comm::{Comm, Traffic};
 
 /// Peak resident set size of this process in bytes (`getrusage`).
 pub fn peak_rss_bytes() -> u64 {
@@ -175,7 +175,7 @@ mod tests {
     #[test]
     fn traffic_is_summed_by_phase_name() {
         let mut t = PhaseTimer::new();
-        let c = crate::comm::SerialComm;
+        let c = crate::parallel::comm::SerialComm;
         t.time(&c, "partition", || ());
         t.record_traffic(
             "partition",
@@ -200,7 +200,7 @@ mod tests {
     #[test]
     fn waits_are_summed_by_phase_name() {
         let mut t = PhaseTimer::new();
-        let c = crate::comm::SerialComm;
+        let c = crate::parallel::comm::SerialComm;
         t.time(&c, "ghost", || ());
         t.record_wait("ghost", 0.25);
         t.record_wait("ghost", 0.5);

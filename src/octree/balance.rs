@@ -37,12 +37,12 @@
 //! one `alltoallv` of probes; rounds repeat until no rank sends anything, so
 //! a ripple may cross any number of ranks.
 
-use crate::brick::Brick;
 use crate::error::Result;
-use crate::octant::{spread3, Connectivity, Octant, MAX_LEVEL};
+use crate::octree::brick::Brick;
+use crate::octree::octant::{spread3, Connectivity, Octant, MAX_LEVEL};
+use crate::octree::sort::{gallop_last_le, radix_sort_bits};
 use crate::octree::{owner_of_cell, LinearOctree};
 use crate::refine::{limit_error, NO_LIMIT};
-use crate::sort::{gallop_last_le, radix_sort_bits};
 
 /// What a balance did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -101,7 +101,7 @@ impl LinearOctree {
         };
         let mut leaves = std::mem::take(&mut b.leaves);
         drop(b);
-        crate::report::trim_heap();
+        crate::run::report::trim_heap();
         if over {
             // Every rank gets here in the same round (the decision is on
             // reduced values); nothing was published, so the ranges and
@@ -288,7 +288,7 @@ impl Balancer {
             // of a random-access search each: the sweep is sequential in
             // memory.
             let qlevel = (l - 2) as u8;
-            let low = 3 * (crate::octant::LATTICE_BITS - qlevel as u32);
+            let low = 3 * (crate::octree::octant::LATTICE_BITS - qlevel as u32);
             radix_sort_bits(&mut probes, &mut tmp, low, 57);
             probes.dedup();
             splits.clear();
@@ -505,7 +505,7 @@ impl Balancer {
             }
         }
         fresh.clear();
-        crate::progress::set_done((self.leaves.len() + self.overlay.added) as u64);
+        crate::run::progress::set_done((self.leaves.len() + self.overlay.added) as u64);
     }
 
     /// Moves the overlay's pieces into the leaf buffer, in place: the
@@ -622,7 +622,7 @@ fn refine_to(c: Octant, members: &[Octant], out: &mut Vec<Octant>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::{CommRef, SerialComm};
+    use crate::parallel::comm::{CommRef, SerialComm};
     use crate::refine::{build_from_callback, NO_LIMIT};
     use std::rc::Rc;
 

@@ -26,13 +26,13 @@
 
 use std::sync::Arc;
 
-use crate::adapt::{Adapt, AdaptStats};
-use crate::balance::BalanceStats;
-use crate::comm::{agree, Comm};
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{Connectivity, Octant};
+use crate::octree::adapt::{Adapt, AdaptStats};
+use crate::octree::balance::BalanceStats;
+use crate::octree::octant::{Connectivity, Octant};
+use crate::octree::partition::PartitionStats;
 use crate::octree::LinearOctree;
-use crate::partition::PartitionStats;
+use crate::parallel::comm::{agree, Comm};
 
 /// Fixed-size user data per local leaf, in Morton order (see the module
 /// documentation).
@@ -484,7 +484,7 @@ impl LinearOctree {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::{CommRef, SerialComm};
+    use crate::parallel::comm::{CommRef, SerialComm};
     use crate::refine::{build_from_callback, NO_LIMIT};
     use std::rc::Rc;
 

@@ -11,9 +11,9 @@
 //! neighbourhood lies in this rank's range are skipped, so the work grows
 //! with the partition boundary, not with the number of leaves.
 
-use crate::comm::Comm;
-use crate::octant::{Connectivity, Octant};
+use crate::octree::octant::{Connectivity, Octant};
 use crate::octree::{owner_of_cell, LinearOctree};
+use crate::parallel::comm::Comm;
 
 /// Leaves of other ranks touching this rank's leaves, sorted in Morton order,
 /// each with its owner rank and a word of data sent along by the owner (the
@@ -77,7 +77,7 @@ pub fn build_ghost_layer(tree: &LinearOctree, data: impl Fn(usize) -> u64) -> Gh
             me,
         };
         let mut tops = Vec::new();
-        crate::octant::cover_cells(scan.range.0, scan.range.1, &mut tops);
+        crate::octree::octant::cover_cells(scan.range.0, scan.range.1, &mut tops);
         let mut lo = 0;
         let mut ranks = Vec::new();
         for t in tops {

@@ -66,7 +66,7 @@ macro_rules! named_enum {
                         "unknown {} '{}' (expected {})",
                         $what,
                         s,
-                        $crate::named::one_of(&[$($name),+])
+                        $crate::run::named::one_of(&[$($name),+])
                     ))),
                 }
             }

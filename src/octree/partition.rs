@@ -8,7 +8,7 @@
 //! partition: partitioning twice gives the same result as once.
 
 use crate::error::{Error, Result};
-use crate::octant::Octant;
+use crate::octree::octant::Octant;
 use crate::octree::LinearOctree;
 
 /// What a partition did.

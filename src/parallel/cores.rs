@@ -6,7 +6,7 @@
 //! the same order, so a result never depends on whether a second thread
 //! ran it.
 
-use crate::comm::Comm;
+use crate::parallel::comm::Comm;
 use std::ops::Range;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 

@@ -18,7 +18,7 @@
 //! normal and are ignored. A surface with inconsistently oriented facets
 //! counts a flipped facet as a 180-degree turn.
 
-use crate::octant::Octant;
+use crate::octree::octant::Octant;
 use crate::refine::SurfaceIndex;
 
 /// The curvature rule of one surface.

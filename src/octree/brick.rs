@@ -35,7 +35,7 @@
 //! the octree level of a user level `l` is `l + k`.
 
 use crate::error::{Error, Result};
-use crate::octant::{morton_encode, spread3, Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
+use crate::octree::octant::{morton_encode, spread3, Octant, LATTICE_BITS, MAX_LEVEL, ROOT_LEN};
 
 /// The bits of a Morton code that hold the x coordinate.
 const DILATED_X: u64 = spread3(u32::MAX);
@@ -255,7 +255,7 @@ impl TreeMap {
                 x[0], x[1], x[2]
             )));
         }
-        let t = crate::octant::morton_decode(code);
+        let t = crate::octree::octant::morton_decode(code);
         let shift = LATTICE_BITS - k as u32;
         let c: [u32; 3] = std::array::from_fn(|a| (t[a] << shift) | (x[a] >> k));
         if x.iter().any(|&v| v & ((1 << k) - 1) != 0) {
@@ -346,7 +346,7 @@ mod tests {
         let codes = b.tree_codes();
         let xyz: Vec<[u32; 3]> = codes
             .iter()
-            .map(|&c| crate::octant::morton_decode(c))
+            .map(|&c| crate::octree::octant::morton_decode(c))
             .collect();
         assert_eq!(xyz[0], [0, 0, 0]);
         assert_eq!(xyz[1], [1, 0, 0]);

@@ -6,12 +6,12 @@
 //! coordinate `q` is the point `origin + q * side / 2^19`.
 //!
 //! A box domain ([`Domain::brick`]) is a brick of cubic root cells placed at
-//! the cube's lowest corner (see [`crate::brick`]): the cube is then the
+//! the cube's lowest corner (see [`crate::octree::brick`]): the cube is then the
 //! smallest power-of-two block of root cells holding the box.
 
-use crate::brick::Brick;
 use crate::error::{Error, Result};
-use crate::octant::ROOT_LEN;
+use crate::octree::brick::Brick;
+use crate::octree::octant::ROOT_LEN;
 
 /// Default ratio of the surface's longest bounding-box side to the cube's
 /// side when the cube is fitted around a surface.

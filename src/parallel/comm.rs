@@ -6,7 +6,7 @@
 //! tests run without MPI at all through [`SerialComm`].
 //!
 //! [`MpiComm`] counts the bytes each rank hands to MPI for other ranks and
-//! receives from them ([`Comm::traffic`]); [`crate::report::PhaseTimer`]
+//! receives from them ([`Comm::traffic`]); [`crate::run::report::PhaseTimer`]
 //! attributes them to phases.
 
 use std::cell::Cell;

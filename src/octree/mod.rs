@@ -7,12 +7,23 @@
 //! `global_first_position`) let any rank find the owner of any point without
 //! communication.
 
+pub mod adapt;
+pub mod balance;
+pub mod brick;
+pub mod domain;
+pub mod ghost;
+pub mod leaf_data;
+pub mod octant;
+pub mod partition;
+pub mod search;
+pub mod sort;
+
 use std::sync::Arc;
 
-use crate::brick::Brick;
-use crate::comm::{agree, CommRef};
 use crate::error::{Error, ErrorKind, Result};
-use crate::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
+use crate::octree::brick::Brick;
+use crate::octree::octant::{Connectivity, Octant, CELLS, MAX_LEVEL};
+use crate::parallel::comm::{agree, CommRef};
 
 /// A distributed, complete, linear octree (see the module documentation).
 pub struct LinearOctree {
@@ -56,7 +67,7 @@ impl LinearOctree {
         n[0]
     }
 
-    /// Places the octree in a brick of root cells (see [`crate::brick`]).
+    /// Places the octree in a brick of root cells (see [`crate::octree::brick`]).
     pub fn set_brick(&mut self, brick: Brick) {
         self.brick = brick;
     }
@@ -92,7 +103,7 @@ impl LinearOctree {
         let (p, r) = (comm.size() as u128, comm.rank() as u128);
         let begin = (n as u128 * r / p) as u64;
         let end = (n as u128 * (r + 1) / p) as u64;
-        let shift = 3 * (crate::octant::LATTICE_BITS - level as u32);
+        let shift = 3 * (crate::octree::octant::LATTICE_BITS - level as u32);
         let leaves = (begin..end)
             .map(|i| Octant::from_parts(i << shift, level))
             .collect();
@@ -211,7 +222,10 @@ impl LinearOctree {
 /// Per-rank first cells and global offsets of locally contiguous leaves,
 /// after checking that the ranks' ranges tile `[0, CELLS)`. Collective; every
 /// rank reaches the same verdict because it is computed from gathered data.
-fn layout(comm: &dyn crate::comm::Comm, leaves: &[Octant]) -> Result<(Vec<u64>, Vec<u64>)> {
+fn layout(
+    comm: &dyn crate::parallel::comm::Comm,
+    leaves: &[Octant],
+) -> Result<(Vec<u64>, Vec<u64>)> {
     let p = comm.size();
     let firsts = comm.allgather_u64(leaves.first().map_or(u64::MAX, |o| o.cell_begin()));
     let ends = comm.allgather_u64(leaves.last().map_or(u64::MAX, |o| o.cell_end()));
@@ -294,7 +308,7 @@ fn check_local(leaves: &[Octant]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::SerialComm;
+    use crate::parallel::comm::SerialComm;
     use std::rc::Rc;
 
     #[test]

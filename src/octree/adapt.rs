@@ -22,10 +22,10 @@
 //!   counts, the ranks' new ranges). Every operation clears the balance
 //!   flag: balance again afterwards, then partition.
 
-use crate::comm::agree;
 use crate::error::Result;
-use crate::octant::{Octant, MAX_LEVEL};
+use crate::octree::octant::{Octant, MAX_LEVEL};
 use crate::octree::LinearOctree;
+use crate::parallel::comm::agree;
 use crate::refine::{check_level, global_limit};
 
 /// A leaf's wish in [`LinearOctree::adapt`] (t8code's convention: refine
@@ -227,7 +227,7 @@ impl LinearOctree {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::{CommRef, SerialComm};
+    use crate::parallel::comm::{CommRef, SerialComm};
     use crate::refine::{build_from_callback, NO_LIMIT};
     use std::rc::Rc;
 

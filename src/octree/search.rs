@@ -25,11 +25,11 @@
 //! domain's box (in the void of the embedding cube), or with a NaN
 //! coordinate is [`Location::Outside`]; it is reported, never dropped.
 
-use crate::comm::offsets;
-use crate::domain::Domain;
 use crate::mesh::Mesh;
-use crate::octant::{morton_encode, Octant};
+use crate::octree::domain::Domain;
+use crate::octree::octant::{morton_encode, Octant};
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
+use crate::parallel::comm::offsets;
 
 /// Where a point lies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -237,7 +237,7 @@ fn route(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::comm::{CommRef, SerialComm};
+    use crate::parallel::comm::{CommRef, SerialComm};
     use std::rc::Rc;
 
     #[test]
