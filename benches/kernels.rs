@@ -12,16 +12,16 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, SamplingMode, Throughput};
 
-use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::geometry::bvh::Bvh;
-use octmesh::geometry::intersect::triangle_box_overlap;
-use octmesh::geometry::{shapes, Triangle};
-use octmesh::mesh::{Mesh, MeshOptions};
-use octmesh::octree::domain::{Domain, DEFAULT_FIT};
-use octmesh::octree::octant::{morton_decode, morton_encode, ROOT_LEN};
-use octmesh::octree::sort::radix_sort_bits;
-use octmesh::parallel::comm::{CommRef, SerialComm};
-use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::internals::classify::{classify_leaves, CutRule, Keep};
+use octmesh::internals::geometry::bvh::Bvh;
+use octmesh::internals::geometry::intersect::triangle_box_overlap;
+use octmesh::internals::geometry::{shapes, Triangle};
+use octmesh::internals::mesh::{Mesh, MeshOptions};
+use octmesh::internals::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::internals::octree::octant::{morton_decode, morton_encode, ROOT_LEN};
+use octmesh::internals::octree::sort::radix_sort_bits;
+use octmesh::internals::parallel::comm::{CommRef, SerialComm};
+use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::{Connectivity, LinearOctree, Octant, MAX_LEVEL};
 
 /// Refinement level of the sphere octree used by the geometric benchmarks.

@@ -13,15 +13,15 @@ use std::io::Write;
 use std::process::ExitCode;
 use std::rc::Rc;
 
-use octmesh::classify::InsideRule;
-use octmesh::config::cli::{self, Invocation};
-use octmesh::config::{Command, Config};
 use octmesh::error::panic_message;
-use octmesh::geometry::diagnostics::diagnose;
-use octmesh::geometry::load_surface;
-use octmesh::parallel::comm::{agree, CommRef, MpiComm, SerialComm};
-use octmesh::pipeline::{Event, Observer, Session};
-use octmesh::run::progress::Style;
+use octmesh::internals::classify::InsideRule;
+use octmesh::internals::config::cli::{self, Invocation};
+use octmesh::internals::config::{Command, Config};
+use octmesh::internals::geometry::diagnostics::diagnose;
+use octmesh::internals::geometry::load_surface;
+use octmesh::internals::parallel::comm::{agree, CommRef, MpiComm, SerialComm};
+use octmesh::internals::pipeline::{Event, Observer, Session};
+use octmesh::internals::run::progress::Style;
 use octmesh::Result;
 
 /// Prints to stdout, ignoring a closed pipe (`octmesh ... | head -1`).
@@ -225,7 +225,7 @@ fn check(comm: &CommRef, file: &str, json: Option<&std::path::Path>, quiet: bool
         Some(path) => {
             let mut j = report.to_json_value();
             j["auto_inside_rule"] = rule.name().into();
-            octmesh::io::json::write_json(&**comm, path, &j)
+            octmesh::internals::io::json::write_json(&**comm, path, &j)
         }
         None => Ok(()),
     }

@@ -20,10 +20,10 @@ use std::path::{Path, PathBuf};
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::io::leaves::write_leaves;
-use octmesh::octree::adapt::Adapt;
-use octmesh::parallel::comm::{CommRef, MpiComm};
-use octmesh::refine::NO_LIMIT;
+use octmesh::internals::io::leaves::write_leaves;
+use octmesh::internals::octree::adapt::Adapt;
+use octmesh::internals::parallel::comm::{CommRef, MpiComm};
+use octmesh::internals::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};
 
 const CHILD: &str = "OCTMESH_ADAPT_P4EST_CHILD";

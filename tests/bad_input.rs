@@ -214,8 +214,11 @@ fn faults_through_the_c_api_on_1_and_3_ranks() {
     let dir = scratch("bad_input_c_cases");
     let exe = c_program(&dir);
     let good = dir.join("sphere.stl");
-    octmesh::geometry::stl::write_stl_binary(&good, &octmesh::geometry::shapes::default_sphere())
-        .unwrap();
+    octmesh::internals::geometry::stl::write_stl_binary(
+        &good,
+        &octmesh::internals::geometry::shapes::default_sphere(),
+    )
+    .unwrap();
     let missing = dir.join("missing.stl");
     let sub = dir.join("a-directory.stl");
     std::fs::create_dir_all(&sub).unwrap();

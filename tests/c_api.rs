@@ -158,7 +158,7 @@ fn faces_from_c_on_1_2_and_3_ranks() {
 /// command's test: between the estimate and the real size.
 #[test]
 fn memory_budget_from_c_on_1_and_2_ranks() {
-    use octmesh::run::budget::{BASE_BYTES, BYTES_PER_OCTANT_MESH, BYTES_PER_TRIANGLE};
+    use octmesh::internals::run::budget::{BASE_BYTES, BYTES_PER_OCTANT_MESH, BYTES_PER_TRIANGLE};
     let (dir, exe) = c_program("budget");
     for np in [1, 2] {
         let stats = dir.join(format!("s{np}.json"));
@@ -194,8 +194,11 @@ fn memory_budget_from_c_on_1_and_2_ranks() {
 fn misuse_from_c_on_1_and_2_ranks() {
     let (dir, exe) = c_program("misuse");
     let good = dir.join("sphere.stl");
-    octmesh::geometry::stl::write_stl_binary(&good, &octmesh::geometry::shapes::default_sphere())
-        .unwrap();
+    octmesh::internals::geometry::stl::write_stl_binary(
+        &good,
+        &octmesh::internals::geometry::shapes::default_sphere(),
+    )
+    .unwrap();
     let missing = dir.join("no-such-file.stl");
     for np in [1, 2] {
         let out = run_ok(

@@ -155,10 +155,10 @@ fn the_fandisk_sharp_edges_reach_max() {
         return;
     };
     let dir = scratch("curvature_fandisk");
-    let s = octmesh::geometry::load_surface(fandisk.to_str().unwrap()).unwrap();
+    let s = octmesh::internals::geometry::load_surface(fandisk.to_str().unwrap()).unwrap();
     type Key = [u64; 3];
     let key = |p: [f64; 3]| p.map(f64::to_bits);
-    let normal = |t: &octmesh::geometry::Triangle| {
+    let normal = |t: &octmesh::internals::geometry::Triangle| {
         let n = t.normal();
         let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         n.map(|c| c / l)
@@ -212,7 +212,7 @@ fn the_fandisk_sharp_edges_reach_max() {
         let mut coarse = 0;
         for p in &midpoints {
             let q: [u32; 3] = std::array::from_fn(|k| ((p[k] - origin[k]) / unit) as u32);
-            let cell = octmesh::octree::octant::morton_encode(q[0], q[1], q[2]);
+            let cell = octmesh::internals::octree::octant::morton_encode(q[0], q[1], q[2]);
             let i = leaves.partition_point(|o| o.cell_begin() <= cell) - 1;
             coarse += usize::from(leaves[i].level() < max);
         }

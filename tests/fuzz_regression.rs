@@ -224,7 +224,7 @@ fn api_without_leaks(input: &[u8]) {
 fn api_corpus_and_random_inputs() {
     // Live allocations are counted per thread: keep the library's work on
     // this one (a spare core's thread may free what this one allocated).
-    std::env::set_var(octmesh::parallel::cores::SPARE_CORE_VAR, "0");
+    std::env::set_var(octmesh::internals::parallel::cores::SPARE_CORE_VAR, "0");
     api_body::init_mpi();
     replay("api", &api_without_leaks, 0x5eed_0002, RANDOM_INPUTS[1]);
     let _ = std::fs::remove_dir_all(

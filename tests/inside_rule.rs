@@ -9,8 +9,8 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use octmesh::geometry::shapes::sphere;
-use octmesh::geometry::Triangle;
+use octmesh::internals::geometry::shapes::sphere;
+use octmesh::internals::geometry::Triangle;
 
 /// Runs `octmesh COMMAND` with `args` on `np` ranks and returns its stats.
 fn stats(np: usize, command: &str, surface: &Path, args: &[&str], tag: &str) -> serde_json::Value {

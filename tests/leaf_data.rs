@@ -1,4 +1,4 @@
-//! Per-leaf user data through an adaptive loop (`octmesh::octree::leaf_data`): a
+//! Per-leaf user data through an adaptive loop (`octmesh::internals::octree::leaf_data`): a
 //! sphere moves through the cube for 50 steps; every step refines the
 //! leaves its surface cuts (up to level 6) and coarsens the families it
 //! does not cut (odd steps with `adapt_with_data`, even steps with
@@ -29,10 +29,10 @@ mod common;
 
 use std::rc::Rc;
 
-use octmesh::octree::adapt::Adapt;
-use octmesh::octree::leaf_data::{LeafData, Replace};
-use octmesh::parallel::comm::{CommRef, MpiComm};
-use octmesh::refine::NO_LIMIT;
+use octmesh::internals::octree::adapt::Adapt;
+use octmesh::internals::octree::leaf_data::{LeafData, Replace};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm};
+use octmesh::internals::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant, Result};
 
 const CHILD: &str = "OCTMESH_LEAF_DATA_CHILD";

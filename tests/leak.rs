@@ -1,4 +1,4 @@
-//! The leak check for fluid meshes (`octmesh::leak`, `--inside-point`).
+//! The leak check for fluid meshes (`octmesh::internals::leak`, `--inside-point`).
 //!
 //! Run by `cargo test`, this program is its own test runner: it launches
 //! itself under `mpirun` on 1, 2 and 3 ranks to run the Rust API in
@@ -22,14 +22,14 @@ use std::rc::Rc;
 use std::sync::OnceLock;
 use std::time::Duration;
 
-use octmesh::classify::{classify_leaves, CUT};
-use octmesh::geometry::{load_surface, shapes, Surface, Triangle};
-use octmesh::leak::find_leak;
-use octmesh::octree::domain::{Domain, DEFAULT_FIT};
-use octmesh::octree::octant::ROOT_LEN;
-use octmesh::octree::LinearOctree;
-use octmesh::parallel::comm::{CommRef, MpiComm};
-use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::internals::classify::{classify_leaves, CUT};
+use octmesh::internals::geometry::{load_surface, shapes, Surface, Triangle};
+use octmesh::internals::leak::find_leak;
+use octmesh::internals::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::internals::octree::octant::ROOT_LEN;
+use octmesh::internals::octree::LinearOctree;
+use octmesh::internals::parallel::comm::{CommRef, MpiComm};
+use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::{Connectivity, Octant, Result};
 
 use common::*;
@@ -174,7 +174,7 @@ const MAZE_POINT: [u32; 3] = [7, 7, 3];
 
 /// What a parallel run found, as text: `none`, `error KIND`, or
 /// `path KEY KEY ...` (boundary first).
-fn describe(r: &Result<Option<octmesh::leak::LeakPath>>) -> String {
+fn describe(r: &Result<Option<octmesh::internals::leak::LeakPath>>) -> String {
     match r {
         Ok(None) => "none".into(),
         Ok(Some(p)) => {
@@ -190,7 +190,7 @@ fn surface_run(
     s: &Surface,
     level: u8,
     point: [f64; 3],
-) -> Result<Option<octmesh::leak::LeakPath>> {
+) -> Result<Option<octmesh::internals::leak::LeakPath>> {
     let domain = domain_of(s);
     let index = SurfaceIndex::new(s, &domain);
     let mut tree = build_from_surface(comm.clone(), &index, level, NO_LIMIT)?;
@@ -202,7 +202,7 @@ fn surface_run(
 }
 
 /// The maze's result and the number of ranks owning leaves of its path.
-fn maze_run(comm: &CommRef) -> (Result<Option<octmesh::leak::LeakPath>>, usize) {
+fn maze_run(comm: &CommRef) -> (Result<Option<octmesh::internals::leak::LeakPath>>, usize) {
     let tree = LinearOctree::new_uniform(comm.clone(), 4).expect("uniform tree");
     let classes: Vec<u8> = tree
         .leaves()
@@ -831,7 +831,7 @@ fn bunny_open_leaks_and_bunny_does_not() {
 /// The holed sphere as an STL file in `dir`.
 fn holed_stl(dir: &Path) -> String {
     let p = dir.join("holed_sphere.stl");
-    octmesh::geometry::stl::write_stl_binary(&p, &holed_sphere()).expect("write stl");
+    octmesh::internals::geometry::stl::write_stl_binary(&p, &holed_sphere()).expect("write stl");
     p.to_str().unwrap().to_string()
 }
 

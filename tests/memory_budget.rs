@@ -7,7 +7,7 @@ mod common;
 use std::time::Duration;
 
 use common::*;
-use octmesh::run::budget::{BASE_BYTES, BYTES_PER_OCTANT_MESH, BYTES_PER_TRIANGLE};
+use octmesh::internals::run::budget::{BASE_BYTES, BYTES_PER_OCTANT_MESH, BYTES_PER_TRIANGLE};
 
 /// Runs a command expected to fail with the budget's error on every rank.
 fn expect_budget_error(np: usize, args: &[&str], needle: &str) {

@@ -10,8 +10,8 @@ mod common;
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::parallel::comm::{CommRef, MpiComm, SerialComm};
-use octmesh::refine::{build_from_callback, NO_LIMIT};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::internals::refine::{build_from_callback, NO_LIMIT};
 use octmesh::{Connectivity, LinearOctree, Octant};
 
 const CHILD: &str = "OCTMESH_MPI_BALANCE_CHILD";

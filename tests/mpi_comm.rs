@@ -10,7 +10,7 @@ mod common;
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::parallel::comm::{CommRef, MpiComm, Traffic};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm, Traffic};
 
 const CHILD: &str = "OCTMESH_MPI_COMM_CHILD";
 

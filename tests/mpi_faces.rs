@@ -17,13 +17,13 @@ use std::collections::BTreeSet;
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::geometry::load_surface;
-use octmesh::mesh::{Faces, Mesh, MeshOptions, Other, NUM_PATCHES, SURFACE_PATCH};
-use octmesh::octree::domain::{Domain, DEFAULT_FIT};
-use octmesh::octree::octant::ROOT_LEN;
-use octmesh::parallel::comm::{CommRef, MpiComm, SerialComm};
-use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::internals::classify::{classify_leaves, CutRule, Keep};
+use octmesh::internals::geometry::load_surface;
+use octmesh::internals::mesh::{Faces, Mesh, MeshOptions, Other, NUM_PATCHES, SURFACE_PATCH};
+use octmesh::internals::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::internals::octree::octant::ROOT_LEN;
+use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::Connectivity;
 
 const CHILD: &str = "OCTMESH_MPI_FACES_CHILD";
@@ -118,7 +118,7 @@ fn check_closure(m: &Mesh, f: &Faces, tag: &str) {
     let n = m.elements().len();
     let mut sum = vec![[0f64; 3]; n];
     let mut total = vec![0f64; n];
-    let mut add = |e: usize, face: &octmesh::mesh::Face, sign: f64| {
+    let mut add = |e: usize, face: &octmesh::internals::mesh::Face, sign: f64| {
         let a = face.lattice_area();
         let nrm = face.unit_normal();
         for k in 0..3 {
@@ -234,7 +234,7 @@ fn brute_force(m: &Mesh, f: &Faces, tag: &str) {
             expected.push((i as u32, face as u8, patch));
         }
     }
-    let serial = octmesh::parallel::comm::SerialComm;
+    let serial = octmesh::internals::parallel::comm::SerialComm;
     let got: Vec<(u32, u8, u16)> = m
         .boundary(&serial, f, None)
         .unwrap()
@@ -282,7 +282,7 @@ fn node_patches(comm: &CommRef, m: &Mesh, f: &Faces) -> Vec<u64> {
 /// whole mesh's elements (sorted, all on one rank): each pair of the eight
 /// finest cells around `p` across a plane through it, one in an element and
 /// one not, is a boundary face through `p`.
-fn brute_node_mask(all: &[octmesh::octree::octant::Octant], p: [u64; 3]) -> u64 {
+fn brute_node_mask(all: &[octmesh::internals::octree::octant::Octant], p: [u64; 3]) -> u64 {
     let root = ROOT_LEN as u64;
     let cell = |b: usize| -> Option<[u64; 3]> {
         let mut q = [0u64; 3];
@@ -304,7 +304,11 @@ fn brute_node_mask(all: &[octmesh::octree::octant::Octant], p: [u64; 3]) -> u64 
     let kept = |q: [u64; 3]| {
         // The last element starting at or before the cell in Morton order
         // is the only one that may hold it.
-        let cell = octmesh::octree::octant::morton_encode(q[0] as u32, q[1] as u32, q[2] as u32);
+        let cell = octmesh::internals::octree::octant::morton_encode(
+            q[0] as u32,
+            q[1] as u32,
+            q[2] as u32,
+        );
         let k = all.partition_point(|e| e.cell_begin() <= cell);
         k > 0 && {
             let e = all[k - 1];

@@ -20,12 +20,12 @@ use std::time::Duration;
 use mpi::collective::SystemOperation;
 use mpi::traits::*;
 
-use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::geometry::load_surface;
-use octmesh::mesh::{Mesh, MeshOptions, VTK_TO_MORTON};
-use octmesh::octree::domain::{Domain, DEFAULT_FIT};
-use octmesh::parallel::comm::{CommRef, MpiComm, SerialComm};
-use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::internals::classify::{classify_leaves, CutRule, Keep};
+use octmesh::internals::geometry::load_surface;
+use octmesh::internals::mesh::{Mesh, MeshOptions, VTK_TO_MORTON};
+use octmesh::internals::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::Connectivity;
 
 const CHILD: &str = "OCTMESH_MPI_MESH_CHILD";
@@ -301,7 +301,7 @@ fn child() {
                 "{tag}: independent nodes differ"
             );
             assert_eq!(dist.hanging, alone.hanging, "{tag}: hanging nodes differ");
-            let without_ghosts = |m: &Mesh| octmesh::mesh::MeshCounts {
+            let without_ghosts = |m: &Mesh| octmesh::internals::mesh::MeshCounts {
                 ghosts: 0,
                 ..*m.counts()
             };
@@ -407,7 +407,7 @@ fn expand(mesh: &Mesh, n: u32) -> Vec<(usize, f64)> {
 
 /// y = A x over the independent nodes, assembled on every rank.
 fn apply(world: &impl Communicator, mesh: &Mesh, k1: &[[f64; 8]; 8], x: &[f64], y: &mut [f64]) {
-    let h_unit = mesh.domain().side / octmesh::octree::octant::ROOT_LEN as f64;
+    let h_unit = mesh.domain().side / octmesh::internals::octree::octant::ROOT_LEN as f64;
     y.iter_mut().for_each(|v| *v = 0.0);
     for (e, conn) in mesh.elements().iter().zip(mesh.connectivity()) {
         let h = e.side() as f64 * h_unit;
@@ -435,7 +435,7 @@ fn patch_test(world: &impl Communicator, mesh: &Mesh, tag: &str) {
     let ni = mesh.num_independent();
     let (a, b, c, d) = (0.7, -1.3, 2.1, 0.4);
     let exact = |p: [f64; 3]| a + b * p[0] + c * p[1] + d * p[2];
-    let root = octmesh::octree::octant::ROOT_LEN;
+    let root = octmesh::internals::octree::octant::ROOT_LEN;
     let lattice = mesh.node_lattice();
     let coords = mesh.coordinates();
     let on_boundary: Vec<bool> = (0..ni)

@@ -176,7 +176,7 @@ fn region_leaves_in_a_box_equal_a_brute_force_construction() {
     let mut trees: Vec<[u32; 3]> = (0..2)
         .flat_map(|y| (0..3).map(move |x| [x, y, 0]))
         .collect();
-    trees.sort_by_key(|t| octmesh::octree::octant::morton_encode(t[0], t[1], t[2]));
+    trees.sort_by_key(|t| octmesh::internals::octree::octant::morton_encode(t[0], t[1], t[2]));
     let mut expected: Vec<(u32, u32, u32, u32, u32)> = Vec::new();
     for (i, t) in trees.iter().enumerate() {
         let origin = t.map(f64::from);

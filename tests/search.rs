@@ -18,12 +18,12 @@ use std::path::Path;
 use std::rc::Rc;
 use std::time::{Duration, Instant};
 
-use octmesh::classify::{CutRule, Keep};
-use octmesh::config::Config;
-use octmesh::octree::domain::Domain;
-use octmesh::octree::search::{locate, locate_elements, owner_ranks, Location};
-use octmesh::parallel::comm::{CommRef, MpiComm};
-use octmesh::pipeline::Session;
+use octmesh::internals::classify::{CutRule, Keep};
+use octmesh::internals::config::Config;
+use octmesh::internals::octree::domain::Domain;
+use octmesh::internals::octree::search::{locate, locate_elements, owner_ranks, Location};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm};
+use octmesh::internals::pipeline::Session;
 use octmesh::{Connectivity, Octant};
 
 const CHILD: &str = "OCTMESH_SEARCH_CHILD";

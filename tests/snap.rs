@@ -34,14 +34,14 @@ use std::collections::BTreeMap;
 use std::rc::Rc;
 use std::time::Duration;
 
-use octmesh::classify::Keep;
-use octmesh::config::{Command, Config};
-use octmesh::geometry::{load_surface, Bvh};
-use octmesh::mesh::snap::{hexahedron_volume, SnapReport};
-use octmesh::mesh::{Mesh, Other, SURFACE_PATCH};
-use octmesh::octree::domain::{Domain, DEFAULT_FIT};
-use octmesh::parallel::comm::{CommRef, MpiComm, SerialComm};
-use octmesh::pipeline::Session;
+use octmesh::internals::classify::Keep;
+use octmesh::internals::config::{Command, Config};
+use octmesh::internals::geometry::{load_surface, Bvh};
+use octmesh::internals::mesh::snap::{hexahedron_volume, SnapReport};
+use octmesh::internals::mesh::{Mesh, Other, SURFACE_PATCH};
+use octmesh::internals::octree::domain::{Domain, DEFAULT_FIT};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
+use octmesh::internals::pipeline::Session;
 
 const CHILD: &str = "OCTMESH_SNAP_CHILD";
 
@@ -286,7 +286,7 @@ fn check_snapped(name: &str, level: u8, keep: Keep, band: bool) -> (SnapReport, 
     // Nodes at the staircase's corners that are convex seen from the kept
     // side cannot reach the surface without flattening their elements
     // where the surface curves away from the kept side (see
-    // `octmesh::mesh::snap`): about half of a fluid mesh's, some of the
+    // `octmesh::internals::mesh::snap`): about half of a fluid mesh's, some of the
     // torus's saddle.
     let least = 0.4;
     assert!(

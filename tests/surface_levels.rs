@@ -8,7 +8,7 @@
 mod common;
 
 use common::*;
-use octmesh::octree::octant::Octant;
+use octmesh::internals::octree::octant::Octant;
 use std::path::{Path, PathBuf};
 
 /// The refined leaves of `octmesh octree SURFACE ARGS`, in a fixed cube
@@ -146,7 +146,7 @@ fn each_solid_refines_to_its_own_levels() {
 #[test]
 fn several_files_are_parts_with_their_own_levels() {
     let dir = scratch("surface_files");
-    let sphere = octmesh::geometry::shapes::default_sphere();
+    let sphere = octmesh::internals::geometry::shapes::default_sphere();
     let tris = |dx: f64| -> Vec<[[f32; 3]; 3]> {
         sphere
             .triangles()

@@ -5,11 +5,11 @@
 
 use std::rc::Rc;
 
-use octmesh::geometry::intersect::triangle_box_overlap;
-use octmesh::geometry::shapes;
-use octmesh::octree::domain::Domain;
-use octmesh::parallel::comm::{CommRef, SerialComm};
-use octmesh::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+use octmesh::internals::geometry::intersect::triangle_box_overlap;
+use octmesh::internals::geometry::shapes;
+use octmesh::internals::octree::domain::Domain;
+use octmesh::internals::parallel::comm::{CommRef, SerialComm};
+use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::Octant;
 
 fn touches_brute_force(idx: &SurfaceIndex, o: Octant) -> bool {

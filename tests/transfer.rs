@@ -1,4 +1,4 @@
-//! Fields across adaptation steps (`octmesh::mesh::transfer`): a sphere
+//! Fields across adaptation steps (`octmesh::internals::mesh::transfer`): a sphere
 //! moves through the unit cube; each step refines the leaves its surface
 //! cuts (up to level 6), coarsens the families it does not cut, balances
 //! (corner), partitions for coarsening and builds the new mesh. Checked at
@@ -26,14 +26,14 @@ mod common;
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use octmesh::classify::{CutRule, Keep};
-use octmesh::config::Config;
-use octmesh::mesh::{transfer_elements, transfer_nodes, ElementMap, Mesh, MeshOptions};
-use octmesh::octree::adapt::Adapt;
-use octmesh::octree::domain::Domain;
-use octmesh::parallel::comm::{CommRef, MpiComm};
-use octmesh::pipeline::{Event, Observer, Session};
-use octmesh::refine::NO_LIMIT;
+use octmesh::internals::classify::{CutRule, Keep};
+use octmesh::internals::config::Config;
+use octmesh::internals::mesh::{transfer_elements, transfer_nodes, ElementMap, Mesh, MeshOptions};
+use octmesh::internals::octree::adapt::Adapt;
+use octmesh::internals::octree::domain::Domain;
+use octmesh::internals::parallel::comm::{CommRef, MpiComm};
+use octmesh::internals::pipeline::{Event, Observer, Session};
+use octmesh::internals::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};
 
 const CHILD: &str = "OCTMESH_TRANSFER_CHILD";

@@ -1,5 +1,5 @@
 //! Fuzz body `api`: an arbitrary byte string decoded into a sequence of C
-//! API calls (`octmesh::ffi`) with arbitrary arguments on `MPI_COMM_SELF`:
+//! API calls (`octmesh::internals::ffi`) with arbitrary arguments on `MPI_COMM_SELF`:
 //! handles created and destroyed, options and domains with NaN, negative
 //! and huge numbers, surfaces from random triangles, built-in shapes and
 //! STL bytes, refinement by surface and by callback with random levels and
@@ -20,11 +20,11 @@ use std::ffi::{c_char, c_void, CStr, CString};
 use std::path::PathBuf;
 use std::ptr::{null, null_mut};
 
-use octmesh::ffi::handle::*;
-use octmesh::ffi::mesh::*;
-use octmesh::ffi::octree::*;
-use octmesh::ffi::surface::*;
-use octmesh::ffi::*;
+use octmesh::internals::ffi::handle::*;
+use octmesh::internals::ffi::mesh::*;
+use octmesh::internals::ffi::octree::*;
+use octmesh::internals::ffi::surface::*;
+use octmesh::internals::ffi::*;
 
 /// Calls per input.
 pub const MAX_CALLS: usize = 48;

@@ -6,13 +6,13 @@
 
 use std::rc::Rc;
 
-use octmesh::classify::{classify_leaves, CutRule, Keep};
-use octmesh::geometry::diagnostics::{clean, diagnose};
-use octmesh::geometry::stl::read_stl_bytes;
-use octmesh::mesh::{Mesh, MeshOptions};
-use octmesh::octree::domain::Domain;
-use octmesh::parallel::comm::{CommRef, SerialComm};
-use octmesh::refine::{build_from_surface, estimate_leaves, SurfaceIndex};
+use octmesh::internals::classify::{classify_leaves, CutRule, Keep};
+use octmesh::internals::geometry::diagnostics::{clean, diagnose};
+use octmesh::internals::geometry::stl::read_stl_bytes;
+use octmesh::internals::mesh::{Mesh, MeshOptions};
+use octmesh::internals::octree::domain::Domain;
+use octmesh::internals::parallel::comm::{CommRef, SerialComm};
+use octmesh::internals::refine::{build_from_surface, estimate_leaves, SurfaceIndex};
 use octmesh::{Connectivity, ErrorKind};
 
 /// Octant limit of the refinement and the balance, so that every input
@@ -81,7 +81,7 @@ pub fn run(data: &[u8]) {
         let (a, n) = (f.lattice_area(), f.unit_normal());
         for k in 0..3 {
             sum[f.owner() as usize][k] += a * n[k];
-            if let octmesh::mesh::Other::Element(j) = f.other() {
+            if let octmesh::internals::mesh::Other::Element(j) = f.other() {
                 sum[j as usize][k] -= a * n[k];
             }
         }

@@ -9,8 +9,8 @@
 
 /// Declares a `Copy` enumeration whose variants have lower-case names.
 ///
-/// ```
-/// octmesh::named_enum! {
+/// ```text
+/// crate::named_enum! {
 ///     /// A side of the surface.
 ///     pub enum Side: "side" {
 ///         /// Inside.
@@ -30,6 +30,9 @@
 /// The first word of a variant is its name; words after `|` are also
 /// accepted when parsing. The string after the enum's name says what the
 /// values are, for the message of an unknown word.
+/// (Crate-internal: exported only so that every module can name it as
+/// `crate::named_enum!`; the tests below run this example.)
+#[doc(hidden)]
 #[macro_export]
 macro_rules! named_enum {
     (

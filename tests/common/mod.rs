@@ -168,7 +168,8 @@ pub fn octmesh_ok(np: usize, args: &[&str]) -> Output {
 
 /// Reads a leaf file written by octmesh or by the p4est reference program.
 pub fn leaves(path: &Path) -> Vec<Octant> {
-    octmesh::io::leaves::read_leaves(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    octmesh::internals::io::leaves::read_leaves(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// Completeness and linearity, checked by volume and order only: sorted,
@@ -184,7 +185,7 @@ pub fn assert_complete_linear(l: &[Octant]) {
     }
     assert_eq!(
         vol,
-        (octmesh::octree::octant::ROOT_LEN as u128).pow(3),
+        (octmesh::internals::octree::octant::ROOT_LEN as u128).pow(3),
         "volumes do not fill the root"
     );
 }
@@ -195,7 +196,7 @@ pub fn assert_complete_linear(l: &[Octant]) {
 /// buckets; within a bucket every pair is compared directly.
 pub fn assert_balanced(l: &[Octant], conn: octmesh::Connectivity) {
     const G: i64 = 16; // buckets per side
-    let root = octmesh::octree::octant::ROOT_LEN as i64;
+    let root = octmesh::internals::octree::octant::ROOT_LEN as i64;
     let cell = root / G;
     let mut buckets: Vec<Vec<usize>> = vec![Vec::new(); (G * G * G) as usize];
     for (i, o) in l.iter().enumerate() {
@@ -432,7 +433,7 @@ pub fn num(v: &serde_json::Value, k: &str) -> f64 {
 
 /// Gathers every rank's `v` on rank 0 (one vector per rank there, empty
 /// vectors elsewhere).
-pub fn gather(comm: &octmesh::parallel::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
+pub fn gather(comm: &octmesh::internals::parallel::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u64>> {
     let p = comm.size();
     let mut counts = vec![0; p];
     counts[0] = v.len();
@@ -450,7 +451,7 @@ pub fn gather(comm: &octmesh::parallel::comm::CommRef, v: Vec<u64>) -> Vec<Vec<u
 /// `parts`: its name and the triangles it holds, by the centroid's z
 /// (`Some(true)`: above 0, `Some(false)`: at or below, `None`: all).
 pub fn write_sphere_solids(path: &Path, parts: &[(&str, Option<bool>)]) {
-    let s = octmesh::geometry::shapes::default_sphere();
+    let s = octmesh::internals::geometry::shapes::default_sphere();
     let mut text = String::new();
     for (name, upper) in parts {
         text.push_str(&format!("solid {name}\n"));

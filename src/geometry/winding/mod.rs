@@ -51,7 +51,7 @@
 //!
 //! # Orientation
 //!
-//! The winding number needs consistent orientation. [`orient`] welds
+//! The winding number needs consistent orientation. `orient` welds
 //! bit-identical vertices (as [`super::diagnostics`] does), walks each
 //! component connected through manifold edges (exactly two facets) and
 //! flips facets so that the two facets of each such edge traverse it in

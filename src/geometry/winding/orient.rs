@@ -7,7 +7,7 @@ use super::*;
 use crate::geometry::diagnostics::weld;
 use crate::geometry::{cross, dot, norm, sub, Triangle};
 
-/// How [`orient`] oriented a soup.
+/// How `orient` oriented a soup.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Orientation {
     /// Per facet, whether it is to be reversed.
