@@ -94,8 +94,9 @@
 //!
 //! Coordinates are in the surface's units. Octants live on a lattice of
 //! 2^19 points per side of each root cell ([`MAX_LEVEL`]); leaves are kept
-//! in Morton order, each rank holding a contiguous run; element corners
-//! follow p4est's z-order (corner `i` at `(i & 1, (i >> 1) & 1, i >> 2)`).
+//! in Morton order, each rank holding a contiguous run. An element's eight
+//! nodes ([`Mesh::connectivity`]) are in VTK's hexahedron order: the lower
+//! face counter-clockwise seen from above, then the upper face.
 
 pub(crate) mod classify;
 pub(crate) mod config;
@@ -142,3 +143,8 @@ pub mod internals {
 
 #[cfg(test)]
 mod testutil;
+
+/// The README's Rust example, compiled by `cargo test --doc`.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeExample;
