@@ -215,7 +215,13 @@ fn check(comm: &CommRef, case: &str, bbox: Option<([f64; 6], [u32; 3])>, dir: &P
     let mine: Vec<usize> = (0..all.len()).filter(|i| i % takers == rank).collect();
     let pts: Vec<[f64; 3]> = mine.iter().map(|&i| all[i]).collect();
     let leaves = locate(tree, &domain, &pts);
-    let elements = locate_elements(tree, mesh, &pts);
+    let elements = locate_elements(
+        tree,
+        mesh.domain(),
+        mesh.elements(),
+        mesh.first_element(),
+        &pts,
+    );
     let owners = owner_ranks(tree, &domain, &pts);
     let offsets = tree.global_offsets();
     let mut rows = Vec::new();

@@ -127,7 +127,13 @@ pub extern "C" fn octmesh_mesh_locate_points(
         let (Some(tree), Some(mesh)) = (h.session.tree(), h.session.mesh()) else {
             unreachable!("a mesh implies its octree");
         };
-        let found = locate_elements(tree, mesh, &pts);
+        let found = locate_elements(
+            tree,
+            mesh.domain(),
+            mesh.elements(),
+            mesh.first_element(),
+            &pts,
+        );
         write(&found, r, e);
         Ok(())
     })

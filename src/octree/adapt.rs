@@ -23,10 +23,10 @@
 //!   flag: balance again afterwards, then partition.
 
 use crate::error::Result;
+use crate::octree::limits::{check_level, global_limit};
 use crate::octree::octant::{Octant, MAX_LEVEL};
 use crate::octree::LinearOctree;
 use crate::parallel::comm::agree;
-use crate::refine::{check_level, global_limit};
 
 /// A leaf's wish in [`LinearOctree::adapt`] (t8code's convention: refine
 /// 1, keep 0, coarsen -1).

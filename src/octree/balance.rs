@@ -39,10 +39,10 @@
 
 use crate::error::Result;
 use crate::octree::brick::Brick;
+use crate::octree::limits::{limit_error, NO_LIMIT};
 use crate::octree::octant::{spread3, Connectivity, Octant, MAX_LEVEL};
 use crate::octree::sort::{gallop_last_le, radix_sort_bits};
 use crate::octree::{owner_of_cell, LinearOctree};
-use crate::refine::{limit_error, NO_LIMIT};
 
 /// What a balance did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -13,6 +13,7 @@ pub mod brick;
 pub mod domain;
 pub mod ghost;
 pub mod leaf_data;
+pub mod limits;
 pub mod octant;
 pub mod partition;
 pub mod search;

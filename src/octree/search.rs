@@ -25,7 +25,6 @@
 //! domain's box (in the void of the embedding cube), or with a NaN
 //! coordinate is [`Location::Outside`]; it is reported, never dropped.
 
-use crate::mesh::Mesh;
 use crate::octree::domain::Domain;
 use crate::octree::octant::{morton_encode, Octant};
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
@@ -124,15 +123,21 @@ pub fn locate(tree: &LinearOctree, domain: &Domain, points: &[[f64; 3]]) -> Vec<
     route(tree, domain, points, tree.global_offsets(), |i, _| Some(i))
 }
 
-/// The mesh element containing each point, in `points`' order:
-/// [`Location::NoElement`] for a point in a leaf the mesh did not keep.
-/// `mesh` must be built from `tree` as it is (same leaves and partition).
+/// The element containing each point, in `points`' order, where the
+/// elements are a Morton-sorted subset of the local leaves (a mesh's
+/// elements, [`Mesh::elements`](crate::mesh::Mesh::elements)) and
+/// `first_element` the global index of this rank's first:
+/// [`Location::NoElement`] for a point in a leaf that is not an element.
 /// Collective: every rank calls it with its own points.
-pub fn locate_elements(tree: &LinearOctree, mesh: &Mesh, points: &[[f64; 3]]) -> Vec<Location> {
-    let firsts = tree.comm().allgather_u64(mesh.first_element());
-    let elements = mesh.elements();
-    // Elements are a sorted subset of the leaves.
-    route(tree, mesh.domain(), points, &firsts, |_, leaf| {
+pub fn locate_elements(
+    tree: &LinearOctree,
+    domain: &Domain,
+    elements: &[Octant],
+    first_element: u64,
+    points: &[[f64; 3]],
+) -> Vec<Location> {
+    let firsts = tree.comm().allgather_u64(first_element);
+    route(tree, domain, points, &firsts, |_, leaf| {
         elements.binary_search(&leaf).ok()
     })
 }

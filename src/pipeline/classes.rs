@@ -183,7 +183,12 @@ impl Session {
         };
         if let Some(file) = path_file {
             let written = if self.comm.rank() == 0 {
-                path.write(file, &domain)
+                crate::io::leak_path::write_leak_path(
+                    file,
+                    &path.centres(&domain),
+                    &path.sizes(&domain),
+                    path.octants(),
+                )
             } else {
                 Ok(())
             };

@@ -36,8 +36,8 @@
 //! limit. The limit itself is still enforced exactly while refining (and by
 //! [`LinearOctree::balance_with_limit`] while balancing).
 
-use crate::error::{Error, ErrorKind, Result};
-use crate::octree::octant::{Octant, MAX_LEVEL};
+use crate::error::Result;
+use crate::octree::octant::Octant;
 use crate::octree::partition::split_by_weight;
 use crate::octree::LinearOctree;
 use crate::parallel::comm::{agree, CommRef};
@@ -55,33 +55,12 @@ pub use estimate::*;
 pub use index::*;
 pub use surface::*;
 
+pub use crate::octree::limits::{check_level, NO_LIMIT};
+pub(crate) use crate::octree::limits::{global_limit, limit_error};
+
 /// Depth of the top of the tree that every rank computes redundantly to
 /// split the work.
 pub const COARSE_LEVEL: u8 = 6;
-
-/// No limit on the number of octants.
-pub const NO_LIMIT: u64 = u64::MAX;
-
-/// Fails unless `level` is at most [`MAX_LEVEL`].
-pub fn check_level(level: u8) -> Result<()> {
-    if level > MAX_LEVEL {
-        return Err(Error::invalid(format!(
-            "level {level} is above the maximum level {MAX_LEVEL}"
-        )));
-    }
-    Ok(())
-}
-
-/// The error of an octant limit reached `during` a phase ("refining").
-pub(crate) fn limit_error(limit: u64, during: &str) -> Error {
-    Error::new(
-        ErrorKind::Limit,
-        format!(
-            "the octree would exceed the limit of {limit} octants (stopped while {during}); \
-             raise the limit or lower the level"
-        ),
-    )
-}
 
 /// Top of the tree: leaves of the rule down to `COARSE_LEVEL` with an
 /// estimate of the work below each, identical on every rank.

@@ -245,7 +245,7 @@ pub(crate) fn scatter_by_child(
 
 /// Builds the octree whose leaves touching `surface` are exactly at `level`
 /// and whose other leaves are as coarse as possible. Fails with an
-/// [`ErrorKind::Limit`] error when it would have more than `limit` leaves:
+/// [`ErrorKind::Limit`](crate::ErrorKind::Limit) error when it would have more than `limit` leaves:
 /// before refining when the estimate is far above the limit
 /// ([`check_estimate`]), else as soon as the count exceeds it. Collective.
 pub fn build_from_surface(
@@ -339,15 +339,6 @@ impl LinearOctree {
         self.set_leaves(w.out);
         self.refresh()
     }
-}
-
-pub(crate) fn global_limit(comm: &CommRef, local: usize, limit: u64) -> Result<()> {
-    let mut n = [local as u64];
-    comm.sum_u64(&mut n);
-    if n[0] > limit {
-        return Err(limit_error(limit, "refining"));
-    }
-    Ok(())
 }
 
 pub(crate) struct SurfaceWalker<'a> {

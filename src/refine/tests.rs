@@ -1,6 +1,7 @@
 //! Tests of construction, surface and callback refinement, estimates.
 
 use super::*;
+use crate::error::ErrorKind;
 use crate::geometry::{Surface, Triangle};
 use crate::octree::domain::Domain;
 use crate::parallel::comm::SerialComm;
