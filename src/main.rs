@@ -137,11 +137,7 @@ impl Observer for Table {
             } => {
                 say!("  wrote the leak path ({n} octants) to {}", f.display())
             }
-            Event::Meshed {
-                counts: m,
-                kept_volume: v,
-                surface_volume: s,
-            } => {
+            Event::Meshed { counts: m } => {
                 say!(
                     "  elements {} | independent nodes {} | hanging nodes {} face, {} edge | \
                      ghosts {}",
@@ -151,8 +147,23 @@ impl Observer for Table {
                     m.edge_hanging_nodes,
                     m.ghosts
                 );
-                let rel = (v - s) / s;
-                say!("  kept volume {v:.6e} | surface volume {s:.6e} | relative difference {rel:+.3e}");
+            }
+            Event::KeptVolume {
+                kept,
+                expected,
+                reference,
+                snapped,
+            } => {
+                let what = if *snapped {
+                    "snapped volume"
+                } else {
+                    "kept volume"
+                };
+                let rel = (kept - expected) / expected;
+                say!(
+                    "  {what} {kept:.6e} | {} {expected:.6e} | relative difference {rel:+.3e}",
+                    reference.describe()
+                );
             }
             Event::Quality(q) => {
                 say!(

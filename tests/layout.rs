@@ -60,7 +60,12 @@ fn without_tests(path: &Path) -> String {
 /// The layer of a file: the folder (or root file) of `src/` it is in.
 fn layer_of(path: &Path) -> String {
     let rel = path.strip_prefix(src()).unwrap();
-    let first = rel.components().next().unwrap().as_os_str().to_string_lossy();
+    let first = rel
+        .components()
+        .next()
+        .unwrap()
+        .as_os_str()
+        .to_string_lossy();
     first.trim_end_matches(".rs").to_string()
 }
 
@@ -72,7 +77,9 @@ fn no_loose_module_at_the_root_of_src() {
         let name = p.file_name().unwrap().to_string_lossy().to_string();
         if p.is_dir() {
             if !LAYERS.contains(&name.as_str()) && !TEST_ONLY.contains(&name.as_str()) {
-                loose.push(format!("{name}/ (a folder that is not a layer: add it to LAYERS)"));
+                loose.push(format!(
+                    "{name}/ (a folder that is not a layer: add it to LAYERS)"
+                ));
             }
         } else if !ROOT_FILES.contains(&name.as_str()) {
             loose.push(name);
@@ -93,7 +100,10 @@ fn no_source_file_over_the_limit_without_its_tests() {
         })
         .collect();
     long.sort();
-    assert!(long.is_empty(), "over {MAX_LINES} lines without tests: {long:#?}");
+    assert!(
+        long.is_empty(),
+        "over {MAX_LINES} lines without tests: {long:#?}"
+    );
 }
 
 #[test]
@@ -132,7 +142,10 @@ fn no_import_runs_back_up_the_layers() {
             }
         }
     }
-    assert!(up.is_empty(), "imports that run up the layers {LAYERS:?}: {up:#?}");
+    assert!(
+        up.is_empty(),
+        "imports that run up the layers {LAYERS:?}: {up:#?}"
+    );
 }
 
 /// The checker itself: a file that only holds tests counts as empty, and
@@ -142,7 +155,11 @@ fn the_line_count_skips_unit_tests() {
     let dir = std::env::temp_dir().join(format!("octmesh_layout_{}", std::process::id()));
     fs::create_dir_all(&dir).unwrap();
     let f = dir.join("a.rs");
-    fs::write(&f, "fn a() {}\n#[cfg(test)]\nmod tests {\n    fn t() {}\n}\n").unwrap();
+    fs::write(
+        &f,
+        "fn a() {}\n#[cfg(test)]\nmod tests {\n    fn t() {}\n}\n",
+    )
+    .unwrap();
     assert_eq!(without_tests(&f).lines().count(), 1);
     let t = dir.join("tests.rs");
     fs::write(&t, "fn t() {}\n").unwrap();

@@ -9,7 +9,7 @@ use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
 use crate::io::vtp::write_boundary;
 use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
-use crate::mesh::snap::{SnapOptions, SnapReport};
+use crate::mesh::snap::{hexahedron_volume, SnapOptions, SnapReport};
 use crate::mesh::{Boundary, Mesh, MeshOptions};
 use crate::parallel::comm::agree;
 
@@ -64,13 +64,9 @@ impl Session {
                 count,
             });
         }
-        let mut cells = [mesh.local_volume_cells()];
-        self.comm.sum_u64(&mut cells);
-        self.observer.event(&Event::Meshed {
-            counts: c,
-            kept_volume: mesh.cells_to_volume(cells[0]),
-            surface_volume: self.surface_volume(),
-        });
+        self.observer.event(&Event::Meshed { counts: c });
+        let e = self.volume_event(&mesh, keep, false);
+        self.observer.event(&e);
         self.drop_mesh();
         self.mesh = Some(mesh);
         self.mesh_generation += 1;
@@ -105,6 +101,10 @@ impl Session {
         let report = agree(&*comm, report)?;
         self.report_phase(Some(report.snapped));
         self.observer.event(&Event::Snapped(&report));
+        if let Some(m) = &self.mesh {
+            let e = self.volume_event(m, self.config.mesh.keep, true);
+            self.observer.event(&e);
+        }
         // Views of the mesh see that it changed.
         self.mesh_generation += 1;
         self.snapped = Some((self.mesh_generation, report.clone()));
@@ -118,6 +118,23 @@ impl Session {
             .as_ref()
             .filter(|s| s.0 == self.mesh_generation)
             .map(|s| &s.1)
+    }
+
+    /// The kept volume of `mesh` beside what a mesh keeping `keep` should
+    /// fill, for the observer. Collective.
+    fn volume_event(&self, mesh: &Mesh, keep: Keep, snapped: bool) -> Event<'static> {
+        let reference = match self.surface_volume() {
+            v if v > 0.0 => VolumeReference::of(keep),
+            _ => VolumeReference::Domain,
+        };
+        let kept = kept_volume(&*self.comm, mesh);
+        let expected = reference.volume(mesh.domain().volume(), self.surface_volume());
+        Event::KeptVolume {
+            kept,
+            expected,
+            reference,
+            snapped,
+        }
     }
 
     pub(super) fn surface_volume(&self) -> f64 {
@@ -329,5 +346,102 @@ impl Session {
         self.report_phase(None);
         self.observer.event(&Event::Wrote(dir));
         Ok(counts)
+    }
+}
+
+/// The volume of the kept elements over all ranks, user units: of the
+/// moved elements when the mesh was snapped, else of the octree's cubes
+/// (exact). A snapped element's volume is rounded to 2^-60 of the cube's
+/// and summed as an integer, so the total has the same bits on any
+/// number of ranks. Collective.
+pub(super) fn kept_volume(comm: &dyn crate::parallel::comm::Comm, mesh: &Mesh) -> f64 {
+    let Some(moved) = mesh.moved() else {
+        let mut cells = [mesh.local_volume_cells()];
+        comm.sum_u64(&mut cells);
+        return mesh.cells_to_volume(cells[0]);
+    };
+    const FIXED: f64 = (1u64 << 60) as f64;
+    let cube = mesh.domain().side.powi(3);
+    let mut sum = [mesh
+        .connectivity()
+        .iter()
+        .map(|c| {
+            let p = c.map(|n| moved[n as usize]);
+            (hexahedron_volume(&p) / cube * FIXED).round() as i64 as u64
+        })
+        .fold(0u64, u64::wrapping_add)];
+    comm.sum_u64(&mut sum);
+    sum[0] as i64 as f64 / FIXED * cube
+}
+
+#[cfg(test)]
+mod tests {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+
+    use super::*;
+    use crate::octree::octant::Connectivity;
+    use crate::parallel::comm::SerialComm;
+
+    /// Keeps the volume events a session reports.
+    struct Volumes(Rc<RefCell<Vec<(f64, f64, VolumeReference, bool)>>>);
+
+    impl Observer for Volumes {
+        fn event(&mut self, e: &Event<'_>) {
+            if let Event::KeptVolume {
+                kept,
+                expected,
+                reference,
+                snapped,
+            } = e
+            {
+                self.0
+                    .borrow_mut()
+                    .push((*kept, *expected, *reference, *snapped));
+            }
+        }
+    }
+
+    /// The sphere at level 4 meshed keeping `keep`, then snapped; the
+    /// session's volume events.
+    fn volumes(keep: Keep) -> Vec<(f64, f64, VolumeReference, bool)> {
+        let seen = Rc::new(RefCell::new(Vec::new()));
+        let mut config = Config::default();
+        config.surface.file = "sphere".into();
+        config.mesh.keep = keep;
+        let mut s = Session::new(Rc::new(SerialComm), config);
+        s.set_observer(Box::new(Volumes(seen.clone())));
+        s.load_surface().unwrap();
+        s.refine_surface(4).unwrap();
+        s.balance(Connectivity::Corner).unwrap();
+        s.build_mesh(keep, CutRule::Center).unwrap();
+        s.snap(&SnapOptions::default()).unwrap();
+        let v = seen.borrow().clone();
+        v
+    }
+
+    #[test]
+    fn a_run_compares_what_it_kept_with_what_it_should_fill() {
+        let sphere = 4.0 / 3.0 * std::f64::consts::PI;
+        let solid = volumes(Keep::Inside);
+        let fluid = volumes(Keep::Outside);
+        for (v, reference) in [
+            (&solid, VolumeReference::Body),
+            (&fluid, VolumeReference::DomainLessBody),
+        ] {
+            assert_eq!(v.len(), 2, "one event after meshing, one after snapping");
+            assert!(v.iter().all(|e| e.2 == reference));
+            assert_eq!((v[0].3, v[1].3), (false, true));
+            // Within 3 % of what it should fill, and closer once snapped.
+            for e in v {
+                assert!(((e.0 - e.1) / e.1).abs() < 0.03, "{e:?}");
+            }
+            assert!((v[1].0 - v[1].1).abs() < (v[0].0 - v[0].1).abs(), "{v:?}");
+        }
+        // The body is the sphere's polyhedron (a little under the ball).
+        assert!((solid[0].1 - sphere).abs() < 0.01 * sphere);
+        // The solid and fluid staircases fill the domain together.
+        let domain = fluid[0].1 + solid[0].1;
+        assert!(((solid[0].0 + fluid[0].0) - domain).abs() < 1e-9 * domain);
     }
 }

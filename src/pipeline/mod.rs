@@ -47,7 +47,7 @@ use crate::run::budget::MemoryBudget;
 use crate::run::progress::{self, Progress, Style};
 use crate::run::report::{peak_rss_bytes, PhaseTimer};
 
-pub use observer::{Event, Observer, Silent};
+pub use observer::{Event, Observer, Silent, VolumeReference};
 use transfer::Previous;
 
 /// The feature angle of curvature refinement when none is configured,

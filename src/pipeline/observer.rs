@@ -60,10 +60,19 @@ pub enum Event<'a> {
     Meshed {
         /// Global counts.
         counts: MeshCounts,
-        /// Volume of the kept elements, user units.
-        kept_volume: f64,
-        /// Volume enclosed by the surface, user units (0 without one).
-        surface_volume: f64,
+    },
+    /// The volume of the kept elements, after meshing and again after
+    /// snapping, beside the volume they should fill.
+    KeptVolume {
+        /// Volume of the kept elements, user units: of the moved elements
+        /// when `snapped`, else of the octree's cubes.
+        kept: f64,
+        /// What the kept elements should fill, user units.
+        expected: f64,
+        /// What `expected` is.
+        reference: VolumeReference,
+        /// Whether the mesh was snapped.
+        snapped: bool,
     },
     /// The mesh's quality was measured.
     Quality(&'a Quality),
@@ -94,4 +103,45 @@ pub struct Silent;
 
 impl Observer for Silent {
     fn event(&mut self, _: &Event<'_>) {}
+}
+
+/// What the kept elements of a mesh should fill, for the run's summary.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VolumeReference {
+    /// A solid: the volume the surface encloses.
+    Body,
+    /// A fluid: the domain less the volume the surface encloses (exact for
+    /// a body inside the domain).
+    DomainLessBody,
+    /// Every leaf kept: the domain's volume.
+    Domain,
+}
+
+impl VolumeReference {
+    /// The reference for a mesh that keeps `keep`.
+    pub fn of(keep: crate::classify::Keep) -> VolumeReference {
+        match keep {
+            crate::classify::Keep::Inside => VolumeReference::Body,
+            crate::classify::Keep::Outside => VolumeReference::DomainLessBody,
+            crate::classify::Keep::All => VolumeReference::Domain,
+        }
+    }
+
+    /// The expected volume from the domain's and the body's.
+    pub fn volume(self, domain: f64, body: f64) -> f64 {
+        match self {
+            VolumeReference::Body => body,
+            VolumeReference::DomainLessBody => domain - body,
+            VolumeReference::Domain => domain,
+        }
+    }
+
+    /// Words for the summary line.
+    pub fn describe(self) -> &'static str {
+        match self {
+            VolumeReference::Body => "the body's volume",
+            VolumeReference::DomainLessBody => "the domain less the body",
+            VolumeReference::Domain => "the domain's volume",
+        }
+    }
 }

@@ -81,9 +81,10 @@ pub struct MeshStats {
     /// Nodes over all ranks' pieces, shared nodes once per rank (what a VTU
     /// holds).
     pub points_written: u64,
-    /// Volume of the kept elements, user units.
+    /// Volume of the kept elements, user units: of the moved elements
+    /// after a snap, else of the octree's cubes.
     pub kept_volume: f64,
-    /// The same in finest-lattice cells.
+    /// The octree's cubes kept, in finest-lattice cells.
     pub kept_cells: u64,
     /// Which leaves were kept.
     pub keep: Keep,
@@ -275,7 +276,7 @@ impl Session {
             MeshStats {
                 counts: *c,
                 points_written: v[1],
-                kept_volume: m.cells_to_volume(v[0]),
+                kept_volume: super::mesh::kept_volume(comm, m),
                 kept_cells: v[0],
                 keep: self.config.mesh.keep,
                 cut_rule: self.config.mesh.cut_rule,
