@@ -383,8 +383,11 @@ mod tests {
     use crate::octree::octant::Connectivity;
     use crate::parallel::comm::SerialComm;
 
+    /// One volume event: kept, expected, the reference, whether snapped.
+    type Seen = (f64, f64, VolumeReference, bool);
+
     /// Keeps the volume events a session reports.
-    struct Volumes(Rc<RefCell<Vec<(f64, f64, VolumeReference, bool)>>>);
+    struct Volumes(Rc<RefCell<Vec<Seen>>>);
 
     impl Observer for Volumes {
         fn event(&mut self, e: &Event<'_>) {
@@ -404,7 +407,7 @@ mod tests {
 
     /// The sphere at level 4 meshed keeping `keep`, then snapped; the
     /// session's volume events.
-    fn volumes(keep: Keep) -> Vec<(f64, f64, VolumeReference, bool)> {
+    fn volumes(keep: Keep) -> Vec<Seen> {
         let seen = Rc::new(RefCell::new(Vec::new()));
         let mut config = Config::default();
         config.surface.file = "sphere".into();
