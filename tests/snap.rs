@@ -43,20 +43,23 @@ use octmesh::mesh::snap::{hexahedron_volume, SnapReport};
 use octmesh::mesh::{Mesh, Other, SURFACE_PATCH};
 use octmesh::pipeline::Session;
 
-const CHILD: &str = "OCTMESH_SNAP_CHILD";
-
 fn main() {
-    if std::env::var(CHILD).is_ok() {
-        child();
-        return;
-    }
-    common::run_self_on_1_to_4_ranks(
+    common::runner::main(
         "snap",
-        CHILD,
-        "snap: all checks passed",
-        Duration::from_secs(900),
+        |_| child(),
+        |r| {
+            r.on_ranks(
+                1..=4,
+                "run",
+                "snap: all checks passed",
+                Duration::from_secs(900),
+            );
+            r.test(
+                "checkmesh_accepts_the_snapped_fluid_sphere",
+                check_mesh_on_the_fluid_sphere,
+            );
+        },
     );
-    check_mesh_on_the_fluid_sphere();
 }
 
 /// `checkMesh -allTopology` says `Mesh OK.` on the snapped fluid sphere
@@ -350,11 +353,6 @@ fn child() {
     // Sharp edges: each rank finds the features near its own nodes.
     if let Some(path) = common::shared_model("fandisk.stl") {
         same_on_all_ranks(&comm, path.to_str().unwrap(), 6, Keep::Inside);
-    } else if comm.rank() == 0 {
-        println!(
-            "SKIP fandisk on {} ranks: not in ../shared/data",
-            comm.size()
-        );
     }
     if comm.size() == 1 {
         serial_checks();
@@ -399,7 +397,6 @@ fn serial_checks() {
         ("flange", true),
     ] {
         let Some(path) = common::shared_model(&format!("{model}.stl")) else {
-            println!("SKIP {model}: not in ../shared/data");
             continue;
         };
         // Three levels each, as the sphere and the torus above.

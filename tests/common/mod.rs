@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: running programs under `mpirun`
 //! with a time limit, the oracles (outside programs and files) and what to
-//! do when one is missing, and checks written independently of the
+//! do when one is missing, the runner of the test programs that launch
+//! themselves ([`runner`]), and checks written independently of the
 //! library's algorithms.
 //!
 //! # Oracles
@@ -22,6 +23,8 @@
 //! - `OCTMESH_PYTHON`: the Python that reads the written files (meshio,
 //!   VTK); default `python3`, then `/usr/bin/python3`.
 #![allow(dead_code)]
+
+pub mod runner;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -454,28 +457,6 @@ pub fn json_file(path: &Path) -> serde_json::Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("bad JSON in {}: {e}", path.display()))
 }
 
-/// Test programs that launch themselves: runs this executable under
-/// `mpirun` on 1 to 4 ranks with `child_var` set, requires success and
-/// `marker` in the output of each run, and prints `NAME: 4 passed, 0 failed`.
-pub fn run_self_on_1_to_4_ranks(name: &str, child_var: &str, marker: &str, limit: Duration) {
-    let me = std::env::current_exe().expect("own path");
-    for np in 1..=4 {
-        let out = mpirun_env(np, &me, &[], &[(child_var, "1")], limit);
-        let text = format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        assert!(out.status.success(), "{name} on {np} ranks failed:\n{text}");
-        assert!(
-            text.contains(marker),
-            "{name} on {np} ranks: no '{marker}' in\n{text}"
-        );
-        print!("{text}");
-    }
-    println!("{name}: 4 passed, 0 failed");
-}
-
 /// `target/<profile>/deps`, where `cargo test` puts the `liboctmesh.so`
 /// built with this test (`cargo build` also copies it one level up).
 pub fn deps_dir() -> PathBuf {
@@ -691,40 +672,4 @@ pub fn assert_same_leaves<T: PartialEq + std::fmt::Debug>(ours: &[T], theirs: &[
             ours[i], theirs[i]
         );
     }
-}
-
-/// Test programs that launch themselves and must give the same results on
-/// every rank count: runs this executable under `mpirun` on 1 to 4 ranks
-/// with `child_var` set to 1; each run must succeed and print `count` lines
-/// starting with one of `prefixes`, and those lines must be the same on
-/// every rank count. Returns each run's standard output.
-pub fn run_self_identical_on_1_to_4_ranks(
-    child_var: &str,
-    prefixes: &[&str],
-    count: usize,
-) -> Vec<String> {
-    let me = std::env::current_exe().expect("own path");
-    let mut first: Option<Vec<String>> = None;
-    let mut outputs = Vec::new();
-    for np in 1..=4 {
-        let out = mpirun_env(np, &me, &[], &[(child_var, "1")], Duration::from_secs(600));
-        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-        assert!(
-            out.status.success(),
-            "np {np} failed:\n{stdout}\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let lines: Vec<String> = stdout
-            .lines()
-            .filter(|l| prefixes.iter().any(|p| l.starts_with(p)))
-            .map(str::to_string)
-            .collect();
-        assert_eq!(lines.len(), count, "np {np}:\n{stdout}");
-        match &first {
-            None => first = Some(lines),
-            Some(f) => assert_eq!(f, &lines, "np {np} differs from np 1"),
-        }
-        outputs.push(stdout);
-    }
-    outputs
 }
