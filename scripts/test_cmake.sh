@@ -6,7 +6,7 @@
 # valgrind on 1 rank). Ends with "cmake tests: N passed, M failed". With CI=true
 # or OCTMESH_REQUIRE_ORACLES=1, a missing oracle (gfortran's Fortran library,
 # valgrind) fails the configuration instead of leaving its tests out; the
-# bunny comes from the shared folder ($OCTMESH_SHARED, else ../shared).
+# bunny comes from the shared folder ($OCTMESH_SHARED_DIR, else ../shared).
 #   scripts/test_cmake.sh [BUILD_DIR]
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -41,7 +41,7 @@ soname=$(readelf -d "$prefix/lib/liboctmesh.so.0.1.0" | sed -n 's/.*SONAME.*\[\(
 
 echo "== consumers and runs (ctest)"
 cmake -S "$root/tests/cmake" -B "$build/tests" -DOCTMESH_PREFIX="$prefix" \
-      -DOCTMESH_BUNNY="${OCTMESH_SHARED:-$root/../shared}/data/bunny.stl" >>"$log" 2>&1 \
+      -DOCTMESH_BUNNY="${OCTMESH_SHARED_DIR:-$root/../shared}/data/bunny.stl" >>"$log" 2>&1 \
   || fail "test configure failed"
 (cd "$build/tests" && ctest --output-on-failure -j 2) 2>&1 | tee -a "$log"
 grep -h '^POISSON ' "$build"/tests/Testing/Temporary/LastTest.log 2>/dev/null \

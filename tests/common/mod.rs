@@ -13,10 +13,10 @@
 //! without them the test prints `skipped: ... missing (...)` and leaves out
 //! the checks that need it. Locations, and the variables that move them:
 //!
-//! - `OCTMESH_SHARED`: the shared folder (models in `data/`, OpenFOAM
+//! - `OCTMESH_SHARED_DIR`: the shared folder (models in `data/`, OpenFOAM
 //!   reference cases in `openfoam/`); default `../shared` beside the
 //!   repository.
-//! - `OCTMESH_OPENFOAM`: OpenFOAM's installation folder, whose
+//! - `OCTMESH_OPENFOAM_DIR`: OpenFOAM's installation folder, whose
 //!   `etc/bashrc` sets up its environment; default `/usr/share/openfoam`
 //!   (Debian's `openfoam` package). Its `checkMesh` must run after sourcing
 //!   that file.
@@ -139,12 +139,12 @@ impl Oracle<'_> {
         match self {
             Oracle::Shared(_) => format!(
                 "put the shared folder (models in data/, OpenFOAM cases in openfoam/) beside \
-                 the repository as ../shared, or set OCTMESH_SHARED to it (now {})",
+                 the repository as ../shared, or set OCTMESH_SHARED_DIR to it (now {})",
                 shared_dir().display()
             ),
             Oracle::OpenFoam => format!(
                 "install Debian's openfoam package (scripts/setup.sh does), or set \
-                 OCTMESH_OPENFOAM to an OpenFOAM folder with etc/bashrc (now {})",
+                 OCTMESH_OPENFOAM_DIR to an OpenFOAM folder with etc/bashrc (now {})",
                 openfoam_dir().display()
             ),
             Oracle::Python { package, .. } => {
@@ -182,10 +182,10 @@ pub fn require(oracle: Oracle) -> Option<PathBuf> {
     }
 }
 
-/// The shared folder: `$OCTMESH_SHARED`, else `../shared` beside the
+/// The shared folder: `$OCTMESH_SHARED_DIR`, else `../shared` beside the
 /// repository.
 pub fn shared_dir() -> PathBuf {
-    match std::env::var_os("OCTMESH_SHARED") {
+    match std::env::var_os("OCTMESH_SHARED_DIR") {
         Some(d) => PathBuf::from(d),
         None => repo().join("..").join("shared"),
     }
@@ -563,10 +563,10 @@ pub fn write_sphere_solids(path: &Path, parts: &[(&str, Option<bool>)]) {
     std::fs::write(path, text).unwrap();
 }
 
-/// OpenFOAM's installation folder: `$OCTMESH_OPENFOAM`, else Debian's
+/// OpenFOAM's installation folder: `$OCTMESH_OPENFOAM_DIR`, else Debian's
 /// `/usr/share/openfoam`.
 pub fn openfoam_dir() -> PathBuf {
-    match std::env::var_os("OCTMESH_OPENFOAM") {
+    match std::env::var_os("OCTMESH_OPENFOAM_DIR") {
         Some(d) => PathBuf::from(d),
         None => PathBuf::from("/usr/share/openfoam"),
     }
