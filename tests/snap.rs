@@ -3,7 +3,7 @@
 //!
 //! Run by `cargo test`, this program launches itself under `mpirun` on 1
 //! to 4 ranks. Every run snaps the solid and fluid sphere, the solid
-//! torus and (when `../shared/data` has it) the solid fandisk, whose
+//! torus and the solid fandisk of the shared models, whose
 //! feature edges each rank finds near its own nodes, on all ranks,
 //! gathers each node's position by its lattice point
 //! on rank 0 and compares the bits (and the report) with the same mesh
@@ -13,8 +13,7 @@
 //! - every surface node the report counts as snapped is on the surface to
 //!   within 1e-6 of its cell size (exact distance to the triangles);
 //! - no element has a corner with a non-positive scaled Jacobian (sphere
-//!   and torus, inside and outside, and the real models when
-//!   `../shared/data` has them);
+//!   and torus, inside and outside, and the shared models);
 //! - the volume error of the snapped sphere and torus against the volume
 //!   the surface encloses, level by level, against the staircase's: for
 //!   the solid sphere (levels 4 to 6) and the solid torus (5 to 7) it
@@ -27,6 +26,9 @@
 //! non-orthogonality and the largest skewness, measured on the moved
 //! points) must equal what `checkMesh -allGeometry` prints, to 1e-6
 //! relative.
+//!
+//! Without the shared models or OpenFOAM the checks that need them are
+//! skipped, and fail under `CI=true` (`tests/common`).
 
 mod common;
 
