@@ -26,7 +26,6 @@ use octmesh::internals::parallel::comm::{CommRef, MpiComm};
 use octmesh::internals::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};
 
-const CHILD: &str = "OCTMESH_ADAPT_P4EST_CHILD";
 const STEPS: u32 = 10;
 /// Initial level and maximum level of each case.
 const CASES: [(u8, u8); 2] = [(3, 8), (0, 5)];
@@ -40,115 +39,125 @@ fn cut(o: Octant, step: u32) -> bool {
 }
 
 fn main() {
-    if let Ok(args) = std::env::var(CHILD) {
-        let a: Vec<&str> = args.splitn(4, ':').collect();
+    let child_main = |arg: &str| {
+        let a: Vec<&str> = arg.splitn(4, ':').collect();
         let level = |i: usize| a[i].parse::<u8>().expect("MODE:LEVEL:MAX:DIR");
         child(a[0], level(1), level(2), Path::new(a[3]));
-        return;
-    }
-    let base = common::scratch("adapt_p4est");
+    };
+    common::runner::main("adapt_p4est", child_main, |r| {
+        let base = common::scratch("adapt_p4est");
+        // Builds both reference programs.
+        r.test("the p4est reference builds", || {
+            common::p4est_ref();
+        });
+        let mut moved_cuts = 0;
+        for np in 1..=4 {
+            for (level, max_level) in CASES {
+                let name = format!(
+                    "levels {level}-{max_level} on {}",
+                    common::runner::ranks(np)
+                );
+                r.test(&name, || {
+                    moved_cuts += equal_to_p4est(&base, np, level, max_level);
+                });
+            }
+        }
+        // The option must have been exercised: an equal split inside a family.
+        r.test("the equal split falls inside a family", || {
+            assert!(moved_cuts > 0, "the equal split never fell inside a family");
+            println!("{moved_cuts} cuts moved to keep families together");
+        });
+    });
+}
+
+/// The reference and octmesh on `np` ranks from `level` to `max_level`,
+/// in every mode: the same leaves and counts at every step. Returns the
+/// number of cuts the reference moved to keep families together.
+fn equal_to_p4est(base: &Path, np: usize, level: u8, max_level: u8) -> usize {
     let reference = common::repo()
         .join("tools")
         .join("p4est_ref")
         .join("octmesh_p4est_adapt");
-    // Builds both reference programs.
-    common::p4est_ref();
-    let me = std::env::current_exe().expect("own path");
     let limit = Duration::from_secs(300);
     let mut moved_cuts = 0;
-    for (np, (level, max_level)) in (1..=4).flat_map(|np| CASES.map(|c| (np, c))) {
-        let dir = |what: &str| -> PathBuf {
-            let d = base.join(format!("np{np}_{level}_{max_level}_{what}"));
-            std::fs::create_dir_all(&d).unwrap();
-            d
+    let dir = |what: &str| -> PathBuf {
+        let d = base.join(format!("np{np}_{level}_{max_level}_{what}"));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    };
+    let mut equal_split = Vec::new();
+    for variant in ["", "--weighted", "--recursive"] {
+        let weighted = variant == "--weighted";
+        let theirs = dir(&format!("p4est{variant}"));
+        let mut args = vec![
+            "--steps".to_string(),
+            STEPS.to_string(),
+            "--level".into(),
+            level.to_string(),
+            "--max-level".into(),
+            max_level.to_string(),
+            "--out".into(),
+            theirs.display().to_string(),
+        ];
+        if !variant.is_empty() {
+            args.push(variant.into());
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = common::mpirun(np, &reference, &args, limit);
+        assert!(
+            out.status.success(),
+            "p4est reference on {np} ranks failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let reference_counts = read_counts(&theirs);
+        let moved = (!weighted).then_some(&mut moved_cuts);
+        check_reference(&reference_counts, &theirs, np, moved);
+        if variant.is_empty() {
+            equal_split = reference_counts.clone();
+        } else if weighted && np == 3 {
+            // Weights by level move the boundaries (on 2 and 4 ranks the
+            // sphere's symmetry in y and z gives every rank equal weight).
+            assert_ne!(equal_split, reference_counts, "weights changed nothing");
+        } else if variant == "--recursive" && level == 3 {
+            assert_ne!(equal_split, reference_counts, "recursion changed nothing");
+        }
+        let modes: &[&str] = match variant {
+            "--weighted" => &["weighted"],
+            "--recursive" => &["recursive"],
+            _ => &["separate", "adapt"],
         };
-        let mut equal_split = Vec::new();
-        for variant in ["", "--weighted", "--recursive"] {
-            let weighted = variant == "--weighted";
-            let theirs = dir(&format!("p4est{variant}"));
-            let mut args = vec![
-                "--steps".to_string(),
-                STEPS.to_string(),
-                "--level".into(),
-                level.to_string(),
-                "--max-level".into(),
-                max_level.to_string(),
-                "--out".into(),
-                theirs.display().to_string(),
-            ];
-            if !variant.is_empty() {
-                args.push(variant.into());
-            }
-            let args: Vec<&str> = args.iter().map(String::as_str).collect();
-            let out = common::mpirun(np, &reference, &args, limit);
-            assert!(
-                out.status.success(),
-                "p4est reference on {np} ranks failed:\n{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            let reference_counts = read_counts(&theirs);
-            let moved = (!weighted).then_some(&mut moved_cuts);
-            check_reference(&reference_counts, &theirs, np, moved);
-            if variant.is_empty() {
-                equal_split = reference_counts.clone();
-            } else if weighted && np == 3 {
-                // Weights by level move the boundaries (on 2 and 4 ranks the
-                // sphere's symmetry in y and z gives every rank equal weight).
-                assert_ne!(equal_split, reference_counts, "weights changed nothing");
-            } else if variant == "--recursive" && level == 3 {
-                assert_ne!(equal_split, reference_counts, "recursion changed nothing");
-            }
-            let modes: &[&str] = match variant {
-                "--weighted" => &["weighted"],
-                "--recursive" => &["recursive"],
-                _ => &["separate", "adapt"],
-            };
-            for &mode in modes {
-                let ours = dir(mode);
-                let env = format!("{mode}:{level}:{max_level}:{}", ours.display());
-                let out = common::mpirun_env(np, &me, &[], &[(CHILD, &env)], limit);
-                assert!(
-                    out.status.success(),
-                    "octmesh ({mode}) on {np} ranks failed:\n{}{}",
-                    String::from_utf8_lossy(&out.stdout),
-                    String::from_utf8_lossy(&out.stderr)
+        for &mode in modes {
+            let ours = dir(mode);
+            let arg = format!("{mode}:{level}:{max_level}:{}", ours.display());
+            print!("{}", common::runner::launch(np, &arg, limit));
+            let counts = read_counts(&ours);
+            for step in 0..=STEPS {
+                let tag = format!("np {np}, levels {level}-{max_level}, {mode}, step {step}");
+                let file = format!("step_{step}.bin");
+                let (a, b) = (
+                    common::leaves(&ours.join(&file)),
+                    common::leaves(&theirs.join(&file)),
                 );
-                print!("{}", String::from_utf8_lossy(&out.stdout));
-                let counts = read_counts(&ours);
-                for step in 0..=STEPS {
-                    let tag = format!("np {np}, levels {level}-{max_level}, {mode}, step {step}");
-                    let file = format!("step_{step}.bin");
-                    let (a, b) = (
-                        common::leaves(&ours.join(&file)),
-                        common::leaves(&theirs.join(&file)),
-                    );
-                    assert_eq!(a.len(), b.len(), "{tag}: octmesh and p4est leaf counts");
-                    if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
-                        panic!(
-                            "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
-                            a[i], b[i]
-                        );
-                    }
-                    assert_eq!(
-                        counts[step as usize], reference_counts[step as usize],
-                        "{tag}: step, refined, coarsened, leaves, leaves per rank"
+                assert_eq!(a.len(), b.len(), "{tag}: octmesh and p4est leaf counts");
+                if let Some(i) = (0..a.len()).find(|&i| a[i] != b[i]) {
+                    panic!(
+                        "{tag}: first difference at leaf {i}: octmesh {:?}, p4est {:?}",
+                        a[i], b[i]
                     );
                 }
-                println!(
-                    "np {np}, levels {level}-{max_level}, {mode}: {} steps equal to p4est, \
-                     {} leaves at the end",
-                    STEPS, counts[STEPS as usize][3]
+                assert_eq!(
+                    counts[step as usize], reference_counts[step as usize],
+                    "{tag}: step, refined, coarsened, leaves, leaves per rank"
                 );
             }
+            println!(
+                "np {np}, levels {level}-{max_level}, {mode}: {} steps equal to p4est, \
+                 {} leaves at the end",
+                STEPS, counts[STEPS as usize][3]
+            );
         }
     }
-    // The option must have been exercised: an equal split inside a family.
-    assert!(moved_cuts > 0, "the equal split never fell inside a family");
-    println!(
-        "adapt_p4est: {moved_cuts} cuts moved to keep families together; \
-         {} passed, 0 failed",
-        4 * CASES.len() * 4
-    );
+    moved_cuts
 }
 
 /// The lines of `counts.txt`: step, refined, coarsened, leaves, per rank.

@@ -9,8 +9,8 @@ use std::process::Command;
 use std::time::Duration;
 
 use common::{
-    compile_c_test as compile, deps_dir, mpirun, python_with_meshio, repo, run_with_limit, scratch,
-    stage_library,
+    compile_c_test as compile, deps_dir, mpirun, python_with_meshio, repo, require, run_with_limit,
+    scratch, stage_library, Oracle,
 };
 
 /// Compiles `tests/c/NAME.c` against this build's library, staged in the
@@ -628,6 +628,13 @@ fn field_transfer_from_c_on_1_to_3_ranks() {
 /// `_ext` calls and both partitions; a failing one changes nothing.
 #[test]
 fn leaf_data_from_fortran_on_1_to_3_ranks() {
+    let fortran = Oracle::Program {
+        name: "mpif90",
+        package: "gfortran and libopenmpi-dev",
+    };
+    if require(fortran).is_none() {
+        return;
+    }
     let dir = scratch("c_api_leaf_data_fortran");
     let lib = dir.join("lib");
     stage_library(&deps_dir(), &lib);
@@ -688,6 +695,13 @@ fn leaf_data_from_fortran_on_1_to_3_ranks() {
 /// replace turned into `octmesh::Error` on every rank.
 #[test]
 fn leaf_data_from_cpp_on_1_to_3_ranks() {
+    let cpp = Oracle::Program {
+        name: "mpicxx",
+        package: "g++ and libopenmpi-dev",
+    };
+    if require(cpp).is_none() {
+        return;
+    }
     let dir = scratch("c_api_leaf_data_cpp");
     let lib = dir.join("lib");
     stage_library(&deps_dir(), &lib);

@@ -28,6 +28,7 @@
 mod common;
 
 use std::rc::Rc;
+use std::time::Duration;
 
 use octmesh::internals::octree::adapt::Adapt;
 use octmesh::internals::octree::leaf_data::{LeafData, Replace};
@@ -35,7 +36,6 @@ use octmesh::internals::parallel::comm::{CommRef, MpiComm};
 use octmesh::internals::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant, Result};
 
-const CHILD: &str = "OCTMESH_LEAF_DATA_CHILD";
 const STEPS: u32 = 50;
 const LEVEL: u8 = 3;
 const MAX_LEVEL: u8 = 6;
@@ -194,14 +194,17 @@ fn child() {
 }
 
 fn main() {
-    if std::env::var_os(CHILD).is_some() {
-        child();
-        return;
-    }
-    let outputs = common::run_self_identical_on_1_to_4_ranks(CHILD, &["STEP"], STEPS as usize);
-    for stdout in &outputs {
-        let done = stdout.lines().find(|l| l.starts_with("DONE"));
-        println!("{}", done.expect("a DONE line"));
-    }
-    println!("leaf_data: 50 steps on np 1-4, data on every leaf its own, integral conserved, identical results");
+    common::runner::main(
+        "leaf_data",
+        |_| child(),
+        |r| {
+            let limit = Duration::from_secs(600);
+            let outputs =
+                r.identical_on_ranks(1..=4, "run", "DONE", &["STEP"], STEPS as usize, limit);
+            for (_, stdout) in &outputs {
+                let done = stdout.lines().find(|l| l.starts_with("DONE"));
+                println!("{}", done.expect("a DONE line"));
+            }
+        },
+    );
 }

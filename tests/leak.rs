@@ -1,7 +1,7 @@
 //! The leak check for fluid meshes (`octmesh::internals::leak`, `--inside-point`).
 //!
-//! Run by `cargo test`, this program is its own test runner: it launches
-//! itself under `mpirun` on 1, 2 and 3 ranks to run the Rust API in
+//! Run by `cargo test` (through `tests/common/runner.rs`), this program
+//! launches itself under `mpirun` on 1, 2 and 3 ranks to run the Rust API in
 //! parallel (a closed sphere, a sphere with a cap cut away, a maze of cut
 //! cells on a uniform grid), and checks the results here, on one process,
 //! with geometry written for the test: the path starts on the domain
@@ -34,8 +34,6 @@ use octmesh::{Connectivity, Octant, Result};
 
 use common::*;
 
-const CHILD: &str = "OCTMESH_LEAK_CHILD";
-
 /// Triangles of the unit icosphere whose centroid has `z` above this are
 /// removed: a cap of about 9 degrees, a hole about 0.31 across.
 const CAP_Z: f64 = 0.9877;
@@ -48,71 +46,42 @@ const COARSE: u8 = 3;
 const RANKS: [usize; 3] = [1, 2, 3];
 
 fn main() {
-    if let Ok(which) = std::env::var(CHILD) {
-        child(&which);
-        return;
-    }
-    let filter = std::env::args().skip(1).find(|a| !a.starts_with('-'));
-    let tests: &[(&str, fn())] = &[
-        ("closed_sphere_has_no_leak", closed_sphere_has_no_leak),
-        (
-            "holed_sphere_leaks_through_the_hole",
-            holed_sphere_leaks_through_the_hole,
-        ),
-        (
-            "holed_sphere_is_sealed_at_a_coarse_level",
-            holed_sphere_is_sealed_at_a_coarse_level,
-        ),
-        (
-            "maze_path_is_shortest_on_any_rank_count",
-            maze_path_is_shortest_on_any_rank_count,
-        ),
-        (
-            "bunny_open_leaks_and_bunny_does_not",
-            bunny_open_leaks_and_bunny_does_not,
-        ),
-        (
-            "cli_reports_a_leak_on_every_rank",
-            cli_reports_a_leak_on_every_rank,
-        ),
-        (
-            "cli_passes_on_a_closed_surface",
-            cli_passes_on_a_closed_surface,
-        ),
-        (
-            "cli_rejects_a_point_on_the_surface",
-            cli_rejects_a_point_on_the_surface,
-        ),
-    ];
-    let mut failed = Vec::new();
-    let mut ran = 0;
-    for (name, f) in tests {
-        if filter.as_deref().is_some_and(|p| !name.contains(p)) {
-            continue;
+    common::runner::main("leak", child, |r| {
+        let tests: &[(&str, fn())] = &[
+            ("closed_sphere_has_no_leak", closed_sphere_has_no_leak),
+            (
+                "holed_sphere_leaks_through_the_hole",
+                holed_sphere_leaks_through_the_hole,
+            ),
+            (
+                "holed_sphere_is_sealed_at_a_coarse_level",
+                holed_sphere_is_sealed_at_a_coarse_level,
+            ),
+            (
+                "maze_path_is_shortest_on_any_rank_count",
+                maze_path_is_shortest_on_any_rank_count,
+            ),
+            (
+                "bunny_open_leaks_and_bunny_does_not",
+                bunny_open_leaks_and_bunny_does_not,
+            ),
+            (
+                "cli_reports_a_leak_on_every_rank",
+                cli_reports_a_leak_on_every_rank,
+            ),
+            (
+                "cli_passes_on_a_closed_surface",
+                cli_passes_on_a_closed_surface,
+            ),
+            (
+                "cli_rejects_a_point_on_the_surface",
+                cli_rejects_a_point_on_the_surface,
+            ),
+        ];
+        for (name, f) in tests {
+            r.test(name, *f);
         }
-        ran += 1;
-        println!("test {name} ...");
-        match std::panic::catch_unwind(f) {
-            Ok(()) => println!("test {name} ... ok"),
-            Err(_) => {
-                println!("test {name} ... FAILED");
-                failed.push(*name);
-            }
-        }
-    }
-    println!(
-        "leak: {} passed, {} failed{}",
-        ran - failed.len(),
-        failed.len(),
-        if failed.is_empty() {
-            String::new()
-        } else {
-            format!(" ({})", failed.join(", "))
-        }
-    );
-    if !failed.is_empty() {
-        std::process::exit(1);
-    }
+    });
 }
 
 // ---------------------------------------------------------------------------
@@ -281,14 +250,7 @@ fn launch(which: &str, np: usize) -> BTreeMap<String, String> {
 
 /// [`launch`], also returning the whole output.
 fn launch_text(which: &str, np: usize) -> (BTreeMap<String, String>, String) {
-    let me = std::env::current_exe().expect("own path");
-    let out = mpirun_env(np, &me, &[], &[(CHILD, which)], Duration::from_secs(600));
-    let text = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "{which} on {np} ranks failed:\n{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = common::runner::launch(np, which, Duration::from_secs(600));
     let mut m = BTreeMap::new();
     for l in text.lines() {
         if let Some(rest) = l.strip_prefix("RESULT ") {

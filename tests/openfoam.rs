@@ -37,16 +37,10 @@ use std::time::Duration;
 
 use common::{foam, octmesh_bin, openfoam, scratch, shared_model};
 
-/// The reference case `../shared/openfoam/<name>`, or `None` (reason
-/// printed) when it is absent.
+/// The reference case `openfoam/<name>` of the shared folder
+/// ([`common::require`]).
 fn reference_case(name: &str) -> Option<PathBuf> {
-    let dir = common::repo().join("../shared/openfoam").join(name);
-    if dir.is_dir() {
-        Some(dir)
-    } else {
-        println!("SKIP: {} not found", dir.display());
-        None
-    }
+    common::require(common::Oracle::Shared(&format!("openfoam/{name}")))
 }
 
 /// Runs octmesh on `np` ranks; returns its statistics.

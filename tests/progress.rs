@@ -53,7 +53,7 @@ fn a_bar_on_a_terminal() {
     let script =
         "import os, pty, sys\nos.environ['OCTMESH_PROGRESS_AFTER'] = '0'\npty.spawn(sys.argv[1:])";
     let bin = octmesh_bin();
-    let mut cmd = Command::new("python3");
+    let mut cmd = Command::new(common::python_with("pty", "python3"));
     cmd.args([
         "-c",
         script,

@@ -131,9 +131,8 @@ fn face_figures_equal_checkmesh() {
         ("sphere".to_string(), "5", "all", &[][..]),
         ("sphere".to_string(), "4", "outside", box_args),
     ];
-    match shared_model("bunny.stl") {
-        Some(p) => cases.push((p.to_string_lossy().into_owned(), "7", "outside", &[][..])),
-        None => println!("SKIP: the bunny case (no ../shared/data/bunny.stl)"),
+    if let Some(p) = shared_model("bunny.stl") {
+        cases.push((p.to_string_lossy().into_owned(), "7", "outside", &[][..]));
     }
     for (surface, level, keep, extra) in &cases {
         for np in [1, 2] {

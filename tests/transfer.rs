@@ -25,6 +25,7 @@ mod common;
 
 use std::cell::RefCell;
 use std::rc::Rc;
+use std::time::Duration;
 
 use octmesh::internals::classify::{CutRule, Keep};
 use octmesh::internals::config::Config;
@@ -36,7 +37,6 @@ use octmesh::internals::pipeline::{Event, Observer, Session};
 use octmesh::internals::refine::NO_LIMIT;
 use octmesh::{Connectivity, LinearOctree, Octant};
 
-const CHILD: &str = "OCTMESH_TRANSFER_CHILD";
 const STEPS: u32 = 6;
 const MAX_LEVEL: u8 = 6;
 const STEP_X: i64 = 20_972;
@@ -453,10 +453,10 @@ fn bench(comm: &CommRef) {
     }
 }
 
-fn child() {
+fn child(mode: &str) {
     let universe = mpi::initialize().expect("MPI init");
     let comm: CommRef = Rc::new(MpiComm::new(universe.world()));
-    if std::env::var(CHILD).is_ok_and(|v| v == "bench") {
+    if mode == "bench" {
         bench(&comm);
         return;
     }
@@ -474,15 +474,14 @@ fn child() {
 }
 
 fn main() {
-    if std::env::var_os(CHILD).is_some() {
-        child();
-        return;
-    }
-    let prefixes = ["STEP", "ERRORS", "CLASSES"];
-    let outputs = common::run_self_identical_on_1_to_4_ranks(CHILD, &prefixes, STEPS as usize + 5);
-    for (np, stdout) in (1..).zip(&outputs) {
-        let errors = stdout.lines().find(|l| l.starts_with("ERRORS"));
-        println!("np {np}: {}", errors.expect("an ERRORS line"));
-    }
-    println!("transfer: 4 passed, 0 failed");
+    common::runner::main("transfer", child, |r| {
+        let prefixes = ["STEP", "ERRORS", "CLASSES"];
+        let limit = Duration::from_secs(600);
+        let count = STEPS as usize + 5;
+        let outputs = r.identical_on_ranks(1..=4, "run", "DONE", &prefixes, count, limit);
+        for (np, stdout) in &outputs {
+            let errors = stdout.lines().find(|l| l.starts_with("ERRORS"));
+            println!("np {np}: {}", errors.expect("an ERRORS line"));
+        }
+    });
 }

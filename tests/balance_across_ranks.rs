@@ -14,18 +14,13 @@ use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
 use octmesh::internals::refine::{build_from_callback, NO_LIMIT};
 use octmesh::{Connectivity, LinearOctree, Octant};
 
-const CHILD: &str = "OCTMESH_MPI_BALANCE_CHILD";
-
 fn main() {
-    if std::env::var(CHILD).is_ok() {
-        child();
-        return;
-    }
-    common::run_self_on_1_to_4_ranks(
-        "mpi_balance",
-        CHILD,
-        "all cases agree",
-        Duration::from_secs(300),
+    common::runner::main(
+        "balance_across_ranks",
+        |_| child(),
+        |r| {
+            r.on_ranks(1..=4, "run", "all cases agree", Duration::from_secs(300));
+        },
     );
 }
 
@@ -112,7 +107,7 @@ fn child() {
     }
     if rank == 0 {
         println!(
-            "mpi_balance on {} ranks: {cases} cases, all cases agree",
+            "balance_across_ranks on {} ranks: {cases} cases, all cases agree",
             comm.size()
         );
     }

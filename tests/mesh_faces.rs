@@ -26,18 +26,18 @@ use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
 use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::Connectivity;
 
-const CHILD: &str = "OCTMESH_MPI_FACES_CHILD";
-
 fn main() {
-    if std::env::var(CHILD).is_ok() {
-        child();
-        return;
-    }
-    common::run_self_on_1_to_4_ranks(
-        "mpi_faces",
-        CHILD,
-        "mpi_faces: all checks passed",
-        Duration::from_secs(600),
+    common::runner::main(
+        "mesh_faces",
+        |_| child(),
+        |r| {
+            r.on_ranks(
+                1..=4,
+                "run",
+                "faces: all checks passed",
+                Duration::from_secs(600),
+            );
+        },
     );
 }
 
@@ -534,6 +534,6 @@ fn child() {
         }
     }
     if rank == 0 {
-        println!("mpi_faces: all checks passed");
+        println!("faces: all checks passed");
     }
 }

@@ -28,18 +28,18 @@ use octmesh::internals::parallel::comm::{CommRef, MpiComm, SerialComm};
 use octmesh::internals::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
 use octmesh::Connectivity;
 
-const CHILD: &str = "OCTMESH_MPI_MESH_CHILD";
-
 fn main() {
-    if std::env::var(CHILD).is_ok() {
-        child();
-        return;
-    }
-    common::run_self_on_1_to_4_ranks(
-        "mpi_mesh",
-        CHILD,
-        "mpi_mesh: all checks passed",
-        Duration::from_secs(600),
+    common::runner::main(
+        "mesh_nodes",
+        |_| child(),
+        |r| {
+            r.on_ranks(
+                1..=4,
+                "run",
+                "nodes: all checks passed",
+                Duration::from_secs(600),
+            );
+        },
     );
 }
 
@@ -323,7 +323,7 @@ fn child() {
         }
     }
     if rank == 0 {
-        println!("mpi_mesh: all checks passed");
+        println!("nodes: all checks passed");
     }
 }
 

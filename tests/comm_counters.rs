@@ -12,18 +12,18 @@ use std::time::Duration;
 
 use octmesh::internals::parallel::comm::{CommRef, MpiComm, Traffic};
 
-const CHILD: &str = "OCTMESH_MPI_COMM_CHILD";
-
 fn main() {
-    if std::env::var(CHILD).is_ok() {
-        child();
-        return;
-    }
-    common::run_self_on_1_to_4_ranks(
-        "mpi_comm",
-        CHILD,
-        "comm counters agree",
-        Duration::from_secs(120),
+    common::runner::main(
+        "comm_counters",
+        |_| child(),
+        |r| {
+            r.on_ranks(
+                1..=4,
+                "run",
+                "comm counters agree",
+                Duration::from_secs(120),
+            );
+        },
     );
 }
 
