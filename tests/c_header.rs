@@ -21,7 +21,7 @@ fn generate() -> String {
     let mut out = Vec::new();
     cbindgen::Builder::new()
         .with_config(config)
-        .with_crate(&root)
+        .with_src(root.join("src/ffi/mod.rs"))
         .generate()
         .expect("cbindgen failed")
         .write(&mut out);
