@@ -456,8 +456,7 @@ const NON_INDEX_WORDS: [&str; 12] = [
 /// The base type of a declaration type: `const int32_t **` -> `int32_t`.
 fn base(ty: &str) -> &str {
     ty.split([' ', '*'])
-        .filter(|w| !w.is_empty() && *w != "const" && *w != "struct")
-        .next_back()
+        .rfind(|w| !w.is_empty() && *w != "const" && *w != "struct")
         .unwrap_or("")
 }
 
