@@ -13,10 +13,15 @@
 !>   ...
 !>   call octmesh_destroy(h)
 !>
-!> A refinement callback is a bind(c) function:
-!>   integer(c_int32_t) function my_refine(ctx, o) bind(c)
+!> A refinement callback is a bind(c) function answering .true. to refine
+!> (C's bool is logical(c_bool)):
+!>   logical(c_bool) function my_refine(ctx, o) bind(c)
 !>     type(c_ptr), value :: ctx
 !>     type(octmesh_octant_t), intent(in) :: o
+!>
+!> Local indices and counts (octmesh_locidx_t) are integer(c_int32_t),
+!> global ones (octmesh_gloidx_t) integer(c_int64_t); the kinds
+!> octmesh_locidx_kind and octmesh_gloidx_kind name them.
 module octmesh
   use, intrinsic :: iso_c_binding
   implicit none
@@ -29,24 +34,27 @@ module octmesh
        OCTMESH_STATUS_LIMIT = 5, OCTMESH_STATUS_STATE = 6, &
        OCTMESH_STATUS_MPI = 7, OCTMESH_STATUS_REMOTE_FAILURE = 8, &
        OCTMESH_STATUS_INTERNAL = 9, OCTMESH_STATUS_LEAK = 10
-  ! Balance contacts (octmesh_connect).
+  ! Balance contacts (octmesh_connect_t).
   integer(c_int32_t), parameter, public :: OCTMESH_CONNECT_FACE = 1, &
        OCTMESH_CONNECT_EDGE = 2, OCTMESH_CONNECT_CORNER = 3
-  ! Elements kept (octmesh_keep).
+  ! Elements kept (octmesh_keep_t).
   integer(c_int32_t), parameter, public :: OCTMESH_KEEP_ALL = 0, &
        OCTMESH_KEEP_INSIDE = 1, OCTMESH_KEEP_OUTSIDE = 2
-  ! Cut leaves (octmesh_cut_rule).
+  ! Cut leaves (octmesh_cut_rule_t).
   integer(c_int32_t), parameter, public :: OCTMESH_CUT_RULE_CENTER = 0, &
        OCTMESH_CUT_RULE_ALL = 1, OCTMESH_CUT_RULE_NONE = 2
-  ! Inside rules (octmesh_inside_rule).
+  ! Inside rules (octmesh_inside_rule_t).
   integer(c_int32_t), parameter, public :: OCTMESH_INSIDE_RULE_AUTO = 0, &
        OCTMESH_INSIDE_RULE_PARITY = 1, OCTMESH_INSIDE_RULE_WINDING = 2
-  ! Element classes (octmesh_class).
+  ! Element classes (octmesh_class_t, stored one byte each).
   integer(c_int8_t), parameter, public :: OCTMESH_CLASS_OUTSIDE = 0, &
        OCTMESH_CLASS_INSIDE = 1, OCTMESH_CLASS_CUT = 2
-  ! OpenFOAM list encodings (octmesh_foam_format).
+  ! OpenFOAM list encodings (octmesh_foam_format_t).
   integer(c_int32_t), parameter, public :: OCTMESH_FOAM_FORMAT_BINARY = 0, &
        OCTMESH_FOAM_FORMAT_ASCII = 1
+  !> Kinds of octmesh_locidx_t (local indices and counts) and
+  !> octmesh_gloidx_t (global ones).
+  integer, parameter, public :: octmesh_locidx_kind = c_int32_t, octmesh_gloidx_kind = c_int64_t
   !> Lattice units per side of the root cube.
   integer(c_int32_t), parameter, public :: OCTMESH_ROOT_LEN = 2**19
 
@@ -270,7 +278,7 @@ module octmesh
        integer(c_int) :: octmesh_octree_refine_surface
      end function octmesh_octree_refine_surface
 
-     !> refine: c_funloc of a bind(c) function (ctx, octant) -> int32;
+     !> refine: c_funloc of a bind(c) function (ctx, octant) -> logical(c_bool);
      !> ctx: c_loc of anything, or c_null_ptr.
      function octmesh_octree_refine_callback(h, max_level, refine, ctx) &
           bind(c, name="octmesh_octree_refine_callback")
@@ -311,13 +319,13 @@ module octmesh
        integer(c_int) :: octmesh_octree_refine_once
      end function octmesh_octree_refine_once
 
-     !> coarsen: c_funloc of a bind(c) function (ctx, family) -> int32,
-     !> family the 8 sibling octants.
+     !> coarsen: c_funloc of a bind(c) function (ctx, family) ->
+     !> logical(c_bool), family the 8 sibling octants.
      function octmesh_octree_coarsen(h, recursive, coarsen, ctx, coarsened) &
           bind(c, name="octmesh_octree_coarsen")
-       import :: c_ptr, c_funptr, c_int32_t, c_int
+       import :: c_ptr, c_funptr, c_bool, c_int
        type(c_ptr), value :: h
-       integer(c_int32_t), value :: recursive
+       logical(c_bool), value :: recursive
        type(c_funptr), value :: coarsen
        type(c_ptr), value :: ctx, coarsened
        integer(c_int) :: octmesh_octree_coarsen
@@ -385,9 +393,9 @@ module octmesh
 
      function octmesh_octree_coarsen_ext(h, recursive, coarsen, replace, ctx, coarsened) &
           bind(c, name="octmesh_octree_coarsen_ext")
-       import :: c_ptr, c_funptr, c_int32_t, c_int
+       import :: c_ptr, c_funptr, c_bool, c_int
        type(c_ptr), value :: h
-       integer(c_int32_t), value :: recursive
+       logical(c_bool), value :: recursive
        type(c_funptr), value :: coarsen, replace
        type(c_ptr), value :: ctx, coarsened
        integer(c_int) :: octmesh_octree_coarsen_ext
@@ -625,11 +633,12 @@ module octmesh
        integer(c_int) :: octmesh_mesh_get_snap_report
      end function octmesh_mesh_get_snap_report
 
-     !> Keep (1) or drop (0) the mesh a change replaces, for the transfers.
+     !> Keep (.true.) or drop (.false.) the mesh a change replaces, for the
+     !> transfers.
      function octmesh_mesh_keep_previous(h, keep) bind(c, name="octmesh_mesh_keep_previous")
-       import :: c_ptr, c_int, c_int32_t
+       import :: c_ptr, c_int, c_bool
        type(c_ptr), value :: h
-       integer(c_int32_t), value :: keep
+       logical(c_bool), value :: keep
        integer(c_int) :: octmesh_mesh_keep_previous
      end function octmesh_mesh_keep_previous
 
@@ -684,10 +693,11 @@ module octmesh
 
      function c_octmesh_mesh_write_openfoam(h, dir, format, overwrite) &
           bind(c, name="octmesh_mesh_write_openfoam")
-       import :: c_ptr, c_char, c_int, c_int32_t
+       import :: c_ptr, c_char, c_int, c_int32_t, c_bool
        type(c_ptr), value :: h
        character(kind=c_char), intent(in) :: dir(*)
-       integer(c_int32_t), value :: format, overwrite
+       integer(c_int32_t), value :: format
+       logical(c_bool), value :: overwrite
        integer(c_int) :: c_octmesh_mesh_write_openfoam
      end function c_octmesh_mesh_write_openfoam
 
@@ -874,11 +884,8 @@ contains
     integer, intent(in) :: format
     logical, intent(in) :: overwrite
     integer(c_int) :: status
-    integer(c_int32_t) :: ow
-    ow = 0
-    if (overwrite) ow = 1
     status = c_octmesh_mesh_write_openfoam(h, trim(dir) // c_null_char, &
-         int(format, c_int32_t), ow)
+         int(format, c_int32_t), logical(overwrite, c_bool))
   end function octmesh_mesh_write_openfoam_f
 
   !> Region refinement (like the command's --min-level, --region and

@@ -4,6 +4,7 @@
 #define OCTMESH_H
 
 #include <mpi.h>
+#include <stdbool.h>
 #include <stdint.h>
 
 /** Version of the octmesh library this header belongs to. */
@@ -71,7 +72,7 @@ typedef enum {
 } octmesh_status_t;
 
 /**
- * Contacts the 2:1 balance applies to (values of `octmesh_connect_t`).
+ * Contacts the 2:1 balance applies to.
  */
 typedef enum {
   /**
@@ -86,10 +87,10 @@ typedef enum {
    * Leaves sharing a face, an edge or a corner.
    */
   OCTMESH_CONNECT_CORNER = 3,
-} octmesh_connect;
+} octmesh_connect_t;
 
 /**
- * Which leaves become elements (values of `octmesh_keep_t`).
+ * Which leaves become elements.
  */
 typedef enum {
   /**
@@ -104,11 +105,11 @@ typedef enum {
    * Leaves outside the surface (fluid mesh).
    */
   OCTMESH_KEEP_OUTSIDE = 2,
-} octmesh_keep;
+} octmesh_keep_t;
 
 /**
  * What happens to leaves touching the surface when keeping inside or
- * outside (values of `octmesh_cut_rule_t`).
+ * outside.
  */
 typedef enum {
   /**
@@ -123,11 +124,11 @@ typedef enum {
    * No cut leaf is kept.
    */
   OCTMESH_CUT_RULE_NONE = 2,
-} octmesh_cut_rule;
+} octmesh_cut_rule_t;
 
 /**
- * How a leaf's centre is found inside the surface when meshing (values of
- * `octmesh_inside_rule_t`, set by `octmesh_mesh_set_inside_rule`).
+ * How a leaf's centre is found inside the surface when meshing (set by
+ * `octmesh_mesh_set_inside_rule`).
  */
 typedef enum {
   /**
@@ -146,10 +147,10 @@ typedef enum {
    * facets repaired.
    */
   OCTMESH_INSIDE_RULE_WINDING = 2,
-} octmesh_inside_rule;
+} octmesh_inside_rule_t;
 
 /**
- * Class of an element, as stored in the array of
+ * Class of an element, as stored (one `int8_t` each) in the array of
  * `octmesh_mesh_get_element_class`.
  */
 typedef enum {
@@ -166,10 +167,10 @@ typedef enum {
    * Touches the surface.
    */
   OCTMESH_CLASS_CUT = 2,
-} octmesh_class;
+} octmesh_class_t;
 
 /**
- * List encoding of OpenFOAM files (values of `octmesh_foam_format_t`).
+ * List encoding of OpenFOAM files.
  */
 typedef enum {
   /**
@@ -180,12 +181,7 @@ typedef enum {
    * Text.
    */
   OCTMESH_FOAM_FORMAT_ASCII = 1,
-} octmesh_foam_format;
-
-/**
- * The brick of root cells of a domain, in lattice terms.
- */
-typedef struct Brick Brick;
+} octmesh_foam_format_t;
 
 /**
  * Opaque handle: a communicator, the pipeline's session (surface, octree,
@@ -195,12 +191,16 @@ typedef struct Brick Brick;
 typedef struct octmesh_t octmesh_t;
 
 /**
- * A local count or index (elements, nodes, leaves of one rank): 32 bits.
+ * A local count or index: of the elements, nodes, faces, leaves, halo
+ * elements, patches or neighbour ranks of one rank, or of the values in
+ * one of its arrays (offsets, capacities). 32 bits, as p4est's
+ * `p4est_locidx_t`.
  */
 typedef int32_t octmesh_locidx_t;
 
 /**
- * A global count or number (over all ranks): 64 bits.
+ * A global count or number (over all ranks): 64 bits, as p4est's
+ * `p4est_gloidx_t`.
  */
 typedef int64_t octmesh_gloidx_t;
 
@@ -221,7 +221,7 @@ typedef struct {
    * Patches: 0..6 the sides `xmin xmax ymin ymax zmin zmax`, 6 the
    * surface (`octmesh_mesh_get_patch_name`).
    */
-  int32_t num_patches;
+  octmesh_locidx_t num_patches;
   /**
    * Owner element of each face (local, 0-based).
    */
@@ -299,7 +299,7 @@ typedef struct {
   /**
    * Neighbour ranks (sharing at least one face), increasing.
    */
-  int32_t num_ranks;
+  octmesh_locidx_t num_ranks;
   /**
    * The neighbour ranks.
    */
@@ -372,11 +372,6 @@ typedef struct {
 } octmesh_boundary_t;
 
 /**
- * One of the `octmesh_foam_format` constants.
- */
-typedef int32_t octmesh_foam_format_t;
-
-/**
  * Options of a handle, read once by `octmesh_create`. Initialise with
  * `octmesh_options_default`, then change fields. They fill the same
  * configuration as the `octmesh` command's options of the same names.
@@ -390,10 +385,10 @@ typedef struct {
   double fit;
   /**
    * Largest number of leaves (over all ranks) a refinement or a balance
-   * may create; 0 means unlimited (default; `--max-octants`). Exceeding
-   * it fails with `OCTMESH_STATUS_LIMIT`.
+   * may create, at least 0; 0 means unlimited (default;
+   * `--max-octants`). Exceeding it fails with `OCTMESH_STATUS_LIMIT`.
    */
-  uint64_t max_octants;
+  octmesh_gloidx_t max_octants;
   /**
    * 0 (default) prints nothing; 1 also prints the message of every
    * failed call on stderr, one line per rank.
@@ -407,21 +402,6 @@ typedef struct {
    */
   uint64_t memory_budget;
 } octmesh_options_t;
-
-/**
- * One of the `octmesh_keep` constants.
- */
-typedef int32_t octmesh_keep_t;
-
-/**
- * One of the `octmesh_cut_rule` constants.
- */
-typedef int32_t octmesh_cut_rule_t;
-
-/**
- * One of the `octmesh_inside_rule` constants.
- */
-typedef int32_t octmesh_inside_rule_t;
 
 /**
  * Sizes of the mesh: this rank's part and global totals (the same on
@@ -492,16 +472,11 @@ typedef struct {
 } octmesh_octant_t;
 
 /**
- * Refinement callback: returns non-zero to refine the octant. It must give
+ * Refinement callback: returns true to refine the octant. It must give
  * the same answer for the same octant on every rank (the top of the tree is
  * evaluated redundantly), and must not unwind or longjmp.
  */
-typedef int32_t (*octmesh_refine_fn)(void *ctx, const octmesh_octant_t *o);
-
-/**
- * One of the `octmesh_connect` constants.
- */
-typedef int32_t octmesh_connect_t;
+typedef bool (*octmesh_refine_fn)(void *ctx, const octmesh_octant_t *o);
 
 /**
  * Replace callback: `num_outgoing` leaves `outgoing` (with their data,
@@ -518,10 +493,10 @@ typedef int32_t octmesh_connect_t;
  * data left as they were. Must not unwind or longjmp.
  */
 typedef int32_t (*octmesh_replace_fn)(void *ctx,
-                                      int32_t num_outgoing,
+                                      octmesh_locidx_t num_outgoing,
                                       const octmesh_octant_t *outgoing,
                                       const void *outgoing_data,
-                                      int32_t num_incoming,
+                                      octmesh_locidx_t num_incoming,
                                       const octmesh_octant_t *incoming,
                                       void *incoming_data);
 
@@ -535,10 +510,10 @@ typedef uint64_t (*octmesh_weight_fn)(void *ctx, const octmesh_octant_t *o);
 
 /**
  * Coarsening callback: `family` points to the eight sibling leaves of a
- * family in Morton order (child 0 first); returns non-zero to replace them
- * by their parent. Must not unwind or longjmp.
+ * family in Morton order (child 0 first); returns true to replace them by
+ * their parent. Must not unwind or longjmp.
  */
-typedef int32_t (*octmesh_coarsen_fn)(void *ctx, const octmesh_octant_t *family);
+typedef bool (*octmesh_coarsen_fn)(void *ctx, const octmesh_octant_t *family);
 
 /**
  * Adaptation callback (t8code's convention): returns a positive value to
@@ -726,7 +701,7 @@ const char *octmesh_last_error(const octmesh_t *h);
  *
  * \param[in] status  a status value
  */
-const char *octmesh_status_name(int32_t status);
+const char *octmesh_status_name(octmesh_status_t status);
 
 /**
  * Sets the cube of the next construction from the root (by
@@ -773,7 +748,7 @@ octmesh_status_t octmesh_domain_set(octmesh_t *h, const double *origin, double s
 octmesh_status_t octmesh_domain_set_box(octmesh_t *h,
                                         const double *lo,
                                         const double *hi,
-                                        const int32_t *roots);
+                                        const octmesh_locidx_t *roots);
 
 /**
  * The cube of the current octree (or, without one, the cube the next
@@ -809,7 +784,9 @@ octmesh_status_t octmesh_surface_from_stl(octmesh_t *h, const char *path);
  * \param[in] n      number of surfaces, > 0
  * \param[in] specs  n NUL-terminated paths or built-in names
  */
-octmesh_status_t octmesh_surface_from_files(octmesh_t *h, int32_t n, const char *const *specs);
+octmesh_status_t octmesh_surface_from_files(octmesh_t *h,
+                                            octmesh_locidx_t n,
+                                            const char *const *specs);
 
 /**
  * Sets the surface from the caller's triangles. The data is copied.
@@ -920,15 +897,15 @@ octmesh_status_t octmesh_octree_refine_surface_part(octmesh_t *h,
  */
 octmesh_status_t octmesh_octree_refine_regions(octmesh_t *h,
                                                int32_t min_level,
-                                               int32_t nregions,
+                                               octmesh_locidx_t nregions,
                                                const char *const *regions,
-                                               int32_t nbands,
+                                               octmesh_locidx_t nbands,
                                                const double *distances,
                                                const int32_t *levels);
 
 /**
  * Refines by a callback: a leaf is split while `refine(ctx, &octant)`
- * returns non-zero and its level is below `max_level`. Without an octree,
+ * returns true and its level is below `max_level`. Without an octree,
  * builds one from the root (in the cube of `octmesh_domain_set`, else
  * fitted around the surface, else the unit cube); otherwise refines the
  * existing leaves (which drops their balance). Drops the mesh.
@@ -952,7 +929,7 @@ octmesh_status_t octmesh_octree_refine_callback(octmesh_t *h,
  * or the memory budget. Collective.
  *
  * \param[in] h        the handle
- * \param[in] connect  the contacts balanced: one of `octmesh_connect`
+ * \param[in] connect  the contacts balanced: one of `octmesh_connect_t`
  */
 octmesh_status_t octmesh_octree_balance(octmesh_t *h, octmesh_connect_t connect);
 
@@ -965,7 +942,7 @@ octmesh_status_t octmesh_octree_balance(octmesh_t *h, octmesh_connect_t connect)
  * data are as they were. Collective.
  *
  * \param[in] h        the handle
- * \param[in] connect  the contacts balanced: one of `octmesh_connect`
+ * \param[in] connect  the contacts balanced: one of `octmesh_connect_t`
  * \param[in] replace  the replace callback, or NULL (new leaves' data
  *                     zeroed)
  * \param[in] ctx      passed to the callback unchanged
@@ -1031,7 +1008,7 @@ octmesh_status_t octmesh_octree_check_leak(octmesh_t *h, const double *point);
 
 /**
  * Splits each leaf below `max_level` for which `refine(ctx, &leaf)`
- * returns non-zero into its eight children, once: the children are not
+ * returns true into its eight children, once: the children are not
  * offered to the callback (p4est's non-recursive `p8est_refine`; for
  * recursive refinement use `octmesh_octree_refine_callback`). Fails with
  * `OCTMESH_STATUS_LIMIT`, leaving the octree as it was, when the octree
@@ -1077,23 +1054,23 @@ octmesh_status_t octmesh_octree_refine_once_ext(octmesh_t *h,
 
 /**
  * Replaces each family of eight sibling leaves on this rank for which
- * `coarsen(ctx, family)` returns non-zero by its parent. A family whose
+ * `coarsen(ctx, family)` returns true by its parent. A family whose
  * leaves are on different ranks is never offered nor coarsened (p4est's
  * rule): partition with `octmesh_octree_partition_for_coarsening` first to
- * keep families together. With `recursive` non-zero, a parent made by
- * coarsening that completes a new family is offered in turn; with 0, only
- * families of the leaves present before the call are (p4est's
+ * keep families together. With `recursive` true, a parent made by
+ * coarsening that completes a new family is offered in turn; with false,
+ * only families of the leaves present before the call are (p4est's
  * `p8est_coarsen`). Drops the balance, the leaf classes and the mesh.
  * Needs an octree. Collective.
  *
  * \param[in]  h          the handle
- * \param[in]  recursive  non-zero to coarsen repeatedly
+ * \param[in]  recursive  true to coarsen repeatedly
  * \param[in]  coarsen    the callback
  * \param[in]  ctx        passed to the callback unchanged
  * \param[out] coarsened  families coarsened over all ranks, or NULL
  */
 octmesh_status_t octmesh_octree_coarsen(octmesh_t *h,
-                                        int32_t recursive,
+                                        bool recursive,
                                         octmesh_coarsen_fn coarsen,
                                         void *ctx,
                                         octmesh_gloidx_t *coarsened);
@@ -1107,7 +1084,7 @@ octmesh_status_t octmesh_octree_coarsen(octmesh_t *h,
  * rank fails and the octree and the data are as they were. Collective.
  *
  * \param[in]  h          the handle
- * \param[in]  recursive  non-zero to coarsen repeatedly
+ * \param[in]  recursive  true to coarsen repeatedly
  * \param[in]  coarsen    the callback
  * \param[in]  replace    the replace callback, or NULL (parents' data
  *                        zeroed)
@@ -1115,7 +1092,7 @@ octmesh_status_t octmesh_octree_coarsen(octmesh_t *h,
  * \param[out] coarsened  families coarsened over all ranks, or NULL
  */
 octmesh_status_t octmesh_octree_coarsen_ext(octmesh_t *h,
-                                            int32_t recursive,
+                                            bool recursive,
                                             octmesh_coarsen_fn coarsen,
                                             octmesh_replace_fn replace,
                                             void *ctx,
@@ -1298,7 +1275,9 @@ octmesh_status_t octmesh_mesh_get_boundary(const octmesh_t *h, octmesh_boundary_
  * \param[in]  patch  0 .. num_patches - 1
  * \param[out] name   the name
  */
-octmesh_status_t octmesh_mesh_get_patch_name(const octmesh_t *h, int32_t patch, const char **name);
+octmesh_status_t octmesh_mesh_get_patch_name(const octmesh_t *h,
+                                             octmesh_locidx_t patch,
+                                             const char **name);
 
 /**
  * Renames patch `from` (its current name, e.g. `xmin`) to `to` (an
@@ -1319,19 +1298,19 @@ octmesh_status_t octmesh_mesh_rename_patch(octmesh_t *h, const char *from, const
  * `dir/processor<r>/constant/polyMesh` with processor patches (ready for
  * `mpirun -np P solver -parallel`), and a minimal `dir/system` when it is
  * absent. Patches are named by `octmesh_mesh_rename_patch`. An existing
- * mesh is replaced only when `overwrite` is non-zero. All or nothing: if
+ * mesh is replaced only when `overwrite` is true. All or nothing: if
  * one rank fails, no rank's mesh is left in place. Needs a mesh.
  * Collective.
  *
  * \param[in] h          the handle
  * \param[in] dir        the case directory, NUL-terminated
- * \param[in] format     one of `octmesh_foam_format`
- * \param[in] overwrite  non-zero to replace an existing mesh
+ * \param[in] format     one of `octmesh_foam_format_t`
+ * \param[in] overwrite  true to replace an existing mesh
  */
 octmesh_status_t octmesh_mesh_write_openfoam(octmesh_t *h,
                                              const char *dir,
                                              octmesh_foam_format_t format,
-                                             int32_t overwrite);
+                                             bool overwrite);
 
 /**
  * Builds the mesh of the octree, replacing any previous one. The elements
@@ -1341,9 +1320,9 @@ octmesh_status_t octmesh_mesh_write_openfoam(octmesh_t *h,
  * corner contacts (`octmesh_octree_balance`). Collective.
  *
  * \param[in] h     the handle
- * \param[in] keep  one of `octmesh_keep`
+ * \param[in] keep  one of `octmesh_keep_t`
  * \param[in] rule  for leaves touching the surface: one of
- *                  `octmesh_cut_rule`
+ *                  `octmesh_cut_rule_t`
  */
 octmesh_status_t octmesh_mesh_build(octmesh_t *h, octmesh_keep_t keep, octmesh_cut_rule_t rule);
 
@@ -1354,7 +1333,7 @@ octmesh_status_t octmesh_mesh_build(octmesh_t *h, octmesh_keep_t keep, octmesh_c
  * Collective.
  *
  * \param[in] h     the handle
- * \param[in] rule  one of `octmesh_inside_rule`
+ * \param[in] rule  one of `octmesh_inside_rule_t`
  */
 octmesh_status_t octmesh_mesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_t rule);
 
@@ -1366,7 +1345,7 @@ octmesh_status_t octmesh_mesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_
  * collective.
  *
  * \param[in]  h    the handle
- * \param[out] out  one of `octmesh_inside_rule`
+ * \param[out] out  one of `octmesh_inside_rule_t`
  */
 octmesh_status_t octmesh_mesh_get_inside_rule(const octmesh_t *h, octmesh_inside_rule_t *out);
 
@@ -1402,7 +1381,7 @@ octmesh_status_t octmesh_mesh_get_counts(const octmesh_t *h, octmesh_mesh_counts
  * \param[out] out  8 * local_elements local node numbers, owned by the
  *                  handle
  */
-octmesh_status_t octmesh_mesh_get_connectivity(const octmesh_t *h, const int32_t **out);
+octmesh_status_t octmesh_mesh_get_connectivity(const octmesh_t *h, const octmesh_locidx_t **out);
 
 /**
  * Sets `*out` to the node coordinates: x, y, z per local node, user
@@ -1422,16 +1401,16 @@ octmesh_status_t octmesh_mesh_get_coordinates(const octmesh_t *h, const double *
  * \param[out] out  num_independent global numbers (0-based), owned by the
  *                  handle
  */
-octmesh_status_t octmesh_mesh_get_global_ids(const octmesh_t *h, const int64_t **out);
+octmesh_status_t octmesh_mesh_get_global_ids(const octmesh_t *h, const octmesh_gloidx_t **out);
 
 /**
  * Sets `*out` to the owner rank of each of the `num_independent`
  * independent local nodes. Needs a mesh. Not collective.
  *
- * \param[in]  h    the handle
- * \param[out] out  num_independent owner ranks, owned by the handle
+ * \param[in]  h      the handle
+ * \param[out] ranks  num_independent owner ranks, owned by the handle
  */
-octmesh_status_t octmesh_mesh_get_owners(const octmesh_t *h, const int32_t **out);
+octmesh_status_t octmesh_mesh_get_owners(const octmesh_t *h, const int32_t **ranks);
 
 /**
  * Sets `*offsets` (`num_independent + 1` entries) and `*ranks` to the
@@ -1446,7 +1425,7 @@ octmesh_status_t octmesh_mesh_get_owners(const octmesh_t *h, const int32_t **out
  *                      handle
  */
 octmesh_status_t octmesh_mesh_get_sharers(const octmesh_t *h,
-                                          const int32_t **offsets,
+                                          const octmesh_locidx_t **offsets,
                                           const int32_t **ranks);
 
 /**
@@ -1466,10 +1445,10 @@ octmesh_status_t octmesh_mesh_get_sharers(const octmesh_t *h,
  *                         by increasing global number, owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_exchange(const octmesh_t *h,
-                                           int32_t *nneighbors,
+                                           octmesh_locidx_t *nneighbors,
                                            const int32_t **ranks,
-                                           const int32_t **offsets,
-                                           const int32_t **nodes);
+                                           const octmesh_locidx_t **offsets,
+                                           const octmesh_locidx_t **nodes);
 
 /**
  * The hanging nodes: hanging node `k` is local node `num_independent + k`
@@ -1496,16 +1475,16 @@ octmesh_status_t octmesh_mesh_get_exchange(const octmesh_t *h,
  *                    for unused entries, owned by the handle
  */
 octmesh_status_t octmesh_mesh_get_hanging(const octmesh_t *h,
-                                          const int32_t **count,
-                                          const int32_t **deps);
+                                          const octmesh_locidx_t **count,
+                                          const octmesh_locidx_t **deps);
 
 /**
  * Sets `*out` to the class of each local element (one of
- * `octmesh_class`). Needs a mesh. Not collective.
+ * `octmesh_class_t`, one byte each). Needs a mesh. Not collective.
  *
  * \param[in]  h    the handle
- * \param[out] out  local_elements classes (`octmesh_class`), owned by the
- *                  handle
+ * \param[out] out  local_elements classes (`octmesh_class_t`), owned by
+ *                  the handle
  */
 octmesh_status_t octmesh_mesh_get_element_class(const octmesh_t *h, const int8_t **out);
 
@@ -1552,7 +1531,7 @@ octmesh_status_t octmesh_mesh_write_vtu(octmesh_t *h, const char *pvtu);
  */
 octmesh_status_t octmesh_mesh_write_vtu_fields(octmesh_t *h,
                                                const char *pvtu,
-                                               int32_t nfields,
+                                               octmesh_locidx_t nfields,
                                                const char *const *names,
                                                const double *const *values);
 
@@ -1632,16 +1611,16 @@ octmesh_status_t octmesh_mesh_snap(octmesh_t *h,
 octmesh_status_t octmesh_mesh_get_snap_report(octmesh_t *h, octmesh_snap_report_t *out);
 
 /**
- * Keeps (`keep` non-zero) or stops keeping the mesh that a change of the
+ * Keeps (`keep` true) or stops keeping the mesh that a change of the
  * octree or a new `octmesh_mesh_build` replaces, for the transfer calls
  * below. Off by default: the kept mesh costs about as much memory as the
  * current one; turning it off frees a kept mesh. Not collective (call it
  * alike on every rank).
  *
  * \param[in] h     the handle
- * \param[in] keep  1 to keep the previous mesh, 0 to drop it
+ * \param[in] keep  true to keep the previous mesh, false to drop it
  */
-octmesh_status_t octmesh_mesh_keep_previous(octmesh_t *h, int32_t keep);
+octmesh_status_t octmesh_mesh_keep_previous(octmesh_t *h, bool keep);
 
 /**
  * Where each local element of the current mesh came from in the previous
@@ -1669,7 +1648,7 @@ octmesh_status_t octmesh_mesh_get_element_map(octmesh_t *h, octmesh_element_map_
  * \param[in]  capacity    room in `new_values`, in values
  */
 octmesh_status_t octmesh_mesh_transfer_elements(octmesh_t *h,
-                                                int32_t ncomp,
+                                                octmesh_locidx_t ncomp,
                                                 const double *old_values,
                                                 double *new_values,
                                                 octmesh_locidx_t capacity);
@@ -1694,7 +1673,7 @@ octmesh_status_t octmesh_mesh_transfer_elements(octmesh_t *h,
  *                         NULL)
  */
 octmesh_status_t octmesh_mesh_transfer_nodes(octmesh_t *h,
-                                             int32_t ncomp,
+                                             octmesh_locidx_t ncomp,
                                              const double *old_values,
                                              double *new_values,
                                              octmesh_locidx_t capacity,

@@ -32,6 +32,14 @@
 
 namespace octmesh {
 
+// The library reads each enumeration passed to it as an int32_t (src/ffi).
+static_assert(sizeof(octmesh_status_t) == sizeof(int32_t), "enum size");
+static_assert(sizeof(octmesh_connect_t) == sizeof(int32_t), "enum size");
+static_assert(sizeof(octmesh_keep_t) == sizeof(int32_t), "enum size");
+static_assert(sizeof(octmesh_cut_rule_t) == sizeof(int32_t), "enum size");
+static_assert(sizeof(octmesh_inside_rule_t) == sizeof(int32_t), "enum size");
+static_assert(sizeof(octmesh_foam_format_t) == sizeof(int32_t), "enum size");
+
 /// A failed octmesh call: what() is the library's message.
 class Error : public std::runtime_error {
  public:
@@ -77,7 +85,7 @@ class Mesher {
   void set_domain(const double origin[3], double side) {
     detail::check(octmesh_domain_set(h_, origin, side), h_, "octmesh_domain_set");
   }
-  void set_domain_box(const double lo[3], const double hi[3], const int roots[3]) {
+  void set_domain_box(const double lo[3], const double hi[3], const octmesh_locidx_t roots[3]) {
     detail::check(octmesh_domain_set_box(h_, lo, hi, roots), h_, "octmesh_domain_set_box");
   }
   void get_domain(double origin[3], double &side) const {
@@ -89,7 +97,7 @@ class Mesher {
   void surface_from_files(const std::vector<std::string> &specs) {
     std::vector<const char *> p;
     for (const auto &s : specs) p.push_back(s.c_str());
-    detail::check(octmesh_surface_from_files(h_, static_cast<int32_t>(p.size()), p.data()), h_,
+    detail::check(octmesh_surface_from_files(h_, static_cast<octmesh_locidx_t>(p.size()), p.data()), h_,
                   "octmesh_surface_from_files");
   }
   void surface_from_stl(const std::string &path) {
@@ -109,8 +117,8 @@ class Mesher {
   /// same answer on every rank and must not throw.
   template <class F>
   void refine(int max_level, F &&f) {
-    auto tramp = [](void *ctx, const octmesh_octant_t *o) -> int32_t {
-      return (*static_cast<typename std::remove_reference<F>::type *>(ctx))(*o) ? 1 : 0;
+    auto tramp = [](void *ctx, const octmesh_octant_t *o) -> bool {
+      return static_cast<bool>((*static_cast<typename std::remove_reference<F>::type *>(ctx))(*o));
     };
     detail::check(octmesh_octree_refine_callback(h_, max_level, tramp, (void *)&f), h_,
                   "octmesh_octree_refine_callback");
@@ -137,8 +145,9 @@ class Mesher {
       d.push_back(b.first);
       l.push_back(b.second);
     }
-    detail::check(octmesh_octree_refine_regions(h_, min_level, (int32_t)r.size(), r.data(),
-                                                (int32_t)d.size(), d.data(), l.data()),
+    detail::check(octmesh_octree_refine_regions(h_, min_level, (octmesh_locidx_t)r.size(),
+                                                r.data(), (octmesh_locidx_t)d.size(), d.data(),
+                                                l.data()),
                   h_, "octmesh_octree_refine_regions");
   }
   void balance(octmesh_connect_t connect = OCTMESH_CONNECT_CORNER) {
@@ -189,7 +198,7 @@ class Mesher {
   octmesh_gloidx_t refine_once(int max_level, F &&f, R &&r = R()) {
     Ctx<F, R> c{&f, &r};
     octmesh_gloidx_t n = 0;
-    detail::check(octmesh_octree_refine_once_ext(h_, max_level, &Ctx<F, R>::octant, replace_of<F, R>(),
+    detail::check(octmesh_octree_refine_once_ext(h_, max_level, &Ctx<F, R>::decide, replace_of<F, R>(),
                                                  &c, &n),
                   h_, "octmesh_octree_refine_once_ext");
     return n;
@@ -200,8 +209,8 @@ class Mesher {
   octmesh_gloidx_t coarsen(bool recursive, F &&f, R &&r = R()) {
     Ctx<F, R> c{&f, &r};
     octmesh_gloidx_t n = 0;
-    detail::check(octmesh_octree_coarsen_ext(h_, recursive ? 1 : 0, &Ctx<F, R>::octant,
-                                             replace_of<F, R>(), &c, &n),
+    detail::check(octmesh_octree_coarsen_ext(h_, recursive, &Ctx<F, R>::decide, replace_of<F, R>(),
+                                             &c, &n),
                   h_, "octmesh_octree_coarsen_ext");
     return n;
   }
@@ -211,7 +220,7 @@ class Mesher {
   std::pair<octmesh_gloidx_t, octmesh_gloidx_t> adapt(F &&f, R &&r = R()) {
     Ctx<F, R> c{&f, &r};
     octmesh_gloidx_t a = 0, b = 0;
-    detail::check(octmesh_octree_adapt_ext(h_, &Ctx<F, R>::octant, replace_of<F, R>(), &c, &a, &b),
+    detail::check(octmesh_octree_adapt_ext(h_, &Ctx<F, R>::verdict, replace_of<F, R>(), &c, &a, &b),
                   h_, "octmesh_octree_adapt_ext");
     return {a, b};
   }
@@ -270,7 +279,7 @@ class Mesher {
             octmesh_cut_rule_t rule = OCTMESH_CUT_RULE_CENTER) {
     detail::check(octmesh_mesh_build(h_, keep, rule), h_, "octmesh_mesh_build");
   }
-  /// How the next meshes find leaf centres inside (octmesh_inside_rule).
+  /// How the next meshes find leaf centres inside (octmesh_inside_rule_t).
   void set_inside_rule(octmesh_inside_rule_t rule) {
     detail::check(octmesh_mesh_set_inside_rule(h_, rule), h_, "octmesh_mesh_set_inside_rule");
   }
@@ -304,8 +313,8 @@ class Mesher {
     return r;
   }
   /// 8 local node numbers per element (VTK hexahedron order); owned by the handle.
-  const int32_t *connectivity() const {
-    const int32_t *p = nullptr;
+  const octmesh_locidx_t *connectivity() const {
+    const octmesh_locidx_t *p = nullptr;
     detail::check(octmesh_mesh_get_connectivity(h_, &p), h_, "octmesh_mesh_get_connectivity");
     return p;
   }
@@ -335,7 +344,7 @@ class Mesher {
     detail::check(octmesh_mesh_get_boundary(h_, &b), h_, "octmesh_mesh_get_boundary");
     return b;
   }
-  std::string patch_name(int32_t patch) const {
+  std::string patch_name(octmesh_locidx_t patch) const {
     const char *name = nullptr;
     detail::check(octmesh_mesh_get_patch_name(h_, patch, &name), h_,
                   "octmesh_mesh_get_patch_name");
@@ -348,13 +357,13 @@ class Mesher {
   void write_openfoam(const std::string &dir,
                       octmesh_foam_format_t format = OCTMESH_FOAM_FORMAT_BINARY,
                       bool overwrite = false) {
-    detail::check(octmesh_mesh_write_openfoam(h_, dir.c_str(), format, overwrite ? 1 : 0), h_,
+    detail::check(octmesh_mesh_write_openfoam(h_, dir.c_str(), format, overwrite), h_,
                   "octmesh_mesh_write_openfoam");
   }
   /// Keeps the mesh that a change of the octree replaces, for the
   /// transfers below (off by default).
   void keep_previous(bool keep = true) {
-    detail::check(octmesh_mesh_keep_previous(h_, keep ? 1 : 0), h_, "octmesh_mesh_keep_previous");
+    detail::check(octmesh_mesh_keep_previous(h_, keep), h_, "octmesh_mesh_keep_previous");
   }
   /// Where each element came from in the previous mesh (collective on the
   /// first call); arrays owned by the handle.
@@ -365,7 +374,8 @@ class Mesher {
   }
   /// An element field of the previous mesh (ncomp values per element) on
   /// the current elements: copy on refinement, volume mean on coarsening.
-  std::vector<double> transfer_elements(const std::vector<double> &old_values, int32_t ncomp = 1) {
+  std::vector<double> transfer_elements(const std::vector<double> &old_values,
+                                        octmesh_locidx_t ncomp = 1) {
     std::vector<double> out(static_cast<size_t>(ncomp) * counts().local_elements);
     detail::check(octmesh_mesh_transfer_elements(h_, ncomp, old_values.data(), out.data(),
                                                  static_cast<octmesh_locidx_t>(out.size())),
@@ -374,7 +384,8 @@ class Mesher {
   }
   /// A trilinear nodal field of the previous mesh (ncomp values per node)
   /// at the current nodes; NaN at nodes in no old element.
-  std::vector<double> transfer_nodes(const std::vector<double> &old_values, int32_t ncomp = 1) {
+  std::vector<double> transfer_nodes(const std::vector<double> &old_values,
+                                     octmesh_locidx_t ncomp = 1) {
     std::vector<double> out(static_cast<size_t>(ncomp) * counts().local_nodes);
     detail::check(octmesh_mesh_transfer_nodes(h_, ncomp, old_values.data(), out.data(),
                                               static_cast<octmesh_locidx_t>(out.size()), nullptr),
@@ -397,10 +408,10 @@ class Mesher {
       names.push_back(f.first.c_str());
       values.push_back(f.second);
     }
-    // More fields than int32_t holds: -1, which every rank rejects.
-    const int32_t n = fields.size() <= static_cast<size_t>(INT32_MAX)
-                          ? static_cast<int32_t>(fields.size())
-                          : -1;
+    // More fields than octmesh_locidx_t holds: -1, which every rank rejects.
+    const octmesh_locidx_t n = fields.size() <= static_cast<size_t>(INT32_MAX)
+                                   ? static_cast<octmesh_locidx_t>(fields.size())
+                                   : -1;
     detail::check(octmesh_mesh_write_vtu_fields(h_, pvtu.c_str(), n, names.data(), values.data()),
                   h_, "octmesh_mesh_write_vtu_fields");
   }
@@ -411,11 +422,16 @@ class Mesher {
   struct Ctx {
     typename std::remove_reference<F>::type *f;
     typename std::remove_reference<R>::type *r;
-    static int32_t octant(void *ctx, const octmesh_octant_t *o) {
-      return (int32_t)(*static_cast<Ctx *>(ctx)->f)(o);
+    // A yes-or-no callback (octmesh_refine_fn, octmesh_coarsen_fn).
+    static bool decide(void *ctx, const octmesh_octant_t *o) {
+      return static_cast<bool>((*static_cast<Ctx *>(ctx)->f)(o));
     }
-    static int32_t replace(void *ctx, int32_t nout, const octmesh_octant_t *out,
-                           const void *out_data, int32_t nin, const octmesh_octant_t *in,
+    // The adaptation callback (octmesh_adapt_fn): > 0 refine, 0 keep, < 0 coarsen.
+    static int32_t verdict(void *ctx, const octmesh_octant_t *o) {
+      return static_cast<int32_t>((*static_cast<Ctx *>(ctx)->f)(o));
+    }
+    static int32_t replace(void *ctx, octmesh_locidx_t nout, const octmesh_octant_t *out,
+                           const void *out_data, octmesh_locidx_t nin, const octmesh_octant_t *in,
                            void *in_data) {
       try {
         (*static_cast<Ctx *>(ctx)->r)(nout, out, out_data, nin, in, in_data);

@@ -66,10 +66,10 @@ static int32_t adapt_front(void *ctx, const octmesh_octant_t *o) {
   return o->level > MIN_LEVEL ? -1 : 0;
 }
 
-static int32_t uniform(void *ctx, const octmesh_octant_t *o) {
+static bool uniform(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   (void)o;
-  return 1; /* max_level stops it at MIN_LEVEL */
+  return true; /* max_level stops it at MIN_LEVEL */
 }
 
 /* Replace callback of adapt_ext and balance_ext. Balance splits (1 -> n)
@@ -82,8 +82,8 @@ static int32_t uniform(void *ctx, const octmesh_octant_t *o) {
  * would never be tested; the tilt makes the field evolve with the front.
  * Coarsening (8 -> 1) takes the mean: the parent's volume is 8 times a
  * child's, so volume * mean is the children's sum. */
-static int32_t replace(void *ctx, int32_t nout, const octmesh_octant_t *out,
-                       const void *out_data, int32_t nin, const octmesh_octant_t *in,
+static int32_t replace(void *ctx, octmesh_locidx_t nout, const octmesh_octant_t *out,
+                       const void *out_data, octmesh_locidx_t nin, const octmesh_octant_t *in,
                        void *in_data) {
   const datum_t *od = out_data;
   datum_t *id = in_data;

@@ -104,21 +104,22 @@ typedef struct {
   int min_level;
 } uniform_ctx;
 
-static int32_t refine_uniform(void *ctx, const octmesh_octant_t *o) {
+static bool refine_uniform(void *ctx, const octmesh_octant_t *o) {
   return o->level < ((const uniform_ctx *)ctx)->min_level;
 }
 
 /* The mesh and what the solver derives from it. */
 typedef struct {
   int64_t ne, nl, ni, nown;
-  const int32_t *conn, *hcount, *hdeps;
+  const octmesh_locidx_t *conn, *hcount, *hdeps;
   const double *xyz;
   double *ke;         /* 64 per element: its stiffness matrix */
   unsigned char *bnd; /* per independent node: 1 on the boundary */
   double *ufull, *rfull;
   /* exchange */
-  int32_t nnb;
-  const int32_t *xr, *xo, *xn;
+  octmesh_locidx_t nnb;
+  const int32_t *xr;               /* neighbour ranks */
+  const octmesh_locidx_t *xo, *xn; /* offsets, local nodes */
   double *sendbuf, *recvbuf;
   MPI_Request *req;
 } problem;
@@ -247,7 +248,7 @@ static void apply(problem *pb, const double *x, double *y, int mask) {
   }
   memset(pb->rfull, 0, sizeof(double) * (size_t)pb->nl);
   for (int64_t e = 0; e < pb->ne; e++) {
-    const int32_t *c = pb->conn + 8 * e;
+    const octmesh_locidx_t *c = pb->conn + 8 * e;
     const double *k = pb->ke + 64 * e;
     double ue[8];
     for (int j = 0; j < 8; j++) ue[j] = pb->ufull[c[j]];
@@ -413,7 +414,7 @@ int main(int argc, char **argv) {
   /* Load b = P^T (integrals of f N_i over the mapped elements). */
   memset(pb.rfull, 0, sizeof(double) * nl);
   for (int64_t e = 0; e < pb.ne; e++) {
-    const int32_t *ce = pb.conn + 8 * e;
+    const octmesh_locidx_t *ce = pb.conn + 8 * e;
     double xe[8][3];
     element_corners(&pb, e, xe);
     for (int q = 0; q < 8; q++) {

@@ -15,7 +15,7 @@ typedef struct {
 } ball_ctx;
 
 /* Split the octant when the ball touches it. */
-static int32_t refine_ball(void *ctx, const octmesh_octant_t *o) {
+static bool refine_ball(void *ctx, const octmesh_octant_t *o) {
   ball_ctx *b = (ball_ctx *)ctx;
   b->calls++;
   double len = (double)(1 << (19 - o->level)), d2 = 0.0;

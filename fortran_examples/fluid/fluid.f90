@@ -13,14 +13,13 @@ module fluid_refine
      integer(c_int64_t) :: calls
   end type half_ctx
 contains
-  integer(c_int32_t) function refine_lower_half(ctx, o) bind(c)
+  logical(c_bool) function refine_lower_half(ctx, o) bind(c)
     type(c_ptr), value :: ctx
     type(octmesh_octant_t), intent(in) :: o
     type(half_ctx), pointer :: c
     call c_f_pointer(ctx, c)
     c%calls = c%calls + 1
-    refine_lower_half = 0
-    if (o%z < OCTMESH_ROOT_LEN / 2 .and. o%level < c%level) refine_lower_half = 1
+    refine_lower_half = o%z < OCTMESH_ROOT_LEN / 2 .and. o%level < c%level
   end function refine_lower_half
 end module fluid_refine
 

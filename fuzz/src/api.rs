@@ -30,7 +30,7 @@ use octmesh::internals::ffi::*;
 pub const MAX_CALLS: usize = 48;
 
 /// Handles with a limit at most this large may refine to any level.
-pub const SMALL_LIMIT: u64 = 20_000;
+pub const SMALL_LIMIT: i64 = 20_000;
 
 /// Initialises MPI once per process (a singleton without `mpirun`); it is
 /// never finalised, as the process may run many inputs.
@@ -192,12 +192,12 @@ fn octant_hash(seed: u64, o: &octmesh_octant_t) -> u64 {
     mix(seed ^ mix(o.x as u64 | (o.y as u64) << 21 | (o.z as u64) << 42) ^ (o.level as u64) << 58)
 }
 
-unsafe extern "C" fn refine_cb(ctx: *mut c_void, o: *const octmesh_octant_t) -> i32 {
+unsafe extern "C" fn refine_cb(ctx: *mut c_void, o: *const octmesh_octant_t) -> bool {
     // SAFETY: ctx points to the seed, o to a valid octant (the library's
     // contract).
     let (seed, o) = unsafe { (*(ctx as *const u64), &*o) };
     // The low byte of the seed sets the share of octants refined.
-    i32::from(octant_hash(seed, o) % 256 < seed % 256)
+    octant_hash(seed, o) % 256 < seed % 256
 }
 
 unsafe extern "C" fn weight_cb(ctx: *mut c_void, o: *const octmesh_octant_t) -> u64 {
@@ -437,7 +437,7 @@ fn call(st: &mut State, b: &mut Bytes) {
 /// Creates a handle in slot `hb % 2` (destroying the one there).
 unsafe fn create(st: &mut State, b: &mut Bytes, hb: u8) {
     let mut opts = octmesh_options_t::default();
-    let limits = [0, 1, 8, 100, 1000, 5000, SMALL_LIMIT, 1 << 40, u64::MAX];
+    let limits = [0, 1, 8, 100, 1000, 5000, SMALL_LIMIT, 1 << 40, i64::MAX];
     opts.fit = if b.one_in(2) { 0.7 } else { b.f64() };
     opts.max_octants = limits[(b.u8() % 9) as usize];
     let popts = if b.one_in(4) {

@@ -14,10 +14,10 @@ use crate::octree::leaf_data::ReplaceFn;
 use crate::Octant;
 
 /// Coarsening callback: `family` points to the eight sibling leaves of a
-/// family in Morton order (child 0 first); returns non-zero to replace them
-/// by their parent. Must not unwind or longjmp.
+/// family in Morton order (child 0 first); returns true to replace them by
+/// their parent. Must not unwind or longjmp.
 pub type octmesh_coarsen_fn =
-    Option<unsafe extern "C" fn(ctx: *mut c_void, family: *const octmesh_octant_t) -> i32>;
+    Option<unsafe extern "C" fn(ctx: *mut c_void, family: *const octmesh_octant_t) -> bool>;
 
 /// Adaptation callback (t8code's convention): returns a positive value to
 /// refine the leaf, 0 to keep it, a negative value to coarsen it (its family
@@ -40,7 +40,7 @@ fn callback<F>(f: Option<F>, name: &str) -> Result<F> {
 }
 
 /// Splits each leaf below `max_level` for which `refine(ctx, &leaf)`
-/// returns non-zero into its eight children, once: the children are not
+/// returns true into its eight children, once: the children are not
 /// offered to the callback (p4est's non-recursive `p8est_refine`; for
 /// recursive refinement use `octmesh_octree_refine_callback`). Fails with
 /// `OCTMESH_STATUS_LIMIT`, leaving the octree as it was, when the octree
@@ -97,7 +97,7 @@ pub extern "C" fn octmesh_octree_refine_once_ext(
             let oc = octmesh_octant_t::of(o);
             // SAFETY: a C function pointer given by the caller, called with
             // its own context and a valid octant.
-            unsafe { f(ctx, &oc) != 0 }
+            unsafe { f(ctx, &oc) }
         };
         let s = h
             .session
@@ -108,24 +108,24 @@ pub extern "C" fn octmesh_octree_refine_once_ext(
 }
 
 /// Replaces each family of eight sibling leaves on this rank for which
-/// `coarsen(ctx, family)` returns non-zero by its parent. A family whose
+/// `coarsen(ctx, family)` returns true by its parent. A family whose
 /// leaves are on different ranks is never offered nor coarsened (p4est's
 /// rule): partition with `octmesh_octree_partition_for_coarsening` first to
-/// keep families together. With `recursive` non-zero, a parent made by
-/// coarsening that completes a new family is offered in turn; with 0, only
-/// families of the leaves present before the call are (p4est's
+/// keep families together. With `recursive` true, a parent made by
+/// coarsening that completes a new family is offered in turn; with false,
+/// only families of the leaves present before the call are (p4est's
 /// `p8est_coarsen`). Drops the balance, the leaf classes and the mesh.
 /// Needs an octree. Collective.
 ///
 /// \param[in]  h          the handle
-/// \param[in]  recursive  non-zero to coarsen repeatedly
+/// \param[in]  recursive  true to coarsen repeatedly
 /// \param[in]  coarsen    the callback
 /// \param[in]  ctx        passed to the callback unchanged
 /// \param[out] coarsened  families coarsened over all ranks, or NULL
 #[no_mangle]
 pub extern "C" fn octmesh_octree_coarsen(
     h: *mut octmesh_t,
-    recursive: i32,
+    recursive: bool,
     coarsen: octmesh_coarsen_fn,
     ctx: *mut c_void,
     coarsened: *mut octmesh_gloidx_t,
@@ -141,7 +141,7 @@ pub extern "C" fn octmesh_octree_coarsen(
 /// rank fails and the octree and the data are as they were. Collective.
 ///
 /// \param[in]  h          the handle
-/// \param[in]  recursive  non-zero to coarsen repeatedly
+/// \param[in]  recursive  true to coarsen repeatedly
 /// \param[in]  coarsen    the callback
 /// \param[in]  replace    the replace callback, or NULL (parents' data
 ///                        zeroed)
@@ -150,7 +150,7 @@ pub extern "C" fn octmesh_octree_coarsen(
 #[no_mangle]
 pub extern "C" fn octmesh_octree_coarsen_ext(
     h: *mut octmesh_t,
-    recursive: i32,
+    recursive: bool,
     coarsen: octmesh_coarsen_fn,
     replace: octmesh_replace_fn,
     ctx: *mut c_void,
@@ -163,11 +163,11 @@ pub extern "C" fn octmesh_octree_coarsen_ext(
             let c = fam.map(octmesh_octant_t::of);
             // SAFETY: a C function pointer given by the caller, called with
             // its own context and eight valid octants.
-            unsafe { f(ctx, c.as_ptr()) != 0 }
+            unsafe { f(ctx, c.as_ptr()) }
         };
         let s = h
             .session
-            .coarsen(recursive != 0, merge, r.as_mut().map(|r| r as ReplaceFn))?;
+            .coarsen(recursive, merge, r.as_mut().map(|r| r as ReplaceFn))?;
         write_counts(s, std::ptr::null_mut(), coarsened);
         Ok(())
     })

@@ -24,10 +24,10 @@ use crate::octree::leaf_data::Replace;
 pub type octmesh_replace_fn = Option<
     unsafe extern "C" fn(
         ctx: *mut c_void,
-        num_outgoing: i32,
+        num_outgoing: octmesh_locidx_t,
         outgoing: *const octmesh_octant_t,
         outgoing_data: *const c_void,
-        num_incoming: i32,
+        num_incoming: octmesh_locidx_t,
         incoming: *const octmesh_octant_t,
         incoming_data: *mut c_void,
     ) -> i32,
@@ -60,10 +60,10 @@ pub(crate) fn replacer(
         let rc = unsafe {
             f(
                 ctx,
-                outs.len() as i32,
+                outs.len() as octmesh_locidx_t,
                 outs.as_ptr(),
                 od,
-                ins.len() as i32,
+                ins.len() as octmesh_locidx_t,
                 ins.as_ptr(),
                 id,
             )

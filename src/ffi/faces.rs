@@ -44,7 +44,7 @@ pub struct octmesh_faces_t {
     pub num_internal: octmesh_locidx_t,
     /// Patches: 0..6 the sides `xmin xmax ymin ymax zmin zmax`, 6 the
     /// surface (`octmesh_mesh_get_patch_name`).
-    pub num_patches: i32,
+    pub num_patches: octmesh_locidx_t,
     /// Owner element of each face (local, 0-based).
     pub owner: *const octmesh_locidx_t,
     /// Other side of each face: the local element for internal faces
@@ -94,7 +94,7 @@ pub struct octmesh_cell_halo_t {
     /// Owner rank of each halo element.
     pub halo_rank: *const i32,
     /// Neighbour ranks (sharing at least one face), increasing.
-    pub num_ranks: i32,
+    pub num_ranks: octmesh_locidx_t,
     /// The neighbour ranks.
     pub ranks: *const i32,
     /// `num_ranks + 1` face indices: the faces shared with `ranks[k]` are
@@ -404,7 +404,7 @@ pub extern "C" fn octmesh_mesh_get_boundary(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_patch_name(
     h: *const octmesh_t,
-    patch: i32,
+    patch: octmesh_locidx_t,
     name: *mut *const c_char,
 ) -> octmesh_status_t {
     with_ref(h, |h| {
@@ -471,27 +471,27 @@ pub extern "C" fn octmesh_mesh_rename_patch(
 /// `dir/processor<r>/constant/polyMesh` with processor patches (ready for
 /// `mpirun -np P solver -parallel`), and a minimal `dir/system` when it is
 /// absent. Patches are named by `octmesh_mesh_rename_patch`. An existing
-/// mesh is replaced only when `overwrite` is non-zero. All or nothing: if
+/// mesh is replaced only when `overwrite` is true. All or nothing: if
 /// one rank fails, no rank's mesh is left in place. Needs a mesh.
 /// Collective.
 ///
 /// \param[in] h          the handle
 /// \param[in] dir        the case directory, NUL-terminated
-/// \param[in] format     one of `octmesh_foam_format`
-/// \param[in] overwrite  non-zero to replace an existing mesh
+/// \param[in] format     one of `octmesh_foam_format_t`
+/// \param[in] overwrite  true to replace an existing mesh
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_write_openfoam(
     h: *mut octmesh_t,
     dir: *const c_char,
     format: octmesh_foam_format_t,
-    overwrite: i32,
+    overwrite: bool,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
         let checked = path_arg(dir, "dir").and_then(|d| Ok((d, FoamFormat::from_c(format)?)));
         let (dir, format) = h.agree(checked)?;
         let out = &mut h.session.config_mut().output;
         let before = (out.openfoam_format, out.overwrite);
-        (out.openfoam_format, out.overwrite) = (format, overwrite != 0);
+        (out.openfoam_format, out.overwrite) = (format, overwrite);
         let written = h.session.write_openfoam(&dir);
         let out = &mut h.session.config_mut().output;
         (out.openfoam_format, out.overwrite) = before;

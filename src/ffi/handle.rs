@@ -9,8 +9,9 @@ use mpi::raw::FromRaw;
 use mpi::topology::SimpleCommunicator;
 
 use super::{
-    c_string, catch, fail_without_handle, no_handle_error, non_null, octmesh_status_t, slice_arg,
-    with_mut, with_ref, write_out,
+    c_string, catch, fail_without_handle, no_handle_error, non_null, octmesh_gloidx_t,
+    octmesh_locidx_t, octmesh_status_t, octmesh_status_value, slice_arg, with_mut, with_ref,
+    write_out,
 };
 use crate::config::Config;
 use crate::error::{Error, ErrorKind, Result};
@@ -29,9 +30,9 @@ pub struct octmesh_options_t {
     /// (default 0.7; `--fit`). Not used after `octmesh_domain_set`.
     pub fit: f64,
     /// Largest number of leaves (over all ranks) a refinement or a balance
-    /// may create; 0 means unlimited (default; `--max-octants`). Exceeding
-    /// it fails with `OCTMESH_STATUS_LIMIT`.
-    pub max_octants: u64,
+    /// may create, at least 0; 0 means unlimited (default;
+    /// `--max-octants`). Exceeding it fails with `OCTMESH_STATUS_LIMIT`.
+    pub max_octants: octmesh_gloidx_t,
     /// 0 (default) prints nothing; 1 also prints the message of every
     /// failed call on stderr, one line per rank.
     pub verbosity: i32,
@@ -47,7 +48,9 @@ impl Default for octmesh_options_t {
         let c = Config::default();
         octmesh_options_t {
             fit: c.domain.fit(),
-            max_octants: c.octree.max_octants.unwrap_or(0),
+            max_octants: c.octree.max_octants.map_or(0, |n| {
+                octmesh_gloidx_t::try_from(n).unwrap_or(octmesh_gloidx_t::MAX)
+            }),
             verbosity: 0,
             memory_budget: c.octree.memory_budget.map_or(0, |b| b.0),
         }
@@ -64,8 +67,14 @@ impl octmesh_options_t {
                 self.fit
             )));
         }
+        if self.max_octants < 0 {
+            return Err(Error::invalid(format!(
+                "options: max_octants must be at least 0, got {}",
+                self.max_octants
+            )));
+        }
         c.domain.fit = Some(self.fit);
-        c.octree.max_octants = (self.max_octants > 0).then_some(self.max_octants);
+        c.octree.max_octants = (self.max_octants > 0).then_some(self.max_octants as u64);
         c.octree.memory_budget = (self.memory_budget > 0).then_some(ByteSize(self.memory_budget));
         c.output.quiet = true;
         Ok(c)
@@ -272,7 +281,7 @@ pub extern "C" fn octmesh_last_error(h: *const octmesh_t) -> *const c_char {
 ///
 /// \param[in] status  a status value
 #[no_mangle]
-pub extern "C" fn octmesh_status_name(status: i32) -> *const c_char {
+pub extern "C" fn octmesh_status_name(status: octmesh_status_value) -> *const c_char {
     octmesh_status_t::name_of(status).as_ptr()
 }
 
@@ -337,7 +346,7 @@ pub extern "C" fn octmesh_domain_set_box(
     h: *mut octmesh_t,
     lo: *const f64,
     hi: *const f64,
-    roots: *const i32,
+    roots: *const octmesh_locidx_t,
 ) -> octmesh_status_t {
     with_mut(h, |h| {
         // SAFETY: NULL or 3 values each (requirement of the C API).

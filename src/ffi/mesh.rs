@@ -50,7 +50,7 @@ pub struct octmesh_mesh_counts_t {
 #[derive(Default)]
 pub(crate) struct MeshArrays {
     coords: OnceCell<Vec<f64>>,
-    global_ids: OnceCell<Vec<i64>>,
+    global_ids: OnceCell<Vec<octmesh_gloidx_t>>,
     owners: OnceCell<Vec<i32>>,
     sharers: OnceCell<(Vec<i32>, Vec<i32>)>,
     exchange: OnceCell<(Vec<i32>, Vec<i32>, Vec<i32>)>,
@@ -67,9 +67,9 @@ pub(crate) struct MeshArrays {
 /// corner contacts (`octmesh_octree_balance`). Collective.
 ///
 /// \param[in] h     the handle
-/// \param[in] keep  one of `octmesh_keep`
+/// \param[in] keep  one of `octmesh_keep_t`
 /// \param[in] rule  for leaves touching the surface: one of
-///                  `octmesh_cut_rule`
+///                  `octmesh_cut_rule_t`
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_build(
     h: *mut octmesh_t,
@@ -89,7 +89,7 @@ pub extern "C" fn octmesh_mesh_build(
 /// Collective.
 ///
 /// \param[in] h     the handle
-/// \param[in] rule  one of `octmesh_inside_rule`
+/// \param[in] rule  one of `octmesh_inside_rule_t`
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_set_inside_rule(
     h: *mut octmesh_t,
@@ -115,7 +115,7 @@ pub extern "C" fn octmesh_mesh_set_inside_rule(
 /// collective.
 ///
 /// \param[in]  h    the handle
-/// \param[out] out  one of `octmesh_inside_rule`
+/// \param[out] out  one of `octmesh_inside_rule_t`
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_inside_rule(
     h: *const octmesh_t,
@@ -213,11 +213,13 @@ pub extern "C" fn octmesh_mesh_get_counts(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_connectivity(
     h: *const octmesh_t,
-    out: *mut *const i32,
+    out: *mut *const octmesh_locidx_t,
 ) -> octmesh_status_t {
     // Local node numbers are below 2^31 (checked when meshing), so the
-    // stored u32 array reads as int32 without a copy.
-    get_ptr(h, out, |m, _| m.connectivity().as_ptr().cast::<i32>())
+    // stored u32 array reads as octmesh_locidx_t without a copy.
+    get_ptr(h, out, |m, _| {
+        m.connectivity().as_ptr().cast::<octmesh_locidx_t>()
+    })
 }
 
 /// Sets `*out` to the node coordinates: x, y, z per local node, user
@@ -247,11 +249,16 @@ pub extern "C" fn octmesh_mesh_get_coordinates(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_global_ids(
     h: *const octmesh_t,
-    out: *mut *const i64,
+    out: *mut *const octmesh_gloidx_t,
 ) -> octmesh_status_t {
     get_ptr(h, out, |m, a| {
         a.global_ids
-            .get_or_init(|| m.global_ids().iter().map(|&g| g as i64).collect())
+            .get_or_init(|| {
+                m.global_ids()
+                    .iter()
+                    .map(|&g| g as octmesh_gloidx_t)
+                    .collect()
+            })
             .as_ptr()
     })
 }
@@ -259,14 +266,14 @@ pub extern "C" fn octmesh_mesh_get_global_ids(
 /// Sets `*out` to the owner rank of each of the `num_independent`
 /// independent local nodes. Needs a mesh. Not collective.
 ///
-/// \param[in]  h    the handle
-/// \param[out] out  num_independent owner ranks, owned by the handle
+/// \param[in]  h      the handle
+/// \param[out] ranks  num_independent owner ranks, owned by the handle
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_owners(
     h: *const octmesh_t,
-    out: *mut *const i32,
+    ranks: *mut *const i32,
 ) -> octmesh_status_t {
-    get_ptr(h, out, |m, a| {
+    get_ptr(h, ranks, |m, a| {
         a.owners
             .get_or_init(|| i32_of(m.owners().iter().copied()))
             .as_ptr()
@@ -286,7 +293,7 @@ pub extern "C" fn octmesh_mesh_get_owners(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_sharers(
     h: *const octmesh_t,
-    offsets: *mut *const i32,
+    offsets: *mut *const octmesh_locidx_t,
     ranks: *mut *const i32,
 ) -> octmesh_status_t {
     with_ref(h, |h| {
@@ -325,10 +332,10 @@ pub extern "C" fn octmesh_mesh_get_sharers(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_exchange(
     h: *const octmesh_t,
-    nneighbors: *mut i32,
+    nneighbors: *mut octmesh_locidx_t,
     ranks: *mut *const i32,
-    offsets: *mut *const i32,
-    nodes: *mut *const i32,
+    offsets: *mut *const octmesh_locidx_t,
+    nodes: *mut *const octmesh_locidx_t,
 ) -> octmesh_status_t {
     with_ref(h, |h| {
         non_null(nneighbors, "nneighbors")?;
@@ -348,7 +355,7 @@ pub extern "C" fn octmesh_mesh_get_exchange(
             }
             (r, o, n)
         });
-        write_out(nneighbors, r.len() as i32);
+        write_out(nneighbors, r.len() as octmesh_locidx_t);
         write_out(ranks, r.as_ptr());
         write_out(offsets, o.as_ptr());
         write_out(nodes, n.as_ptr());
@@ -381,8 +388,8 @@ pub extern "C" fn octmesh_mesh_get_exchange(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_hanging(
     h: *const octmesh_t,
-    count: *mut *const i32,
-    deps: *mut *const i32,
+    count: *mut *const octmesh_locidx_t,
+    deps: *mut *const octmesh_locidx_t,
 ) -> octmesh_status_t {
     with_ref(h, |h| {
         non_null(count, "count")?;
@@ -404,11 +411,11 @@ pub extern "C" fn octmesh_mesh_get_hanging(
 }
 
 /// Sets `*out` to the class of each local element (one of
-/// `octmesh_class`). Needs a mesh. Not collective.
+/// `octmesh_class_t`, one byte each). Needs a mesh. Not collective.
 ///
 /// \param[in]  h    the handle
-/// \param[out] out  local_elements classes (`octmesh_class`), owned by the
-///                  handle
+/// \param[out] out  local_elements classes (`octmesh_class_t`), owned by
+///                  the handle
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_get_element_class(
     h: *const octmesh_t,
@@ -510,7 +517,7 @@ unsafe fn field_args<'a>(
 pub extern "C" fn octmesh_mesh_write_vtu_fields(
     h: *mut octmesh_t,
     pvtu: *const c_char,
-    nfields: i32,
+    nfields: octmesh_locidx_t,
     names: *const *const c_char,
     values: *const *const f64,
 ) -> octmesh_status_t {

@@ -20,7 +20,13 @@
 //!   `OCTMESH_STATUS_INVALID_ARGUMENT` naming the size needed.
 //! - Local counts and indices are [`octmesh_locidx_t`] (32-bit), global
 //!   ones [`octmesh_gloidx_t`] (64-bit), as p4est's `p4est_locidx_t` and
-//!   `p4est_gloidx_t`.
+//!   `p4est_gloidx_t`: every count, index, offset and capacity in the
+//!   header is one of the two. A plain `int32_t` is a value that indexes
+//!   nothing: an MPI rank, an octree level, a lattice coordinate, a byte
+//!   size, a number of relaxation layers or iterations, a verbosity, a
+//!   callback's verdict.
+//! - Yes-or-no arguments and callback answers are `bool` (`<stdbool.h>`;
+//!   Rust's `bool` is C's `_Bool`).
 //! - No panic crosses the boundary: a panic becomes
 //!   `OCTMESH_STATUS_INTERNAL` with a message starting with `panic: `, and
 //!   the handle then refuses further work (destroy it).
@@ -31,10 +37,18 @@
 //!   leaving the others waiting. A NULL handle cannot be agreed on: it fails
 //!   on the calling rank only.
 //! - A failed call leaves the handle as it was before the call.
-//! - Enumerations passed *to* octmesh are `int32_t` typedefs (`..._t`) with
-//!   named constants in an enum of the same name without `_t`, so that an
-//!   unknown value is an `OCTMESH_STATUS_INVALID_ARGUMENT`, never undefined
-//!   behaviour.
+//! - Every enumeration has one form, p4est's: `typedef enum { OCTMESH_X_A
+//!   = 0, ... } octmesh_x_t;`, constants prefixed with the type's name in
+//!   capitals, and functions take and give `octmesh_x_t`. On the Rust side
+//!   an enumeration passed *to* octmesh arrives as an `i32` (the alias
+//!   `octmesh_x_t` here, left out of the header, where the enum `octmesh_x`
+//!   is renamed `octmesh_x_t`; see `cbindgen.toml`), so that a value outside
+//!   the enumeration is an `OCTMESH_STATUS_INVALID_ARGUMENT`, never the
+//!   undefined behaviour of an invalid Rust enum. C's enums of these
+//!   values are `int`-sized, the size of `i32` (the C tests and the C++
+//!   header assert it).
+//! - Only `octmesh_`-prefixed types, the standard integer types, `bool`,
+//!   `double`, `char`, `void` and `MPI_Comm` appear in the header.
 //!
 //! The header `include/octmesh.h` is generated from this module by cbindgen
 //! (`tests/c_header.rs` checks that it is up to date and that every
@@ -72,11 +86,19 @@ use crate::error::{panic_message, Error, ErrorKind, Result};
 
 pub use handle::octmesh_t;
 
-/// A local count or index (elements, nodes, leaves of one rank): 32 bits.
+/// A local count or index: of the elements, nodes, faces, leaves, halo
+/// elements, patches or neighbour ranks of one rank, or of the values in
+/// one of its arrays (offsets, capacities). 32 bits, as p4est's
+/// `p4est_locidx_t`.
 pub type octmesh_locidx_t = i32;
 
-/// A global count or number (over all ranks): 64 bits.
+/// A global count or number (over all ranks): 64 bits, as p4est's
+/// `p4est_gloidx_t`.
 pub type octmesh_gloidx_t = i64;
+
+/// An `octmesh_status_t` value as it arrives from C (any `int32_t`); in the
+/// header it is `octmesh_status_t`.
+pub type octmesh_status_value = i32;
 
 /// Status returned by every octmesh function: `OCTMESH_STATUS_OK`, or the
 /// code of what failed (the same numbers as the library's error kinds; the
@@ -149,8 +171,8 @@ macro_rules! status_conversions {
 
 crate::for_each_error_kind!(status_conversions);
 
-/// Declares the conversions between an `int32_t` C enumeration
-/// (`octmesh_keep_t` with constants in `octmesh_keep`) and a library type:
+/// Declares the conversions between a C enumeration (`octmesh_keep_t`,
+/// whose constants are the enum `octmesh_keep`) and a library type:
 /// from the C integer (an unknown value is an error naming the allowed
 /// constants) and back. The constants are named once, here.
 macro_rules! c_enum_conversions {
@@ -172,7 +194,7 @@ macro_rules! c_enum_conversions {
     };
 }
 
-/// A library type with an `int32_t` C enumeration.
+/// A library type with a C enumeration.
 pub(crate) trait FromC: Sized {
     /// The value of a C constant, or an error naming the allowed ones.
     fn from_c(x: i32) -> Result<Self>;
@@ -180,7 +202,7 @@ pub(crate) trait FromC: Sized {
     fn to_c(self) -> i32;
 }
 
-/// Contacts the 2:1 balance applies to (values of `octmesh_connect_t`).
+/// Contacts the 2:1 balance applies to.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_connect {
@@ -192,7 +214,8 @@ pub enum octmesh_connect {
     OCTMESH_CONNECT_CORNER = 3,
 }
 
-/// One of the `octmesh_connect` constants.
+/// An `octmesh_connect_t` value as it arrives from C (any `int32_t`, checked
+/// by the functions); in the header it is the enum `octmesh_connect_t`.
 pub type octmesh_connect_t = i32;
 
 c_enum_conversions!(octmesh_connect, "connect", crate::Connectivity {
@@ -201,7 +224,7 @@ c_enum_conversions!(octmesh_connect, "connect", crate::Connectivity {
     OCTMESH_CONNECT_CORNER <=> crate::Connectivity::Corner,
 });
 
-/// Which leaves become elements (values of `octmesh_keep_t`).
+/// Which leaves become elements.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_keep {
@@ -213,7 +236,8 @@ pub enum octmesh_keep {
     OCTMESH_KEEP_OUTSIDE = 2,
 }
 
-/// One of the `octmesh_keep` constants.
+/// An `octmesh_keep_t` value as it arrives from C (any `int32_t`, checked
+/// by the functions); in the header it is the enum `octmesh_keep_t`.
 pub type octmesh_keep_t = i32;
 
 c_enum_conversions!(octmesh_keep, "keep", crate::classify::Keep {
@@ -223,7 +247,7 @@ c_enum_conversions!(octmesh_keep, "keep", crate::classify::Keep {
 });
 
 /// What happens to leaves touching the surface when keeping inside or
-/// outside (values of `octmesh_cut_rule_t`).
+/// outside.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_cut_rule {
@@ -235,7 +259,8 @@ pub enum octmesh_cut_rule {
     OCTMESH_CUT_RULE_NONE = 2,
 }
 
-/// One of the `octmesh_cut_rule` constants.
+/// An `octmesh_cut_rule_t` value as it arrives from C (any `int32_t`, checked
+/// by the functions); in the header it is the enum `octmesh_cut_rule_t`.
 pub type octmesh_cut_rule_t = i32;
 
 c_enum_conversions!(octmesh_cut_rule, "rule", crate::classify::CutRule {
@@ -244,8 +269,8 @@ c_enum_conversions!(octmesh_cut_rule, "rule", crate::classify::CutRule {
     OCTMESH_CUT_RULE_NONE <=> crate::classify::CutRule::None,
 });
 
-/// How a leaf's centre is found inside the surface when meshing (values of
-/// `octmesh_inside_rule_t`, set by `octmesh_mesh_set_inside_rule`).
+/// How a leaf's centre is found inside the surface when meshing (set by
+/// `octmesh_mesh_set_inside_rule`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_inside_rule {
@@ -261,7 +286,8 @@ pub enum octmesh_inside_rule {
     OCTMESH_INSIDE_RULE_WINDING = 2,
 }
 
-/// One of the `octmesh_inside_rule` constants.
+/// An `octmesh_inside_rule_t` value as it arrives from C (any `int32_t`, checked
+/// by the functions); in the header it is the enum `octmesh_inside_rule_t`.
 pub type octmesh_inside_rule_t = i32;
 
 c_enum_conversions!(octmesh_inside_rule, "inside rule", crate::classify::InsideRule {
@@ -270,7 +296,7 @@ c_enum_conversions!(octmesh_inside_rule, "inside rule", crate::classify::InsideR
     OCTMESH_INSIDE_RULE_WINDING <=> crate::classify::InsideRule::Winding,
 });
 
-/// List encoding of OpenFOAM files (values of `octmesh_foam_format_t`).
+/// List encoding of OpenFOAM files.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum octmesh_foam_format {
@@ -280,7 +306,8 @@ pub enum octmesh_foam_format {
     OCTMESH_FOAM_FORMAT_ASCII = 1,
 }
 
-/// One of the `octmesh_foam_format` constants.
+/// An `octmesh_foam_format_t` value as it arrives from C (any `int32_t`, checked
+/// by the functions); in the header it is the enum `octmesh_foam_format_t`.
 pub type octmesh_foam_format_t = i32;
 
 c_enum_conversions!(octmesh_foam_format, "format", crate::io::openfoam::FoamFormat {
@@ -288,7 +315,7 @@ c_enum_conversions!(octmesh_foam_format, "format", crate::io::openfoam::FoamForm
     OCTMESH_FOAM_FORMAT_ASCII <=> crate::io::openfoam::FoamFormat::Ascii,
 });
 
-/// Class of an element, as stored in the array of
+/// Class of an element, as stored (one `int8_t` each) in the array of
 /// `octmesh_mesh_get_element_class`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

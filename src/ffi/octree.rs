@@ -12,11 +12,11 @@ use crate::octree::LinearOctree;
 use crate::refine::regions::Region;
 use crate::{Connectivity, Octant, MAX_LEVEL};
 
-/// Refinement callback: returns non-zero to refine the octant. It must give
+/// Refinement callback: returns true to refine the octant. It must give
 /// the same answer for the same octant on every rank (the top of the tree is
 /// evaluated redundantly), and must not unwind or longjmp.
 pub type octmesh_refine_fn =
-    Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> i32>;
+    Option<unsafe extern "C" fn(ctx: *mut c_void, o: *const octmesh_octant_t) -> bool>;
 
 /// Weight callback for partitioning: the weight of a leaf. When the sum
 /// over all leaves does not fit in 64 bits, `octmesh_octree_partition`
@@ -174,9 +174,9 @@ pub extern "C" fn octmesh_octree_refine_surface_part(
 pub extern "C" fn octmesh_octree_refine_regions(
     h: *mut octmesh_t,
     min_level: i32,
-    nregions: i32,
+    nregions: octmesh_locidx_t,
     regions: *const *const c_char,
-    nbands: i32,
+    nbands: octmesh_locidx_t,
     distances: *const f64,
     levels: *const i32,
 ) -> octmesh_status_t {
@@ -260,7 +260,7 @@ unsafe fn band_args(n: i32, d: *const f64, l: *const i32) -> Result<Vec<(f64, u8
 }
 
 /// Refines by a callback: a leaf is split while `refine(ctx, &octant)`
-/// returns non-zero and its level is below `max_level`. Without an octree,
+/// returns true and its level is below `max_level`. Without an octree,
 /// builds one from the root (in the cube of `octmesh_domain_set`, else
 /// fitted around the surface, else the unit cube); otherwise refines the
 /// existing leaves (which drops their balance). Drops the mesh.
@@ -287,7 +287,7 @@ pub extern "C" fn octmesh_octree_refine_callback(
             let oc = octmesh_octant_t::of(o);
             // SAFETY: a C function pointer given by the caller, called with
             // its own context and a valid octant.
-            unsafe { f(ctx, &oc) != 0 }
+            unsafe { f(ctx, &oc) }
         })
     })
 }
@@ -299,7 +299,7 @@ pub extern "C" fn octmesh_octree_refine_callback(
 /// or the memory budget. Collective.
 ///
 /// \param[in] h        the handle
-/// \param[in] connect  the contacts balanced: one of `octmesh_connect`
+/// \param[in] connect  the contacts balanced: one of `octmesh_connect_t`
 #[no_mangle]
 pub extern "C" fn octmesh_octree_balance(
     h: *mut octmesh_t,
@@ -316,7 +316,7 @@ pub extern "C" fn octmesh_octree_balance(
 /// data are as they were. Collective.
 ///
 /// \param[in] h        the handle
-/// \param[in] connect  the contacts balanced: one of `octmesh_connect`
+/// \param[in] connect  the contacts balanced: one of `octmesh_connect_t`
 /// \param[in] replace  the replace callback, or NULL (new leaves' data
 ///                     zeroed)
 /// \param[in] ctx      passed to the callback unchanged

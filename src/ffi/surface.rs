@@ -6,7 +6,9 @@
 use std::ffi::{c_char, CStr};
 
 use super::handle::octmesh_t;
-use super::{non_null, octmesh_gloidx_t, octmesh_status_t, path_arg, slice_arg, with_mut};
+use super::{
+    non_null, octmesh_gloidx_t, octmesh_locidx_t, octmesh_status_t, path_arg, slice_arg, with_mut,
+};
 use crate::error::{Error, Result};
 use crate::geometry::{shapes, stl, Surface, Triangle};
 
@@ -49,7 +51,7 @@ pub extern "C" fn octmesh_surface_from_stl(
 #[no_mangle]
 pub extern "C" fn octmesh_surface_from_files(
     h: *mut octmesh_t,
-    n: i32,
+    n: octmesh_locidx_t,
     specs: *const *const c_char,
 ) -> octmesh_status_t {
     with_mut(h, |h| {

@@ -3,7 +3,7 @@
 //! new mesh (see the crate's `mesh::transfer` module).
 //!
 //! ```text
-//!   octmesh_mesh_keep_previous(h, 1);
+//!   octmesh_mesh_keep_previous(h, true);
 //!   octmesh_mesh_build(h, ...);                  old mesh, fields u_old
 //!   octmesh_octree_adapt(h, ...); balance; partition_for_coarsening
 //!   octmesh_mesh_build(h, ...);                  new mesh
@@ -46,18 +46,18 @@ pub struct octmesh_element_map_t {
     pub uncovered: octmesh_gloidx_t,
 }
 
-/// Keeps (`keep` non-zero) or stops keeping the mesh that a change of the
+/// Keeps (`keep` true) or stops keeping the mesh that a change of the
 /// octree or a new `octmesh_mesh_build` replaces, for the transfer calls
 /// below. Off by default: the kept mesh costs about as much memory as the
 /// current one; turning it off frees a kept mesh. Not collective (call it
 /// alike on every rank).
 ///
 /// \param[in] h     the handle
-/// \param[in] keep  1 to keep the previous mesh, 0 to drop it
+/// \param[in] keep  true to keep the previous mesh, false to drop it
 #[no_mangle]
-pub extern "C" fn octmesh_mesh_keep_previous(h: *mut octmesh_t, keep: i32) -> octmesh_status_t {
+pub extern "C" fn octmesh_mesh_keep_previous(h: *mut octmesh_t, keep: bool) -> octmesh_status_t {
     with_mut(h, |h| {
-        h.session.keep_previous_mesh(keep != 0);
+        h.session.keep_previous_mesh(keep);
         Ok(())
     })
 }
@@ -102,7 +102,7 @@ pub extern "C" fn octmesh_mesh_get_element_map(
 /// `old` is NULL or valid for `ncomp * old_items` values; `out` is NULL or
 /// valid for writes of `capacity` values.
 unsafe fn field_args<'a>(
-    ncomp: i32,
+    ncomp: octmesh_locidx_t,
     old: *const f64,
     old_items: usize,
     out: *mut f64,
@@ -148,7 +148,7 @@ fn counts(h: &octmesh_t, item: fn(&crate::mesh::Mesh) -> usize) -> Result<(usize
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_transfer_elements(
     h: *mut octmesh_t,
-    ncomp: i32,
+    ncomp: octmesh_locidx_t,
     old_values: *const f64,
     new_values: *mut f64,
     capacity: octmesh_locidx_t,
@@ -185,7 +185,7 @@ pub extern "C" fn octmesh_mesh_transfer_elements(
 #[no_mangle]
 pub extern "C" fn octmesh_mesh_transfer_nodes(
     h: *mut octmesh_t,
-    ncomp: i32,
+    ncomp: octmesh_locidx_t,
     old_values: *const f64,
     new_values: *mut f64,
     capacity: octmesh_locidx_t,

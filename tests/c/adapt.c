@@ -20,25 +20,25 @@ static int g_step;
 /* The reference's test: the closed box meets the sphere's surface. */
 static int cut(const octmesh_octant_t *o) { return check_sphere_cuts(o, g_step); }
 
-static int32_t never(void *ctx, const octmesh_octant_t *o) {
+static bool never(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   (void)o;
-  return 0;
+  return false;
 }
 
-static int32_t refine_cut(void *ctx, const octmesh_octant_t *o) {
+static bool refine_cut(void *ctx, const octmesh_octant_t *o) {
   ++*(long *)ctx;
   return cut(o);
 }
 
-static int32_t coarsen_uncut(void *ctx, const octmesh_octant_t *family) {
+static bool coarsen_uncut(void *ctx, const octmesh_octant_t *family) {
   ++*(long *)ctx;
   for (int i = 0; i < 8; i++) {
     /* Siblings in child order: same level, one side apart. */
-    if (family[i].level != family[0].level) return 0;
-    if (cut(&family[i])) return 0;
+    if (family[i].level != family[0].level) return false;
+    if (cut(&family[i])) return false;
   }
-  return 1;
+  return true;
 }
 
 static int32_t adapt_sphere(void *ctx, const octmesh_octant_t *o) {
@@ -58,10 +58,10 @@ static uint64_t by_level(void *ctx, const octmesh_octant_t *o) {
   return (uint64_t)o->level;
 }
 
-static int32_t always(void *ctx, const octmesh_octant_t *family) {
+static bool always(void *ctx, const octmesh_octant_t *family) {
   (void)ctx;
   (void)family;
-  return 1;
+  return true;
 }
 
 /* Gathers the leaves on rank 0 and writes them, and a line of counts. */
@@ -125,14 +125,14 @@ int main(int argc, char **argv) {
   int64_t refined = -1, coarsened = -1;
   /* No octree yet. */
   CHECK_STATUS(octmesh_octree_adapt(h, adapt_sphere, &calls, NULL, NULL), OCTMESH_STATUS_STATE, h);
-  CHECK_STATUS(octmesh_octree_coarsen(h, 0, coarsen_uncut, &calls, NULL), OCTMESH_STATUS_STATE, h);
+  CHECK_STATUS(octmesh_octree_coarsen(h, false, coarsen_uncut, &calls, NULL), OCTMESH_STATUS_STATE, h);
   CHECK_STATUS(octmesh_octree_refine_once(h, 5, refine_cut, &calls, NULL), OCTMESH_STATUS_STATE, h);
   CHECK_STATUS(octmesh_octree_partition_for_coarsening(h, NULL, NULL), OCTMESH_STATUS_STATE, h);
   CHECK(calls == 0, h);
   /* The root alone. */
   OK(octmesh_octree_refine_callback(h, 0, never, NULL), h);
   CHECK_STATUS(octmesh_octree_adapt(h, NULL, NULL, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  CHECK_STATUS(octmesh_octree_coarsen(h, 1, NULL, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
+  CHECK_STATUS(octmesh_octree_coarsen(h, true, NULL, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK_STATUS(octmesh_octree_refine_once(h, 19, refine_cut, &calls, NULL),
                OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK_STATUS(octmesh_octree_refine_once(h, 5, NULL, NULL, NULL), OCTMESH_STATUS_INVALID_ARGUMENT,
@@ -149,7 +149,7 @@ int main(int argc, char **argv) {
       CHECK(calls == nl, h); /* once per local leaf */
     } else {
       OK(octmesh_octree_refine_once(h, MAX_LEVEL, refine_cut, &calls, &refined), h);
-      OK(octmesh_octree_coarsen(h, 0, coarsen_uncut, &calls, &coarsened), h);
+      OK(octmesh_octree_coarsen(h, false, coarsen_uncut, &calls, &coarsened), h);
     }
     OK(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER), h);
     OK(octmesh_octree_partition_for_coarsening(h, NULL, NULL), h);
@@ -176,13 +176,13 @@ int main(int argc, char **argv) {
   octmesh_locidx_t nl;
   octmesh_gloidx_t before, after, once;
   OK(octmesh_octree_get_num_leaves(h, &nl, &before), h);
-  OK(octmesh_octree_coarsen(h, 1, always, NULL, &coarsened), h);
+  OK(octmesh_octree_coarsen(h, true, always, NULL, &coarsened), h);
   OK(octmesh_octree_get_num_leaves(h, &nl, &after), h);
   CHECK(after == before - 7 * coarsened, h);
   int size;
   MPI_Comm_size(MPI_COMM_WORLD, &size);
   if (size == 1) CHECK(after == 1, h);
-  OK(octmesh_octree_coarsen(h, 0, always, NULL, NULL), h);
+  OK(octmesh_octree_coarsen(h, false, always, NULL, NULL), h);
   OK(octmesh_octree_get_num_leaves(h, &nl, &once), h);
   CHECK(once == after, h); /* nothing left that a rank can coarsen */
 

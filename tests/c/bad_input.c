@@ -118,7 +118,7 @@ static void file_case(const char *path, octmesh_status_t want, int nwords, char 
 /* Refines every octant on the rank whose flag is set, none elsewhere: the
  * work differs per rank, which is allowed when refining an existing octree
  * (each leaf is decided by its own rank only). */
-static int32_t refine_if_flag(void *ctx, const octmesh_octant_t *o) {
+static bool refine_if_flag(void *ctx, const octmesh_octant_t *o) {
   (void)o;
   return *(const int *)ctx;
 }

@@ -10,6 +10,19 @@
 #include "octmesh.h"
 #include "sphere_cut.h"
 
+/* The library reads every enumeration passed to it as an int32_t (so that a
+ * value outside it is an error, src/ffi/mod.rs) and gives back bools as
+ * C's _Bool: the sizes this relies on, checked wherever a test compiles. */
+#define OCTMESH_SAME_SIZE(t, u) _Static_assert(sizeof(t) == sizeof(u), #t " is not " #u "-sized")
+OCTMESH_SAME_SIZE(octmesh_status_t, int32_t);
+OCTMESH_SAME_SIZE(octmesh_connect_t, int32_t);
+OCTMESH_SAME_SIZE(octmesh_keep_t, int32_t);
+OCTMESH_SAME_SIZE(octmesh_cut_rule_t, int32_t);
+OCTMESH_SAME_SIZE(octmesh_inside_rule_t, int32_t);
+OCTMESH_SAME_SIZE(octmesh_class_t, int32_t);
+OCTMESH_SAME_SIZE(octmesh_foam_format_t, int32_t);
+OCTMESH_SAME_SIZE(bool, uint8_t);
+
 #define CHECK(cond, h)                                                            \
   do {                                                                            \
     if (!(cond)) {                                                                \

@@ -146,10 +146,11 @@ int main(int argc, char **argv) {
   free(got);
 
   /* Boundary nodes against corner counts summed over the ranks. */
-  const int32_t *conn = NULL;
+  const octmesh_locidx_t *conn = NULL;
   OK(octmesh_mesh_get_connectivity(h, &conn), h);
-  int32_t nnb = 0;
-  const int32_t *xr = NULL, *xo = NULL, *xn = NULL;
+  octmesh_locidx_t nnb = 0;
+  const int32_t *xr = NULL;
+  const octmesh_locidx_t *xo = NULL, *xn = NULL;
   OK(octmesh_mesh_get_exchange(h, &nnb, &xr, &xo, &xn), h);
   double *count = calloc((size_t)mc.local_nodes + 1, sizeof(double));
   for (int64_t k = 0; k < 8 * (int64_t)ne; k++) count[conn[k]] += 1.0;
@@ -229,12 +230,12 @@ int main(int argc, char **argv) {
   CHECK(f2.owner == f.owner && f2.num_faces == f.num_faces, h);
 
   /* OpenFOAM output: written, refused without overwrite, replaced. */
-  CHECK_STATUS(octmesh_mesh_write_openfoam(h, argv[1], 7, 0), OCTMESH_STATUS_INVALID_ARGUMENT,
+  CHECK_STATUS(octmesh_mesh_write_openfoam(h, argv[1], 7, false), OCTMESH_STATUS_INVALID_ARGUMENT,
                h);
-  OK(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, 0), h);
-  CHECK_STATUS(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, 0),
+  OK(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, false), h);
+  CHECK_STATUS(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, false),
                OCTMESH_STATUS_INVALID_ARGUMENT, h);
-  OK(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, 1), h);
+  OK(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, true), h);
   char path[4096];
   if (size == 1)
     snprintf(path, sizeof path, "%s/constant/polyMesh/boundary", argv[1]);

@@ -40,8 +40,8 @@ static int inside(const datum_t *d, const octmesh_octant_t *o) {
 
 /* Returns non-zero (a failure) when the data does not belong to the
  * outgoing leaves or the result does not match the incoming ones. */
-static int32_t replace(void *ctx, int32_t nout, const octmesh_octant_t *out,
-                       const void *out_data, int32_t nin, const octmesh_octant_t *in,
+static int32_t replace(void *ctx, octmesh_locidx_t nout, const octmesh_octant_t *out,
+                       const void *out_data, octmesh_locidx_t nin, const octmesh_octant_t *in,
                        void *in_data) {
   (void)ctx;
   const datum_t *od = out_data;
@@ -74,24 +74,24 @@ static int32_t replace(void *ctx, int32_t nout, const octmesh_octant_t *out,
 }
 
 /* Fails on the last rank at its first call. */
-static int32_t fail_on_last(void *ctx, int32_t nout, const octmesh_octant_t *out,
-                            const void *out_data, int32_t nin, const octmesh_octant_t *in,
+static int32_t fail_on_last(void *ctx, octmesh_locidx_t nout, const octmesh_octant_t *out,
+                            const void *out_data, octmesh_locidx_t nin, const octmesh_octant_t *in,
                             void *in_data) {
   ++*(long *)ctx;
   if (g_rank == g_size - 1) return 42;
   return replace(NULL, nout, out, out_data, nin, in, in_data);
 }
 
-static int32_t refine_cut(void *ctx, const octmesh_octant_t *o) {
+static bool refine_cut(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   return cut(o);
 }
 
-static int32_t coarsen_uncut(void *ctx, const octmesh_octant_t *family) {
+static bool coarsen_uncut(void *ctx, const octmesh_octant_t *family) {
   (void)ctx;
   for (int i = 0; i < 8; i++)
-    if (family[i].level != family[0].level || cut(&family[i])) return 0;
-  return 1;
+    if (family[i].level != family[0].level || cut(&family[i])) return false;
+  return true;
 }
 
 static int32_t adapt_sphere(void *ctx, const octmesh_octant_t *o) {
@@ -100,25 +100,25 @@ static int32_t adapt_sphere(void *ctx, const octmesh_octant_t *o) {
   return -1;
 }
 
-static int32_t all(void *ctx, const octmesh_octant_t *o) {
+static bool all(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   return o->level < 1;
 }
 
-static int32_t everything(void *ctx, const octmesh_octant_t *o) {
+static bool everything(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   (void)o;
-  return 1;
+  return true;
 }
 
-static int32_t corner(void *ctx, const octmesh_octant_t *o) {
+static bool corner(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   return o->x == 0 && o->y == 0 && o->z == 0;
 }
 
 /* The leaf holding the point just below (2^17, 2^17, 2^17): refining it
  * several times unbalances the coarse leaves across the plane x = 2^17. */
-static int32_t near_p(void *ctx, const octmesh_octant_t *o) {
+static bool near_p(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   const int32_t q = 131071, len = 1 << (19 - o->level);
   return o->x <= q && q < o->x + len && o->y <= q && q < o->y + len && o->z <= q &&
@@ -126,8 +126,8 @@ static int32_t near_p(void *ctx, const octmesh_octant_t *o) {
 }
 
 /* Fails at every call. */
-static int32_t fail_always(void *ctx, int32_t nout, const octmesh_octant_t *out,
-                           const void *out_data, int32_t nin, const octmesh_octant_t *in,
+static int32_t fail_always(void *ctx, octmesh_locidx_t nout, const octmesh_octant_t *out,
+                           const void *out_data, octmesh_locidx_t nin, const octmesh_octant_t *in,
                            void *in_data) {
   (void)out;
   (void)out_data;

@@ -57,9 +57,10 @@ int main(int argc, char **argv) {
   octmesh_mesh_counts_t c;
   CHECK_STATUS(octmesh_mesh_get_counts(h, &c), OCTMESH_STATUS_STATE, h);
   CHECK(contains(octmesh_last_error(h), "octmesh_mesh_build"), h);
-  octmesh_inside_rule_t ir = -1;
+  /* Untouched on failure: a value outside the enumeration stays. */
+  octmesh_inside_rule_t ir = (octmesh_inside_rule_t)42;
   CHECK_STATUS(octmesh_mesh_get_inside_rule(h, &ir), OCTMESH_STATUS_STATE, h);
-  CHECK(ir == -1, h);
+  CHECK(ir == (octmesh_inside_rule_t)42, h);
   CHECK_STATUS(octmesh_mesh_set_inside_rule(h, 3), OCTMESH_STATUS_INVALID_ARGUMENT, h);
   CHECK(contains(octmesh_last_error(h), "inside rule"), h);
   if (size > 1) /* different rules on different ranks: every rank fails */

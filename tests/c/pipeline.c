@@ -14,7 +14,7 @@ typedef struct {
 } counter_t;
 
 /* Refines the octants touching the lowest corner of the cube. */
-static int32_t refine_corner(void *ctx, const octmesh_octant_t *o) {
+static bool refine_corner(void *ctx, const octmesh_octant_t *o) {
   counter_t *c = (counter_t *)ctx;
   c->calls++;
   if (o->level > c->max_level_seen) c->max_level_seen = o->level;
@@ -61,9 +61,10 @@ int main(int argc, char **argv) {
   CHECK(c.global_face_hanging + c.global_edge_hanging > 0, h);
   CHECK(c.num_owned <= c.num_independent && c.num_independent <= c.local_nodes, h);
 
-  const int32_t *conn, *owners, *hcount, *hdeps, *soff, *sranks;
+  const octmesh_locidx_t *conn, *hcount, *hdeps, *soff;
+  const int32_t *owners, *sranks;
   const double *xyz;
-  const int64_t *gid;
+  const octmesh_gloidx_t *gid;
   const int8_t *cls, *lvl;
   OK(octmesh_mesh_get_connectivity(h, &conn), h);
   OK(octmesh_mesh_get_coordinates(h, &xyz), h);
@@ -99,8 +100,9 @@ int main(int argc, char **argv) {
         CHECK(hdeps[4 * k + j] == -1, h);
     }
   }
-  int32_t nn;
-  const int32_t *xr, *xo, *xn;
+  octmesh_locidx_t nn;
+  const int32_t *xr;
+  const octmesh_locidx_t *xo, *xn;
   OK(octmesh_mesh_get_exchange(h, &nn, &xr, &xo, &xn), h);
   CHECK(nn >= 0 && nn < size, h);
   for (int32_t k = 0; k < nn; k++) CHECK(xr[k] != rank && xo[k + 1] > xo[k], h);

@@ -20,10 +20,10 @@
 
 static int g_step;
 
-static int32_t all(void *ctx, const octmesh_octant_t *o) {
+static bool all(void *ctx, const octmesh_octant_t *o) {
   (void)ctx;
   (void)o;
-  return 1;
+  return true;
 }
 
 static int32_t adapt_sphere(void *ctx, const octmesh_octant_t *o) {
@@ -84,7 +84,7 @@ int main(int argc, char **argv) {
   octmesh_element_map_t map;
   CHECK_STATUS(octmesh_mesh_transfer_nodes(h, 1, dummy, dummy, 2, NULL), OCTMESH_STATUS_STATE, h);
   CHECK_STATUS(octmesh_mesh_get_element_map(h, &map), OCTMESH_STATUS_STATE, h);
-  OK(octmesh_mesh_keep_previous(h, 1), h);
+  OK(octmesh_mesh_keep_previous(h, true), h);
 
   long refined = 0, coarsened = 0;
   for (g_step = 1; g_step <= 6; g_step++) {
@@ -161,7 +161,7 @@ int main(int argc, char **argv) {
   CHECK(counts[0] > 0 && counts[1] > 0, h);
 
   /* Turning the keeping off drops the previous mesh. */
-  OK(octmesh_mesh_keep_previous(h, 0), h);
+  OK(octmesh_mesh_keep_previous(h, false), h);
   CHECK_STATUS(octmesh_mesh_get_element_map(h, &map), OCTMESH_STATUS_STATE, h);
   if (rank == 0) printf("TRANSFER refined %ld coarsened %ld\n", counts[0], counts[1]);
   printf("TRANSFER OK\n");

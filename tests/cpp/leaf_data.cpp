@@ -52,7 +52,7 @@ int main(int argc, char **argv) {
     }
     // Children from the parent's stored octant, parents from the first
     // child's; balance's leaves as given.
-    auto replace = [](int32_t nout, const octmesh_octant_t *, const void *od, int32_t nin,
+    auto replace = [](octmesh_locidx_t nout, const octmesh_octant_t *, const void *od, octmesh_locidx_t nin,
                       const octmesh_octant_t *in, void *id) {
       const Datum *o = static_cast<const Datum *>(od);
       Datum *n = static_cast<Datum *>(id);
@@ -91,7 +91,7 @@ int main(int argc, char **argv) {
     bool threw = false;
     try {
       m.refine_once(18, [](const octmesh_octant_t *) { return true; },
-                    [](int32_t, const octmesh_octant_t *, const void *, int32_t,
+                    [](octmesh_locidx_t, const octmesh_octant_t *, const void *, octmesh_locidx_t,
                        const octmesh_octant_t *, void *) { throw std::runtime_error("no"); });
     } catch (const octmesh::Error &) {
       threw = true;

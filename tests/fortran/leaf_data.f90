@@ -20,20 +20,20 @@ contains
   function near_origin(ctx, o) bind(c) result(r)
     type(c_ptr), value :: ctx
     type(octmesh_octant_t), intent(in) :: o
-    integer(c_int32_t) :: r
-    r = merge(1, 0, o%x == 0 .and. o%y == 0 .and. o%z == 0)
+    logical(c_bool) :: r
+    r = o%x == 0 .and. o%y == 0 .and. o%z == 0
   end function near_origin
 
   function every_family(ctx, family) bind(c) result(r)
     type(c_ptr), value :: ctx
     type(octmesh_octant_t), intent(in) :: family(8)
-    integer(c_int32_t) :: r
-    r = merge(1, 0, family(1)%x >= 2**17)
+    logical(c_bool) :: r
+    r = family(1)%x >= 2**17
   end function every_family
 
   function replace(ctx, nout, outgoing, out_data, nin, incoming, in_data) bind(c) result(r)
     type(c_ptr), value :: ctx, outgoing, out_data, incoming, in_data
-    integer(c_int32_t), value :: nout, nin
+    integer(octmesh_locidx_kind), value :: nout, nin
     integer(c_int32_t) :: r
     real(c_double), pointer :: od(:), id(:)
     call c_f_pointer(out_data, od, [nout])
@@ -48,7 +48,7 @@ contains
 
   function refuse(ctx, nout, outgoing, out_data, nin, incoming, in_data) bind(c) result(r)
     type(c_ptr), value :: ctx, outgoing, out_data, incoming, in_data
-    integer(c_int32_t), value :: nout, nin
+    integer(octmesh_locidx_kind), value :: nout, nin
     integer(c_int32_t) :: r
     r = 7
   end function refuse
@@ -86,7 +86,7 @@ program leaf_data
   call same(start)
   call ok(octmesh_octree_partition_for_coarsening(h, c_null_funptr, c_null_ptr))
   call same(start)
-  call ok(octmesh_octree_coarsen_ext(h, 1, c_funloc(every_family), c_funloc(replace), c_null_ptr, &
+  call ok(octmesh_octree_coarsen_ext(h, .true._c_bool, c_funloc(every_family), c_funloc(replace), c_null_ptr, &
                                      c_loc(coarsened)))
   call same(start)
   call ok(octmesh_octree_partition(h, c_null_funptr, c_null_ptr))
@@ -167,7 +167,7 @@ contains
     integer(c_int64_t) :: missing
     real(c_double) :: sums(2), all(2)
     call ok(octmesh_octree_balance(h, OCTMESH_CONNECT_CORNER))
-    call ok(octmesh_mesh_keep_previous(h, 1))
+    call ok(octmesh_mesh_keep_previous(h, .true._c_bool))
     call ok(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER))
     call ok(octmesh_mesh_get_counts(h, c))
     call ok(octmesh_mesh_get_coordinates(h, p))
