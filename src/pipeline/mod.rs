@@ -50,9 +50,6 @@ use crate::report::{peak_rss_bytes, PhaseTimer};
 pub use observer::{Event, Observer, Silent};
 use transfer::Previous;
 
-/// The feature angle of curvature refinement when none is configured,
-/// degrees (snappyHexMesh's `resolveFeatureAngle` default).
-pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
 pub use stats::Stats;
 
 /// The surface and what is derived from it.
