@@ -28,6 +28,7 @@ mod octree;
 mod quality;
 pub mod stats;
 mod surface;
+mod table;
 mod transfer;
 
 use std::cell::OnceCell;
@@ -51,6 +52,7 @@ pub use observer::{Event, Observer, Silent};
 use transfer::Previous;
 
 pub use stats::Stats;
+pub use table::Table;
 
 /// The surface and what is derived from it.
 struct SurfaceState {
