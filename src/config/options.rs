@@ -171,6 +171,9 @@ pub enum DefaultValue {
 /// Keys set by the command line, for error messages.
 pub type Given = Vec<&'static str>;
 
+/// The value of a numeric key as a number, if it is set.
+pub type KeyValue = fn(&Config) -> Option<f64>;
+
 /// One option.
 pub struct Opt {
     /// The long name, `level` for `--level` (for the input: `input`).
@@ -189,7 +192,7 @@ pub struct Opt {
     pub default: DefaultValue,
     /// What its first key accepts, checked by [`Config::validate`] for
     /// any front end, and how to read that key's value.
-    pub range: Option<(Range, fn(&Config) -> Option<f64>)>,
+    pub range: Option<(Range, KeyValue)>,
     /// A note on the default that no value expresses.
     pub default_note: Option<&'static str>,
     /// Whether values may start with `-`.
@@ -319,7 +322,7 @@ macro_rules! options {
     (@default shown $d:expr) => { DefaultValue::Shown(|| $d.to_string()) };
     (@range) => { None };
     (@range $r:expr => |$rc:ident| $rv:expr) => {
-        Some(($r, (|$rc: &Config| $rv) as fn(&Config) -> Option<f64>))
+        Some(($r, (|$rc: &Config| $rv) as KeyValue))
     };
     (@arg $a:ident Input $t:ty) => { $a };
     (@arg $a:ident Switch $t:ty) => { $a.action(ArgAction::SetTrue) };
