@@ -9,62 +9,27 @@
 //!   case file of a command line),
 //! - the C API's `octmesh_options_t` and setters.
 //!
-//! A case file, with every key at its default except the surface and level:
+//! A case file sets the keys it names; the rest keep their defaults:
 //!
 //! ```toml
 //! [surface]
 //! file = "bunny.stl"        # an STL file, or the built-in "sphere", "torus" or "hull"
-//! drop_degenerate = false
-//! drop_duplicates = false
-//!
-//! [domain]
-//! fit = 0.7                 # or: cube = [x, y, z, side] (user units)
-//! # box = [x0, y0, z0, x1, y1, z1]   # or a box of cubic root cells:
-//! # roots = [6, 2, 1]                # NX x NY x NZ trees (levels count from them)
 //!
 //! [octree]
 //! level = 9
-//! # max_level = 11          # curvature refinement up to here (--level 9:11)
-//! # feature_angle = 30.0
-//! min_level = 0
-//! # distance = [[0.01, 10], [0.05, 8]]   # (distance, level) bands around the surface
-//! balance = "corner"        # none | face | edge | corner
-//! # max_octants = 100000000
-//! # memory_budget = "8GiB"  # per rank; unset: the node's available memory
-//!
-//! [classify]
-//! # inside = "auto"         # parity | winding | auto (meshes: auto)
-//!
-//! [leak]
-//! # inside_point = [0.0, 0.0, 0.0]
-//! # path = "leak.vtk"
 //!
 //! [[regions]]              # as many as wanted
-//! shape = "box"             # box (min, max) | sphere (center, radius) | cylinder (start, end, radius)
+//! shape = "box"
 //! min = [0.0, 0.0, 0.0]
 //! max = [1.0, 0.5, 0.5]
 //! level = 8
-//! outside = false
 //!
 //! [mesh]
-//! keep = "all"              # all | inside | outside
-//! cut_rule = "center"       # center | all | none
-//! snap = false              # move the surface nodes onto the surface (inside | outside)
-//! snap_feature_angle = 30.0 # surface edges sharper than this stay sharp
-//! snap_layers = 2           # element layers relaxed around the surface nodes
-//! snap_iterations = 3       # relaxation iterations
-//! # snap_min_jacobian = 0.001  # least scaled Jacobian (unset: 0.1 with an OpenFOAM case)
-//!
-//! [output]
-//! quiet = false
-//! # stats = "stats.json"
-//! # leaves = "leaves.bin"
-//! # refined_leaves = "refined.bin"
-//! # vtu = "mesh.pvtu"
-//! quality = false           # scaled Jacobian, non-orthogonality, skewness (mesh)
-//! # quality_out = "worst.vtu"  # the worst elements by scaled Jacobian (mesh)
-//! # quality_worst = 100
+//! keep = "outside"
 //! ```
+//!
+//! Every option and key, with its default and range, is declared once in
+//! [`options::OPTIONS`]; `docs/options.md` is generated from it.
 //!
 //! [`Config::validate`] checks a filled configuration for a command and
 //! reports the first problem as a [`ConfigError`] naming the key, which each
@@ -73,6 +38,9 @@
 
 pub mod case;
 pub mod cli;
+pub mod options;
+
+pub use options::{DEFAULT_FEATURE_ANGLE, DEFAULT_QUALITY_WORST};
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -227,7 +195,8 @@ pub struct OctreeConfig {
     /// touching them differ by more than `feature_angle` (`--level
     /// MIN:MAX`). Unset: every surface leaf at `level`.
     pub max_level: Option<u8>,
-    /// The feature angle of curvature refinement, degrees (default 30).
+    /// The feature angle of curvature refinement, degrees, in (0, 180)
+    /// (unset: [`DEFAULT_FEATURE_ANGLE`]).
     pub feature_angle: Option<f64>,
     /// Levels per part of the surface, `{ name = [min, max] }` (`--surface-level
     /// NAME=MIN[:MAX]`): leaves touching the part get `min`, and up to `max`
@@ -269,6 +238,11 @@ pub struct OctreeConfig {
 }
 
 impl OctreeConfig {
+    /// The feature angle of curvature refinement, degrees.
+    pub fn feature_angle(&self) -> f64 {
+        self.feature_angle.unwrap_or(DEFAULT_FEATURE_ANGLE)
+    }
+
     /// The octant limit, [`crate::refine::NO_LIMIT`] when unset.
     pub fn limit(&self) -> u64 {
         self.max_octants.unwrap_or(crate::refine::NO_LIMIT)
@@ -405,10 +379,6 @@ pub struct OutputConfig {
     pub quality_worst: Option<u64>,
 }
 
-/// The elements `output.quality_out` holds when `output.quality_worst` is
-/// unset.
-pub const DEFAULT_QUALITY_WORST: u64 = 100;
-
 impl OutputConfig {
     /// The elements written to `quality_out`.
     pub fn quality_worst(&self) -> u64 {
@@ -445,7 +415,7 @@ impl ConfigError {
     /// file's key).
     pub fn render(&self, label: impl Fn(&str) -> String) -> String {
         let mut text = self.message.clone();
-        for key in KEYS {
+        for key in options::keys() {
             text = text.replace(&format!("{{{key}}}"), &label(key));
         }
         let sep = if text.starts_with("unknown") {
@@ -456,55 +426,6 @@ impl ConfigError {
         format!("{}{sep}{text}", label(self.key))
     }
 }
-
-/// Every key of a configuration, `table.field`.
-pub const KEYS: &[&str] = &[
-    "surface.file",
-    "surface.others",
-    "surface.drop_degenerate",
-    "surface.drop_duplicates",
-    "domain.fit",
-    "domain.cube",
-    "domain.box",
-    "domain.roots",
-    "octree.level",
-    "octree.min_level",
-    "octree.max_level",
-    "octree.size",
-    "octree.max_size",
-    "octree.min_size",
-    "octree.feature_angle",
-    "octree.surface_levels",
-    "octree.distance",
-    "octree.distance_size",
-    "octree.balance",
-    "octree.max_octants",
-    "octree.memory_budget",
-    "classify.inside",
-    "leak.inside_point",
-    "leak.path",
-    "mesh.keep",
-    "mesh.cut_rule",
-    "mesh.patches",
-    "mesh.clean_walls",
-    "mesh.snap",
-    "mesh.snap_feature_angle",
-    "mesh.snap_layers",
-    "mesh.snap_iterations",
-    "mesh.snap_min_jacobian",
-    "output.quiet",
-    "output.stats",
-    "output.leaves",
-    "output.refined_leaves",
-    "output.vtu",
-    "output.openfoam",
-    "output.openfoam_format",
-    "output.overwrite",
-    "output.quality",
-    "output.quality_out",
-    "output.quality_worst",
-    "regions",
-];
 
 impl Config {
     /// Checks the configuration for `command`: required keys, ranges,
@@ -525,12 +446,7 @@ impl Config {
         let Some(level) = self.octree.level else {
             return Err(ConfigError::new("octree.level", "is required"));
         };
-        if level > MAX_LEVEL {
-            return Err(ConfigError::new(
-                "octree.level",
-                format!("is {level}: above the maximum level {MAX_LEVEL}"),
-            ));
-        }
+        options::check_ranges(self, command == Command::Mesh)?;
         if let Some(max) = self.octree.max_level {
             if max > MAX_LEVEL || max < level {
                 return Err(ConfigError::new(
@@ -552,14 +468,6 @@ impl Config {
                 ));
             }
         }
-        if let Some(a) = self.octree.feature_angle {
-            if !(a > 0.0 && a < 180.0) {
-                return Err(ConfigError::new(
-                    "octree.feature_angle",
-                    format!("must be between 0 and 180 degrees, got {a}"),
-                ));
-            }
-        }
         let bands = &self.octree.distance;
         if let Some((i, &(d, l))) = bands.iter().enumerate().find(|(i, &(d, l))| {
             !(d.is_finite() && d >= 0.0) || l > MAX_LEVEL || (*i > 0 && d <= bands[i - 1].0)
@@ -573,15 +481,6 @@ impl Config {
                 ),
             ));
         }
-        if self.octree.min_level > MAX_LEVEL {
-            return Err(ConfigError::new(
-                "octree.min_level",
-                format!(
-                    "is {}: above the maximum level {MAX_LEVEL}",
-                    self.octree.min_level
-                ),
-            ));
-        }
         for (i, r) in self.regions.iter().enumerate() {
             if let Err(m) = r.validate() {
                 return Err(ConfigError::new(
@@ -590,19 +489,11 @@ impl Config {
                 ));
             }
         }
-        if let Some(fit) = self.domain.fit {
-            if self.domain.cube.is_some() {
-                return Err(ConfigError::new(
-                    "domain.fit",
-                    "and {domain.cube} exclude each other: give one",
-                ));
-            }
-            if !(fit > 0.0 && fit <= 1.0) {
-                return Err(ConfigError::new(
-                    "domain.fit",
-                    format!("must be in (0, 1], got {fit}"),
-                ));
-            }
+        if self.domain.fit.is_some() && self.domain.cube.is_some() {
+            return Err(ConfigError::new(
+                "domain.fit",
+                "and {domain.cube} exclude each other: give one",
+            ));
         }
         if let Some([x, y, z, s]) = self.domain.cube {
             if let Err(e) = Domain::cube([x, y, z], s) {
@@ -647,52 +538,16 @@ impl Config {
                     ));
                 }
             }
-            match self.output.quality_worst {
-                Some(0) => {
-                    return Err(ConfigError::new(
-                        "output.quality_worst",
-                        "must be at least 1, got 0",
-                    ))
-                }
-                Some(_) if self.output.quality_out.is_none() => {
-                    return Err(ConfigError::new(
-                        "output.quality_worst",
-                        "needs {output.quality_out}",
-                    ))
-                }
-                _ => {}
+            if self.output.quality_worst.is_some() && self.output.quality_out.is_none() {
+                return Err(ConfigError::new(
+                    "output.quality_worst",
+                    "needs {output.quality_out}",
+                ));
             }
             if self.mesh.snap && self.mesh.keep == Keep::All {
                 return Err(ConfigError::new(
                     "mesh.snap",
                     "needs {mesh.keep} inside or outside: with all leaves kept no node is on the surface",
-                ));
-            }
-            let a = self.mesh.snap_feature_angle;
-            if !(0.0..=180.0).contains(&a) {
-                return Err(ConfigError::new(
-                    "mesh.snap_feature_angle",
-                    format!("must be between 0 and 180 degrees, got {a}"),
-                ));
-            }
-            if self.mesh.snap_layers > 100 {
-                return Err(ConfigError::new(
-                    "mesh.snap_layers",
-                    format!("must be at most 100, got {}", self.mesh.snap_layers),
-                ));
-            }
-            if let Some(j) = self.mesh.snap_min_jacobian {
-                if !(j > 0.0 && j <= 0.5) {
-                    return Err(ConfigError::new(
-                        "mesh.snap_min_jacobian",
-                        format!("must be above 0 and at most 0.5, got {j}"),
-                    ));
-                }
-            }
-            if self.mesh.snap_iterations > 1000 {
-                return Err(ConfigError::new(
-                    "mesh.snap_iterations",
-                    format!("must be at most 1000, got {}", self.mesh.snap_iterations),
                 ));
             }
             // The patches renamed must exist, which only the surface's
@@ -1038,25 +893,6 @@ mod tests {
         let text = c.to_toml();
         let back: Config = toml::from_str(&text).unwrap();
         assert_eq!(back, c, "{text}");
-        // Every key of KEYS is a field, and the other way round.
-        let full: toml::Table = toml::from_str(&c.resolved().to_toml()).unwrap();
-        let n: usize = full
-            .values()
-            .filter_map(|t| t.as_table())
-            .map(|t| t.len())
-            .sum();
-        assert!(n <= KEYS.len());
-        for (table, fields) in &full {
-            match fields.as_table() {
-                Some(t) => {
-                    for field in t.keys() {
-                        let key = format!("{table}.{field}");
-                        assert!(KEYS.contains(&key.as_str()), "{key}");
-                    }
-                }
-                // Arrays of tables (regions) are keys themselves.
-                None => assert!(KEYS.contains(&table.as_str()), "{table}"),
-            }
-        }
+        // That every key is declared is checked in `options`.
     }
 }

@@ -61,12 +61,7 @@ impl octmesh_options_t {
     /// The configuration these options give.
     fn config(&self) -> Result<Config> {
         let mut c = Config::default();
-        if !(self.fit > 0.0 && self.fit <= 1.0) {
-            return Err(Error::invalid(format!(
-                "options: fit must be in (0, 1], got {}",
-                self.fit
-            )));
-        }
+        crate::config::options::check_key("domain.fit", "options: fit", self.fit)?;
         if self.max_octants < 0 {
             return Err(Error::invalid(format!(
                 "options: max_octants must be at least 0, got {}",

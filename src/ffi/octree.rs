@@ -99,11 +99,7 @@ fn curvature_args(min_level: i32, max_level: i32, feature_angle: f64) -> Result<
             "max_level {hi} is below min_level {lo}"
         )));
     }
-    if !(feature_angle > 0.0 && feature_angle < 180.0) {
-        return Err(Error::invalid(format!(
-            "feature_angle {feature_angle} is not in (0, 180) degrees"
-        )));
-    }
+    crate::config::options::check_key("octree.feature_angle", "feature_angle", feature_angle)?;
     Ok((lo, hi))
 }
 

@@ -143,34 +143,11 @@ impl Default for SnapOptions {
 }
 
 impl SnapOptions {
-    /// Checks the ranges: the angle in [0, 180], at most 100 layers and
-    /// 1000 iterations, the least scaled Jacobian in (0, 0.5].
+    /// Checks the ranges the configuration declares for the `mesh.snap_*`
+    /// keys ([`crate::config::options`]): the angle in [0, 180], at most
+    /// 100 layers and 1000 iterations, the least scaled Jacobian in (0, 0.5].
     pub fn check(&self) -> Result<()> {
-        let a = self.feature_angle_deg;
-        if !(0.0..=180.0).contains(&a) {
-            return Err(Error::invalid(format!(
-                "the snap feature angle must be between 0 and 180 degrees (got {a})"
-            )));
-        }
-        if self.layers > 100 {
-            return Err(Error::invalid(format!(
-                "at most 100 snap relaxation layers (got {})",
-                self.layers
-            )));
-        }
-        let j = self.min_jacobian;
-        if !(j > 0.0 && j <= 0.5) {
-            return Err(Error::invalid(format!(
-                "the least scaled Jacobian of a snapped element must be above 0 and at most 0.5 (got {j})"
-            )));
-        }
-        if self.iterations > 1000 {
-            return Err(Error::invalid(format!(
-                "at most 1000 snap relaxation iterations (got {})",
-                self.iterations
-            )));
-        }
-        Ok(())
+        crate::config::options::check_snap(self)
     }
 }
 

@@ -28,6 +28,7 @@ mod octree;
 mod quality;
 pub mod stats;
 mod surface;
+mod table;
 mod transfer;
 
 use std::cell::OnceCell;
@@ -50,10 +51,8 @@ use crate::run::report::{peak_rss_bytes, PhaseTimer};
 pub use observer::{Event, Observer, Silent, VolumeReference};
 use transfer::Previous;
 
-/// The feature angle of curvature refinement when none is configured,
-/// degrees (snappyHexMesh's `resolveFeatureAngle` default).
-pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
 pub use stats::Stats;
+pub use table::Table;
 
 /// The surface and what is derived from it.
 struct SurfaceState {

@@ -184,11 +184,7 @@ impl Session {
             &*self.comm,
             self.config.surface_ranges(self.surface_name(), &self.parts),
         )?;
-        let angle = self
-            .config
-            .octree
-            .feature_angle
-            .unwrap_or(DEFAULT_FEATURE_ANGLE);
+        let angle = self.config.octree.feature_angle();
         let domain = agree(&*self.comm, self.tree_or_state().map(|t| t.1))?;
         self.index_for(domain)?;
         let budget = self.memory_budget();

@@ -1,0 +1,211 @@
+//! The table the `octmesh` command prints while it runs: an [`Observer`]
+//! writing each event of a [`super::Session`] as a line on stdout.
+
+use std::io::Write;
+
+use super::{Event, Observer};
+use crate::config::{Command, Config};
+
+/// Prints to stdout, ignoring a closed pipe (`octmesh ... | head -1`).
+macro_rules! say {
+    ($($t:tt)*) => {{ let _ = writeln!(std::io::stdout(), $($t)*); }};
+}
+
+/// Prints a run's table on stdout, as the `octmesh` command does on rank
+/// 0: the surface, the domain, a line per phase with its time and count,
+/// and what each stage found.
+pub struct Table {
+    command: Command,
+    config: Config,
+    ranks: usize,
+}
+
+impl Table {
+    /// A table for `command` run with `config` on `ranks` ranks.
+    pub fn new(command: Command, config: Config, ranks: usize) -> Table {
+        Table {
+            command,
+            config,
+            ranks,
+        }
+    }
+}
+
+impl Observer for Table {
+    fn event(&mut self, e: &Event<'_>) {
+        let c = &self.config;
+        match e {
+            Event::SurfaceLoaded {
+                name,
+                triangles,
+                dropped,
+                domain,
+                estimate,
+                inside,
+            } => {
+                let rule = inside.map(|(r, why)| format!("inside {r}{why}"));
+                let what = match (self.command, rule) {
+                    (Command::Octree, Some(r)) => format!("octree ({r})"),
+                    (Command::Octree, None) => "octree".to_string(),
+                    (Command::Mesh, r) => format!(
+                        "mesh (keep {}, cut rule {}, {})",
+                        c.mesh.keep,
+                        c.mesh.cut_rule,
+                        r.unwrap_or_default()
+                    ),
+                };
+                say!(
+                    "octmesh {what}: {name} ({triangles} triangles), level {}, balance {}, {} rank(s)",
+                    c.octree.level.unwrap_or(0), c.octree.balance, self.ranks
+                );
+                if let Some(n) = dropped {
+                    say!("  dropped {n} facet(s) (degenerate or duplicate)");
+                }
+                let (o, s) = (domain.origin, domain.side);
+                if domain.brick.is_cube() {
+                    say!(
+                        "  cube: origin ({:.6}, {:.6}, {:.6}), side {s:.6}",
+                        o[0],
+                        o[1],
+                        o[2]
+                    );
+                } else {
+                    let (u, r) = (domain.upper(), domain.brick.roots());
+                    say!(
+                        "  box: ({:.6}, {:.6}, {:.6}) to ({:.6}, {:.6}, {:.6}), {}x{}x{} root cells \
+                         of side {:.6}",
+                        o[0],
+                        o[1],
+                        o[2],
+                        u[0],
+                        u[1],
+                        u[2],
+                        r[0],
+                        r[1],
+                        r[2],
+                        domain.root_side()
+                    );
+                }
+                if let Some(e) = estimate {
+                    say!(
+                        "  estimated octants: {} refined, {} balanced",
+                        e.refined,
+                        e.balanced
+                    );
+                }
+                say!("  {:<12} {:>10} {:>14}", "phase", "time [s]", "count");
+            }
+            Event::Phase {
+                name,
+                seconds,
+                count,
+            } => {
+                let n = count.map(|c| c.to_string()).unwrap_or_default();
+                say!("  {name:<12} {seconds:>10.3} {n:>14}");
+            }
+            Event::Winding(w) => {
+                say!(
+                "  winding: {} component(s), {} facet(s) reversed, {} boundary loop(s) closed by \
+                 {} cap triangle(s)",
+                w.components, w.reversed_facets, w.boundary_loops, w.cap_triangles
+            )
+            }
+            Event::LeafClasses([i, o, cut]) => {
+                say!("  leaves inside {i} | outside {o} | cut {cut}")
+            }
+            Event::LeakChecked {
+                point: p,
+                path_octants: None,
+                seconds,
+                ..
+            } => say!(
+                "  leak check passed: the inside point ({}, {}, {}) is sealed off from the \
+                 domain boundary ({seconds:.3} s)",
+                p[0],
+                p[1],
+                p[2]
+            ),
+            Event::LeakChecked {
+                path_octants: Some(n),
+                written: Some(f),
+                ..
+            } => {
+                say!("  wrote the leak path ({n} octants) to {}", f.display())
+            }
+            Event::Meshed { counts: m } => {
+                say!(
+                    "  elements {} | independent nodes {} | hanging nodes {} face, {} edge | \
+                     ghosts {}",
+                    m.elements,
+                    m.independent_nodes,
+                    m.face_hanging_nodes,
+                    m.edge_hanging_nodes,
+                    m.ghosts
+                );
+            }
+            Event::KeptVolume {
+                kept,
+                expected,
+                reference,
+                snapped,
+            } => {
+                let what = match snapped {
+                    true => "snapped volume",
+                    false => "kept volume",
+                };
+                let rel = (kept - expected) / expected;
+                say!(
+                    "  {what} {kept:.6e} | {} {expected:.6e} | relative difference {rel:+.3e}",
+                    reference.describe()
+                );
+            }
+            Event::Quality(q) => {
+                say!(
+                    "  quality: scaled Jacobian min {:.4} ({} inverted) | non-orthogonality max {:.4} \
+                     average {:.4} deg | skewness max {:.4}",
+                    q.scaled_jacobian_min,
+                    q.inverted_elements,
+                    q.non_orthogonality_max,
+                    q.non_orthogonality_average,
+                    q.skewness_max
+                );
+                let h = &q.scaled_jacobian_histogram;
+                let bins: Vec<String> = (0..h.counts.len())
+                    .filter(|&k| h.counts[k] > 0)
+                    .map(|k| {
+                        // The last bin holds 1.
+                        let close = if k + 1 == h.counts.len() { ']' } else { ')' };
+                        let (a, b) = (h.edges[k], h.edges[k + 1]);
+                        format!("[{a:.1}, {b:.1}{close} {}", h.counts[k])
+                    })
+                    .collect();
+                say!("  scaled Jacobian histogram: {}", bins.join(" | "));
+            }
+            Event::Snapped(r) => {
+                say!(
+                    "  snap: surface nodes {} | snapped {} ({} to features) | partly {} | not {} | \
+                     relaxed {} | elements reported {} | scaled Jacobian min {:.4}",
+                    r.surface_nodes,
+                    r.snapped,
+                    r.feature_nodes,
+                    r.partial,
+                    r.unsnapped,
+                    r.relaxed_nodes,
+                    r.reported_elements,
+                    r.min_scaled_jacobian
+                );
+            }
+            Event::Wrote(p) => say!("  wrote {}", p.display()),
+            Event::Finished {
+                seconds,
+                peak_rss,
+                bytes_per_leaf,
+            } => {
+                say!("  {:<12} {seconds:>10.3}", "total");
+                let mib = *peak_rss as f64 / (1 << 20) as f64;
+                say!("  peak RSS {mib:.1} MiB per rank (max over ranks), {bytes_per_leaf:.1} bytes per leaf");
+            }
+            _ => {}
+        }
+    }
+}
