@@ -1,9 +1,7 @@
 //! A leak's path: the octants from the boundary to the inside point, and
 //! the report that describes it.
 
-use std::path::Path;
-
-use crate::error::{Error, ErrorKind, Result};
+use crate::error::{Error, ErrorKind};
 use crate::geometry::Aabb;
 use crate::octree::domain::Domain;
 use crate::octree::octant::{Octant, ROOT_LEN};
@@ -97,20 +95,6 @@ impl LeakPath {
     /// The [`ErrorKind::Leak`] error carrying [`LeakPath::message`].
     pub fn to_error(&self, domain: &Domain, surface_box: Option<&Aabb>) -> Error {
         Error::new(ErrorKind::Leak, self.message(domain, surface_box))
-    }
-
-    /// Writes the path for ParaView: for `.vtk`, a legacy VTK unstructured
-    /// grid holding the polyline through the centres as one line cell per
-    /// step, with point data `size`, `level` and `step`; for any other
-    /// extension a CSV table `step,x,y,z,size,level`. User units. Not
-    /// collective.
-    pub fn write(&self, path: &Path, domain: &Domain) -> Result<()> {
-        crate::io::leak_path::write_leak_path(
-            path,
-            &self.centres(domain),
-            &self.sizes(domain),
-            &self.octants,
-        )
     }
 }
 
