@@ -20,8 +20,9 @@ use std::time::{Duration, Instant};
 
 use octmesh::classify::{CutRule, Keep};
 use octmesh::config::Config;
+use octmesh::mesh::locate_elements;
 use octmesh::octree::domain::Domain;
-use octmesh::octree::search::{locate, locate_elements, owner_ranks, Location};
+use octmesh::octree::search::{locate, owner_ranks, Location};
 use octmesh::parallel::comm::{CommRef, MpiComm};
 use octmesh::pipeline::Session;
 use octmesh::{Connectivity, Octant};

@@ -58,6 +58,7 @@ mod build;
 pub(crate) mod dual;
 pub mod faces;
 pub(crate) mod hanging;
+mod locate;
 pub mod manifold;
 pub(crate) mod numbering;
 pub mod patches;
@@ -79,6 +80,7 @@ pub use crate::geometry::cells::VTK_TO_MORTON;
 pub use boundary::{Boundary, BoundaryFace};
 pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, SURFACE_PATCH};
 pub use hanging::HangingDeps;
+pub use locate::locate_elements;
 pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
 
 use hanging::Hanging;

@@ -4,7 +4,7 @@
 //! A point maps to one finest lattice cell ([`point_cell`]); the rank whose
 //! cell range holds that cell ([`LinearOctree::first_cells`], p4est's
 //! `global_first_position`) owns the point, found without communication
-//! ([`owner_ranks`]). [`locate`] and [`locate_elements`] are collective:
+//! ([`owner_ranks`]). [`locate`] and `mesh::locate_elements` are collective:
 //! each rank sends its points' cells to their owners in one all-to-all,
 //! the owners look them up among their leaves, and a second all-to-all
 //! returns the answers, in the caller's point order. This is the routing
@@ -25,7 +25,6 @@
 //! domain's box (in the void of the embedding cube), or with a NaN
 //! coordinate is [`Location::Outside`]; it is reported, never dropped.
 
-use crate::mesh::Mesh;
 use crate::octree::domain::Domain;
 use crate::octree::octant::{morton_encode, Octant};
 use crate::octree::{owner_of_cell, LeafIndex, LinearOctree};
@@ -47,8 +46,8 @@ pub enum Location {
         leaf: Octant,
     },
     /// Inside the domain, in a leaf of rank `rank` that is not an element
-    /// of the mesh (only from [`locate_elements`]: for example inside the
-    /// body of a fluid mesh).
+    /// of the mesh (only from [`crate::mesh::locate_elements`]: for example
+    /// inside the body of a fluid mesh).
     NoElement {
         /// The rank holding the leaf.
         rank: u32,
@@ -124,19 +123,6 @@ pub fn locate(tree: &LinearOctree, domain: &Domain, points: &[[f64; 3]]) -> Vec<
     route(tree, domain, points, tree.global_offsets(), |i, _| Some(i))
 }
 
-/// The mesh element containing each point, in `points`' order:
-/// [`Location::NoElement`] for a point in a leaf the mesh did not keep.
-/// `mesh` must be built from `tree` as it is (same leaves and partition).
-/// Collective: every rank calls it with its own points.
-pub fn locate_elements(tree: &LinearOctree, mesh: &Mesh, points: &[[f64; 3]]) -> Vec<Location> {
-    let firsts = tree.comm().allgather_u64(mesh.first_element());
-    let elements = mesh.elements();
-    // Elements are a sorted subset of the leaves.
-    route(tree, mesh.domain(), points, &firsts, |_, leaf| {
-        elements.binary_search(&leaf).ok()
-    })
-}
-
 /// No cell: the point is outside.
 const OUTSIDE: u64 = u64::MAX;
 
@@ -145,7 +131,7 @@ const OUTSIDE: u64 = u64::MAX;
 /// the leaf or element (`None`: no element); `bases[r]` is the global
 /// index of rank `r`'s first. Returns the answers in the caller's order.
 /// Collective.
-fn route(
+pub(crate) fn route(
     tree: &LinearOctree,
     domain: &Domain,
     points: &[[f64; 3]],
