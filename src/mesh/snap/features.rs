@@ -6,6 +6,7 @@ use std::borrow::Cow;
 use crate::geometry::bvh::Bvh;
 use crate::geometry::distance::closest_point_triangle;
 use crate::geometry::hash::{FoldMap, FoldSet};
+use crate::geometry::vector::{dot, norm};
 use crate::geometry::{Aabb, Surface, Triangle};
 use crate::mesh::dual::Bits;
 use crate::mesh::Mesh;
@@ -337,7 +338,7 @@ pub(super) fn features(
         .iter()
         .map(|t| {
             let n = t.normal();
-            let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let l = norm(n);
             if l > 0.0 {
                 [n[0] / l, n[1] / l, n[2] / l]
             } else {
@@ -359,7 +360,7 @@ pub(super) fn features(
             }
             let sharp = if count == 2 {
                 let (n, m) = (unit[first as usize], unit[second as usize]);
-                n[0] * m[0] + n[1] * m[1] + n[2] * m[2] < cos_limit
+                dot(n, m) < cos_limit
             } else {
                 true
             };

@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::cells::{hexahedron_volume_centre, quad_area_centre, VTK_TO_MORTON};
+use crate::geometry::vector::norm;
 use crate::mesh::{Faces, Mesh};
 
 use super::mean;
@@ -40,7 +41,7 @@ impl Mesh {
         let mut g = FvGeometry::default();
         for q in at.chunks_exact(4) {
             let (s, c) = quad_area_centre(&[q[0], q[1], q[2], q[3]]);
-            let a = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+            let a = norm(s);
             g.face_area.push(a);
             g.face_centre.push(c);
             g.face_normal
