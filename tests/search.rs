@@ -20,51 +20,61 @@ use std::time::{Duration, Instant};
 
 use octmesh::internals::classify::{CutRule, Keep};
 use octmesh::internals::config::Config;
+use octmesh::internals::mesh::locate_elements;
 use octmesh::internals::octree::domain::Domain;
-use octmesh::internals::octree::search::{locate, locate_elements, owner_ranks, Location};
+use octmesh::internals::octree::search::{locate, owner_ranks, Location};
 use octmesh::internals::parallel::comm::{CommRef, MpiComm};
 use octmesh::internals::pipeline::Session;
 use octmesh::{Connectivity, Octant};
 
+const CHILD: &str = "OCTMESH_SEARCH_CHILD";
 const POINTS: usize = 6000;
 const NONE: u64 = u64::MAX;
 
 fn main() {
-    let child_main = |arg: &str| {
+    if let Ok(arg) = std::env::var(CHILD) {
         let (mode, dir) = arg.split_once(':').expect("MODE:DIR");
         child(mode, Path::new(dir));
-    };
-    common::runner::main("search", child_main, |r| {
-        let dir = common::scratch("search");
-        let limit = Duration::from_secs(300);
-        let check = format!("check:{}", dir.display());
-        r.on_ranks(1..=4, &check, "SEARCH OK", limit);
-        r.test("the same answers on every rank count", || {
-            for case in ["cube", "box"] {
-                let read = |np: usize| {
-                    let f = dir.join(format!("{case}_np{np}.txt"));
-                    std::fs::read(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()))
-                };
-                let one = read(1);
-                for np in 2..=4 {
-                    assert!(
-                        read(np) == one,
-                        "{case}: the answers on {np} ranks differ from 1 rank's"
-                    );
-                }
-            }
-        });
-        if std::env::var("OCTMESH_SEARCH_BENCH").is_ok_and(|v| v == "1") {
-            r.test("bench", || {
-                for np in [1, 2] {
-                    print!(
-                        "{}",
-                        common::runner::launch(np, &format!("bench:{}", dir.display()), limit)
-                    );
-                }
-            });
+        return;
+    }
+    let dir = common::scratch("search");
+    let me = std::env::current_exe().expect("own path");
+    let limit = Duration::from_secs(300);
+    for np in 1..=4 {
+        let arg = format!("check:{}", dir.display());
+        let out = common::mpirun_env(np, &me, &[], &[(CHILD, &arg)], limit);
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.status.success(), "search on {np} ranks failed:\n{text}");
+        assert!(text.contains("SEARCH OK"), "np {np}:\n{text}");
+        print!("{text}");
+    }
+    for case in ["cube", "box"] {
+        let read = |np: usize| std::fs::read(dir.join(format!("{case}_np{np}.txt"))).unwrap();
+        let one = read(1);
+        for np in 2..=4 {
+            assert!(
+                read(np) == one,
+                "{case}: the answers on {np} ranks differ from 1 rank's"
+            );
         }
-    });
+    }
+    println!("search: 4 rank counts agree");
+    if std::env::var("OCTMESH_SEARCH_BENCH").is_ok_and(|v| v == "1") {
+        for np in [1, 2] {
+            let arg = format!("bench:{}", dir.display());
+            let out = common::mpirun_env(np, &me, &[], &[(CHILD, &arg)], limit);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            print!("{}", String::from_utf8_lossy(&out.stdout));
+        }
+    }
 }
 
 /// splitmix64: a fixed sequence with no dependency.
@@ -206,13 +216,7 @@ fn check(comm: &CommRef, case: &str, bbox: Option<([f64; 6], [u32; 3])>, dir: &P
     let mine: Vec<usize> = (0..all.len()).filter(|i| i % takers == rank).collect();
     let pts: Vec<[f64; 3]> = mine.iter().map(|&i| all[i]).collect();
     let leaves = locate(tree, &domain, &pts);
-    let elements = locate_elements(
-        tree,
-        mesh.domain(),
-        mesh.elements(),
-        mesh.first_element(),
-        &pts,
-    );
+    let elements = locate_elements(tree, mesh, &pts);
     let owners = owner_ranks(tree, &domain, &pts);
     let offsets = tree.global_offsets();
     let mut rows = Vec::new();

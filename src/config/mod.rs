@@ -39,6 +39,8 @@
 pub mod case;
 pub mod cli;
 pub mod options;
+mod reference;
+mod values;
 
 pub use options::{DEFAULT_FEATURE_ANGLE, DEFAULT_QUALITY_WORST};
 

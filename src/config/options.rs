@@ -31,6 +31,9 @@ use crate::octree::octant::MAX_LEVEL;
 use crate::refine::regions::Region;
 use crate::run::budget::ByteSize;
 
+pub use super::reference::markdown;
+use super::values::*;
+
 /// The feature angle of curvature refinement when `octree.feature_angle`
 /// is unset, degrees (snappyHexMesh's `resolveFeatureAngle` default).
 pub const DEFAULT_FEATURE_ANGLE: f64 = 30.0;
@@ -819,207 +822,35 @@ pub fn check_snap(o: &crate::mesh::snap::SnapOptions) -> Result<()> {
     )
 }
 
-/// The reference of every option and case-file key, in Markdown
-/// (`docs/options.md`).
-pub fn markdown() -> String {
-    let cell = |s: &str| s.replace('|', "\\|").replace('\n', " ");
-    let mut t = String::from(
-        "# Options and case-file keys\n\n\
-         Generated from the one declaration of the options (`src/config/options.rs`) by \
-         `octmesh::config::options::markdown`; `tests/options_reference.rs` checks that this \
-         file is up to date and matches `octmesh octree --help` and `octmesh mesh --help`. \
-         Do not edit by hand: after changing an option, run \
-         `OCTMESH_BLESS=1 cargo test --release --test options_reference`.\n\n\
-         Every option fills the case-file keys named next to it (`table.key`, or the \
-         `[[regions]]` tables); in a case file (`octmesh mesh case.toml`) the same keys \
-         take TOML values, and options given with a case file override its keys. \
-         `octmesh mesh ... --print-case` prints the case file of a command line.\n",
-    );
-    for (title, scope) in [
-        ("`octmesh octree` and `octmesh mesh`", Scope::Octree),
-        ("`octmesh mesh` only", Scope::Mesh),
-    ] {
-        t.push_str(&format!(
-            "\n## {title}\n\n| Option | Case-file key | Default | Range | Description |\n\
-             |---|---|---|---|---|\n"
-        ));
-        for o in OPTIONS.iter().filter(|o| o.scope == scope) {
-            let flag = match o.value {
-                Some(v) if o.kind != Kind::Input => format!("`{} {v}`", o.flag()),
-                _ => format!("`{}`", o.flag()),
-            };
-            let keys: Vec<String> = o.keys.iter().map(|k| format!("`{k}`")).collect();
-            let keys = match keys.is_empty() {
-                true => "(command line only)".to_string(),
-                false => keys.join(", "),
-            };
-            let default = o.default_text().unwrap_or_else(|| {
-                match o.kind {
-                    Kind::Input => "",
-                    Kind::Switch => "off",
-                    Kind::Many => "none",
-                    _ if o.keys.is_empty() => "",
-                    _ => "unset",
-                }
-                .to_string()
-            });
-            let range = o.range.map(|r| r.0.to_string()).unwrap_or_default();
-            t.push_str(&format!(
-                "| {flag} | {keys} | {} | {} | {} |\n",
-                cell(&default),
-                cell(&range),
-                cell(o.help.trim())
-            ));
-        }
-    }
-    t.push_str(
-        "\n## `octmesh check`\n\nDiagnoses a surface; it reads no case file.\n\n\
-         | Option | Description |\n|---|---|\n",
-    );
-    let check = super::cli::command();
-    let check = check.find_subcommand("check").into_iter();
-    for a in check.flat_map(|c| c.get_arguments()) {
-        let value = a.get_value_names().map(|v| v.join(" "));
-        let flag = match (a.get_long(), value) {
-            (Some(l), Some(v)) if a.get_action().takes_values() => format!("`--{l} {v}`"),
-            (Some(l), _) => format!("`--{l}`"),
-            (None, v) => format!("`{}`", v.unwrap_or_default()),
-        };
-        let help = a.get_help().map(|h| h.to_string()).unwrap_or_default();
-        t.push_str(&format!("| {flag} | {} |\n", cell(&help)));
-    }
-    t
-}
-
-// Value parsers: each names what it expects; clap puts the option's name
-// in front.
-
-/// A path: any text.
-fn path(s: &str) -> std::result::Result<String, String> {
-    Ok(s.to_string())
-}
-
-/// `OLD=NEW`.
-fn parse_rename(s: &str) -> std::result::Result<(String, String), String> {
-    match s.split_once('=') {
-        Some((a, b)) if !a.is_empty() => Ok((a.to_string(), b.to_string())),
-        _ => Err(format!("expects OLD=NEW, got '{s}'")),
-    }
-}
-
-fn parse_level(s: &str) -> std::result::Result<u8, String> {
-    let l: u32 = s
-        .parse()
-        .map_err(|_| format!("expects an integer, got '{s}'"))?;
-    // Out-of-range levels are reported by validation, with the maximum.
-    Ok(l.min(u8::MAX as u32) as u8)
-}
-
-/// Distance bands as one option value (clap reads a bare `Vec` as several
-/// values).
-#[derive(Clone, Debug)]
-pub struct Bands(Vec<(f64, u8)>);
-
-/// `D1:L1,D2:L2,...`.
-fn parse_bands(s: &str) -> std::result::Result<Bands, String> {
-    let bad = || format!("expects D1:L1,D2:L2,... (distance:level pairs), got '{s}'");
-    s.split(',')
-        .map(|band| {
-            let (d, l) = band.split_once(':').ok_or_else(bad)?;
-            Ok((
-                parse_finite(d).map_err(|_| bad())?,
-                parse_level(l).map_err(|_| bad())?,
-            ))
-        })
-        .collect::<std::result::Result<_, String>>()
-        .map(Bands)
-}
-
-/// Distance bands with sizes, as one option value.
-#[derive(Clone, Debug)]
-pub struct SizeBands(Vec<(f64, f64)>);
-
-/// `D1:S1,D2:S2,...`.
-fn parse_size_bands(s: &str) -> std::result::Result<SizeBands, String> {
-    let bad = || format!("expects D1:S1,D2:S2,... (distance:size pairs), got '{s}'");
-    s.split(',')
-        .map(|band| {
-            let (d, c) = band.split_once(':').ok_or_else(bad)?;
-            Ok((
-                parse_finite(d).map_err(|_| bad())?,
-                parse_finite(c).map_err(|_| bad())?,
-            ))
-        })
-        .collect::<std::result::Result<_, String>>()
-        .map(SizeBands)
-}
-
-/// `S` or `S:FINE`.
-fn parse_size_range(s: &str) -> std::result::Result<(f64, Option<f64>), String> {
-    match s.split_once(':') {
-        None => Ok((parse_finite(s)?, None)),
-        Some((a, b)) => Ok((parse_finite(a)?, Some(parse_finite(b)?))),
-    }
-}
-
-/// `NAME=MIN[:MAX]`.
-fn parse_part_levels(s: &str) -> std::result::Result<(String, (u8, Option<u8>)), String> {
-    match s.split_once('=') {
-        Some((name, r)) if !name.is_empty() => Ok((name.to_string(), parse_level_range(r)?)),
-        _ => Err(format!("expects NAME=MIN[:MAX], got '{s}'")),
-    }
-}
-
-/// `L` or `MIN:MAX`.
-fn parse_level_range(s: &str) -> std::result::Result<(u8, Option<u8>), String> {
-    match s.split_once(':') {
-        None => Ok((parse_level(s)?, None)),
-        Some((a, b)) => Ok((parse_level(a)?, Some(parse_level(b)?))),
-    }
-}
-
-fn parse_count(s: &str) -> std::result::Result<u64, String> {
-    s.parse()
-        .map_err(|_| format!("expects a non-negative integer, got '{s}'"))
-}
-
-fn parse_u32(s: &str) -> std::result::Result<u32, String> {
-    s.parse()
-        .map_err(|_| format!("expects a non-negative integer, got '{s}'"))
-}
-
-/// `NX,NY,NZ`: three positive counts.
-fn parse_roots(s: &str) -> std::result::Result<[u32; 3], String> {
-    let bad = || format!("expects three comma-separated positive integers NX,NY,NZ, got '{s}'");
-    let v: Vec<u32> = s
-        .split(',')
-        .map(|t| t.trim().parse::<u32>().ok().filter(|&n| n > 0))
-        .collect::<Option<_>>()
-        .ok_or_else(bad)?;
-    v.try_into().map_err(|_| bad())
-}
-
-fn parse_finite(s: &str) -> std::result::Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() => Ok(x),
-        _ => Err(format!("expects a number, got '{s}'")),
-    }
-}
-
-/// `N` finite comma-separated numbers.
-fn parse_numbers<const N: usize>(s: &str) -> std::result::Result<[f64; N], String> {
-    let bad = || format!("expects {N} comma-separated numbers, got '{s}'");
-    let v: Vec<f64> = s
-        .split(',')
-        .map(parse_finite)
-        .collect::<std::result::Result<_, _>>()
-        .map_err(|_| bad())?;
-    v.try_into().map_err(|_| bad())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn snap_options_are_checked_against_the_declared_ranges() {
+        use crate::mesh::snap::SnapOptions;
+        assert!(check_snap(&SnapOptions::default()).is_ok());
+        for bad in [
+            SnapOptions {
+                feature_angle_deg: 200.0,
+                ..SnapOptions::default()
+            },
+            SnapOptions {
+                feature_angle_deg: f64::NAN,
+                ..SnapOptions::default()
+            },
+            SnapOptions {
+                min_jacobian: 0.0,
+                ..SnapOptions::default()
+            },
+            SnapOptions {
+                iterations: 1001,
+                ..SnapOptions::default()
+            },
+        ] {
+            assert!(check_snap(&bad).is_err(), "{bad:?}");
+        }
+    }
 
     #[test]
     fn every_key_is_a_field_and_every_field_a_key() {

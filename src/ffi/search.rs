@@ -4,7 +4,8 @@
 use super::handle::octmesh_t;
 use super::{octmesh_gloidx_t, octmesh_locidx_t, octmesh_status_t, with_ref};
 use crate::error::{Error, ErrorKind, Result};
-use crate::octree::search::{locate, locate_elements, Location};
+use crate::mesh::locate_elements;
+use crate::octree::search::{locate, Location};
 
 /// The points of a call and its two output arrays.
 type Arrays<'a> = (Vec<[f64; 3]>, &'a mut [i32], &'a mut [octmesh_gloidx_t]);
@@ -127,13 +128,7 @@ pub extern "C" fn octmesh_mesh_locate_points(
         let (Some(tree), Some(mesh)) = (h.session.tree(), h.session.mesh()) else {
             unreachable!("a mesh implies its octree");
         };
-        let found = locate_elements(
-            tree,
-            mesh.domain(),
-            mesh.elements(),
-            mesh.first_element(),
-            &pts,
-        );
+        let found = locate_elements(tree, mesh, &pts);
         write(&found, r, e);
         Ok(())
     })

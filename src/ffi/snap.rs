@@ -88,7 +88,7 @@ pub extern "C" fn octmesh_mesh_snap(
                 min_jacobian,
             })
         });
-        let opts = h.agree(opts.and_then(|o| o.check().map(|_| o)))?;
+        let opts = h.agree(opts)?;
         h.session.snap(&opts).map(|_| ())
     })
 }

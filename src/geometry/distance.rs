@@ -8,24 +8,8 @@
 //! to each of the 3 triangle edges; and zero when they overlap.
 
 use super::intersect::triangle_box_overlap;
+use super::vector::{add_scaled, dist2, dot, sub};
 use super::{fmax, Triangle};
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn add_scaled(a: [f64; 3], d: [f64; 3], t: f64) -> [f64; 3] {
-    [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]]
-}
-
-fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let d = sub(a, b);
-    dot(d, d)
-}
 
 /// Squared distance from `p` to the box `lo..hi`.
 pub fn point_box2(p: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> f64 {

@@ -31,7 +31,8 @@
 //! exact and the result is the exact answer for closed sets. Inputs must be
 //! finite.
 
-use super::{cross, dot, fmax, sub, Triangle};
+use super::vector::{cross, dot, sub};
+use super::{fmax, Triangle};
 
 /// True if the closed triangle and the closed box `[box_min, box_max]` share
 /// at least one point (see the module documentation for the touching rule).

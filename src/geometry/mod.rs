@@ -7,13 +7,17 @@
 //! that were read from a file and not transformed.
 
 pub mod bvh;
+pub mod cells;
 pub mod diagnostics;
 pub mod distance;
+pub(crate) mod hash;
 pub mod intersect;
+pub mod names;
 pub mod parts;
 pub mod predicates;
 pub mod shapes;
 pub mod stl;
+pub(crate) mod vector;
 pub mod winding;
 
 use std::path::Path;
@@ -21,7 +25,9 @@ use std::path::Path;
 use crate::error::{Error, ErrorKind, Result};
 
 pub use bvh::Bvh;
+
 pub use intersect::triangle_box_overlap;
+use vector::{cross, dot, norm, sub};
 
 /// The larger of two numbers that are not NaN, as one instruction
 /// (`f64::max` also orders NaNs, which costs a compare and a blend in
@@ -43,30 +49,6 @@ pub(crate) fn fmin(a: f64, b: f64) -> f64 {
     } else {
         b
     }
-}
-
-#[inline]
-pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-#[inline]
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-#[inline]
-pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-#[inline]
-pub(crate) fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// A closed axis-aligned box `[min, max]`.
@@ -213,7 +195,7 @@ pub struct Surface {
 }
 
 /// The named parts of a surface: the `solid` blocks of an ASCII STL file.
-/// Each becomes a boundary patch ([`crate::mesh::patches`]).
+/// Each becomes a boundary patch ([`names`]).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Parts {
     /// Part names in order of first appearance (`solid` blocks with the
@@ -404,9 +386,7 @@ pub fn load_surfaces(specs: &[String]) -> Result<Surface> {
         let own = s.parts();
         let first = parts.names.len() as u16;
         if own.names.is_empty() {
-            parts
-                .names
-                .push(crate::mesh::patches::surface_patch_name(spec));
+            parts.names.push(names::surface_patch_name(spec));
         } else {
             parts.names.extend(own.names.iter().cloned());
         }

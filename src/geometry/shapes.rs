@@ -11,7 +11,8 @@
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
-use super::{cross, dot, norm, sub, Surface, Triangle};
+use super::vector::{cross, dot, norm, sub};
+use super::{Surface, Triangle};
 
 /// Exact volume of a ball, `4/3 pi r^3`.
 pub fn sphere_analytic_volume(radius: f64) -> f64 {

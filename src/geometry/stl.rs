@@ -108,7 +108,7 @@ fn encode_binary(tris: &[Triangle], header: &[u8]) -> Vec<u8> {
     out.extend_from_slice(&(tris.len() as u32).to_le_bytes());
     for t in tris {
         let n = t.normal();
-        let len = super::norm(n);
+        let len = super::vector::norm(n);
         let unit = if len > 0.0 && len.is_finite() {
             n.map(|c| c / len)
         } else {

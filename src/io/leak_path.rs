@@ -5,7 +5,25 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::leak::LeakPath;
+use crate::octree::domain::Domain;
 use crate::octree::octant::Octant;
+
+impl LeakPath {
+    /// Writes the path for ParaView: for `.vtk`, a legacy VTK unstructured
+    /// grid holding the polyline through the centres as one line cell per
+    /// step, with point data `size`, `level` and `step`; for any other
+    /// extension a CSV table `step,x,y,z,size,level`. User units. Not
+    /// collective.
+    pub fn write(&self, path: &Path, domain: &Domain) -> Result<()> {
+        write_leak_path(
+            path,
+            &self.centres(domain),
+            &self.sizes(domain),
+            &self.octants,
+        )
+    }
+}
 
 /// Writes a path of octants: `c` their centres and `s` their sizes (user
 /// units). With the extension `.vtk` a legacy VTK polyline with point data

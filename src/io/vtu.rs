@@ -38,6 +38,7 @@ use std::path::{Path, PathBuf};
 
 use super::direct::DirectWriter;
 use crate::error::{Error, Result};
+use crate::mesh::quality::WorstElement;
 use crate::parallel::comm::{agree, Comm};
 
 /// One rank's part of a hexahedral mesh, ready to write.
@@ -597,6 +598,48 @@ pub fn write_mesh(
         point_fields: fields,
     };
     write_parallel(comm, pvtu, &piece)
+}
+
+/// Writes `worst` ([`crate::mesh::Mesh::worst_elements`]) as one VTU file for ParaView:
+/// each element with its own 8 points (none shared), cell data `level`,
+/// `class` (and `rank`, 0: the writer's), point data `scaled_jacobian`
+/// (the element's), `corner_scaled_jacobian` (the corner's), `element`
+/// (global number) and `owner_rank`; `global_id` is -1. Not collective.
+pub fn write_worst_vtu(path: &Path, worst: &[WorstElement]) -> Result<()> {
+    let points: Vec<[f64; 3]> = worst.iter().flat_map(|w| w.corners).collect();
+    let cells: Vec<[u32; 8]> = (0..worst.len() as u32)
+        .map(|k| std::array::from_fn(|v| 8 * k + v as u32))
+        .collect();
+    let level: Vec<u8> = worst.iter().map(|w| w.level).collect();
+    let class: Vec<u8> = worst.iter().map(|w| w.class).collect();
+    let per_point = |f: &dyn Fn(&WorstElement) -> f64| -> Vec<f64> {
+        worst.iter().flat_map(|w| [f(w); 8]).collect()
+    };
+    let value = per_point(&|w| w.scaled_jacobian);
+    let element = per_point(&|w| w.global as f64);
+    let owner = per_point(&|w| w.rank as f64);
+    let corner: Vec<f64> = worst.iter().flat_map(|w| w.corner_values).collect();
+    let none = vec![-1i64; points.len()];
+    let independent = vec![0u8; points.len()];
+    let fields: [(&str, &[f64]); 4] = [
+        ("scaled_jacobian", &value),
+        ("corner_scaled_jacobian", &corner),
+        ("element", &element),
+        ("owner_rank", &owner),
+    ];
+    write_vtu(
+        path,
+        &VtuPiece {
+            points: &points,
+            cells: &cells,
+            cell_level: &level,
+            cell_class: &class,
+            rank: 0,
+            point_global_id: &none,
+            point_hanging: &independent,
+            point_fields: &fields,
+        },
+    )
 }
 
 #[cfg(test)]

@@ -89,12 +89,11 @@
 //! independent of the order of the sum. The figures are therefore the same
 //! bits on any number of ranks.
 
-use std::path::Path;
-
 use serde::Serialize;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::io::vtu::{write_vtu, VtuPiece};
+use crate::geometry::cells::TINY;
+use crate::geometry::vector::{dot, norm, scale, sub};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
     corner_at, edge_points, face_polygon, point_key, PointFilter, PointIndex,
@@ -102,72 +101,12 @@ use crate::mesh::points::{
 use crate::mesh::{Mesh, VTK_TO_MORTON};
 use crate::parallel::comm::{agree, Comm};
 
-/// For each corner (VTK order), its three neighbours along the edges, in a
-/// right-handed order on the undistorted element (see the module picture).
-pub const CORNER_EDGES: [[usize; 3]; 8] = [
-    [1, 3, 4],
-    [2, 0, 5],
-    [3, 1, 6],
-    [0, 2, 7],
-    [7, 5, 0],
-    [4, 6, 1],
-    [5, 7, 2],
-    [6, 4, 3],
-];
+pub use crate::geometry::cells::{
+    cell_centre, corner_scaled_jacobians, polygon_area_centre, scaled_jacobian, CORNER_EDGES,
+};
 
 /// Bins of the scaled-Jacobian histogram (width 0.1 over [-1, 1]).
 pub const HISTOGRAM_BINS: usize = 20;
-
-/// Keeps a division by a zero projection finite, as OpenFOAM's `ROOTVSMALL`
-/// does.
-const TINY: f64 = 1e-150;
-
-/// OpenFOAM's `VSMALL`: a cell with less volume has its estimate as the
-/// centre.
-const VERY_SMALL: f64 = 1e-300;
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn det(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
-    a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
-}
-
-/// The scaled Jacobian at each corner of a hexahedron whose corners `p` are
-/// in VTK order (see the module documentation).
-pub fn corner_scaled_jacobians(p: &[[f64; 3]; 8]) -> [f64; 8] {
-    std::array::from_fn(|k| {
-        let e = CORNER_EDGES[k].map(|j| sub(p[j], p[k]));
-        let product = norm(e[0]) * norm(e[1]) * norm(e[2]);
-        if product == 0.0 {
-            0.0
-        } else {
-            det(e[0], e[1], e[2]) / product
-        }
-    })
-}
-
-/// The scaled Jacobian of a hexahedron with corners `p` in VTK order: the
-/// minimum over its corners, in [-1, 1].
-pub fn scaled_jacobian(p: &[[f64; 3]; 8]) -> f64 {
-    corner_scaled_jacobians(p)
-        .into_iter()
-        .fold(f64::INFINITY, f64::min)
-}
 
 /// The histogram bin of a scaled Jacobian (see the module documentation).
 pub fn histogram_bin(j: f64) -> usize {
@@ -230,75 +169,6 @@ fn skew_ratio(miss: [f64; 3], centre: [f64; 3], points: &[[f64; 3]], floor: f64)
         .map(|&p| dot(dir, sub(p, centre)).abs())
         .fold(floor + TINY, f64::max);
     m / extent
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-/// The area vector and centre of the polygon `p` (points in order, area
-/// vector by the right-hand rule), as OpenFOAM v1912's `primitiveMesh`
-/// computes them (see the module documentation): a triangle directly;
-/// otherwise the triangles from the mean of the points to each edge, the
-/// area vector half the sum of their cross products, the centre the mean
-/// of their centroids weighted by their areas. A polygon of (almost) no
-/// area has its mean as the centre and a zero area vector.
-pub fn polygon_area_centre(p: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
-    if p.len() == 3 {
-        let s = scale(cross(sub(p[1], p[0]), sub(p[2], p[0])), 0.5);
-        let c = scale(add(add(p[0], p[1]), p[2]), 1.0 / 3.0);
-        return (s, c);
-    }
-    let m = scale(
-        p.iter().fold([0.0; 3], |a, &q| add(a, q)),
-        1.0 / p.len() as f64,
-    );
-    let (mut sum_n, mut sum_a, mut sum_ac) = ([0.0; 3], 0.0, [0.0; 3]);
-    for (k, &a) in p.iter().enumerate() {
-        let b = p[(k + 1) % p.len()];
-        let n = cross(sub(b, a), sub(m, a));
-        let w = norm(n);
-        sum_n = add(sum_n, n);
-        sum_a += w;
-        sum_ac = add(sum_ac, scale(add(add(a, b), m), w));
-    }
-    if sum_a < TINY {
-        return ([0.0; 3], m);
-    }
-    (scale(sum_n, 0.5), scale(sum_ac, 1.0 / (3.0 * sum_a)))
-}
-
-/// The centre of a cell from its faces, each `(centre, area vector out of
-/// the cell)`, as OpenFOAM's `primitiveMesh` computes it: the pyramids
-/// from the mean of the face centres to each face, their centroids
-/// weighted by their volumes (the mean itself when the volume is
-/// (almost) zero).
-pub fn cell_centre(faces: &[([f64; 3], [f64; 3])]) -> [f64; 3] {
-    let est = scale(
-        faces.iter().fold([0.0; 3], |a, f| add(a, f.0)),
-        1.0 / faces.len().max(1) as f64,
-    );
-    let (mut volume, mut moment) = (0.0, [0.0; 3]);
-    for &(c, s) in faces {
-        // Three times the pyramid's volume, and its centroid.
-        let v = dot(s, sub(c, est));
-        let pc = add(scale(c, 0.75), scale(est, 0.25));
-        volume += v;
-        moment = add(moment, scale(pc, v));
-    }
-    if volume.abs() > VERY_SMALL {
-        scale(moment, 1.0 / volume)
-    } else {
-        est
-    }
 }
 
 /// What one face of a snapped mesh looks like to the figures: its polygon
@@ -815,155 +685,14 @@ impl Mesh {
         all
     }
 }
-
-/// Writes `worst` ([`Mesh::worst_elements`]) as one VTU file for ParaView:
-/// each element with its own 8 points (none shared), cell data `level`,
-/// `class` (and `rank`, 0: the writer's), point data `scaled_jacobian`
-/// (the element's), `corner_scaled_jacobian` (the corner's), `element`
-/// (global number) and `owner_rank`; `global_id` is -1. Not collective.
-pub fn write_worst_vtu(path: &Path, worst: &[WorstElement]) -> Result<()> {
-    let points: Vec<[f64; 3]> = worst.iter().flat_map(|w| w.corners).collect();
-    let cells: Vec<[u32; 8]> = (0..worst.len() as u32)
-        .map(|k| std::array::from_fn(|v| 8 * k + v as u32))
-        .collect();
-    let level: Vec<u8> = worst.iter().map(|w| w.level).collect();
-    let class: Vec<u8> = worst.iter().map(|w| w.class).collect();
-    let per_point = |f: &dyn Fn(&WorstElement) -> f64| -> Vec<f64> {
-        worst.iter().flat_map(|w| [f(w); 8]).collect()
-    };
-    let value = per_point(&|w| w.scaled_jacobian);
-    let element = per_point(&|w| w.global as f64);
-    let owner = per_point(&|w| w.rank as f64);
-    let corner: Vec<f64> = worst.iter().flat_map(|w| w.corner_values).collect();
-    let none = vec![-1i64; points.len()];
-    let independent = vec![0u8; points.len()];
-    let fields: [(&str, &[f64]); 4] = [
-        ("scaled_jacobian", &value),
-        ("corner_scaled_jacobian", &corner),
-        ("element", &element),
-        ("owner_rank", &owner),
-    ];
-    write_vtu(
-        path,
-        &VtuPiece {
-            points: &points,
-            cells: &cells,
-            cell_level: &level,
-            cell_class: &class,
-            rank: 0,
-            point_global_id: &none,
-            point_hanging: &independent,
-            point_fields: &fields,
-        },
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::parallel::comm::SerialComm;
     use crate::testutil::sphere_mesh;
 
-    /// The unit cube's corners in VTK order, mapped by `f`.
-    fn cube(f: impl Fn([f64; 3]) -> [f64; 3]) -> [[f64; 3]; 8] {
-        const UNIT: [[f64; 3]; 8] = [
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [1.0, 0.0, 1.0],
-            [1.0, 1.0, 1.0],
-            [0.0, 1.0, 1.0],
-        ];
-        UNIT.map(f)
-    }
-
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-14
-    }
-
-    #[test]
-    fn the_corner_table_follows_the_edges_right_handed() {
-        let c = cube(|p| p);
-        for (k, e) in CORNER_EDGES.iter().enumerate() {
-            // Each neighbour differs from the corner in exactly one
-            // coordinate, each along a different axis.
-            let mut axes = [false; 3];
-            for &j in e {
-                let d = sub(c[j], c[k]);
-                let along: Vec<usize> = (0..3).filter(|&a| d[a] != 0.0).collect();
-                assert_eq!(along.len(), 1, "corner {k} -> {j}");
-                axes[along[0]] = true;
-            }
-            assert_eq!(axes, [true; 3], "corner {k}");
-        }
-        assert_eq!(corner_scaled_jacobians(&c), [1.0; 8]);
-    }
-
-    #[test]
-    fn distorted_hexahedra_have_their_closed_form_values() {
-        // A box with sides 2, 3, 0.5: right angles everywhere.
-        let b = cube(|p| [2.0 * p[0] + 1.0, 3.0 * p[1], 0.5 * p[2] - 4.0]);
-        assert!(close(scaled_jacobian(&b), 1.0));
-        // Sheared, x += s z: the edges x, y, (s, 0, 1) at every corner;
-        // det 1 over lengths 1, 1, sqrt(1 + s^2).
-        for s in [0.5, 1.0, 3.0] {
-            let h = cube(|p| [p[0] + s * p[2], p[1], p[2]]);
-            let want = 1.0 / (1.0f64 + s * s).sqrt();
-            for j in corner_scaled_jacobians(&h) {
-                assert!(close(j, want), "shear {s}: {j} vs {want}");
-            }
-        }
-        // An affine parallelepiped on a = (1, 0, 0), b = (1, 1, 0),
-        // c = (0, 1, 1): det 1, lengths 1, sqrt 2, sqrt 2, so 1/2 at every
-        // corner.
-        let (a, bb, c) = ([1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 1.0]);
-        let h = cube(|p| [0, 1, 2].map(|k| p[0] * a[k] + p[1] * bb[k] + p[2] * c[k]));
-        for j in corner_scaled_jacobians(&h) {
-            assert!(close(j, 0.5), "{j}");
-        }
-        // Mirrored (z -> -z): every corner inverted, -1.
-        let m = cube(|p| [p[0], p[1], -p[2]]);
-        assert_eq!(corner_scaled_jacobians(&m), [-1.0; 8]);
-        // Flattened (top on the bottom): coplanar edges, 0 everywhere.
-        let f = cube(|p| [p[0], p[1], 0.0]);
-        assert_eq!(corner_scaled_jacobians(&f), [0.0; 8]);
-        // The top face collapsed to the point (0.5, 0.5, 1) (a pyramid):
-        // the top corners' edges along the top have length zero, so 0 there;
-        // a bottom corner, e.g. 0, has edges x, y, (0.5, 0.5, 1): det 1 over
-        // 1 * 1 * sqrt(1.5).
-        let py = cube(|p| if p[2] == 1.0 { [0.5, 0.5, 1.0] } else { p });
-        let j = corner_scaled_jacobians(&py);
-        assert_eq!(&j[4..], &[0.0; 4]);
-        for v in &j[..4] {
-            assert!(close(*v, 1.0 / 1.5f64.sqrt()), "{v}");
-        }
-        assert_eq!(scaled_jacobian(&py), 0.0);
-        // Corner 6 pulled from (1, 1, 1) to (2, 2, 2). At 6 the edges to 5,
-        // 7, 2 are (-1, -2, -1), (-2, -1, -1), (-1, -1, -2): det 4, lengths
-        // sqrt 6 each, so 4 / (6 sqrt 6). At 5 (and by symmetry 2 and 7):
-        // edges to 4, 6, 1 are (-1, 0, 0), (1, 2, 1), (0, 0, -1): det 2 over
-        // sqrt 6. The rest keep their right angles.
-        let mut pulled = cube(|p| p);
-        pulled[6] = [2.0, 2.0, 2.0];
-        let j = corner_scaled_jacobians(&pulled);
-        let at6 = 4.0 / (6.0 * 6f64.sqrt());
-        let at5 = 2.0 / 6f64.sqrt();
-        let want = [1.0, 1.0, at5, 1.0, 1.0, at5, at6, at5];
-        for k in 0..8 {
-            assert!(close(j[k], want[k]), "corner {k}: {} vs {}", j[k], want[k]);
-        }
-        assert!(close(scaled_jacobian(&pulled), at6));
-        // Corner 0 pushed through the element to (1.5, 0.5, 0.5): its
-        // edges (-0.5, -0.5, -0.5), (-1.5, 0.5, -0.5), (-1.5, -0.5, 0.5) to
-        // 1, 3, 4 give det -1.5 over (sqrt 0.75 * sqrt 2.75 * sqrt 2.75).
-        let mut through = cube(|p| p);
-        through[0] = [1.5, 0.5, 0.5];
-        let j0 = corner_scaled_jacobians(&through)[0];
-        let want = -1.5 / (0.75f64.sqrt() * 2.75);
-        assert!(close(j0, want), "{j0} vs {want}");
-        assert!(scaled_jacobian(&through) < 0.0);
     }
 
     #[test]
@@ -1022,95 +751,6 @@ mod tests {
             boundary_face_skewness([0.0, 0.0, 1.0], [0.0, 0.0, 4.0], &whole, p),
             0.0
         );
-    }
-
-    #[test]
-    fn polygons_and_cells_as_openfoam_measures_them() {
-        // A planar quadrilateral, tilted: its area vector is the exact one
-        // (1 x 2 rectangle in the plane z = x), its centre the centroid,
-        // with or without a point in the middle of an edge.
-        let q = [
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 1.0],
-            [1.0, 2.0, 1.0],
-            [0.0, 2.0, 0.0],
-        ];
-        let (s, c) = polygon_area_centre(&q);
-        let want_s = [-2.0, 0.0, 2.0];
-        for a in 0..3 {
-            assert!(close(s[a], want_s[a]), "{s:?}");
-            assert!(close(c[a], [0.5, 1.0, 0.5][a]), "{c:?}");
-        }
-        let five = [q[0], q[1], [1.0, 1.0, 1.0], q[2], q[3]];
-        let (s5, c5) = polygon_area_centre(&five);
-        for a in 0..3 {
-            assert!(
-                close(s5[a], want_s[a]) && close(c5[a], c[a]),
-                "{s5:?} {c5:?}"
-            );
-        }
-        // A trapezoid's centroid is not its corners' mean.
-        let trapezoid = [
-            [0.0, 0.0, 0.0],
-            [4.0, 0.0, 0.0],
-            [3.0, 1.0, 0.0],
-            [1.0, 1.0, 0.0],
-        ];
-        let (st, ct) = polygon_area_centre(&trapezoid);
-        assert!(
-            close(st[2], 3.0) && close(ct[0], 2.0) && close(ct[1], 4.0 / 9.0),
-            "{ct:?}"
-        );
-        // A triangle, and a polygon of no area.
-        let (s3, c3) = polygon_area_centre(&[[0.0; 3], [3.0, 0.0, 0.0], [0.0, 3.0, 0.0]]);
-        assert!(close(s3[2], 4.5) && close(c3[0], 1.0) && close(c3[1], 1.0));
-        let flat = [[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
-        assert_eq!(polygon_area_centre(&flat), ([0.0; 3], [1.0, 0.0, 0.0]));
-        // A sheared box (a parallelepiped: planar faces), its faces with
-        // outward area vectors: the centre is its corners' mean, however
-        // many faces a side is split into.
-        let p = cube(|[x, y, z]| [x + 0.5 * z, y + 0.25 * x, z]);
-        let sides: [[usize; 4]; 6] = [
-            [0, 3, 2, 1],
-            [4, 5, 6, 7],
-            [0, 1, 5, 4],
-            [2, 3, 7, 6],
-            [0, 4, 7, 3],
-            [1, 2, 6, 5],
-        ];
-        let faces: Vec<([f64; 3], [f64; 3])> = sides
-            .iter()
-            .map(|f| {
-                let (s, c) = polygon_area_centre(&f.map(|k| p[k]));
-                (c, s)
-            })
-            .collect();
-        let mean = p
-            .iter()
-            .fold([0.0; 3], |a, x| [0, 1, 2].map(|k| a[k] + x[k] / 8.0));
-        let centre = cell_centre(&faces);
-        for a in 0..3 {
-            assert!(close(centre[a], mean[a]), "{centre:?} {mean:?}");
-        }
-        // The bottom split into its four quarters.
-        let mid = |a: [f64; 3], b: [f64; 3]| [0, 1, 2].map(|k| 0.5 * (a[k] + b[k]));
-        let (b0, b1, b2, b3) = (p[0], p[3], p[2], p[1]);
-        let m = mid(b0, b2);
-        let quarters = [
-            [b0, mid(b0, b1), m, mid(b3, b0)],
-            [mid(b0, b1), b1, mid(b1, b2), m],
-            [m, mid(b1, b2), b2, mid(b2, b3)],
-            [mid(b3, b0), m, mid(b2, b3), b3],
-        ];
-        let mut split: Vec<([f64; 3], [f64; 3])> = faces[1..].to_vec();
-        for q in &quarters {
-            let (s, c) = polygon_area_centre(q);
-            split.push((c, s));
-        }
-        let centre = cell_centre(&split);
-        for a in 0..3 {
-            assert!(close(centre[a], mean[a]), "{centre:?} {mean:?}");
-        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 //! A point maps to one finest lattice cell ([`point_cell`]); the rank whose
 //! cell range holds that cell ([`LinearOctree::first_cells`], p4est's
 //! `global_first_position`) owns the point, found without communication
-//! ([`owner_ranks`]). [`locate`] and [`locate_elements`] are collective:
+//! ([`owner_ranks`]). [`locate`] and `mesh::locate_elements` are collective:
 //! each rank sends its points' cells to their owners in one all-to-all,
 //! the owners look them up among their leaves, and a second all-to-all
 //! returns the answers, in the caller's point order. This is the routing
@@ -46,8 +46,8 @@ pub enum Location {
         leaf: Octant,
     },
     /// Inside the domain, in a leaf of rank `rank` that is not an element
-    /// of the mesh (only from [`locate_elements`]: for example inside the
-    /// body of a fluid mesh).
+    /// of the mesh (only from [`crate::mesh::locate_elements`]: for example
+    /// inside the body of a fluid mesh).
     NoElement {
         /// The rank holding the leaf.
         rank: u32,
@@ -123,25 +123,6 @@ pub fn locate(tree: &LinearOctree, domain: &Domain, points: &[[f64; 3]]) -> Vec<
     route(tree, domain, points, tree.global_offsets(), |i, _| Some(i))
 }
 
-/// The element containing each point, in `points`' order, where the
-/// elements are a Morton-sorted subset of the local leaves (a mesh's
-/// elements, [`Mesh::elements`](crate::mesh::Mesh::elements)) and
-/// `first_element` the global index of this rank's first:
-/// [`Location::NoElement`] for a point in a leaf that is not an element.
-/// Collective: every rank calls it with its own points.
-pub fn locate_elements(
-    tree: &LinearOctree,
-    domain: &Domain,
-    elements: &[Octant],
-    first_element: u64,
-    points: &[[f64; 3]],
-) -> Vec<Location> {
-    let firsts = tree.comm().allgather_u64(first_element);
-    route(tree, domain, points, &firsts, |_, leaf| {
-        elements.binary_search(&leaf).ok()
-    })
-}
-
 /// No cell: the point is outside.
 const OUTSIDE: u64 = u64::MAX;
 
@@ -150,7 +131,7 @@ const OUTSIDE: u64 = u64::MAX;
 /// the leaf or element (`None`: no element); `bases[r]` is the global
 /// index of rank `r`'s first. Returns the answers in the caller's order.
 /// Collective.
-fn route(
+pub(crate) fn route(
     tree: &LinearOctree,
     domain: &Domain,
     points: &[[f64; 3]],

@@ -81,6 +81,7 @@ impl Session {
     /// mesh. Phase `snap`.
     pub fn snap(&mut self, opts: &SnapOptions) -> Result<SnapReport> {
         self.mesh_or_state()?;
+        agree(&*self.comm, crate::config::options::check_snap(opts))?;
         let surface = self.surface.as_ref().map(|_| ()).ok_or_else(|| {
             Error::new(
                 ErrorKind::State,

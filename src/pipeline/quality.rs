@@ -2,7 +2,8 @@
 //! a run asks for it (`--stats`, `--quality-out`).
 
 use crate::error::Result;
-use crate::mesh::quality::{write_worst_vtu, Quality};
+use crate::io::vtu::write_worst_vtu;
+use crate::mesh::quality::Quality;
 use crate::parallel::comm::agree;
 
 use super::*;

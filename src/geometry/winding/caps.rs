@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::geometry::diagnostics::weld;
+use crate::geometry::vector::{add, scale};
 use crate::geometry::Triangle;
 
 /// Caps closing the boundary of `tris` (taken as oriented): for every loop
@@ -20,8 +21,8 @@ pub fn close_boundary(tris: &[Triangle]) -> Vec<Triangle> {
     let mut caps = Vec::new();
     for lp in boundary_loops(&ids, &vec![false; tris.len()]) {
         let z = scale(
-            1.0 / lp.len() as f64,
             lp.iter().fold([0.0; 3], |s, &u| add(s, pos[u as usize])),
+            1.0 / lp.len() as f64,
         );
         for i in 0..lp.len() {
             let (u, v) = (pos[lp[i] as usize], pos[lp[(i + 1) % lp.len()] as usize]);

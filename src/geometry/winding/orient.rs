@@ -3,9 +3,9 @@
 
 use std::collections::HashMap;
 
-use super::*;
 use crate::geometry::diagnostics::weld;
-use crate::geometry::{cross, dot, norm, sub, Triangle};
+use crate::geometry::vector::{add, cross, dot, norm, scale, sub};
+use crate::geometry::Triangle;
 
 /// How `orient` oriented a soup.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -124,14 +124,14 @@ pub(crate) fn orient_welded(tris: &[Triangle], ids: &[[u64; 3]]) -> Orientation 
             let a = t.area();
             let w = &mut weight[comp[i] as usize];
             w.0 += a;
-            w.1 = add(w.1, scale(a, t.centroid()));
+            w.1 = add(w.1, scale(t.centroid(), a));
         }
     }
     let centroid: Vec<[f64; 3]> = weight
         .iter()
         .map(|(a, c)| {
             if *a > 0.0 {
-                scale(1.0 / a, *c)
+                scale(*c, 1.0 / a)
             } else {
                 [0.0; 3]
             }

@@ -1,7 +1,8 @@
 //! Solid angles of triangles and the exact winding number of a soup.
 
 use super::*;
-use crate::geometry::{cross, dot, norm, sub, Triangle};
+use crate::geometry::vector::{add, cross, dot, norm, scale, sub};
+use crate::geometry::Triangle;
 
 /// The terms of Van Oosterom and Strackee's formula for triangle `t` seen
 /// from `p`: numerator `a . (b x c)`, denominator, and `|a||b||c|`.
@@ -64,7 +65,7 @@ pub fn distance_to_triangle(p: [f64; 3], t: &Triangle) -> f64 {
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
         let v = d1 / (d1 - d3);
-        return norm(sub(ap, scale(v, ab)));
+        return norm(sub(ap, scale(ab, v)));
     }
     let cp = sub(p, c);
     let (d5, d6) = (dot(ab, cp), dot(ac, cp));
@@ -74,12 +75,12 @@ pub fn distance_to_triangle(p: [f64; 3], t: &Triangle) -> f64 {
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
         let w = d2 / (d2 - d6);
-        return norm(sub(ap, scale(w, ac)));
+        return norm(sub(ap, scale(ac, w)));
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        return norm(sub(bp, scale(w, sub(c, b))));
+        return norm(sub(bp, scale(sub(c, b), w)));
     }
     let denom = va + vb + vc;
     if denom == 0.0 {
@@ -92,12 +93,12 @@ pub fn distance_to_triangle(p: [f64; 3], t: &Triangle) -> f64 {
             } else {
                 0.0
             };
-            norm(sub(p, add(u, scale(s, e))))
+            norm(sub(p, add(u, scale(e, s))))
         };
         return seg(a, b).min(seg(b, c)).min(seg(c, a));
     }
     let (v, w) = (vb / denom, vc / denom);
-    norm(sub(ap, add(scale(v, ab), scale(w, ac))))
+    norm(sub(ap, add(scale(ab, v), scale(ac, w))))
 }
 
 /// The generalized winding number of `tris` at `p` by direct summation over

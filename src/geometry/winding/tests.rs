@@ -4,8 +4,9 @@ use super::*;
 use crate::geometry::diagnostics::diagnose;
 use crate::geometry::diagnostics::weld;
 use crate::geometry::shapes::{default_sphere, default_torus};
+use crate::geometry::vector::{add, norm, scale, sub};
 use crate::geometry::Surface;
-use crate::geometry::{norm, sub, Triangle};
+use crate::geometry::Triangle;
 use std::f64::consts::PI;
 
 use crate::testutil::Rng;
@@ -221,7 +222,7 @@ fn bounded_evaluation_keeps_its_bound() {
             balls += 1;
             for _ in 0..5 {
                 let d = rng.in_box(-1.0, 1.0);
-                let x = add(p, scale(rho * rng.unit() / norm(d), d));
+                let x = add(p, scale(d, rho * rng.unit() / norm(d)));
                 let w = winding_number(&tris, x);
                 assert!(
                     (v - w).abs() <= e,

@@ -3,7 +3,8 @@
 
 use super::*;
 use crate::geometry::bvh::Bvh;
-use crate::geometry::{dot, norm, sub, Triangle};
+use crate::geometry::vector::{add, dot, norm, scale, sub};
+use crate::geometry::Triangle;
 
 /// Moments of one node of a [`WindingTree`].
 #[derive(Clone, Copy, Debug, Default)]
@@ -37,14 +38,6 @@ pub struct WindingTree {
     ids: Vec<u32>,
     beta: f64,
     order: u8,
-}
-
-pub(crate) fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-
-pub(crate) fn scale(s: f64, a: [f64; 3]) -> [f64; 3] {
-    [s * a[0], s * a[1], s * a[2]]
 }
 
 /// `T += u v^T`.
@@ -101,21 +94,21 @@ impl WindingTree {
                 let mut weighted = [0.0; 3];
                 let mut mean = [0.0; 3];
                 for t in &sorted[f..f + c] {
-                    let nt = scale(0.5, t.normal());
+                    let nt = scale(t.normal(), 0.5);
                     let at = norm(nt);
                     let ct = t.centroid();
                     node.area += at;
                     node.normal = add(node.normal, nt);
-                    weighted = add(weighted, scale(at, ct));
+                    weighted = add(weighted, scale(ct, at));
                     mean = add(mean, ct);
                 }
                 node.center = if node.area > 0.0 {
-                    scale(1.0 / node.area, weighted)
+                    scale(weighted, 1.0 / node.area)
                 } else {
-                    scale(1.0 / c as f64, mean)
+                    scale(mean, 1.0 / c as f64)
                 };
                 for t in &sorted[f..f + c] {
-                    let nt = scale(0.5, t.normal());
+                    let nt = scale(t.normal(), 0.5);
                     let ct = t.centroid();
                     let d = sub(ct, node.center);
                     add_outer(&mut node.tensor, nt, d);
@@ -124,7 +117,7 @@ impl WindingTree {
                     add_outer(&mut second, d, d);
                     for v in t.v {
                         let e = sub(v, ct);
-                        add_outer(&mut second, scale(1.0 / 12.0, e), e);
+                        add_outer(&mut second, scale(e, 1.0 / 12.0), e);
                     }
                     for (plane, &ni) in node.third.iter_mut().zip(&nt) {
                         for (row, srow) in plane.iter_mut().zip(&second) {
@@ -140,11 +133,11 @@ impl WindingTree {
                 node.area = l.area + r.area;
                 node.center = if node.area > 0.0 {
                     scale(
+                        add(scale(l.center, l.area), scale(r.center, r.area)),
                         1.0 / node.area,
-                        add(scale(l.area, l.center), scale(r.area, r.center)),
                     )
                 } else {
-                    scale(0.5, add(l.center, r.center))
+                    scale(add(l.center, r.center), 0.5)
                 };
                 node.normal = add(l.normal, r.normal);
                 for ch in [l, r] {

@@ -1,0 +1,315 @@
+//! OpenFOAM cases: `constant/polyMesh` on one rank, and on P ranks one
+//! `processor<r>/constant/polyMesh` per rank with processor patches, laid
+//! out as `decomposePar` does, so a solver runs on it with `-parallel`
+//! without decomposing.
+//!
+//! # What is written
+//!
+//! Per mesh: `points` (vectorField; in binary its count is padded with
+//! blanks like the label count below, as the positions stream to the file
+//! while the faces are made), `faces` (faceList, or faceCompactList
+//! in binary: offsets, then point labels, whose count is padded with
+//! blanks to a fixed width as it is written after them), `owner`,
+//! `neighbour` (labelList), `boundary` (polyBoundaryMesh). Labels are
+//! 32-bit and scalars 64-bit (`arch "LSB;label=32;scalar=64"`, Debian's
+//! build).
+//!
+//! - Cells are the local elements in Morton order.
+//! - Faces are [`crate::mesh::Faces`] in their order: internal faces
+//!   upper-triangular, then the patches `xmin xmax ymin ymax zmin zmax` and
+//!   the surface (a `wall`), then one `procBoundary<me>to<r>` patch per
+//!   neighbour rank. Points run counter-clockwise seen from the side the
+//!   normal points to (right-hand rule: from owner to neighbour, out of
+//!   the domain on a boundary).
+//! - Every face lists every mesh point on its edges, so a face with a
+//!   hanging point on an edge is a polygon with that point (as OpenFOAM's
+//!   `hexRef8` leaves them). Points are this rank's: its local nodes in
+//!   their order (but the few that are no corner of a face, only a hanging
+//!   node's dependency, whose labels the last nodes take), then the
+//!   corners of halo elements that its faces use and that are no local
+//!   node, in the order the faces first use them.
+//! - Both sides of a processor patch list the shared faces in the same
+//!   order ([`crate::mesh::faces`]), each starting at the same point (the
+//!   lowest in lattice order); the higher rank's then run the other way.
+//!
+//! `system/controlDict`, `fvSchemes`, `fvSolution` (and on P ranks
+//! `decomposeParDict`) are written when absent and never overwritten.
+//!
+//! # Failures
+//!
+//! An existing mesh is replaced only with `overwrite`. Each rank writes its
+//! mesh beside the final place (`polyMesh.octmesh-partial`) and the meshes
+//! are moved in only when every rank has written its own: a failure on one
+//! rank leaves no case looking complete, and every rank reports it.
+
+mod polygons;
+mod polymesh;
+mod system;
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::direct::DirectWriter;
+use crate::error::{Error, ErrorKind, Result};
+use crate::geometry::cells::{corner_coords, VTK_TO_MORTON};
+use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
+use crate::mesh::hanging::{face_diagonal, DepsIndex};
+use crate::mesh::patches::PatchNames;
+use crate::mesh::points::{
+    corner_at, edge_midpoint, halo_corners, point_key, EdgeMidpoints, PointIndex,
+};
+use crate::mesh::Mesh;
+use crate::parallel::comm::{agree, Comm};
+
+use polygons::*;
+use polymesh::*;
+use system::*;
+
+crate::named_enum! {
+    /// Binary or ASCII list data.
+    #[derive(Default)]
+    pub enum FoamFormat: "OpenFOAM format" {
+        /// Raw little-endian lists (OpenFOAM's `format binary`).
+        #[default]
+        Binary = "binary",
+        /// Text.
+        Ascii = "ascii",
+    }
+}
+
+/// How to write a case.
+#[derive(Clone, Debug, Default)]
+pub struct FoamOptions {
+    /// List encoding.
+    pub format: FoamFormat,
+    /// Replace an existing mesh.
+    pub overwrite: bool,
+    /// Patch names.
+    pub patches: PatchNames,
+}
+
+/// Sizes of what one rank wrote.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FoamCounts {
+    /// Points.
+    pub points: u64,
+    /// Faces, all kinds.
+    pub faces: u64,
+    /// Internal faces.
+    pub internal_faces: u64,
+    /// Cells.
+    pub cells: u64,
+}
+
+/// The directory of this rank's mesh.
+fn mesh_dir(case: &Path, rank: usize, size: usize) -> PathBuf {
+    if size == 1 {
+        case.join("constant").join("polyMesh")
+    } else {
+        case.join(format!("processor{rank}"))
+            .join("constant")
+            .join("polyMesh")
+    }
+}
+
+fn partial(dir: &Path) -> PathBuf {
+    dir.with_file_name("polyMesh.octmesh-partial")
+}
+
+fn io_err(what: &Path, e: std::io::Error) -> Error {
+    Error::io(format!("{}: {e}", what.display()))
+}
+
+/// Writes the case `dir` for `mesh`'s `faces` (collective).
+pub fn write_case(
+    comm: &dyn Comm,
+    dir: &Path,
+    mesh: &Mesh,
+    faces: &Faces,
+    opts: &FoamOptions,
+) -> Result<FoamCounts> {
+    let (me, p) = (comm.rank(), comm.size());
+    let target = mesh_dir(dir, me, p);
+    let check = if mesh.counts().elements == 0 {
+        Err(Error::invalid(
+            "the mesh has no elements: there is nothing to write as an OpenFOAM case",
+        ))
+    } else if target.exists() && !opts.overwrite {
+        Err(Error::invalid(format!(
+            "{} exists: pass --overwrite (or set output.overwrite) to replace it",
+            target.display()
+        )))
+    } else {
+        Ok(())
+    };
+    agree(comm, check)?;
+    // A core no rank of this node runs on makes the polygons while this
+    // rank labels them (a serial run on a workstation, say).
+    let spare_core = crate::parallel::cores::spare_core(comm);
+    let scratch = partial(&target);
+    let written = (|| -> Result<FoamCounts> {
+        let _ = fs::remove_dir_all(&scratch);
+        fs::create_dir_all(&scratch).map_err(|e| io_err(&scratch, e))?;
+        write_polymesh(&scratch, mesh, faces, opts, (me, p), spare_core)
+    })();
+    if written.is_err() {
+        let _ = fs::remove_dir_all(&scratch);
+    }
+    let counts = match agree(comm, written) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = fs::remove_dir_all(&scratch);
+            return Err(e);
+        }
+    };
+    let moved = (|| -> Result<()> {
+        if target.exists() {
+            fs::remove_dir_all(&target).map_err(|e| io_err(&target, e))?;
+        }
+        fs::rename(&scratch, &target).map_err(|e| io_err(&target, e))?;
+        if me == 0 {
+            write_system(dir, p)?;
+            if p > 1 {
+                remove_extra_processors(dir, p)?;
+            }
+        }
+        Ok(())
+    })();
+    agree(comm, moved)?;
+    Ok(counts)
+}
+
+/// Removes `processor<r>` directories for `r >= p` left by an earlier run
+/// on more ranks (OpenFOAM counts them).
+fn remove_extra_processors(dir: &Path, p: usize) -> Result<()> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        if let Some(r) = name
+            .strip_prefix("processor")
+            .and_then(|r| r.parse::<usize>().ok())
+        {
+            if r >= p {
+                fs::remove_dir_all(e.path()).map_err(|err| io_err(&e.path(), err))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn create(path: &Path) -> Result<DirectWriter> {
+    DirectWriter::create(path).map_err(|e| io_err(path, e))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_polymesh(
+    dir: &Path,
+    mesh: &Mesh,
+    faces: &Faces,
+    opts: &FoamOptions,
+    (me, p): (usize, usize),
+    spare_core: bool,
+) -> Result<FoamCounts> {
+    let fmt = opts.format;
+    let location = if p == 1 {
+        "constant/polyMesh".to_string()
+    } else {
+        format!("processor{me}/constant/polyMesh")
+    };
+    let loc = location.as_str();
+    let nodes = NodeLabels::new(mesh);
+    let mut points = PointsOut::new(&dir.join("points"), fmt, loc, mesh)?;
+    let mut fill = NodeFill::new(mesh, &nodes);
+    let halo = write_faces(
+        &dir.join("faces"),
+        (fmt, loc),
+        (mesh, faces),
+        &nodes,
+        spare_core,
+        || fill.step(&mut points),
+    )?;
+    points.halo(&halo)?;
+    let num_points = points.finish(loc)?;
+    let nf = faces.faces().len();
+    let ni = faces.num_internal();
+    let counts = FoamCounts {
+        points: num_points as u64,
+        faces: nf as u64,
+        internal_faces: ni as u64,
+        cells: mesh.elements().len() as u64,
+    };
+    let note = format!(
+        "nPoints:{} nCells:{} nFaces:{} nInternalFaces:{}",
+        counts.points, counts.cells, counts.faces, counts.internal_faces
+    );
+    let result = (|| -> std::io::Result<()> {
+        let owners = faces.faces().iter().map(|f| f.owner());
+        let path = dir.join("owner");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(&mut w, fmt, "labelList", loc, "owner", Some(&note))?;
+        write_label_iter(&mut w, fmt, nf, owners)?;
+        w.flush()?;
+
+        let neighbours = faces.faces()[..ni].iter().map(|f| match f.other() {
+            Other::Element(j) => j,
+            _ => 0,
+        });
+        let path = dir.join("neighbour");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(&mut w, fmt, "labelList", loc, "neighbour", Some(&note))?;
+        write_label_iter(&mut w, fmt, ni, neighbours)?;
+        w.flush()?;
+
+        let path = dir.join("boundary");
+        let mut w = create(&path).map_err(std::io::Error::other)?;
+        header(
+            &mut w,
+            FoamFormat::Ascii,
+            "polyBoundaryMesh",
+            loc,
+            "boundary",
+            None,
+        )?;
+        let halo = faces.halo_ranges();
+        let np = faces.num_patches();
+        if opts.patches.names().len() != np {
+            return Err(std::io::Error::other(format!(
+                "{} patch names for {np} patches",
+                opts.patches.names().len()
+            )));
+        }
+        writeln!(w, "{}\n(", np + halo.len())?;
+        for q in 0..np {
+            let r = faces.patch_range(q);
+            writeln!(w, "    {}\n    {{", opts.patches.name(q))?;
+            if q >= SURFACE_PATCH as usize {
+                writeln!(w, "        type            wall;")?;
+                writeln!(w, "        inGroups        List<word> 1(wall);")?;
+            } else {
+                writeln!(w, "        type            patch;")?;
+            }
+            writeln!(w, "        nFaces          {};", r.len())?;
+            writeln!(w, "        startFace       {};", r.start)?;
+            writeln!(w, "    }}")?;
+        }
+        for (r, range) in halo {
+            writeln!(w, "    procBoundary{me}to{r}\n    {{")?;
+            writeln!(w, "        type            processor;")?;
+            writeln!(w, "        inGroups        List<word> 1(processor);")?;
+            writeln!(w, "        nFaces          {};", range.len())?;
+            writeln!(w, "        startFace       {};", range.start)?;
+            writeln!(w, "        matchTolerance  0.0001;")?;
+            writeln!(w, "        transform       unknown;")?;
+            writeln!(w, "        myProcNo        {me};")?;
+            writeln!(w, "        neighbProcNo    {r};")?;
+            writeln!(w, "    }}")?;
+        }
+        writeln!(w, ")")?;
+        w.flush()
+    })();
+    result.map_err(|e| Error::io(format!("writing {}: {e}", dir.display())))?;
+    Ok(counts)
+}

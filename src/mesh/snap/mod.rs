@@ -1,0 +1,455 @@
+//! Body-fitted meshes: the nodes on the surface moved onto it.
+//!
+//! [`Mesh::snap`] moves every independent node on the surface patch (a
+//! node of a kept element next to a dropped one, not on the domain's
+//! sides) to the closest point of the surface, found by exact
+//! point-triangle distance through a bounding-box tree. Sharp features are
+//! kept: surface edges whose facets' normals differ by more than the
+//! feature angle (and open or non-manifold edges) are *feature edges*,
+//! their ends where not exactly two of them meet are *feature corners*; a
+//! node within [`FEATURE_REACH`] cells of a corner goes to the corner,
+//! else one that near a feature edge goes to the edge's closest point.
+//! Hanging nodes stay the mean of their dependencies, so the constraint
+//! stays exact.
+//!
+//! # Validity
+//!
+//! After the move every element touching a moved node is measured by its
+//! corners' scaled Jacobians ([`crate::mesh::quality`]). At a corner below the
+//! least scaled Jacobian allowed ([`SnapOptions::min_jacobian`]) the
+//! corner's surface node is blamed (a hanging corner's neighbours along
+//! the edges, as it follows its face or edge; else every surface node of
+//! the element), and a blamed node moves a smaller fraction of its
+//! displacement, down the steps of [`FRACTIONS`], until the element is
+//! valid; after [`STEPS`] steps the node stays where the octree put it.
+//! Only the elements around nodes that changed are measured again. The
+//! nodes that end between are *partly snapped*, and the elements that
+//! depend on them are reported. Then, up to `iterations` times, the
+//! interior nodes within `layers` element layers of the surface nodes take
+//! the mean displacement of the elements around them (the surface and
+//! everything further in fixed), each move kept only where every element
+//! around stays valid, and every partly snapped node tries a step up again
+//! at the same time under the same rule (one check of the elements serves
+//! both); the relaxed layers make room for it. A node whose step up is
+//! refused stops trying: on the bunny's fluid mesh at level 5 over 95 % of
+//! the later steps up that were kept came from nodes whose previous one
+//! was, and the refused ones cost most of the relaxation's checks.
+//!
+//! # Limits
+//!
+//! The topology does not change. An element at a corner of the staircase
+//! that is convex seen from the kept side has two or three faces on the
+//! surface; where the surface bends away from the kept side (a fluid mesh
+//! around a convex body, a saddle) moving all their nodes onto it flattens
+//! or inverts the element, so some of those nodes stay partly snapped
+//! (about half of a fluid sphere's). Hanging nodes on the surface cannot
+//! reach it either: refining the leaves next to the surface to its level
+//! (a distance band) keeps 2:1 steps off it.
+//!
+//! # Rank counts
+//!
+//! A node's target depends only on its lattice point and the surface, and
+//! every rank holding a node computes it the same way. Every decision that
+//! involves elements of several ranks (a step back, a refused move, the
+//! layers) is a flag per node or-ed over the ranks sharing it through the
+//! node exchange lists, and the smoothing's sums over the elements around
+//! a node are fixed-point integers, exact in any order. So every rank
+//! holding a node gives it the same bits, whatever the number of ranks.
+//! Hanging nodes are the mean of their dependencies taken in the order of
+//! their lattice points.
+
+mod features;
+mod fv;
+mod measure;
+mod nearest;
+mod options;
+mod snapper;
+#[cfg(target_arch = "x86_64")]
+mod wide;
+
+use crate::error::Result;
+use crate::geometry::cells::corner_scaled_jacobians;
+use crate::geometry::{Surface, Triangle};
+use crate::mesh::dual::Bits;
+use crate::mesh::faces::SURFACE_PATCH;
+use crate::mesh::Mesh;
+use crate::parallel::comm::Comm;
+use crate::refine::SurfaceIndex;
+
+pub use crate::geometry::cells::{hexahedron_volume, hexahedron_volume_centre, quad_area_centre};
+pub use fv::FvGeometry;
+pub use options::{
+    SnapOptions, SnapReport, DEFAULT_FEATURE_ANGLE, DEFAULT_ITERATIONS, DEFAULT_LAYERS,
+    DEFAULT_MIN_JACOBIAN, FEATURE_REACH, FOAM_MIN_JACOBIAN, FRACTIONS, RELAX_TOLERANCE, STEPS,
+    SURFACE_REACH,
+};
+
+use features::{features, Region, Target};
+use measure::corner_verdict;
+use nearest::NearTriangles;
+use options::{CHUNK, SPLIT_AT};
+use snapper::Snapper;
+
+/// Whether a node with patch mask `mask` is on the surface patch.
+fn is_on_surface(mask: u64) -> bool {
+    mask >> SURFACE_PATCH & 1 != 0
+}
+
+/// Whether a node with patch mask `mask` and finest element side `side`
+/// (`u64::MAX`: no local element) is sent to the surface: on the surface
+/// patch and on no side of the domain.
+fn is_queried(mask: u64, side: u64) -> bool {
+    is_on_surface(mask) && mask & ((1u64 << SURFACE_PATCH) - 1) == 0 && side != u64::MAX
+}
+
+/// The mean of the positions of a hanging node's dependencies, in the
+/// order given (their lattice points'), pairwise.
+#[inline]
+fn mean(pos: &[[f64; 3]], (d, n): ([u32; 4], u8)) -> [f64; 3] {
+    let p = |k: usize| pos[d[k] as usize];
+    if n == 2 {
+        let (a, b) = (p(0), p(1));
+        std::array::from_fn(|k| (a[k] + b[k]) * 0.5)
+    } else {
+        let (a, b, c, e) = (p(0), p(1), p(2), p(3));
+        std::array::from_fn(|k| ((a[k] + b[k]) + (c[k] + e[k])) * 0.25)
+    }
+}
+
+impl Mesh {
+    /// Snaps the mesh to `surface` (see the module documentation): moves
+    /// the surface nodes onto it, scales back where an element would be
+    /// invalid, relaxes the layers next to it, and stores the positions,
+    /// which [`Mesh::coordinates`] and everything built on it then return.
+    /// A snapped mesh is snapped again from the lattice. Collective; the
+    /// positions are the same bits on any number of ranks.
+    pub fn snap(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        opts: &SnapOptions,
+    ) -> Result<SnapReport> {
+        self.snap_indexed(comm, surface, None, opts)
+    }
+
+    /// [`Mesh::snap`] with the surface's index if there is one for this
+    /// mesh's domain (the classification's): its triangles and tree are
+    /// used instead of made again.
+    pub(crate) fn snap_indexed(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        index: Option<&SurfaceIndex>,
+        opts: &SnapOptions,
+    ) -> Result<SnapReport> {
+        let spare = crate::parallel::cores::spare_core(comm);
+        self.snap_threads(
+            comm,
+            surface,
+            index,
+            opts,
+            spare,
+            crate::parallel::cores::avx512(),
+        )
+    }
+
+    /// [`Mesh::snap_indexed`], with a second thread where `spare` allows
+    /// and the kernels for AVX-512 where `wide` says the processor has it
+    /// (the same bits either way).
+    fn snap_threads(
+        &mut self,
+        comm: &dyn Comm,
+        surface: &Surface,
+        index: Option<&SurfaceIndex>,
+        opts: &SnapOptions,
+        spare: bool,
+        wide: bool,
+    ) -> Result<SnapReport> {
+        let index = index.filter(|ix| ix.tris.len() == surface.len());
+        self.moved = None;
+        self.moved_lattice = None;
+        // On a lone rank with a spare core, the surface's features (which
+        // depend on the surface only) are found on a second thread while
+        // this one finds the nodes to move; they are then cut to the
+        // region those nodes give, as if found in it (see [`features`]).
+        let early = match index {
+            Some(ix) if spare && comm.size() == 1 && opts.feature_angle_deg < 180.0 => Some(ix),
+            _ => None,
+        };
+        let (found, (masks, mut s, side, reach, region)) = crate::parallel::cores::join(
+            early.is_some(),
+            || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, |_| true)),
+            || {
+                let lattice_u = self.node_lattice();
+                let masks = self.plain_patch_masks(comm, &lattice_u);
+                let ni = self.num_independent();
+                let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
+                    .map(|k| {
+                        let mut d = [0u32; 4];
+                        let h = self.hanging_deps(k);
+                        d[..h.len()].copy_from_slice(&h);
+                        d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
+                        (d, h.len() as u8)
+                    })
+                    .collect();
+                let s = Snapper {
+                    mesh: self,
+                    comm,
+                    spare,
+                    wide,
+                    lists: if comm.size() > 1 {
+                        self.exchange_lists()
+                    } else {
+                        Vec::new()
+                    },
+                    ni,
+                    pos: lattice_u.iter().map(|q| q.map(f64::from)).collect(),
+                    lattice: lattice_u,
+                    deps,
+                    snap: vec![false; ni],
+                    target: vec![[0.0; 3]; ni],
+                    step: vec![STEPS; ni],
+                    climbing: vec![true; ni],
+                    layer: vec![false; ni],
+                    active: Vec::new(),
+                    adj_start: Vec::new(),
+                    adj: Vec::new(),
+                    side: Vec::new(),
+                    min_jacobian: opts.min_jacobian,
+                    least: vec![f64::NAN; self.elements().len()],
+                    flags: Vec::new(),
+                    sums: Vec::new(),
+                    seen: Bits::new(self.elements().len()),
+                };
+                // The finest element side at each node, over the ranks.
+                let mut side = vec![u64::MAX; ni];
+                for (e, c) in self.elements().iter().zip(self.connectivity()) {
+                    for &n in c {
+                        let n = n as usize;
+                        if n < ni {
+                            side[n] = side[n].min(e.side() as u64);
+                        }
+                    }
+                }
+                s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
+                let queried = |n: usize| is_queried(masks[n], side[n]);
+                let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
+                let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
+                // The features that can attract a node lie within `reach` of
+                // it.
+                let region = Region::new(
+                    (0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)),
+                    largest.unwrap_or(1) as f64,
+                    reach,
+                );
+                (masks, s, side, reach, region)
+            },
+        );
+        let ni = s.ni;
+        let on_surface = |n: usize| is_on_surface(masks[n]);
+        let queried = |n: usize| is_queried(masks[n], side[n]);
+        let found = found.map(|(edges, corners)| {
+            let meets = |t: &Triangle| region.meets(&t.aabb());
+            (
+                edges.into_iter().filter(meets).collect(),
+                corners.into_iter().filter(meets).collect(),
+            )
+        });
+        let target_surface = Target::new(
+            surface,
+            index,
+            self,
+            opts.feature_angle_deg,
+            &region,
+            reach,
+            found,
+        );
+
+        let mut feature = vec![false; ni];
+        // In the Morton order of their lattice points: each query's
+        // neighbours come next, and the gathered triangles serve more.
+        // (One node per lattice point: the keys are distinct.)
+        let mut order: Vec<u32> = (0..ni as u32).filter(|&n| queried(n as usize)).collect();
+        let mut keys: Vec<u64> = order
+            .iter()
+            .map(|&n| crate::mesh::numbering::node_key(s.lattice[n as usize]))
+            .collect();
+        crate::octree::sort::radix_sort_pairs_bits(&mut keys, &mut order, 0, 64);
+        drop(keys);
+        // A node's target depends on nothing but its point: the pieces of
+        // the order may go to two threads. The elements that may change
+        // are found meanwhile, from the nodes queried (nearly all of them
+        // find a target).
+        let spare_here = s.spare && order.len() >= SPLIT_AT;
+        let query = |part: std::ops::Range<usize>| {
+            let mut near_tris = NearTriangles {
+                wide,
+                ..NearTriangles::default()
+            };
+            order[part]
+                .iter()
+                .map(|&n| {
+                    let n = n as usize;
+                    let x = s.lattice[n].map(f64::from);
+                    target_surface.of(x, side[n] as f64, &mut near_tris)
+                })
+                .collect::<Vec<_>>()
+        };
+        let (targets, (layer, active, adj_start, adj)) =
+            crate::parallel::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
+                s.moving_elements(&queried, &masks, opts)
+            });
+        for (&n, found) in order.iter().zip(targets.into_iter().flatten()) {
+            let n = n as usize;
+            if let Some((t, f)) = found {
+                s.snap[n] = true;
+                s.target[n] = t;
+                s.step[n] = 0;
+                feature[n] = f;
+            }
+        }
+        drop(target_surface);
+        s.layer = layer;
+        s.active = active;
+        s.adj_start = adj_start;
+        s.adj = adj;
+        s.side = side;
+
+        s.scale_back();
+        let mut relaxed = vec![false; ni];
+        let mut iterations = 0;
+        for _ in 0..opts.iterations {
+            iterations += 1;
+            let moved = s.relax();
+            if moved == 0 {
+                break;
+            }
+        }
+        for (n, r) in relaxed.iter_mut().enumerate() {
+            *r = s.layer[n] && s.pos[n] != s.lattice(n);
+        }
+        s.place_surface_nodes();
+        s.update_hanging();
+
+        // Figures, each node once (by its owner).
+        let owned = self.num_owned();
+        let mut counts = [0u64; 8];
+        for n in 0..owned {
+            if on_surface(n) {
+                counts[0] += 1;
+                match (s.snap[n], s.step[n]) {
+                    (true, 0) => {
+                        counts[1] += 1;
+                        counts[4] += feature[n] as u64;
+                    }
+                    (true, k) if k < STEPS => counts[2] += 1,
+                    _ => counts[3] += 1,
+                }
+            }
+            counts[6] += relaxed[n] as u64;
+        }
+        for &e in &s.active {
+            let mut reported = false;
+            s.support(e as usize, |n| reported |= on_surface(n) && s.step[n] > 0);
+            counts[7] += reported as u64;
+        }
+        comm.sum_u64(&mut counts);
+        let domain = *self.domain();
+        let active = std::mem::take(&mut s.active);
+        // The minimum in user units, as the quality measures it. The
+        // lattice positions' figures (no roots), as last measured, pick
+        // the elements that may hold it: the two differ by rounding only,
+        // far inside the margin.
+        let squared: Vec<f64> = active.iter().map(|&e| s.least[e as usize]).collect();
+        let pos = s.pos;
+        debug_assert!(active.iter().zip(&squared).all(|(&e, &q)| {
+            let p = self.connectivity()[e as usize].map(|n| pos[n as usize]);
+            corner_verdict(&p, 0.0).1 == q
+        }));
+        let least = squared.iter().copied().fold(f64::INFINITY, f64::min);
+        let near = least + 1e-9 * least.abs() + 1e-12;
+        self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
+        self.moved_lattice = Some(pos);
+        let mut min_j = 1.0f64;
+        for (&e, &q) in active.iter().zip(&squared) {
+            if q <= near {
+                let p = self.element_corners(e as usize, None);
+                for j in corner_scaled_jacobians(&p) {
+                    min_j = min_j.min(j);
+                }
+            }
+        }
+        let mut worst = [-min_j];
+        comm.max_f64(&mut worst);
+        Ok(SnapReport {
+            surface_nodes: counts[0],
+            snapped: counts[1],
+            partial: counts[2],
+            unsnapped: counts[3],
+            feature_nodes: counts[4],
+            relaxed_nodes: counts[6],
+            reported_elements: counts[7],
+            min_scaled_jacobian: -worst[0],
+            iterations,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::Keep;
+    use crate::parallel::comm::SerialComm;
+    use crate::testutil::mesh_of;
+
+    #[test]
+    fn a_second_thread_and_avx512_give_the_same_bits() {
+        // Level 7: more surface nodes and active elements than SPLIT_AT,
+        // so the passes are shared; outside, so nodes step back and up.
+        let (mut m, s) = mesh_of("sphere", 7, Keep::Outside);
+        let index = SurfaceIndex::new(&s, m.domain());
+        let opts = SnapOptions {
+            feature_angle_deg: 10.0,
+            ..SnapOptions::default()
+        };
+        // A snapped mesh is snapped again from the lattice.
+        let mut run = |spare: bool, wide: bool| {
+            let r = m
+                .snap_threads(&SerialComm, &s, Some(&index), &opts, spare, wide)
+                .unwrap();
+            (format!("{r:?}"), m.moved_lattice.clone().unwrap())
+        };
+        let one = run(false, false);
+        assert!(one.1.len() > 2 * SPLIT_AT);
+        // With AVX-512 (where the processor has it) too.
+        let wide = crate::parallel::cores::avx512();
+        for other in [run(true, false), run(false, wide), run(true, wide)] {
+            assert_eq!(one.0, other.0);
+            assert!(one
+                .1
+                .iter()
+                .zip(&other.1)
+                .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits)));
+        }
+    }
+
+    #[test]
+    fn snapped_sphere_is_valid_and_on_the_surface() {
+        for keep in [Keep::Inside, Keep::Outside] {
+            let (mut m, s) = mesh_of("sphere", 5, keep);
+            let r = m.snap(&SerialComm, &s, &SnapOptions::default()).unwrap();
+            eprintln!("{keep:?} {r:?}");
+            assert!(r.surface_nodes > 1000);
+            assert_eq!(r.snapped + r.partial + r.unsnapped, r.surface_nodes);
+            assert!(
+                r.min_scaled_jacobian >= DEFAULT_MIN_JACOBIAN * 0.99,
+                "{r:?}"
+            );
+            let x = m.coordinates();
+            assert!(m.moved().is_some());
+            let j = m.scaled_jacobians(None);
+            assert!(j.iter().all(|&j| j > 0.0));
+            let _ = x;
+        }
+    }
+}
