@@ -10,7 +10,7 @@ pub fn markdown() -> String {
     let mut t = String::from(
         "# Options and case-file keys\n\n\
          Generated from the one declaration of the options (`src/config/options.rs`) by \
-         `octmesh::config::options::markdown`; `tests/options_reference.rs` checks that this \
+         `markdown` in `src/config/reference.rs`; `tests/options_reference.rs` checks that this \
          file is up to date and matches `octmesh octree --help` and `octmesh mesh --help`. \
          Do not edit by hand: after changing an option, run \
          `OCTMESH_BLESS=1 cargo test --release --test options_reference`.\n\n\
