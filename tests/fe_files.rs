@@ -18,6 +18,7 @@
 //! - Gmsh opens the `.msh`: its node, hexahedron and quadrilateral
 //!   counts are octmesh's and the `.inp`'s, its physical surfaces are the
 //!   patches with faces, and its physical volume is `volume`.
+//! - A file that cannot be written fails the run on every rank.
 
 mod common;
 
@@ -438,5 +439,28 @@ fn gmsh_reads_the_msh() {
     if let Some(bunny) = shared_model("bunny.stl") {
         let args = ["--level", "5", "--keep", "inside"];
         gmsh_check(&python, "bunny", bunny.to_str().unwrap(), &args, &["bunny"]);
+    }
+}
+
+/// A file that cannot be written fails the run on every rank with the
+/// path in the message, and nothing is left half-written.
+#[test]
+fn an_unwritable_file_fails_every_rank() {
+    let dir = scratch("fe_files_unwritable");
+    for (option, name) in [("--abaqus", "m.inp"), ("--gmsh", "m.msh")] {
+        let path = dir.join("no_such_dir").join(name);
+        let p = path.to_str().unwrap();
+        let args = [
+            "mesh", "sphere", "--level", "3", "--keep", "inside", option, p,
+        ];
+        let out = common::mpirun(
+            2,
+            &common::octmesh_bin(),
+            &args,
+            std::time::Duration::from_secs(300),
+        );
+        let lines = common::rank_error_lines(&out, 2, option);
+        assert!(lines[0].contains(name), "{option}: {}", lines[0]);
+        assert!(!path.exists());
     }
 }
