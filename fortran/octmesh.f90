@@ -142,6 +142,7 @@ module octmesh
   public :: octmesh_octree_refine_once_ext, octmesh_octree_coarsen_ext, octmesh_octree_adapt_ext
   public :: octmesh_octree_balance_ext
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
+  public :: octmesh_mesh_write_gmsh_f, octmesh_mesh_write_abaqus_f
   public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
@@ -544,6 +545,20 @@ module octmesh
        integer(c_int) :: c_octmesh_mesh_write_vtu
      end function c_octmesh_mesh_write_vtu
 
+     function c_octmesh_mesh_write_gmsh(h, path) bind(c, name="octmesh_mesh_write_gmsh")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_mesh_write_gmsh
+     end function c_octmesh_mesh_write_gmsh
+
+     function c_octmesh_mesh_write_abaqus(h, path) bind(c, name="octmesh_mesh_write_abaqus")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_mesh_write_abaqus
+     end function c_octmesh_mesh_write_abaqus
+
      !> The C function: `names(k)` points to a NUL-terminated name and
      !> `values(k)` to `local_nodes` doubles (see octmesh.h).
      function octmesh_mesh_write_vtu_fields(h, pvtu, nfields, names, values) &
@@ -824,6 +839,24 @@ contains
     integer(c_int) :: status
     status = c_octmesh_mesh_write_vtu(h, trim(pvtu) // c_null_char)
   end function octmesh_mesh_write_vtu_f
+
+  !> Writes the mesh as one Gmsh MSH 4.1 file (octmesh_mesh_write_gmsh).
+  !> Collective.
+  function octmesh_mesh_write_gmsh_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_mesh_write_gmsh(h, trim(path) // c_null_char)
+  end function octmesh_mesh_write_gmsh_f
+
+  !> Writes the mesh as one Abaqus/CalculiX input file with the hanging
+  !> nodes' equations (octmesh_mesh_write_abaqus). Collective.
+  function octmesh_mesh_write_abaqus_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_mesh_write_abaqus(h, trim(path) // c_null_char)
+  end function octmesh_mesh_write_abaqus_f
 
   !> Writes the mesh as VTU pieces and the PVTU `pvtu` with point fields:
   !> `values(:, k)` (one value per local node, in local node order, hanging

@@ -1510,6 +1510,34 @@ octmesh_status_t octmesh_mesh_get_element_level(const octmesh_t *h, const int8_t
 octmesh_status_t octmesh_mesh_write_vtu(octmesh_t *h, const char *pvtu);
 
 /**
+ * Writes the mesh as one Gmsh MSH 4.1 file (ASCII), like the command's
+ * `--gmsh`: a physical surface per patch with boundary faces (named by
+ * `octmesh_mesh_rename_patch`), the physical volume `volume`, the
+ * hanging nodes as plain nodes with their constraints in a
+ * `$HangingNodes` section (docs/formats.md). The mesh is gathered on rank
+ * 0, which writes the file: the same bytes on any number of ranks. Needs
+ * a mesh. Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file, NUL-terminated (same on every rank)
+ */
+octmesh_status_t octmesh_mesh_write_gmsh(octmesh_t *h, const char *path);
+
+/**
+ * Writes the mesh as one Abaqus/CalculiX input file, like the command's
+ * `--abaqus`: `*NODE`, `*ELEMENT, TYPE=C3D8`, per patch with boundary
+ * faces an `*NSET`, `*ELSET` and `*SURFACE, TYPE=ELEMENT`, and for every
+ * hanging node and each of the 3 displacement degrees of freedom an
+ * `*EQUATION` (docs/formats.md). The mesh is gathered on rank 0, which
+ * writes the file: the same bytes on any number of ranks. Needs a mesh.
+ * Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file, NUL-terminated (same on every rank)
+ */
+octmesh_status_t octmesh_mesh_write_abaqus(octmesh_t *h, const char *path);
+
+/**
  * Writes the mesh like `octmesh_mesh_write_vtu`, with `nfields` caller
  * fields (a solution, an error, ...) added as point data: field `k` is
  * called `names[k]` (a non-empty UTF-8 string without control characters,

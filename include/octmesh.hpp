@@ -395,6 +395,15 @@ class Mesher {
   void write_vtu(const std::string &pvtu) {
     detail::check(octmesh_mesh_write_vtu(h_, pvtu.c_str()), h_, "octmesh_mesh_write_vtu");
   }
+  /// octmesh_mesh_write_gmsh: one Gmsh MSH 4.1 file, gathered on rank 0.
+  void write_gmsh(const std::string &path) {
+    detail::check(octmesh_mesh_write_gmsh(h_, path.c_str()), h_, "octmesh_mesh_write_gmsh");
+  }
+  /// octmesh_mesh_write_abaqus: one Abaqus/CalculiX input file with an *EQUATION per hanging
+  /// node and degree of freedom, gathered on rank 0.
+  void write_abaqus(const std::string &path) {
+    detail::check(octmesh_mesh_write_abaqus(h_, path.c_str()), h_, "octmesh_mesh_write_abaqus");
+  }
   /// Writes the mesh with point fields: each pair is a field name and a
   /// pointer to one double per local node (local node order, hanging nodes
   /// included). Collective; every rank passes the same names.

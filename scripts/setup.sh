@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 
 packages=(libopenmpi-dev openmpi-bin libclang-dev clang cmake gfortran libp4est-dev
           pkg-config make build-essential python3 python3-numpy python3-meshio python3-vtk9 valgrind
-          openfoam)
+          openfoam calculix-ccx gmsh python3-gmsh)
 missing=()
 for p in "${packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")

@@ -110,8 +110,35 @@ fn pipeline_from_c_on_1_and_2_ranks() {
     // Global counts do not depend on the number of ranks.
     assert_eq!(sphere[0], sphere[1]);
     assert_eq!(callback[0], callback[1]);
-    // ... and equal those of the octmesh command on the same input.
-    let cli = common::octmesh_ok(1, &["mesh", "sphere", "--level", "5", "--keep", "inside"]);
+    // ... and equal those of the octmesh command on the same input, whose
+    // Abaqus and Gmsh files are those of the C API, byte for byte.
+    let (inp, msh) = (dir.join("cli.inp"), dir.join("cli.msh"));
+    let cli = common::octmesh_ok(
+        1,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "5",
+            "--keep",
+            "inside",
+            "--abaqus",
+            inp.to_str().unwrap(),
+            "--gmsh",
+            msh.to_str().unwrap(),
+        ],
+    );
+    for np in [1, 2] {
+        for (ext, cli_file) in [("inp", &inp), ("msh", &msh)] {
+            let c_file = dir.join(format!("sphere_np{np}.pvtu.{ext}"));
+            assert!(
+                std::fs::read(&c_file).unwrap() == std::fs::read(cli_file).unwrap(),
+                "{} differs from the command's {}",
+                c_file.display(),
+                cli_file.display()
+            );
+        }
+    }
     let cli = String::from_utf8_lossy(&cli.stdout).into_owned();
     let nums = |line: &str| -> Vec<u64> {
         line.split(|c: char| !c.is_ascii_digit())

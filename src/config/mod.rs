@@ -365,6 +365,10 @@ pub struct OutputConfig {
     /// `processor<r>/constant/polyMesh` on several, and the `system/` files
     /// that are absent.
     pub openfoam: Option<PathBuf>,
+    /// One Gmsh MSH 4.1 file of the mesh ([`crate::io::gmsh`]).
+    pub gmsh: Option<PathBuf>,
+    /// One Abaqus/CalculiX input file of the mesh ([`crate::io::abaqus`]).
+    pub abaqus: Option<PathBuf>,
     /// `binary` (default) or `ascii` lists in the OpenFOAM files.
     pub openfoam_format: FoamFormat,
     /// Replace an existing OpenFOAM mesh.

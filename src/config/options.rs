@@ -642,6 +642,24 @@ options! {
     range,
     set |c, v, _g| { c.output.openfoam = Some(v.into()); }
 
+    /// Write one Gmsh MSH 4.1 file (ASCII; gathered on rank 0): physical
+    /// surfaces per patch, the hanging nodes as plain nodes with their
+    /// constraints in a `$HangingNodes` section (see docs/formats.md)
+    Mesh "gmsh" <"FILE.msh">: One String = path,
+    keys ["output.gmsh"],
+    default none,
+    range,
+    set |c, v, _g| { c.output.gmsh = Some(v.into()); }
+
+    /// Write one Abaqus/CalculiX input file (gathered on rank 0): `*NODE`,
+    /// C3D8 `*ELEMENT`, `*NSET`/`*ELSET`/`*SURFACE` per patch, an
+    /// `*EQUATION` per hanging node and degree of freedom
+    Mesh "abaqus" <"FILE.inp">: One String = path,
+    keys ["output.abaqus"],
+    default none,
+    range,
+    set |c, v, _g| { c.output.abaqus = Some(v.into()); }
+
     /// Lists in the OpenFOAM files: binary or ascii
     Mesh "openfoam-format" <"FORMAT">: One FoamFormat = FoamFormat::parse,
     keys ["output.openfoam_format"],
@@ -879,6 +897,7 @@ mod tests {
         let out = &mut c.output;
         (out.stats, out.leaves, out.refined_leaves) =
             (Some("s".into()), Some("l".into()), Some("r".into()));
+        (out.gmsh, out.abaqus) = (Some("g.msh".into()), Some("a.inp".into()));
         (out.vtu, out.openfoam, out.quality_out, out.quality_worst) = (
             Some("v".into()),
             Some("f".into()),

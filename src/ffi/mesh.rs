@@ -458,6 +458,48 @@ pub extern "C" fn octmesh_mesh_write_vtu(
     octmesh_mesh_write_vtu_fields(h, pvtu, 0, std::ptr::null(), std::ptr::null())
 }
 
+/// Writes the mesh as one Gmsh MSH 4.1 file (ASCII), like the command's
+/// `--gmsh`: a physical surface per patch with boundary faces (named by
+/// `octmesh_mesh_rename_patch`), the physical volume `volume`, the
+/// hanging nodes as plain nodes with their constraints in a
+/// `$HangingNodes` section (docs/formats.md). The mesh is gathered on rank
+/// 0, which writes the file: the same bytes on any number of ranks. Needs
+/// a mesh. Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file, NUL-terminated (same on every rank)
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_write_gmsh(
+    h: *mut octmesh_t,
+    path: *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = h.agree(path_arg(path, "path"))?;
+        h.session.write_gmsh(&path)
+    })
+}
+
+/// Writes the mesh as one Abaqus/CalculiX input file, like the command's
+/// `--abaqus`: `*NODE`, `*ELEMENT, TYPE=C3D8`, per patch with boundary
+/// faces an `*NSET`, `*ELSET` and `*SURFACE, TYPE=ELEMENT`, and for every
+/// hanging node and each of the 3 displacement degrees of freedom an
+/// `*EQUATION` (docs/formats.md). The mesh is gathered on rank 0, which
+/// writes the file: the same bytes on any number of ranks. Needs a mesh.
+/// Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file, NUL-terminated (same on every rank)
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_write_abaqus(
+    h: *mut octmesh_t,
+    path: *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = h.agree(path_arg(path, "path"))?;
+        h.session.write_abaqus(&path)
+    })
+}
+
 /// Reads the `nfields` caller fields of `octmesh_mesh_write_vtu_fields`,
 /// `nodes` values each.
 ///

@@ -1,9 +1,13 @@
 //! Files octmesh writes and reads (large ones around the page cache: `direct`): leaf lists, VTK XML meshes (`vtu`) and
 //! boundary faces (`vtp`), JSON
 //! statistics and reports (`json`), leak paths (`leak_path`), OpenFOAM cases
-//! (`openfoam`), and (in `geometry::stl`) STL.
+//! (`openfoam`), single-file finite-element meshes gathered on rank 0 (`gathered`) for Gmsh (`gmsh`) and
+//! Abaqus/CalculiX (`abaqus`), and (in `geometry::stl`) STL.
 
+pub mod abaqus;
 pub mod direct;
+pub mod gathered;
+pub mod gmsh;
 pub mod json;
 pub mod leak_path;
 pub mod leaves;

@@ -22,6 +22,7 @@
 mod adapt;
 mod classes;
 mod data;
+mod fe;
 mod mesh;
 pub mod observer;
 mod octree;
@@ -379,6 +380,12 @@ impl Session {
             }
             if let Some(dir) = self.config.output.openfoam.clone() {
                 self.write_openfoam(&dir)?;
+            }
+            if let Some(path) = self.config.output.gmsh.clone() {
+                self.write_gmsh(&path)?;
+            }
+            if let Some(path) = self.config.output.abaqus.clone() {
+                self.write_abaqus(&path)?;
             }
             if self.config.output.wants_quality() {
                 self.quality()?;

@@ -1,0 +1,258 @@
+//! The whole mesh on rank 0, numbered the same way on any number of ranks,
+//! for the single-file finite-element writers ([`super::gmsh`],
+//! [`super::abaqus`]).
+//!
+//! Every rank sends rank 0 its elements (the 8 corners of each as lattice
+//! point keys, in global element order), its nodes (lattice key, position,
+//! the keys of a hanging node's dependencies, the node's patches) and its
+//! boundary faces, as plain integer buffers. Rank 0 merges the nodes by
+//! lattice point and numbers them by first use: the independent nodes in
+//! the order the elements, in global (Morton) element order, first list
+//! them, then the hanging nodes the same way. Global element order and
+//! lattice points do not depend on the partition, and neither do snapped
+//! positions ([`crate::mesh::snap`]), so the numbering and every written
+//! byte are the same on any number of ranks. (The mesh's own global node
+//! numbers do depend on the partition: an owner numbers its nodes in its
+//! own traversal order.)
+//!
+//! Rank 0 holds the whole mesh: about 150 bytes per node and 40 per
+//! element. That bounds the size of meshes these files suit.
+
+use std::collections::HashMap;
+
+use crate::error::{Error, Result};
+use crate::mesh::points::point_key;
+use crate::mesh::{Boundary, Mesh};
+use crate::parallel::comm::Comm;
+
+/// The corners of p4est face `f` (`2 axis + side`) as Abaqus lists them:
+/// [`ABAQUS_FACE`]`[f]` is the face's label `S1..S6` less one, and
+/// [`ABAQUS_FACE_NODES`] its 4 VTK corners in Abaqus's order.
+pub const ABAQUS_FACE: [u8; 6] = [5, 3, 2, 4, 0, 1];
+
+/// The VTK (= Abaqus C3D8 = Gmsh) corners of the hexahedron's faces
+/// `S1..S6`: S1 = 1-2-3-4, S2 = 5-8-7-6, S3 = 1-5-6-2, S4 = 2-6-7-3,
+/// S5 = 3-7-8-4, S6 = 4-8-5-1 (1-based in Abaqus's manual). Each runs
+/// clockwise seen from outside, so its right-hand normal points into the
+/// element.
+pub const ABAQUS_FACE_NODES: [[usize; 4]; 6] = [
+    [0, 1, 2, 3],
+    [4, 7, 6, 5],
+    [0, 4, 5, 1],
+    [1, 5, 6, 2],
+    [2, 6, 7, 3],
+    [3, 7, 4, 0],
+];
+
+/// A boundary face of the gathered mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct GatheredFace {
+    /// The patch.
+    pub patch: u16,
+    /// The element (0-based global number).
+    pub element: u64,
+    /// The face's Abaqus label less one (`0..6` for `S1..S6`).
+    pub label: u8,
+}
+
+/// The whole mesh, on rank 0 (empty elsewhere). Nodes are 0-based: the
+/// independent ones `0..num_independent`, then the hanging ones.
+#[derive(Clone, Debug, Default)]
+pub struct Gathered {
+    /// Node positions, user units.
+    pub coordinates: Vec<[f64; 3]>,
+    /// Nodes below this are independent.
+    pub num_independent: usize,
+    /// Each element's 8 nodes, VTK hexahedron order, global element order.
+    pub elements: Vec<[u32; 8]>,
+    /// Hanging node `num_independent + k` is the mean of the nodes
+    /// `dependencies[k]` (4 for a face-hanging node, 2 for an edge-hanging
+    /// one).
+    pub dependencies: Vec<Vec<u32>>,
+    /// Each patch's nodes (independent and hanging), increasing; one entry
+    /// per patch id up to the highest used.
+    pub patch_nodes: Vec<Vec<u32>>,
+    /// The boundary faces, by patch, element, label.
+    pub faces: Vec<GatheredFace>,
+}
+
+impl Gathered {
+    /// The patches that have boundary faces, increasing.
+    pub fn used_patches(&self) -> Vec<u16> {
+        let mut p: Vec<u16> = self.faces.iter().map(|f| f.patch).collect();
+        p.dedup();
+        p
+    }
+}
+
+/// Sends `local` to rank 0; rank 0 gets every rank's in rank order.
+fn to_root(comm: &dyn Comm, local: &[u64]) -> Vec<u64> {
+    let mut counts = vec![0usize; comm.size()];
+    counts[0] = local.len();
+    comm.alltoallv_u64(local, &counts).0
+}
+
+/// Gathers `mesh` with its `boundary` (this mesh's) on rank 0. Collective;
+/// the result is empty on the other ranks.
+pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathered> {
+    let lattice = mesh.node_lattice();
+    let keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
+    let coords = mesh.coordinates();
+    let ni = mesh.num_independent();
+    // Elements: 8 keys each.
+    let mut buf: Vec<u64> = Vec::with_capacity(mesh.connectivity().len() * 8);
+    for c in mesh.connectivity() {
+        buf.extend(c.iter().map(|&n| keys[n as usize]));
+    }
+    let elements = to_root(comm, &buf);
+    // Nodes: key, x, y, z, deps, dep keys, patches, patch ids.
+    buf.clear();
+    for n in 0..mesh.num_nodes() {
+        buf.push(keys[n]);
+        buf.extend(coords[n].iter().map(|x| x.to_bits()));
+        if n < ni {
+            buf.push(0);
+        } else {
+            let d = mesh.hanging_deps(n - ni);
+            buf.push(d.len() as u64);
+            buf.extend(d.iter().map(|&m| keys[m as usize]));
+        }
+        let p = boundary.node_patches(n);
+        buf.push(p.len() as u64);
+        buf.extend(p.iter().map(|&x| x as u64));
+    }
+    let nodes = to_root(comm, &buf);
+    // Faces: global element, label, patch.
+    buf.clear();
+    let first = mesh.first_element();
+    for f in boundary.faces() {
+        buf.push(first + f.element as u64);
+        buf.push(ABAQUS_FACE[f.face as usize] as u64);
+        buf.push(f.patch as u64);
+    }
+    let faces = to_root(comm, &buf);
+    if comm.rank() != 0 {
+        return Ok(Gathered::default());
+    }
+    assemble(&elements, &nodes, &faces)
+}
+
+/// One node as the ranks sent it, merged over the ranks.
+struct NodeRecord {
+    position: [f64; 3],
+    deps: Vec<u64>,
+    patches: Vec<u16>,
+}
+
+/// Rank 0's half of [`gather`].
+fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> {
+    let corrupt = || Error::io("the gathered mesh is inconsistent (an internal error)");
+    let mut records: HashMap<u64, NodeRecord> = HashMap::new();
+    let mut i = 0;
+    let take = |i: &mut usize| -> Result<u64> {
+        let v = *nodes.get(*i).ok_or_else(corrupt)?;
+        *i += 1;
+        Ok(v)
+    };
+    while i < nodes.len() {
+        let key = take(&mut i)?;
+        let mut position = [0.0f64; 3];
+        for x in &mut position {
+            *x = f64::from_bits(take(&mut i)?);
+        }
+        let nd = take(&mut i)? as usize;
+        let mut deps = Vec::with_capacity(nd);
+        for _ in 0..nd {
+            deps.push(take(&mut i)?);
+        }
+        let np = take(&mut i)? as usize;
+        let mut patches = Vec::with_capacity(np);
+        for _ in 0..np {
+            patches.push(take(&mut i)? as u16);
+        }
+        match records.get_mut(&key) {
+            None => {
+                records.insert(
+                    key,
+                    NodeRecord {
+                        position,
+                        deps,
+                        patches,
+                    },
+                );
+            }
+            Some(r) => {
+                if r.deps.is_empty() && !deps.is_empty() {
+                    r.deps = deps;
+                }
+                r.patches.extend(patches);
+            }
+        }
+    }
+    // Number the nodes by first use: independent ones, then hanging ones.
+    let mut number: HashMap<u64, u32> = HashMap::with_capacity(records.len());
+    let mut order: Vec<u64> = Vec::with_capacity(records.len());
+    for hanging in [false, true] {
+        for &k in elements {
+            let r = records.get(&k).ok_or_else(corrupt)?;
+            if r.deps.is_empty() != hanging && !number.contains_key(&k) {
+                number.insert(k, order.len() as u32);
+                order.push(k);
+            }
+        }
+    }
+    let mut out = Gathered {
+        num_independent: order
+            .iter()
+            .take_while(|k| records[k].deps.is_empty())
+            .count(),
+        ..Gathered::default()
+    };
+    out.elements = elements
+        .chunks_exact(8)
+        .map(|c| {
+            let mut e = [0u32; 8];
+            for (x, k) in e.iter_mut().zip(c) {
+                *x = number[k];
+            }
+            e
+        })
+        .collect();
+    for (n, k) in order.iter().enumerate() {
+        let r = &records[k];
+        out.coordinates.push(r.position);
+        if !r.deps.is_empty() {
+            let d = r
+                .deps
+                .iter()
+                .map(|k| number.get(k).copied().ok_or_else(corrupt))
+                .collect::<Result<Vec<u32>>>()?;
+            if d.iter().any(|&m| m as usize >= out.num_independent) {
+                return Err(corrupt());
+            }
+            out.dependencies.push(d);
+        }
+        for &p in &r.patches {
+            let p = p as usize;
+            if out.patch_nodes.len() <= p {
+                out.patch_nodes.resize(p + 1, Vec::new());
+            }
+            out.patch_nodes[p].push(n as u32);
+        }
+    }
+    for l in &mut out.patch_nodes {
+        l.sort_unstable();
+        l.dedup();
+    }
+    out.faces = faces
+        .chunks_exact(3)
+        .map(|f| GatheredFace {
+            patch: f[2] as u16,
+            element: f[0],
+            label: f[1] as u8,
+        })
+        .collect();
+    out.faces.sort_unstable();
+    out.faces.dedup();
+    Ok(out)
+}

@@ -1,0 +1,466 @@
+//! The single-file finite-element meshes (`--abaqus FILE.inp`, `--gmsh
+//! FILE.msh`) of hanging-node meshes, judged by the programs that read
+//! them: CalculiX (Debian `calculix-ccx`) and Gmsh's Python API (Debian
+//! `python3-gmsh`), both installed by `scripts/setup.sh`.
+//!
+//! - The patch test in CalculiX on the solid sphere (level 4 and 5) and the
+//!   solid bunny (level 5): the deck, completed with a material, a
+//!   section and a static step that prescribes a linear displacement
+//!   `u = A x + b` on every node of the patch node sets, gives every
+//!   interior independent node `u` to 1e-8 relative to the field's size.
+//!   CalculiX prints 7 significant digits, so the cube and the field are
+//!   chosen to make every exact nodal value a short decimal: a printed
+//!   value is then exact unless the solver is off by half a unit in its
+//!   7th digit, and anything larger shows in full. The same deck without
+//!   its `*EQUATION`s must fail the test by far (the hanging corners come
+//!   loose), which shows the test can fail.
+//! - The deck and the `.msh` are byte-identical on 1 to 4 ranks.
+//! - Gmsh opens the `.msh`: its node, hexahedron and quadrilateral
+//!   counts are octmesh's and the `.inp`'s, its physical surfaces are the
+//!   patches with faces, and its physical volume is `volume`.
+//! - A file that cannot be written fails the run on every rank.
+
+mod common;
+
+use std::collections::{BTreeSet, HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{json_file, octmesh_ok, require, scratch, shared_model, Oracle};
+
+/// `ccx`, or `None` after a skip ([`common::require`]).
+fn ccx() -> Option<PathBuf> {
+    require(Oracle::Program {
+        name: "ccx",
+        package: "calculix-ccx",
+    })
+}
+
+/// A Python with `gmsh`, or `None` after a skip.
+fn gmsh_python() -> Option<PathBuf> {
+    require(Oracle::Python {
+        module: "gmsh",
+        package: "python3-gmsh",
+    })
+}
+
+/// Runs `octmesh mesh INPUT ARGS --abaqus DIR/m.inp --gmsh DIR/m.msh` on
+/// `np` ranks; returns the two files' paths and the statistics.
+fn mesh(
+    np: usize,
+    dir: &Path,
+    input: &str,
+    args: &[&str],
+) -> (PathBuf, PathBuf, serde_json::Value) {
+    std::fs::create_dir_all(dir).unwrap();
+    let (inp, msh, stats) = (dir.join("m.inp"), dir.join("m.msh"), dir.join("s.json"));
+    let mut all = vec!["mesh", input];
+    all.extend(args);
+    all.extend([
+        "--abaqus",
+        inp.to_str().unwrap(),
+        "--gmsh",
+        msh.to_str().unwrap(),
+    ]);
+    all.extend(["--stats", stats.to_str().unwrap(), "--quiet"]);
+    octmesh_ok(np, &all);
+    let s = json_file(&stats);
+    (inp, msh, s)
+}
+
+/// What the patch test reads from a deck.
+struct Deck {
+    coords: HashMap<u64, [f64; 3]>,
+    /// Nodes of the patch node sets (NALL left out).
+    boundary: BTreeSet<u64>,
+    /// The nodes the equations eliminate.
+    hanging: HashSet<u64>,
+    surfaces: usize,
+}
+
+/// Reads the nodes, node sets and equations of `text`.
+fn read_deck(text: &str) -> Deck {
+    let mut d = Deck {
+        coords: HashMap::new(),
+        boundary: BTreeSet::new(),
+        hanging: HashSet::new(),
+        surfaces: 0,
+    };
+    enum Mode {
+        Node,
+        Set,
+        Surface,
+        EquationCount,
+        /// Terms left, whether the next line is the equation's first.
+        Equation(usize, bool),
+        Other,
+    }
+    let mut mode = Mode::Other;
+    for line in text.lines() {
+        if line.starts_with("**") || line.trim().is_empty() {
+            continue;
+        }
+        if line.starts_with('*') {
+            let u = line.to_uppercase();
+            mode = if u.starts_with("*NODE") {
+                Mode::Node
+            } else if u.starts_with("*NSET") && !u.contains("GENERATE") {
+                Mode::Set
+            } else if u.starts_with("*SURFACE") {
+                Mode::Surface
+            } else if u.starts_with("*EQUATION") {
+                Mode::EquationCount
+            } else {
+                Mode::Other
+            };
+            continue;
+        }
+        let f: Vec<&str> = line
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .collect();
+        match mode {
+            Mode::Node => {
+                let p = [1, 2, 3].map(|k| f[k].parse::<f64>().unwrap());
+                d.coords.insert(f[0].parse().unwrap(), p);
+            }
+            Mode::Set => d
+                .boundary
+                .extend(f.iter().map(|s| s.parse::<u64>().unwrap())),
+            Mode::Surface => d.surfaces += 1,
+            Mode::EquationCount => mode = Mode::Equation(f[0].parse().unwrap(), true),
+            Mode::Equation(left, first) => {
+                // The first term of an equation is the node it eliminates.
+                if first {
+                    d.hanging.insert(f[0].parse().unwrap());
+                }
+                let left = left - f.len() / 3;
+                mode = match left {
+                    0 => Mode::EquationCount,
+                    l => Mode::Equation(l, false),
+                };
+            }
+            _ => {}
+        }
+    }
+    d
+}
+
+/// The linear field of the patch test: short decimals on the lattices
+/// used below.
+const A: [[f64; 3]; 3] = [[1e-3, 2e-3, -1e-3], [5e-4, -1e-3, 3e-3], [2e-3, 1e-3, 1e-3]];
+const B: [f64; 3] = [1e-3, -2e-3, 3e-3];
+
+fn field(p: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| A[i][0] * p[0] + A[i][1] * p[1] + A[i][2] * p[2] + B[i])
+}
+
+/// Runs the patch test in `dir` on the deck `text` with CalculiX `ccx`:
+/// the largest error of an interior independent node relative to the
+/// field's largest value, and how many interior independent nodes there
+/// were.
+fn patch_test(ccx: &Path, dir: &Path, text: &str) -> (f64, usize) {
+    let deck = read_deck(text);
+    let mut job = String::from(text);
+    job.push_str(
+        "*MATERIAL, NAME=STEEL\n*ELASTIC\n210000., 0.3\n\
+         *SOLID SECTION, ELSET=EALL, MATERIAL=STEEL\n*STEP\n*STATIC\n*BOUNDARY\n",
+    );
+    for n in &deck.boundary {
+        let u = field(deck.coords[n]);
+        for (i, v) in u.iter().enumerate() {
+            job.push_str(&format!("{n}, {}, {}, {v:.12e}\n", i + 1, i + 1));
+        }
+    }
+    job.push_str("*NODE PRINT, NSET=NALL\nU\n*END STEP\n");
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("job.inp"), job).unwrap();
+    let out = Command::new(ccx)
+        .args(["-i", "job"])
+        .current_dir(dir)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && !log.contains("*ERROR"),
+        "ccx failed in {}:\n{}",
+        dir.display(),
+        &log[log.len().saturating_sub(3000)..]
+    );
+    let dat = std::fs::read_to_string(dir.join("job.dat")).unwrap();
+    let scale = deck
+        .coords
+        .values()
+        .flat_map(|&p| field(p))
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut printed = HashMap::new();
+    for line in dat.lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        if f.len() != 4 {
+            continue;
+        }
+        if let (Ok(n), Ok(u)) = (
+            f[0].parse::<u64>(),
+            f[1..]
+                .iter()
+                .map(|s| s.parse::<f64>())
+                .collect::<Result<Vec<_>, _>>(),
+        ) {
+            printed.insert(n, u);
+        }
+    }
+    assert_eq!(printed.len(), deck.coords.len(), "a displacement per node");
+    let (mut worst, mut interior) = (0.0f64, 0);
+    for (n, p) in &deck.coords {
+        if deck.boundary.contains(n) || deck.hanging.contains(n) {
+            continue;
+        }
+        interior += 1;
+        let exact = field(*p);
+        for i in 0..3 {
+            worst = worst.max((printed[n][i] - exact[i]).abs() / scale);
+        }
+    }
+    (worst, interior)
+}
+
+/// The deck without its equations.
+fn without_equations(text: &str) -> String {
+    match text.find("\n*EQUATION") {
+        Some(k) => text[..=k].to_string(),
+        None => text.to_string(),
+    }
+}
+
+/// The patch test of `input` meshed with `args`, with and without the
+/// equations; returns both errors.
+fn patch_tests(name: &str, input: &str, args: &[&str]) -> Option<(f64, f64)> {
+    let ccx = ccx()?;
+    let dir = scratch(&format!("fe_files_{name}"));
+    let (inp, _, stats) = mesh(1, &dir.join("mesh"), input, args);
+    let text = std::fs::read_to_string(&inp).unwrap();
+    let hanging =
+        common::int(&stats, "face_hanging_nodes") + common::int(&stats, "edge_hanging_nodes");
+    assert!(hanging > 0, "{name}: the test needs hanging nodes");
+    let deck = read_deck(&text);
+    assert_eq!(
+        deck.hanging.len() as u64,
+        hanging,
+        "{name}: an equation set per hanging node"
+    );
+    let (with, interior) = patch_test(&ccx, &dir.join("with"), &text);
+    let (without, _) = patch_test(&ccx, &dir.join("without"), &without_equations(&text));
+    println!(
+        "{name}: {interior} interior independent nodes, {hanging} hanging; patch test error \
+         {with:.3e} with the equations, {without:.3e} without"
+    );
+    assert!(interior > 0, "{name}: no interior node");
+    assert!(
+        with <= 1e-8,
+        "{name}: patch test off by {with:e} with the equations"
+    );
+    assert!(
+        without > 1e-3,
+        "{name}: without the equations the error is only {without:e}"
+    );
+    Some((with, without))
+}
+
+#[test]
+fn calculix_patch_test_solid_sphere() {
+    for level in ["4", "5"] {
+        patch_tests(
+            &format!("sphere{level}"),
+            "sphere",
+            &[
+                "--level",
+                level,
+                "--keep",
+                "inside",
+                "--domain",
+                "-1.28,-1.28,-1.28,2.56",
+            ],
+        );
+    }
+}
+
+#[test]
+fn calculix_patch_test_solid_bunny() {
+    let Some(bunny) = shared_model("bunny.stl") else {
+        return;
+    };
+    patch_tests(
+        "bunny5",
+        bunny.to_str().unwrap(),
+        &[
+            "--level",
+            "5",
+            "--keep",
+            "inside",
+            "--domain",
+            "-0.64,-0.64,-0.64,1.28",
+        ],
+    );
+}
+
+/// The deck and the msh on `np` ranks equal those on one rank, byte for
+/// byte.
+fn same_files_on_ranks(name: &str, input: &str, args: &[&str], ranks: &[usize]) {
+    let dir = scratch(&format!("fe_files_ranks_{name}"));
+    let (inp1, msh1, _) = mesh(1, &dir.join("np1"), input, args);
+    let (inp1, msh1) = (std::fs::read(inp1).unwrap(), std::fs::read(msh1).unwrap());
+    for &np in ranks {
+        let (inp, msh, s) = mesh(np, &dir.join(format!("np{np}")), input, args);
+        assert_eq!(common::int(&s, "ranks"), np as u64);
+        assert!(
+            std::fs::read(inp).unwrap() == inp1,
+            "{name}: the .inp differs on {np} ranks"
+        );
+        assert!(
+            std::fs::read(msh).unwrap() == msh1,
+            "{name}: the .msh differs on {np} ranks"
+        );
+    }
+}
+
+#[test]
+fn files_are_the_same_on_1_to_4_ranks() {
+    let sphere = [
+        "--level",
+        "4",
+        "--keep",
+        "inside",
+        "--domain",
+        "-1.28,-1.28,-1.28,2.56",
+    ];
+    same_files_on_ranks("sphere", "sphere", &sphere, &[2, 3, 4]);
+    let fluid = ["--level", "4", "--keep", "outside", "--snap"];
+    same_files_on_ranks("sphere_fluid_snapped", "sphere", &fluid, &[3]);
+    if let Some(bunny) = shared_model("bunny.stl") {
+        let args = ["--level", "5", "--keep", "inside"];
+        same_files_on_ranks("bunny", bunny.to_str().unwrap(), &args, &[3]);
+    }
+}
+
+/// Gmsh reads `msh`: nodes, hexahedra, quadrilaterals, and the physical
+/// groups as `dim tag name` lines.
+fn gmsh_read(python: &Path, msh: &Path) -> (u64, u64, u64, BTreeSet<(i32, String)>) {
+    let script = r#"
+import sys, gmsh
+gmsh.initialize()
+gmsh.option.setNumber("General.Terminal", 0)
+gmsh.open(sys.argv[1])
+tags, _, _ = gmsh.model.mesh.getNodes()
+def count(dim, t):
+    types, elems, _ = gmsh.model.mesh.getElements(dim)
+    return sum(len(e) for ty, e in zip(types, elems) if ty == t)
+print("counts", len(tags), count(3, 5), count(2, 3))
+for d, t in gmsh.model.getPhysicalGroups():
+    print("group", d, gmsh.model.getPhysicalName(d, t))
+gmsh.finalize()
+"#;
+    let out = Command::new(python)
+        .args(["-c", script, msh.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "gmsh could not read {}:\n{text}\n{}",
+        msh.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut counts = [0u64; 3];
+    let mut groups = BTreeSet::new();
+    for line in text.lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        match f.first() {
+            Some(&"counts") => {
+                for k in 0..3 {
+                    counts[k] = f[k + 1].parse().unwrap();
+                }
+            }
+            Some(&"group") => {
+                groups.insert((f[1].parse().unwrap(), f[2..].join(" ")));
+            }
+            _ => {}
+        }
+    }
+    (counts[0], counts[1], counts[2], groups)
+}
+
+/// Gmsh's reading of the msh of `input` meshed with `args` against
+/// octmesh's counts, the deck's surfaces and the `patches` expected.
+fn gmsh_check(python: &Path, name: &str, input: &str, args: &[&str], patches: &[&str]) {
+    let dir = scratch(&format!("fe_files_gmsh_{name}"));
+    let (inp, msh, s) = mesh(1, &dir, input, args);
+    let (nodes, hexes, quads, groups) = gmsh_read(python, &msh);
+    let hanging = common::int(&s, "face_hanging_nodes") + common::int(&s, "edge_hanging_nodes");
+    assert_eq!(
+        nodes,
+        common::int(&s, "independent_nodes") + hanging,
+        "{name}: nodes"
+    );
+    assert_eq!(hexes, common::int(&s, "elements"), "{name}: hexahedra");
+    let deck = read_deck(&std::fs::read_to_string(inp).unwrap());
+    assert_eq!(
+        quads as usize, deck.surfaces,
+        "{name}: a quadrilateral per boundary face"
+    );
+    assert_eq!(deck.coords.len() as u64, nodes, "{name}: the deck's nodes");
+    let mut want: BTreeSet<(i32, String)> = patches.iter().map(|p| (2, p.to_string())).collect();
+    want.insert((3, "volume".into()));
+    assert_eq!(groups, want, "{name}: physical groups");
+    // The hanging nodes' constraints are in the file, one line each.
+    let text = std::fs::read_to_string(&msh).unwrap();
+    let section = text
+        .split("$HangingNodes\n")
+        .nth(1)
+        .expect("a $HangingNodes section");
+    let count: u64 = section.lines().next().unwrap().parse().unwrap();
+    assert_eq!(count, hanging, "{name}: $HangingNodes");
+    println!(
+        "{name}: gmsh read {nodes} nodes, {hexes} hexahedra, {quads} quadrilaterals, {groups:?}"
+    );
+}
+
+#[test]
+fn gmsh_reads_the_msh() {
+    let Some(python) = gmsh_python() else {
+        return;
+    };
+    let solid = ["--level", "4", "--keep", "inside"];
+    gmsh_check(&python, "sphere", "sphere", &solid, &["sphere"]);
+    let fluid = ["--level", "4", "--keep", "outside"];
+    let all = ["xmin", "xmax", "ymin", "ymax", "zmin", "zmax", "sphere"];
+    gmsh_check(&python, "sphere_fluid", "sphere", &fluid, &all);
+    if let Some(bunny) = shared_model("bunny.stl") {
+        let args = ["--level", "5", "--keep", "inside"];
+        gmsh_check(&python, "bunny", bunny.to_str().unwrap(), &args, &["bunny"]);
+    }
+}
+
+/// A file that cannot be written fails the run on every rank with the
+/// path in the message, and nothing is left half-written.
+#[test]
+fn an_unwritable_file_fails_every_rank() {
+    let dir = scratch("fe_files_unwritable");
+    for (option, name) in [("--abaqus", "m.inp"), ("--gmsh", "m.msh")] {
+        let path = dir.join("no_such_dir").join(name);
+        let p = path.to_str().unwrap();
+        let args = [
+            "mesh", "sphere", "--level", "3", "--keep", "inside", option, p,
+        ];
+        let out = common::mpirun(
+            2,
+            &common::octmesh_bin(),
+            &args,
+            std::time::Duration::from_secs(300),
+        );
+        let lines = common::rank_error_lines(&out, 2, option);
+        assert!(lines[0].contains(name), "{option}: {}", lines[0]);
+        assert!(!path.exists());
+    }
+}
