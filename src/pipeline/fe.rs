@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use crate::io::gathered::{gather, Gathered};
+use crate::mesh::patches::PatchNames;
 use crate::parallel::comm::agree;
 
 use super::*;
@@ -30,19 +31,9 @@ impl Session {
     /// gathered on rank 0, with the session's patch names. Phases `faces`,
     /// `boundary` (when not made yet), `gather` and `gmsh`.
     pub fn write_gmsh(&mut self, path: &Path) -> Result<()> {
-        let patches = agree(&*self.comm, self.patch_names())?;
-        let g = self.gathered()?;
-        let comm = self.comm.clone();
-        self.timer.time(&*comm, "gmsh", || {
-            let local = match comm.rank() {
-                0 => crate::io::gmsh::write_gmsh(path, &g, &patches).map(|_| ()),
-                _ => Ok(()),
-            };
-            agree(&*comm, local)
-        })?;
-        self.report_phase(None);
-        self.observer.event(&Event::Wrote(path));
-        Ok(())
+        self.write_gathered(path, "gmsh", |g, patches| {
+            crate::io::gmsh::write_gmsh(path, g, patches).map(|_| ())
+        })
     }
 
     /// Writes the mesh as one Abaqus/CalculiX input file
@@ -51,12 +42,25 @@ impl Session {
     /// gathered on rank 0, with the session's patch names. Phases `faces`,
     /// `boundary` (when not made yet), `gather` and `abaqus`.
     pub fn write_abaqus(&mut self, path: &Path) -> Result<()> {
+        self.write_gathered(path, "abaqus", |g, patches| {
+            crate::io::abaqus::write_abaqus(path, g, patches)
+        })
+    }
+
+    /// Gathers the mesh and has rank 0 `write` it as phase `phase`; every
+    /// rank returns rank 0's result. Collective.
+    fn write_gathered(
+        &mut self,
+        path: &Path,
+        phase: &str,
+        write: impl FnOnce(&Gathered, &PatchNames) -> Result<()>,
+    ) -> Result<()> {
         let patches = agree(&*self.comm, self.patch_names())?;
         let g = self.gathered()?;
         let comm = self.comm.clone();
-        self.timer.time(&*comm, "abaqus", || {
+        self.timer.time(&*comm, phase, || {
             let local = match comm.rank() {
-                0 => crate::io::abaqus::write_abaqus(path, &g, &patches),
+                0 => write(&g, &patches),
                 _ => Ok(()),
             };
             agree(&*comm, local)
