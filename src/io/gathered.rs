@@ -18,9 +18,8 @@
 //! Rank 0 holds the whole mesh: about 150 bytes per node and 40 per
 //! element. That bounds the size of meshes these files suit.
 
-use std::collections::HashMap;
-
 use crate::error::{Error, Result};
+use crate::geometry::hash::FoldMap;
 use crate::mesh::points::point_key;
 use crate::mesh::{Boundary, Mesh};
 use crate::parallel::comm::Comm;
@@ -147,7 +146,9 @@ struct NodeRecord {
 /// Rank 0's half of [`gather`].
 fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> {
     let corrupt = || Error::io("the gathered mesh is inconsistent (an internal error)");
-    let mut records: HashMap<u64, NodeRecord> = HashMap::new();
+    // Fixed fast hash: the maps' order never shows (numbers follow the
+    // elements' order).
+    let mut records: FoldMap<u64, NodeRecord> = FoldMap::default();
     let mut i = 0;
     let take = |i: &mut usize| -> Result<u64> {
         let v = *nodes.get(*i).ok_or_else(corrupt)?;
@@ -190,7 +191,8 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
         }
     }
     // Number the nodes by first use: independent ones, then hanging ones.
-    let mut number: HashMap<u64, u32> = HashMap::with_capacity(records.len());
+    let mut number: FoldMap<u64, u32> =
+        FoldMap::with_capacity_and_hasher(records.len(), Default::default());
     let mut order: Vec<u64> = Vec::with_capacity(records.len());
     for hanging in [false, true] {
         for &k in elements {
