@@ -434,6 +434,14 @@ impl ConfigError {
 }
 
 impl Config {
+    /// Whether the run writes a mesh for a solver (OpenFOAM, Gmsh,
+    /// Abaqus/CalculiX), which turns `--clean-walls` on unless it is set:
+    /// a solver needs walls it can take and a mesh in one piece.
+    pub fn writes_solver_mesh(&self) -> bool {
+        let o = &self.output;
+        o.openfoam.is_some() || o.gmsh.is_some() || o.abaqus.is_some()
+    }
+
     /// Checks the configuration for `command`: required keys, ranges,
     /// consistency. Rank-local (every rank checks the same values).
     pub fn validate(&self, command: Command) -> Result<(), ConfigError> {

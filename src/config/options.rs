@@ -693,7 +693,7 @@ options! {
     /// walls are manifold
     Mesh "clean-walls" <"BOOL">: One bool = clap::value_parser!(bool),
     keys ["mesh.clean_walls"],
-    default none note "true with --openfoam, else false",
+    default none note "true with --openfoam, --gmsh or --abaqus, else false",
     range,
     set |c, v, _g| { c.mesh.clean_walls = Some(v); }
 

@@ -84,6 +84,59 @@ impl Gathered {
     }
 }
 
+impl Gathered {
+    /// The sizes (elements) of the mesh's pieces joined through faces,
+    /// largest first: what a solver's stiffness sees. Two elements are
+    /// joined when they share a whole face, or when one's face is a
+    /// quarter of the other's (a face-hanging node's four dependencies
+    /// are the coarse face's corners). Pieces touching only along an edge
+    /// or at a corner stay apart: such a joint is a hinge, and the
+    /// stiffness is singular unless every piece is held.
+    pub fn pieces(&self) -> Vec<u64> {
+        let ni = self.num_independent;
+        let mut parent: Vec<u32> = (0..self.elements.len() as u32).collect();
+        fn root(parent: &mut [u32], mut a: u32) -> u32 {
+            while parent[a as usize] != a {
+                let up = parent[parent[a as usize] as usize];
+                parent[a as usize] = up;
+                a = up;
+            }
+            a
+        }
+        let mut first: FoldMap<[u32; 4], u32> = FoldMap::default();
+        for (e, nodes) in self.elements.iter().enumerate() {
+            for face in &ABAQUS_FACE_NODES {
+                let corners = face.map(|k| nodes[k]);
+                // A quarter of a coarse face: its face-hanging corner
+                // names the coarse face.
+                let coarse = corners.iter().find_map(|&n| {
+                    let d = n.checked_sub(ni as u32)?;
+                    let deps = &self.dependencies[d as usize];
+                    (deps.len() == 4).then(|| [deps[0], deps[1], deps[2], deps[3]])
+                });
+                let mut key = coarse.unwrap_or(corners);
+                key.sort_unstable();
+                match first.get(&key) {
+                    Some(&other) => {
+                        let (a, b) = (root(&mut parent, other), root(&mut parent, e as u32));
+                        parent[a.max(b) as usize] = a.min(b);
+                    }
+                    None => {
+                        first.insert(key, e as u32);
+                    }
+                }
+            }
+        }
+        let mut size: FoldMap<u32, u64> = FoldMap::default();
+        for e in 0..parent.len() as u32 {
+            *size.entry(root(&mut parent, e)).or_default() += 1;
+        }
+        let mut sizes: Vec<u64> = size.into_values().collect();
+        sizes.sort_unstable_by(|a, b| b.cmp(a));
+        sizes
+    }
+}
+
 /// Sends `local` to rank 0; rank 0 gets every rank's in rank order.
 fn to_root(comm: &dyn Comm, local: &[u64]) -> Vec<u64> {
     let mut counts = vec![0usize; comm.size()];

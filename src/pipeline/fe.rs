@@ -9,10 +9,15 @@ use crate::parallel::comm::agree;
 use super::*;
 
 impl Session {
-    /// The current mesh and its boundary gathered on rank 0
-    /// ([`crate::io::gathered`]); empty on the other ranks. Phases `faces`
-    /// and `boundary` (when not made yet) and `gather`.
-    fn gathered(&mut self) -> Result<Gathered> {
+    /// Gathers the current mesh and its boundary on rank 0
+    /// ([`crate::io::gathered`]), once per mesh: every single-file writer
+    /// of the same mesh uses the same copy. Reports the mesh's pieces
+    /// ([`Event::Pieces`]). Phases `faces` and `boundary` (when not made
+    /// yet) and `gather`.
+    fn gather(&mut self) -> Result<()> {
+        if self.gathered.as_ref().map(|g| g.0) == Some(self.mesh_generation) {
+            return Ok(());
+        }
         self.boundary()?;
         let comm = self.comm.clone();
         let (mesh, boundary) = (&self.mesh, &self.boundary);
@@ -24,7 +29,16 @@ impl Session {
             });
         let g = agree(&*comm, g)?;
         self.report_phase(None);
-        Ok(g)
+        // Rank 0 has the mesh: it counts the pieces and tells the others.
+        let mut sizes = g.pieces();
+        let mut n = [sizes.len() as u64];
+        comm.max_u64(&mut n);
+        sizes.resize(n[0] as usize, 0);
+        comm.max_u64(&mut sizes);
+        self.observer.event(&Event::Pieces(&sizes));
+        self.facts.pieces = Some(sizes);
+        self.gathered = Some((self.mesh_generation, g));
+        Ok(())
     }
 
     /// Writes the mesh as one Gmsh MSH 4.1 file ([`crate::io::gmsh`]),
@@ -56,11 +70,12 @@ impl Session {
         write: impl FnOnce(&Gathered, &PatchNames) -> Result<()>,
     ) -> Result<()> {
         let patches = agree(&*self.comm, self.patch_names())?;
-        let g = self.gathered()?;
+        self.gather()?;
         let comm = self.comm.clone();
+        let g = &self.gathered.as_ref().expect("gathered just now").1;
         self.timer.time(&*comm, phase, || {
             let local = match comm.rank() {
-                0 => write(&g, &patches),
+                0 => write(g, &patches),
                 _ => Ok(()),
             };
             agree(&*comm, local)

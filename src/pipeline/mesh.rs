@@ -39,7 +39,7 @@ impl Session {
             .config
             .mesh
             .clean_walls
-            .unwrap_or(self.config.output.openfoam.is_some());
+            .unwrap_or(self.config.writes_solver_mesh());
         let opts = MeshOptions {
             keep,
             cut_rule,

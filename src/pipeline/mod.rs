@@ -115,6 +115,8 @@ struct Facts {
     /// Peak memory before anything and after reading, bytes (this rank).
     rss_start: u64,
     rss_read: u64,
+    /// The sizes of the last gathered mesh's pieces joined through faces.
+    pieces: Option<Vec<u64>>,
 }
 
 /// A meshing session over a communicator: the pipeline's state and stages.
@@ -147,6 +149,9 @@ pub struct Session {
     faces: Option<(u64, Faces)>,
     /// The finite-element boundary of the mesh of a generation.
     boundary: Option<(u64, Boundary)>,
+    /// The mesh of a generation gathered on rank 0 for the single-file
+    /// writers (empty on the other ranks).
+    gathered: Option<(u64, crate::io::gathered::Gathered)>,
     /// The quality of the mesh of a generation, when measured.
     quality: Option<(u64, crate::mesh::quality::Quality)>,
     /// The snap that made the mesh of a generation.
@@ -179,6 +184,7 @@ impl Session {
             previous: Previous::default(),
             faces: None,
             boundary: None,
+            gathered: None,
             quality: None,
             snapped: None,
             parts: Vec::new(),

@@ -78,6 +78,12 @@ pub enum Event<'a> {
     Quality(&'a Quality),
     /// The mesh was snapped to the surface.
     Snapped(&'a crate::mesh::snap::SnapReport),
+    /// The mesh was gathered for a single-file writer: the sizes of its
+    /// pieces joined through faces, largest first
+    /// ([`crate::io::gathered::Gathered::pieces`]). More than one piece
+    /// leaves a finite-element solver's stiffness singular unless every
+    /// piece is held.
+    Pieces(&'a [u64]),
     /// A file was written.
     Wrote(&'a Path),
     /// The run ended.

@@ -158,6 +158,11 @@ pub struct Stats {
     /// The mesh's quality, when measured (see [`crate::mesh::quality`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub quality: Option<Quality>,
+    /// The sizes of the mesh's pieces joined through faces, largest
+    /// first, when a single-file writer gathered it
+    /// ([`crate::io::gathered::Gathered::pieces`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pieces: Option<Vec<u64>>,
     /// What the snap did, when the mesh was snapped (see
     /// [`crate::mesh::snap`]).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -313,6 +318,7 @@ impl Session {
             },
             mesh,
             quality: self.current_quality().cloned(),
+            pieces: f.pieces.clone(),
             snap: self.current_snap().cloned(),
             surface_volume: self.surface_volume(),
             dropped_facets: f.dropped.unwrap_or(0) as u64,

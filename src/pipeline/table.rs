@@ -195,6 +195,17 @@ impl Observer for Table {
                     r.min_scaled_jacobian
                 );
             }
+            Event::Pieces(sizes) if sizes.len() > 1 => {
+                let total: u64 = sizes.iter().sum();
+                say!(
+                    "  warning: the mesh is {} pieces joined through faces (the largest has {} of {total} \
+                     elements; the others touch it at most along edges or corners, or not at all): a solver's \
+                     stiffness is singular unless every piece is held; --clean-walls true joins them \
+                     where they only touch",
+                    sizes.len(),
+                    sizes[0]
+                );
+            }
             Event::Wrote(p) => say!("  wrote {}", p.display()),
             Event::Finished {
                 seconds,
