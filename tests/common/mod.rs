@@ -24,6 +24,7 @@
 //!   VTK); default `python3`, then `/usr/bin/python3`.
 #![allow(dead_code)]
 
+pub mod conformity;
 pub mod runner;
 
 use std::path::{Path, PathBuf};
