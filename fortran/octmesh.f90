@@ -127,6 +127,14 @@ module octmesh
      integer(c_int64_t) :: scaled_jacobian_histogram(20)
      integer(c_int64_t) :: internal_faces
      real(c_double) :: non_orthogonality_max, non_orthogonality_average, skewness_max
+     real(c_double) :: internal_skewness_max, boundary_skewness_max
+     real(c_double) :: determinant_min, determinant_average
+     real(c_double) :: face_weight_min, face_weight_average
+     real(c_double) :: volume_ratio_min, volume_ratio_average
+     real(c_double) :: face_flatness_min, face_flatness_average, face_twist_min
+     integer(c_int64_t) :: non_orthogonal_faces, skewed_internal_faces, skewed_boundary_faces
+     integer(c_int64_t) :: low_determinant_cells, low_weight_faces, low_volume_ratio_faces
+     integer(c_int64_t) :: twisted_faces
   end type octmesh_mesh_quality_t
 
   public :: octmesh_create_f, octmesh_destroy, octmesh_error, octmesh_status_name_f

@@ -564,6 +564,83 @@ typedef struct {
    * The largest skewness over all faces (`checkMesh`'s "Max skewness").
    */
   double skewness_max;
+  /**
+   * The largest skewness of the internal faces (`meshQualityDict`'s
+   * `maxInternalSkewness`, 4 by default, limits it).
+   */
+  double internal_skewness_max;
+  /**
+   * The largest skewness of the boundary faces (`maxBoundarySkewness`,
+   * 20).
+   */
+  double boundary_skewness_max;
+  /**
+   * The smallest cell determinant (`checkMesh`'s "Cell determinant";
+   * 1 for a cube; `minDeterminant`, 0.001).
+   */
+  double determinant_min;
+  /**
+   * The mean cell determinant.
+   */
+  double determinant_average;
+  /**
+   * The smallest face interpolation weight (0.5 between equal cubes;
+   * `minFaceWeight`, 0.05).
+   */
+  double face_weight_min;
+  /**
+   * The mean interpolation weight of the internal faces.
+   */
+  double face_weight_average;
+  /**
+   * The smallest ratio of a face's cells' volumes (`minVolRatio`, 0.01).
+   */
+  double volume_ratio_min;
+  /**
+   * The mean volume ratio of the internal faces.
+   */
+  double volume_ratio_average;
+  /**
+   * The smallest face flatness (1 for planar faces).
+   */
+  double face_flatness_min;
+  /**
+   * The mean face flatness over every face.
+   */
+  double face_flatness_average;
+  /**
+   * The smallest face twist (`minTwist`, 0.02; 1 for planar faces normal
+   * to the line between their cells' centres).
+   */
+  double face_twist_min;
+  /**
+   * Internal faces more non-orthogonal than 65 degrees.
+   */
+  octmesh_gloidx_t non_orthogonal_faces;
+  /**
+   * Internal faces more skewed than 4.
+   */
+  octmesh_gloidx_t skewed_internal_faces;
+  /**
+   * Boundary faces more skewed than 20.
+   */
+  octmesh_gloidx_t skewed_boundary_faces;
+  /**
+   * Cells whose determinant is below 0.001.
+   */
+  octmesh_gloidx_t low_determinant_cells;
+  /**
+   * Internal faces whose interpolation weight is below 0.05.
+   */
+  octmesh_gloidx_t low_weight_faces;
+  /**
+   * Internal faces whose cells' volume ratio is below 0.01.
+   */
+  octmesh_gloidx_t low_volume_ratio_faces;
+  /**
+   * Faces twisted below 0.02.
+   */
+  octmesh_gloidx_t twisted_faces;
 } octmesh_mesh_quality_t;
 
 /**
@@ -1566,7 +1643,9 @@ octmesh_status_t octmesh_mesh_write_vtu_fields(octmesh_t *h,
 /**
  * Measures the current mesh's quality and writes it to `*out`: the scaled
  * Jacobian of each element from its node coordinates, and `checkMesh`'s
- * non-orthogonality and skewness over the finite-volume faces (those of
+ * face and cell figures (non-orthogonality, skewness, determinant,
+ * interpolation weight, volume ratio, flatness, twist) with the counts
+ * against `meshQualityDict`'s default limits, over the finite-volume faces (those of
  * `octmesh_mesh_build_faces`; after `octmesh_mesh_snap`, measured on the
  * moved points as `checkMesh` measures the written OpenFOAM case). Needs
  * a mesh. Collective.

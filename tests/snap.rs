@@ -22,10 +22,14 @@
 //!
 //! and then `checkMesh -allTopology` on the snapped fluid sphere written
 //! as an OpenFOAM case on 1 and 2 ranks must say `Mesh OK.`, and octmesh's
-//! quality figures of the same run (`--quality`: the largest and average
-//! non-orthogonality and the largest skewness, measured on the moved
-//! points) must equal what `checkMesh -allGeometry` prints, to 1e-6
-//! relative.
+//! quality figures of the same run (`--quality`, measured on the moved
+//! points: non-orthogonality, skewness, flatness, cell determinant,
+//! interpolation weight, volume ratio) must equal what `checkMesh
+//! -allGeometry` prints, to its 8 printed digits, and `checkMesh
+//! -meshQuality` with `minTwist` set just above and just below octmesh's
+//! smallest twist must find twisted faces and none. The same figures of
+//! the unsnapped fluid bunny (level 6, 2 ranks) are compared too (the
+//! octree's path of the figures).
 //!
 //! Without the shared models or OpenFOAM the checks that need them are
 //! skipped, and fail under `CI=true` (`tests/common`).
@@ -59,6 +63,10 @@ fn main() {
             r.test(
                 "checkmesh_accepts_the_snapped_fluid_sphere",
                 check_mesh_on_the_fluid_sphere,
+            );
+            r.test(
+                "checkmesh_figures_of_the_unsnapped_bunny",
+                checkmesh_figures_of_the_unsnapped_bunny,
             );
         },
     );
@@ -116,24 +124,145 @@ fn check_mesh_on_the_fluid_sphere() {
         // so too); its figures are the ones compared.
         let text = common::foam(&rc, &case, &(parallel("-allGeometry") + " || true"));
         let q = common::json_file(&stats)["quality"].clone();
-        let figures = &text[text.find("Mesh non-orthogonality").unwrap_or(0)..];
-        for (label, key) in [
-            ("Mesh non-orthogonality Max:", "non_orthogonality_max"),
-            ("average:", "non_orthogonality_average"),
-            ("Max skewness =", "skewness_max"),
-        ] {
-            let printed = common::number_after(figures, label);
-            let mine = q[key].as_f64().unwrap_or_else(|| panic!("no {key} in {q}"));
-            assert!(
-                (mine - printed).abs() <= 1e-6 * printed.abs(),
-                "snapped fluid sphere on {np} ranks: {key} {mine}, checkMesh printed {printed}"
-            );
-            println!(
-                "snapped fluid sphere, level 6, {np} rank(s): checkMesh {label} {printed}, octmesh {mine}"
-            );
-        }
+        compare_figures(
+            &format!("snapped fluid sphere, level 6, {np} rank(s)"),
+            &text,
+            &q,
+            np,
+        );
+        twist_brackets(&rc, &case, &q, &parallel(""));
         println!("snapped fluid sphere, level 6, {np} rank(s): checkMesh Mesh OK");
     }
+}
+
+/// The figures `checkMesh -allGeometry` printed in `text` against
+/// octmesh's `q`, to the printed 8 digits. (On several ranks checkMesh
+/// counts a face between ranks twice in the mean flatness; the mean is
+/// compared on one rank.)
+fn compare_figures(what: &str, text: &str, q: &serde_json::Value, np: usize) {
+    let from = |label: &str| {
+        &text[text
+            .find(label)
+            .unwrap_or_else(|| panic!("no {label}:\n{text}"))..]
+    };
+    let mut pairs = vec![
+        (
+            from("Mesh non-orthogonality"),
+            "Max:",
+            "non_orthogonality_max",
+        ),
+        (
+            from("Mesh non-orthogonality"),
+            "average:",
+            "non_orthogonality_average",
+        ),
+        (from("Max skewness"), "Max skewness =", "skewness_max"),
+        (from("Face flatness"), "min =", "face_flatness_min"),
+        (from("Cell determinant"), "minimum:", "determinant_min"),
+        (from("Cell determinant"), "average:", "determinant_average"),
+        (
+            from("Face interpolation weight"),
+            "minimum:",
+            "face_weight_min",
+        ),
+        (
+            from("Face interpolation weight"),
+            "average:",
+            "face_weight_average",
+        ),
+        (from("Face volume ratio"), "minimum:", "volume_ratio_min"),
+        (
+            from("Face volume ratio"),
+            "average:",
+            "volume_ratio_average",
+        ),
+    ];
+    if np == 1 {
+        pairs.push((from("Face flatness"), "average =", "face_flatness_average"));
+    }
+    for (figures, label, key) in pairs {
+        let printed = common::number_after(figures, label);
+        let mine = q[key].as_f64().unwrap_or_else(|| panic!("no {key} in {q}"));
+        assert!(
+            (mine - printed).abs() <= 1e-7 * printed.abs().max(1e-3),
+            "{what}: {key} {mine}, checkMesh printed {printed}"
+        );
+        println!("{what}: checkMesh {key} {printed}, octmesh {mine}");
+    }
+}
+
+/// `checkMesh -meshQuality` with `minTwist` just above octmesh's smallest
+/// twist finds twisted faces, and just below finds none: the smallest
+/// twist is checkMesh's to 1e-9. `check` runs checkMesh (serial or
+/// parallel) with options appended.
+fn twist_brackets(
+    rc: &std::path::Path,
+    case: &std::path::Path,
+    q: &serde_json::Value,
+    check: &str,
+) {
+    let twist = q["face_twist_min"].as_f64().unwrap();
+    for (limit, some) in [(twist + 1e-9, true), (twist - 1e-9, false)] {
+        let dict = format!(
+            "FoamFile {{ version 2.0; format ascii; class dictionary; object meshQualityDict; }}\n\
+             maxNonOrtho 180; maxBoundarySkewness -1; maxInternalSkewness -1; maxConcave 180;\n\
+             minVol -1e30; minTetQuality -1e30; minArea -1; minTwist {limit:.12}; minDeterminant -1;\n\
+             minFaceWeight -1; minVolRatio -1; minTriangleTwist -1; nSmoothScale 4; errorReduction 0.75;\n"
+        );
+        std::fs::write(case.join("system/meshQualityDict"), dict).unwrap();
+        let text = common::foam(rc, case, &format!("{check} -meshQuality || true"));
+        let line = text
+            .lines()
+            .find(|l| l.contains("faces with face twist <"))
+            .unwrap_or_else(|| panic!("no twist line:\n{text}"));
+        let count: u64 = line.rsplit(':').next().unwrap().trim().parse().unwrap();
+        assert_eq!(
+            count > 0,
+            some,
+            "minTwist {limit}: {line} (octmesh's smallest twist {twist})"
+        );
+    }
+    println!("checkMesh -meshQuality brackets the smallest twist {twist}");
+}
+
+/// `checkMesh -allGeometry` on the unsnapped fluid bunny (level 6, 2
+/// ranks, `-parallel`) prints octmesh's figures: the octree's own path of
+/// the figures (2:1 faces, cells with split faces, boundary pieces).
+fn checkmesh_figures_of_the_unsnapped_bunny() {
+    let Some(rc) = common::openfoam() else {
+        return;
+    };
+    let Some(bunny) = common::shared_model("bunny.stl") else {
+        return;
+    };
+    let case = common::scratch("snap_foam_bunny_unsnapped");
+    let _ = std::fs::remove_dir_all(&case);
+    let stats = case.with_file_name("snap_foam_bunny_unsnapped.json");
+    let args = [
+        "mesh",
+        bunny.to_str().unwrap(),
+        "--level",
+        "6",
+        "--keep",
+        "outside",
+        "--openfoam",
+        case.to_str().unwrap(),
+        "--quality",
+        "--stats",
+        stats.to_str().unwrap(),
+        "--quiet",
+    ];
+    let out = common::mpirun(2, &common::octmesh_bin(), &args, Duration::from_secs(600));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let check = "mpirun --oversubscribe -np 2 checkMesh -parallel";
+    let text = common::foam(&rc, &case, &format!("{check} -allGeometry || true"));
+    let q = common::json_file(&stats)["quality"].clone();
+    compare_figures("unsnapped fluid bunny, level 6, 2 ranks", &text, &q, 2);
+    twist_brackets(&rc, &case, &q, check);
 }
 
 /// The snapped mesh of the built-in or shared surface `name` at `level`

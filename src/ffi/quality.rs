@@ -35,11 +35,54 @@ pub struct octmesh_mesh_quality_t {
     pub non_orthogonality_average: f64,
     /// The largest skewness over all faces (`checkMesh`'s "Max skewness").
     pub skewness_max: f64,
+    /// The largest skewness of the internal faces (`meshQualityDict`'s
+    /// `maxInternalSkewness`, 4 by default, limits it).
+    pub internal_skewness_max: f64,
+    /// The largest skewness of the boundary faces (`maxBoundarySkewness`,
+    /// 20).
+    pub boundary_skewness_max: f64,
+    /// The smallest cell determinant (`checkMesh`'s "Cell determinant";
+    /// 1 for a cube; `minDeterminant`, 0.001).
+    pub determinant_min: f64,
+    /// The mean cell determinant.
+    pub determinant_average: f64,
+    /// The smallest face interpolation weight (0.5 between equal cubes;
+    /// `minFaceWeight`, 0.05).
+    pub face_weight_min: f64,
+    /// The mean interpolation weight of the internal faces.
+    pub face_weight_average: f64,
+    /// The smallest ratio of a face's cells' volumes (`minVolRatio`, 0.01).
+    pub volume_ratio_min: f64,
+    /// The mean volume ratio of the internal faces.
+    pub volume_ratio_average: f64,
+    /// The smallest face flatness (1 for planar faces).
+    pub face_flatness_min: f64,
+    /// The mean face flatness over every face.
+    pub face_flatness_average: f64,
+    /// The smallest face twist (`minTwist`, 0.02; 1 for planar faces normal
+    /// to the line between their cells' centres).
+    pub face_twist_min: f64,
+    /// Internal faces more non-orthogonal than 65 degrees.
+    pub non_orthogonal_faces: octmesh_gloidx_t,
+    /// Internal faces more skewed than 4.
+    pub skewed_internal_faces: octmesh_gloidx_t,
+    /// Boundary faces more skewed than 20.
+    pub skewed_boundary_faces: octmesh_gloidx_t,
+    /// Cells whose determinant is below 0.001.
+    pub low_determinant_cells: octmesh_gloidx_t,
+    /// Internal faces whose interpolation weight is below 0.05.
+    pub low_weight_faces: octmesh_gloidx_t,
+    /// Internal faces whose cells' volume ratio is below 0.01.
+    pub low_volume_ratio_faces: octmesh_gloidx_t,
+    /// Faces twisted below 0.02.
+    pub twisted_faces: octmesh_gloidx_t,
 }
 
 /// Measures the current mesh's quality and writes it to `*out`: the scaled
 /// Jacobian of each element from its node coordinates, and `checkMesh`'s
-/// non-orthogonality and skewness over the finite-volume faces (those of
+/// face and cell figures (non-orthogonality, skewness, determinant,
+/// interpolation weight, volume ratio, flatness, twist) with the counts
+/// against `meshQualityDict`'s default limits, over the finite-volume faces (those of
 /// `octmesh_mesh_build_faces`; after `octmesh_mesh_snap`, measured on the
 /// moved points as `checkMesh` measures the written OpenFOAM case). Needs
 /// a mesh. Collective.
@@ -81,6 +124,24 @@ pub extern "C" fn octmesh_mesh_get_quality(
                 non_orthogonality_max: q.non_orthogonality_max,
                 non_orthogonality_average: q.non_orthogonality_average,
                 skewness_max: q.skewness_max,
+                internal_skewness_max: q.internal_skewness_max,
+                boundary_skewness_max: q.boundary_skewness_max,
+                determinant_min: q.determinant_min,
+                determinant_average: q.determinant_average,
+                face_weight_min: q.face_weight_min,
+                face_weight_average: q.face_weight_average,
+                volume_ratio_min: q.volume_ratio_min,
+                volume_ratio_average: q.volume_ratio_average,
+                face_flatness_min: q.face_flatness_min,
+                face_flatness_average: q.face_flatness_average,
+                face_twist_min: q.face_twist_min,
+                non_orthogonal_faces: n(q.limits.non_orthogonal_faces),
+                skewed_internal_faces: n(q.limits.skewed_internal_faces),
+                skewed_boundary_faces: n(q.limits.skewed_boundary_faces),
+                low_determinant_cells: n(q.limits.low_determinant_cells),
+                low_weight_faces: n(q.limits.low_weight_faces),
+                low_volume_ratio_faces: n(q.limits.low_volume_ratio_faces),
+                twisted_faces: n(q.limits.twisted_faces),
             },
         );
         Ok(())

@@ -218,6 +218,12 @@ pub fn polygon_area_centre(p: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
 /// (almost) zero).
 #[inline]
 pub fn cell_centre(faces: &[([f64; 3], [f64; 3])]) -> [f64; 3] {
+    cell_centre_volume(faces).0
+}
+
+/// The centre of a cell as [`cell_centre`], and its volume: the sum of the
+/// pyramids' (OpenFOAM's `cellVolumes`).
+pub fn cell_centre_volume(faces: &[([f64; 3], [f64; 3])]) -> ([f64; 3], f64) {
     let est = scale(
         faces.iter().fold([0.0; 3], |a, f| add(a, f.0)),
         1.0 / faces.len().max(1) as f64,
@@ -231,10 +237,42 @@ pub fn cell_centre(faces: &[([f64; 3], [f64; 3])]) -> [f64; 3] {
         moment = add(moment, scale(pc, v));
     }
     if volume.abs() > VERY_SMALL {
-        scale(moment, 1.0 / volume)
+        (scale(moment, 1.0 / volume), volume / 3.0)
     } else {
-        est
+        (est, volume / 3.0)
     }
+}
+
+/// The flatness of a face of more than three `points` with centre `c` and
+/// area vector `s` ([`polygon_area_centre`]), as OpenFOAM's `checkMesh`
+/// measures it: `|s|` over the sum of the areas of the triangles from `c`
+/// to each edge (1 for a planar convex face, towards 0 for a butterfly).
+pub fn face_flatness(points: &[[f64; 3]], c: [f64; 3], s: [f64; 3]) -> f64 {
+    let mut sum = 0.0;
+    for (k, &a) in points.iter().enumerate() {
+        let b = points[(k + 1) % points.len()];
+        sum += 0.5 * norm(cross(sub(b, a), sub(c, a)));
+    }
+    norm(s) / (sum + TINY)
+}
+
+/// The twist of a face as snappyHexMesh's `minTwist` measures it
+/// (OpenFOAM's `polyMeshGeometry::checkFaceTwist`): the smallest cosine
+/// between the unit vector `nf` (from the owner's centre to the
+/// neighbour's, or to the face centre on a boundary) and the normals of
+/// the triangles from the face centre `c` to each edge. 1 for a planar
+/// face normal to `nf`.
+pub fn face_twist(points: &[[f64; 3]], c: [f64; 3], nf: [f64; 3]) -> f64 {
+    let mut twist = 1.0f64;
+    for (k, &a) in points.iter().enumerate() {
+        let b = points[(k + 1) % points.len()];
+        let n = cross(sub(b, a), sub(c, a));
+        let m = norm(n);
+        if m > VERY_SMALL {
+            twist = twist.min(dot(nf, n) / m);
+        }
+    }
+    twist
 }
 
 #[cfg(test)]

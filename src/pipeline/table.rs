@@ -180,6 +180,34 @@ impl Observer for Table {
                     })
                     .collect();
                 say!("  scaled Jacobian histogram: {}", bins.join(" | "));
+                say!(
+                    "  checkMesh figures: skewness internal {:.4} boundary {:.4} | determinant min {:.4} \
+                     | face weight min {:.4} | volume ratio min {:.4} | flatness min {:.4} | twist min {:.4}",
+                    q.internal_skewness_max,
+                    q.boundary_skewness_max,
+                    q.determinant_min,
+                    q.face_weight_min,
+                    q.volume_ratio_min,
+                    q.face_flatness_min,
+                    q.face_twist_min
+                );
+                let l = &q.limits;
+                if l.passed() {
+                    say!("  meshQualityDict's default limits: passed");
+                } else {
+                    say!(
+                        "  meshQualityDict's default limits: FAILED: non-orthogonal > 65: {} | skewness > 4 \
+                         internal: {} | > 20 boundary: {} | determinant < 0.001: {} cells | weight < 0.05: {} \
+                         | volume ratio < 0.01: {} | twist < 0.02: {}",
+                        l.non_orthogonal_faces,
+                        l.skewed_internal_faces,
+                        l.skewed_boundary_faces,
+                        l.low_determinant_cells,
+                        l.low_weight_faces,
+                        l.low_volume_ratio_faces,
+                        l.twisted_faces
+                    );
+                }
             }
             Event::Snapped(r) => {
                 say!(

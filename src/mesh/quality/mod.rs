@@ -1,6 +1,6 @@
-//! Mesh quality: Knupp's scaled Jacobian of each element, and the
-//! non-orthogonality and skewness of the finite-volume faces as OpenFOAM's
-//! `checkMesh` defines them.
+//! Mesh quality: Knupp's scaled Jacobian of each element, and the figures
+//! of the finite-volume faces and cells as OpenFOAM's `checkMesh` defines
+//! them.
 //!
 //! # Scaled Jacobian
 //!
@@ -49,6 +49,16 @@
 //!   distance from `P` to the plane. `checkMesh` prints the maximum over
 //!   all faces.
 //!
+//! - **the rest of `checkMesh -allGeometry`** ([`figures`]): the cell
+//!   determinant (`S S^T` summed over a cell's internal faces, each `S`
+//!   over their mean area, its determinant over 8), the interpolation
+//!   weight (`min(dP, dN) / (dP + dN)` with the distances from the cells'
+//!   centres to the face's plane along `S`), the volume ratio of a face's
+//!   two cells, the face flatness, and snappyHexMesh's twist (the smallest
+//!   cosine between the line through the cells' centres and the normals
+//!   of the face's triangles), with the counts of faces and cells outside
+//!   `meshQualityDict`'s default limits ([`limits`]).
+//!
 //! On an unsnapped mesh, faces are the planar, convex polygons of
 //! [`crate::mesh::faces`]: their centroid and area are exact, the extent is
 //! reached at one of the four corners (a hanging midpoint on an edge lies
@@ -93,7 +103,7 @@ use serde::Serialize;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::TINY;
-use crate::geometry::vector::{dot, norm, scale, sub};
+use crate::geometry::vector::{cross, dot, norm, scale, sub};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
     corner_at, edge_points, face_polygon, point_key, PointFilter, PointIndex,
@@ -104,6 +114,12 @@ use crate::parallel::comm::{agree, Comm};
 pub use crate::geometry::cells::{
     cell_centre, corner_scaled_jacobians, polygon_area_centre, scaled_jacobian, CORNER_EDGES,
 };
+pub use figures::{limits, LimitCounts};
+
+mod figures;
+
+use crate::geometry::cells::cell_centre_volume;
+use figures::{AreaTensor, Figures};
 
 /// Bins of the scaled-Jacobian histogram (width 0.1 over [-1, 1]).
 pub const HISTOGRAM_BINS: usize = 20;
@@ -218,18 +234,37 @@ pub struct Quality {
     pub non_orthogonality_average: f64,
     /// Largest skewness over all faces (`checkMesh`'s "Max skewness").
     pub skewness_max: f64,
-}
-
-/// Fixed-point scale of the summed cosines: exact integer sums do not
-/// depend on the order of the sum, so neither on the rank count.
-const COSINE_ONE: f64 = (1u64 << 52) as f64;
-
-/// The cosine `c` in [-1, 1] as an integer in [0, 2^53], split into a high
-/// and a low word that each sum without overflow for 2^37 faces.
-fn cosine_words(c: f64) -> [u64; 2] {
-    // Rounded half up; `round` is a library call.
-    let v = ((c.clamp(-1.0, 1.0) + 1.0) * COSINE_ONE + 0.5) as u64;
-    [v >> 26, v & ((1 << 26) - 1)]
+    /// Largest skewness of the internal faces (`meshQualityDict`'s
+    /// `maxInternalSkewness` limits it).
+    pub internal_skewness_max: f64,
+    /// Largest skewness of the boundary faces (`maxBoundarySkewness`).
+    pub boundary_skewness_max: f64,
+    /// Smallest cell determinant (`checkMesh`'s "Cell determinant
+    /// (wellposedness) : minimum"; 1 for a cube, 0 for a cell without
+    /// internal faces).
+    pub determinant_min: f64,
+    /// Mean cell determinant ("average").
+    pub determinant_average: f64,
+    /// Smallest face interpolation weight (`checkMesh`'s "Face
+    /// interpolation weight : minimum"; 0.5 between equal cubes).
+    pub face_weight_min: f64,
+    /// Mean interpolation weight of the internal faces.
+    pub face_weight_average: f64,
+    /// Smallest ratio of the volumes of a face's two cells ("Face volume
+    /// ratio : minimum").
+    pub volume_ratio_min: f64,
+    /// Mean volume ratio of the internal faces.
+    pub volume_ratio_average: f64,
+    /// Smallest face flatness ("Face flatness ... min"; 1 for planar
+    /// faces).
+    pub face_flatness_min: f64,
+    /// Mean face flatness over every face.
+    pub face_flatness_average: f64,
+    /// Smallest face twist (snappyHexMesh's `minTwist` measure; 1 for
+    /// planar faces normal to the line between their cells' centres).
+    pub face_twist_min: f64,
+    /// What fails `meshQualityDict`'s default limits.
+    pub limits: LimitCounts,
 }
 
 impl Mesh {
@@ -271,6 +306,16 @@ impl Mesh {
         [c[0] as f64 + h, c[1] as f64 + h, c[2] as f64 + h]
     }
 
+    /// The volume of a local or halo element, lattice units.
+    fn volume_of(&self, o: Other) -> f64 {
+        let leaf = match o {
+            Other::Element(j) => self.elements()[j as usize],
+            Other::Halo(h) => self.halo().leaves[h as usize],
+            Other::Patch(_) => return 0.0,
+        };
+        (leaf.side() as f64).powi(3)
+    }
+
     /// The quality of this mesh: the scaled Jacobians from the corners of
     /// [`Mesh::element_corners`] with `coords`, and the face figures over
     /// the faces of [`Mesh::faces`]: with the octree geometry, measured as
@@ -288,95 +333,69 @@ impl Mesh {
             return Err(Error::new(ErrorKind::Limit, "too many local elements"));
         }
         let jac = self.scaled_jacobians(coords);
-        // Sums: elements, inverted, faces, the histogram, then the cosine
-        // words.
-        let mut sums = vec![0u64; 3 + HISTOGRAM_BINS + 2];
-        sums[0] = jac.len() as u64;
+        let mut figures = Figures::new();
         for &j in &jac {
-            sums[1] += (j <= 0.0) as u64;
-            sums[3 + histogram_bin(j)] += 1;
-        }
-        // Maxima: -min J, -min cosine, max skewness.
-        let mut max = [-1.0f64, -1.0, 0.0];
-        for &j in &jac {
-            max[0] = max[0].max(-j);
+            figures.element(j);
         }
         if self.moved().is_some() {
-            self.moved_face_figures(comm, &mut sums, &mut max)?;
+            self.moved_face_figures(comm, &mut figures)?;
         } else {
-            self.octree_face_figures(comm, &mut sums, &mut max);
+            self.octree_face_figures(comm, &mut figures);
         }
-        comm.sum_u64(&mut sums);
-        comm.max_f64(&mut max);
-        let nfaces = sums[2];
-        let degrees = |c: f64| c.clamp(-1.0, 1.0).acos().to_degrees();
-        let (nonorth_max, nonorth_mean) = if nfaces == 0 {
-            (0.0, 0.0)
-        } else {
-            let total =
-                ((sums[3 + HISTOGRAM_BINS] as u128) << 26) + sums[4 + HISTOGRAM_BINS] as u128;
-            let mean = total as f64 / COSINE_ONE / nfaces as f64 - 1.0;
-            (degrees(-max[1]), degrees(mean))
-        };
-        let q = Quality {
-            elements: sums[0],
-            scaled_jacobian_min: if sums[0] == 0 { 1.0 } else { -max[0] },
-            inverted_elements: sums[1],
-            scaled_jacobian_histogram: Histogram {
-                edges: (0..=HISTOGRAM_BINS)
-                    .map(|k| (k as f64 - 10.0) / 10.0)
-                    .collect(),
-                counts: sums[3..3 + HISTOGRAM_BINS].to_vec(),
-            },
-            internal_faces: nfaces,
-            non_orthogonality_max: nonorth_max,
-            non_orthogonality_average: nonorth_mean,
-            skewness_max: max[2],
-        };
+        let q = figures.reduce(comm);
         Ok((q, jac))
     }
-    /// Adds one face's figures: the cosine to the sums, the angle and the
-    /// skewness to the maxima.
-    fn add_face(sums: &mut [u64], max: &mut [f64; 3], cos: f64, skew: f64) {
-        sums[2] += 1;
-        let w = cosine_words(cos);
-        sums[3 + HISTOGRAM_BINS] += w[0];
-        sums[4 + HISTOGRAM_BINS] += w[1];
-        max[1] = max[1].max(-cos);
-        max[2] = max[2].max(skew);
-    }
-
     /// The face figures of an unsnapped mesh, from the octree's geometry:
     /// measured as [`Mesh::for_each_face`] makes the faces (nothing is
     /// stored per face). Local work.
-    fn octree_face_figures(&self, comm: &dyn Comm, sums: &mut [u64], max: &mut [f64; 3]) {
+    fn octree_face_figures(&self, comm: &dyn Comm, figures: &mut Figures) {
         let me = comm.rank() as u32;
         // The figures are ratios and angles, unchanged by the map from the
         // lattice to user units (a scaling and a shift): they are computed
         // on the lattice, where the coordinates are exact.
-        let centre = |o: Other| self.centre_of(o);
+        let cell = |o: Other| (self.centre_of(o), self.volume_of(o));
+        let mut tensors = vec![AreaTensor::default(); self.elements().len()];
         self.for_each_face(|kind, f| {
             let c = f.lattice_centre();
             let s = scale(f.unit_normal(), f.lattice_area());
-            let corners = f.corners().map(|q| q.map(|x| x as f64));
-            let own = centre(Other::Element(f.owner()));
+            let mut corners = f.corners().map(|q| q.map(|x| x as f64));
+            let own = cell(Other::Element(f.owner()));
+            // The corners turn about the area vector, which points out of
+            // the first cell (the twist sees the order).
+            let mut orient = |s: [f64; 3], towards: [f64; 3]| {
+                let turn = cross(sub(corners[2], corners[0]), sub(corners[3], corners[1]));
+                if dot(turn, s) < 0.0 {
+                    corners.reverse();
+                }
+                if dot(s, towards) < 0.0 {
+                    corners.reverse();
+                    scale(s, -1.0)
+                } else {
+                    s
+                }
+            };
+            if kind == FaceKind::Boundary {
+                let s = orient(s, sub(c, own.0));
+                figures.boundary_face(&corners, c, s, own.0);
+                return;
+            }
+            tensors[f.owner() as usize].add(s);
+            if let Other::Element(j) = f.other() {
+                tensors[j as usize].add(s);
+            }
             // Seen from the element with the lower global number: the
             // owner on one rank, and the same bits on any number.
-            let (p, n, s) = match (kind, f.other()) {
-                (FaceKind::Boundary, _) => {
-                    max[2] = max[2].max(boundary_face_skewness(c, s, &corners, own));
-                    return;
-                }
-                (FaceKind::Halo, Other::Halo(h)) if self.halo().owners[h as usize] < me => {
-                    return;
-                }
-                (_, Other::Element(j)) if j < f.owner() => (centre(f.other()), own, scale(s, -1.0)),
-                (_, other) => (own, centre(other), s),
+            let (p, n, s) = match f.other() {
+                Other::Halo(h) if self.halo().owners[h as usize] < me => return,
+                Other::Element(j) if j < f.owner() => (cell(f.other()), own, scale(s, -1.0)),
+                other => (own, cell(other), s),
             };
-            let cos = face_orthogonality(p, n, s);
-            let skew = face_skewness(c, s, &corners, p, n);
-            Self::add_face(sums, max, cos, skew);
+            let s = orient(s, sub(n.0, p.0));
+            figures.internal_face(&corners, c, s, p, n);
         });
+        for t in &tensors {
+            figures.cell(t);
+        }
     }
 
     /// The faces of `faces` on the moved points of a snapped mesh (see
@@ -466,13 +485,8 @@ impl Mesh {
     /// taken in the order of their corners' lattice sums so that the bits
     /// do not depend on the rank count; the centres of the halo elements
     /// come from their ranks. Collective.
-    fn moved_face_figures(
-        &self,
-        comm: &dyn Comm,
-        sums: &mut [u64],
-        max: &mut [f64; 3],
-    ) -> Result<()> {
-        let local = (|| -> Result<(Faces, MovedFaces, Vec<[f64; 3]>)> {
+    fn moved_face_figures(&self, comm: &dyn Comm, figures: &mut Figures) -> Result<()> {
+        let local = (|| -> Result<(Faces, MovedFaces, Vec<([f64; 3], f64)>)> {
             let faces = self.faces()?;
             let moved = self.moved_faces(&faces)?;
             // Each element's faces with their area vectors out of it, in the
@@ -508,9 +522,9 @@ impl Mesh {
                     next[j as usize] += 1;
                 }
             }
-            let mut centres = vec![[0.0; 3]; n];
+            let mut cells = vec![([0.0; 3], 0.0); n];
             let mut cell: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(32);
-            for (e, centre) in centres.iter_mut().enumerate() {
+            for (e, centre) in cells.iter_mut().enumerate() {
                 let mine = &mut sides[offset[e]..offset[e + 1]];
                 mine.sort_unstable_by_key(|x| x.0);
                 cell.clear();
@@ -518,60 +532,70 @@ impl Mesh {
                     let (s, c) = moved.geometry[k as usize];
                     cell.push((c, if negate { scale(s, -1.0) } else { s }));
                 }
-                *centre = cell_centre(&cell);
+                *centre = cell_centre_volume(&cell);
             }
-            Ok((faces, moved, centres))
+            Ok((faces, moved, cells))
         })();
-        let (faces, moved, centres) = agree(comm, local)?;
-        let halo_centres = self.exchange_centres(comm, &faces, &centres);
+        let (faces, moved, cells) = agree(comm, local)?;
+        let halo_cells = self.exchange_cells(comm, &faces, &cells);
+        let mut tensors = vec![AreaTensor::default(); cells.len()];
         for (k, f) in faces.faces().iter().enumerate() {
             let points = &moved.points[moved.start[k]..moved.start[k + 1]];
             let (s, c) = moved.geometry[k];
-            let own = centres[f.owner() as usize];
+            let own = cells[f.owner() as usize];
+            if let Other::Patch(_) = f.other() {
+                figures.boundary_face(points, c, s, own.0);
+                continue;
+            }
+            tensors[f.owner() as usize].add(s);
             let n = match f.other() {
-                Other::Patch(_) => {
-                    max[2] = max[2].max(boundary_face_skewness(c, s, points, own));
-                    continue;
-                }
                 // The element on the other rank measures it.
                 Other::Halo(_) if moved.flipped[k] => continue,
-                Other::Halo(h) => halo_centres[h as usize],
-                Other::Element(j) => centres[j as usize],
+                Other::Halo(h) => halo_cells[h as usize],
+                Other::Element(j) => {
+                    tensors[j as usize].add(s);
+                    cells[j as usize]
+                }
+                Other::Patch(_) => unreachable!("boundary faces are measured above"),
             };
-            let cos = face_orthogonality(own, n, s);
-            let skew = face_skewness(c, s, points, own, n);
-            Self::add_face(sums, max, cos, skew);
+            figures.internal_face(points, c, s, own, n);
+        }
+        for t in &tensors {
+            figures.cell(t);
         }
         Ok(())
     }
 
-    /// The halo elements' `centres` (one per local element on each rank),
-    /// through the cell halo of `faces`; elements not in it get zeros.
-    /// Collective.
-    fn exchange_centres(
+    /// The halo elements' `cells` (centre and volume, one per local element
+    /// on each rank), through the cell halo of `faces`; elements not in it
+    /// get zeros. Collective.
+    fn exchange_cells(
         &self,
         comm: &dyn Comm,
         faces: &Faces,
-        centres: &[[f64; 3]],
-    ) -> Vec<[f64; 3]> {
-        let cells = self.cell_halo(faces);
+        cells: &[([f64; 3], f64)],
+    ) -> Vec<([f64; 3], f64)> {
+        let halo = self.cell_halo(faces);
         let mut counts = vec![0usize; comm.size()];
         let mut send: Vec<u64> = Vec::new();
-        for (r, list) in cells.ranks.iter().zip(&cells.send) {
-            counts[*r as usize] = 3 * list.len();
+        for (r, list) in halo.ranks.iter().zip(&halo.send) {
+            counts[*r as usize] = 4 * list.len();
             for &e in list {
-                send.extend(centres[e as usize].map(f64::to_bits));
+                let (c, v) = cells[e as usize];
+                send.extend(c.map(f64::to_bits));
+                send.push(v.to_bits());
             }
         }
         let (got, _) = comm.alltoallv_u64(&send, &counts);
         // Received in rank order, each rank's in the order of its send
         // list, which is the order of this rank's receive list.
-        let mut out = vec![[0.0; 3]; self.halo().leaves.len()];
+        let mut out = vec![([0.0; 3], 0.0); self.halo().leaves.len()];
         let mut at = 0;
-        for list in &cells.recv {
+        for list in &halo.recv {
             for &h in list {
-                out[h as usize] = std::array::from_fn(|a| f64::from_bits(got[at + a]));
-                at += 3;
+                let c = std::array::from_fn(|a| f64::from_bits(got[at + a]));
+                out[h as usize] = (c, f64::from_bits(got[at + 3]));
+                at += 4;
             }
         }
         out
