@@ -187,6 +187,9 @@ fn skew_ratio(miss: [f64; 3], centre: [f64; 3], points: &[[f64; 3]], floor: f64)
     m / extent
 }
 
+/// A cell's centre and volume.
+type Cell = ([f64; 3], f64);
+
 /// What one face of a snapped mesh looks like to the figures: its polygon
 /// (corners and the mesh points on its edges), area vector and centre, all
 /// oriented from the element with the lower global number (a boundary
@@ -486,7 +489,7 @@ impl Mesh {
     /// do not depend on the rank count; the centres of the halo elements
     /// come from their ranks. Collective.
     fn moved_face_figures(&self, comm: &dyn Comm, figures: &mut Figures) -> Result<()> {
-        let local = (|| -> Result<(Faces, MovedFaces, Vec<([f64; 3], f64)>)> {
+        let local = (|| -> Result<(Faces, MovedFaces, Vec<Cell>)> {
             let faces = self.faces()?;
             let moved = self.moved_faces(&faces)?;
             // Each element's faces with their area vectors out of it, in the
@@ -569,12 +572,7 @@ impl Mesh {
     /// The halo elements' `cells` (centre and volume, one per local element
     /// on each rank), through the cell halo of `faces`; elements not in it
     /// get zeros. Collective.
-    fn exchange_cells(
-        &self,
-        comm: &dyn Comm,
-        faces: &Faces,
-        cells: &[([f64; 3], f64)],
-    ) -> Vec<([f64; 3], f64)> {
+    fn exchange_cells(&self, comm: &dyn Comm, faces: &Faces, cells: &[Cell]) -> Vec<Cell> {
         let halo = self.cell_halo(faces);
         let mut counts = vec![0usize; comm.size()];
         let mut send: Vec<u64> = Vec::new();
