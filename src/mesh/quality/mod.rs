@@ -49,7 +49,7 @@
 //!   distance from `P` to the plane. `checkMesh` prints the maximum over
 //!   all faces.
 //!
-//! - **the rest of `checkMesh -allGeometry`** ([`figures`]): the cell
+//! - **the rest of `checkMesh -allGeometry`** (`figures.rs`): the cell
 //!   determinant (`S S^T` summed over a cell's internal faces, each `S`
 //!   over their mean area, its determinant over 8), the interpolation
 //!   weight (`min(dP, dN) / (dP + dN)` with the distances from the cells'
