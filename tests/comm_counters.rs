@@ -1,6 +1,6 @@
 //! The byte counters of `MpiComm` against counts worked out by hand for each
-//! collective, on 1 to 4 ranks, and its time inside collectives against a
-//! rank that arrives late.
+//! collective, on 1 to 4 ranks, its count of collective operations, and its
+//! time inside collectives against a rank that arrives late.
 //!
 //! Run by `cargo test`, this program launches itself under `mpirun`; each
 //! launched copy checks its own counters and exits non-zero on a mismatch.
@@ -41,6 +41,7 @@ fn child() {
     let (r, p) = (comm.rank() as u64, comm.size() as u64);
     check("fresh communicator", comm.traffic(), 0, 0);
     assert_eq!(comm.comm_seconds(), 0.0, "fresh communicator");
+    assert_eq!(comm.collectives(), 0, "fresh communicator");
 
     // Rank r sends q + 1 values to rank q (itself included) and so receives
     // r + 1 values from every rank; 4-byte counts go to every other rank first.
@@ -128,6 +129,35 @@ fn child() {
             "rank 0 came last but waited {waited} s"
         );
     }
+
+    // Collective operations: the same count on every rank, whatever the
+    // data, and the same on one rank as on several.
+    let calls = |what: &str, expected: u64, f: &dyn Fn()| {
+        let c0 = comm.collectives();
+        f();
+        let got = comm.collectives() - c0;
+        assert_eq!(got, expected, "{what}: {got} collective operations");
+    };
+    calls("barrier", 1, &|| comm.barrier());
+    calls("max_u64", 1, &|| comm.max_u64(&mut [r, 1, 2]));
+    calls("sum_u64", 1, &|| comm.sum_u64(&mut [r]));
+    calls("max_f64", 1, &|| comm.max_f64(&mut [r as f64]));
+    calls("allgather_u64", 1, &|| {
+        comm.allgather_u64(r);
+    });
+    calls("alltoallv, rank 0 sends nothing", 2, &|| {
+        let counts: Vec<usize> = (0..p as usize).map(|_| r as usize).collect();
+        let send = vec![7u64; (r * p) as usize];
+        comm.alltoallv_u64(&send, &counts);
+    });
+    calls("broadcast of 5 bytes", 2, &|| {
+        let mut msg = b"hello".to_vec();
+        comm.broadcast_bytes(0, &mut msg);
+    });
+    calls("broadcast of nothing", 1, &|| {
+        let mut msg = Vec::new();
+        comm.broadcast_bytes(0, &mut msg);
+    });
 
     // Over all ranks, what was sent arrived.
     let total = comm.traffic();

@@ -58,6 +58,16 @@ pub trait Comm {
     fn comm_seconds(&self) -> f64 {
         0.0
     }
+    /// Collective operations this rank has handed to MPI so far: one per
+    /// reduction, all-gather and barrier, two per all-to-all (the counts,
+    /// then the data) and per non-empty broadcast (the length, then the
+    /// bytes). Each is a round whose latency grows with the number of ranks,
+    /// so a phase scales only if this stays flat (or grows as log P). Not
+    /// collective. The default, for communicators that do not count, is
+    /// zero.
+    fn collectives(&self) -> u64 {
+        0
+    }
     /// Number of this communicator's ranks on this rank's node (sharing its
     /// memory). Collective. The default, for communicators of one node, is
     /// all of them.
@@ -212,6 +222,7 @@ pub struct MpiComm {
     sent: Cell<u64>,
     received: Cell<u64>,
     busy: Cell<f64>,
+    calls: Cell<u64>,
 }
 
 impl MpiComm {
@@ -222,11 +233,24 @@ impl MpiComm {
             sent: Cell::new(0),
             received: Cell::new(0),
             busy: Cell::new(0.0),
+            calls: Cell::new(0),
         }
     }
 
-    /// Runs one collective, adding its wall time to [`Comm::comm_seconds`].
+    /// Runs `calls` collective operations, adding their wall time to
+    /// [`Comm::comm_seconds`] and their number to [`Comm::collectives`].
+    fn timed_n<T>(&self, calls: u64, f: impl FnOnce() -> T) -> T {
+        self.calls.set(self.calls.get() + calls);
+        self.time_only(f)
+    }
+
+    /// Runs one collective operation (see [`MpiComm::timed_n`]).
     fn timed<T>(&self, f: impl FnOnce() -> T) -> T {
+        self.timed_n(1, f)
+    }
+
+    /// Adds the wall time of `f` to [`Comm::comm_seconds`].
+    fn time_only<T>(&self, f: impl FnOnce() -> T) -> T {
         let t0 = std::time::Instant::now();
         let r = f();
         self.busy.set(self.busy.get() + t0.elapsed().as_secs_f64());
@@ -265,6 +289,7 @@ impl Comm for MpiComm {
     }
     fn ranks_on_node(&self) -> usize {
         // MPI_Comm_split_type(MPI_COMM_TYPE_SHARED): the ranks sharing memory.
+        self.calls.set(self.calls.get() + 1);
         self.comm.split_shared(0).size() as usize
     }
     fn size(&self) -> usize {
@@ -306,7 +331,7 @@ impl Comm for MpiComm {
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
         let p = self.size();
         let send_counts = to_i32_counts(counts);
-        let (recv, rc) = self.timed(|| {
+        let (recv, rc) = self.timed_n(2, || {
             let mut recv_counts = vec![0i32; p];
             self.comm
                 .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
@@ -334,13 +359,14 @@ impl Comm for MpiComm {
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>) {
         let mut len = bytes.len() as u64;
         let proc = self.comm.process_at_rank(root as i32);
-        self.timed(|| {
+        self.time_only(|| {
             proc.broadcast_into(&mut len);
             bytes.resize(len as usize, 0);
             if len > 0 {
                 proc.broadcast_into(&mut bytes[..]);
             }
         });
+        self.calls.set(self.calls.get() + 1 + u64::from(len > 0));
         let others = self.size() - 1;
         let message = 8 + bytes.len();
         if self.rank() == root {
@@ -357,6 +383,9 @@ impl Comm for MpiComm {
     }
     fn comm_seconds(&self) -> f64 {
         self.busy.get()
+    }
+    fn collectives(&self) -> u64 {
+        self.calls.get()
     }
 }
 
