@@ -133,8 +133,10 @@ fn memory_marks_and_partition_steps() {
 #[test]
 fn sent_equals_received_on_2_and_3_ranks() {
     let dir = scratch("comm_bytes_23");
+    let mut calls_by_np = Vec::new();
     for np in [2, 3] {
         let j = stats(np, &dir);
+        calls_by_np.push(j["comm_calls"].clone());
         let sent = j["comm_bytes_sum"]["sent"].as_u64().unwrap();
         let received = j["comm_bytes_sum"]["received"].as_u64().unwrap();
         assert!(sent > 0, "np {np}: nothing sent");
@@ -182,5 +184,14 @@ fn sent_equals_received_on_2_and_3_ranks() {
             .map(|(_, v)| v.as_u64().unwrap())
             .sum();
         assert!(phase_sum >= per_rank, "np {np}: phases below the total");
+    }
+    // The exchanges of the ghost layer, the node numbering and the
+    // construction are a fixed number of collectives, whatever the number
+    // of ranks.
+    for k in ["construct", "refine", "ghost", "numbering"] {
+        assert_eq!(
+            calls_by_np[0][k], calls_by_np[1][k],
+            "{k}: collectives on 2 and 3 ranks"
+        );
     }
 }
