@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 packages=(libopenmpi-dev openmpi-bin libclang-dev clang cmake gfortran libp4est-dev
-          pkg-config make build-essential python3 python3-numpy python3-meshio python3-vtk9 valgrind
+          pkg-config make build-essential python3 python3-numpy python3-meshio python3-vtk9 python3-matplotlib valgrind
           openfoam calculix-ccx gmsh python3-gmsh)
 missing=()
 for p in "${packages[@]}"; do

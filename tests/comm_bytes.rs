@@ -1,4 +1,4 @@
-//! The `comm_bytes` and `comm_seconds` fields of `--stats`: nothing crosses
+//! The `comm_bytes`, `comm_calls` and `comm_seconds` fields of `--stats`: nothing crosses
 //! ranks on one rank;
 //! on two and three ranks every phase that exchanges leaves or nodes reports
 //! bytes, and the bytes sent over all ranks equal those received. Also the
@@ -44,7 +44,10 @@ fn one_rank_exchanges_nothing() {
     for k in PHASES.iter().chain(&["total"]) {
         assert_eq!(j["comm_bytes"][k].as_u64(), Some(0), "phase {k}");
         assert_eq!(j["comm_bytes_sent"][k].as_u64(), Some(0), "phase {k}");
+        assert_eq!(j["comm_bytes_received"][k].as_u64(), Some(0), "phase {k}");
     }
+    // One rank still calls the collectives (MPI's own copies).
+    assert!(j["comm_calls"]["ghost"].as_u64().unwrap() > 0);
     assert_eq!(j["comm_bytes_sum"]["sent"].as_u64(), Some(0));
     assert_eq!(j["comm_bytes_sum"]["received"].as_u64(), Some(0));
     // Collectives on one rank only copy: a small part of each phase.
@@ -130,8 +133,10 @@ fn memory_marks_and_partition_steps() {
 #[test]
 fn sent_equals_received_on_2_and_3_ranks() {
     let dir = scratch("comm_bytes_23");
+    let mut calls_by_np = Vec::new();
     for np in [2, 3] {
         let j = stats(np, &dir);
+        calls_by_np.push(j["comm_calls"].clone());
         let sent = j["comm_bytes_sum"]["sent"].as_u64().unwrap();
         let received = j["comm_bytes_sum"]["received"].as_u64().unwrap();
         assert!(sent > 0, "np {np}: nothing sent");
@@ -146,7 +151,25 @@ fn sent_equals_received_on_2_and_3_ranks() {
                 out <= both,
                 "np {np}: {k} sent {out} > sent+received {both}"
             );
+            // The maxima of sent and of received bound that of their sum.
+            let got = j["comm_bytes_received"][k].as_u64().unwrap();
+            assert!(got > 0 && got <= both, "np {np}: {k} received {got}");
+            assert!(out + got >= both, "np {np}: {k} {out} + {got} < {both}");
+            // Each of these phases takes part in collectives.
+            let calls = j["comm_calls"][k].as_u64().unwrap();
+            assert!(calls > 0, "np {np}: no collective in {k}");
         }
+        let calls = j["comm_calls"].as_object().unwrap();
+        let phases: u64 = calls
+            .iter()
+            .filter(|(k, _)| *k != "total")
+            .map(|(_, v)| v.as_u64().unwrap())
+            .sum();
+        let total = calls["total"].as_u64().unwrap();
+        assert!(
+            phases <= total,
+            "np {np}: {phases} calls in phases > {total}"
+        );
         // Each rank's total is at most the sum over ranks and at least an
         // equal share of it.
         let per_rank = j["comm_bytes"]["total"].as_u64().unwrap();
@@ -161,5 +184,14 @@ fn sent_equals_received_on_2_and_3_ranks() {
             .map(|(_, v)| v.as_u64().unwrap())
             .sum();
         assert!(phase_sum >= per_rank, "np {np}: phases below the total");
+    }
+    // The exchanges of the ghost layer, the node numbering and the
+    // construction are a fixed number of collectives, whatever the number
+    // of ranks.
+    for k in ["construct", "refine", "ghost", "numbering"] {
+        assert_eq!(
+            calls_by_np[0][k], calls_by_np[1][k],
+            "{k}: collectives on 2 and 3 ranks"
+        );
     }
 }

@@ -1,6 +1,6 @@
 //! The byte counters of `MpiComm` against counts worked out by hand for each
-//! collective, on 1 to 4 ranks, and its time inside collectives against a
-//! rank that arrives late.
+//! collective, on 1 to 4 ranks, its count of collective operations, and its
+//! time inside collectives against a rank that arrives late.
 //!
 //! Run by `cargo test`, this program launches itself under `mpirun`; each
 //! launched copy checks its own counters and exits non-zero on a mismatch.
@@ -41,9 +41,10 @@ fn child() {
     let (r, p) = (comm.rank() as u64, comm.size() as u64);
     check("fresh communicator", comm.traffic(), 0, 0);
     assert_eq!(comm.comm_seconds(), 0.0, "fresh communicator");
+    assert_eq!(comm.collectives(), 0, "fresh communicator");
 
     // Rank r sends q + 1 values to rank q (itself included) and so receives
-    // r + 1 values from every rank; 4-byte counts go to every other rank first.
+    // r + 1 values from every rank; nothing else crosses (no counts).
     let counts: Vec<usize> = (0..p as usize).map(|q| q + 1).collect();
     let send: Vec<u64> = counts
         .iter()
@@ -58,9 +59,27 @@ fn child() {
     check(
         "alltoallv",
         comm.traffic() - t0,
-        4 * (p - 1) + 8 * (all_out - (r + 1)),
-        4 * (p - 1) + 8 * (r + 1) * (p - 1),
+        8 * (all_out - (r + 1)),
+        8 * (r + 1) * (p - 1),
     );
+
+    // Sparse exchanges back to back, nothing in between: each rank sends to
+    // the next one only, the round in the data, and one rank is sometimes
+    // late, so that others run ahead into the next exchange. No message may
+    // land in another round.
+    for round in 0..60u64 {
+        let (next, prev) = (((r + 1) % p) as usize, ((r + p - 1) % p) as usize);
+        let n = (round % 3) as usize + 1;
+        let mut counts = vec![0usize; p as usize];
+        counts[next] = n;
+        if r == 0 && round % 7 == 0 {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let (recv, rc) = comm.alltoallv_u64(&vec![1000 * round + r; n], &counts);
+        assert_eq!(rc[prev], n, "round {round}");
+        assert_eq!(rc.iter().sum::<usize>(), n, "round {round}");
+        assert_eq!(recv, vec![1000 * round + prev as u64; n], "round {round}");
+    }
 
     let t0 = comm.traffic();
     let mut v = [r, 2 * r, 3];
@@ -128,6 +147,35 @@ fn child() {
             "rank 0 came last but waited {waited} s"
         );
     }
+
+    // Collective operations: the same count on every rank, whatever the
+    // data, and the same on one rank as on several.
+    let calls = |what: &str, expected: u64, f: &dyn Fn()| {
+        let c0 = comm.collectives();
+        f();
+        let got = comm.collectives() - c0;
+        assert_eq!(got, expected, "{what}: {got} collective operations");
+    };
+    calls("barrier", 1, &|| comm.barrier());
+    calls("max_u64", 1, &|| comm.max_u64(&mut [r, 1, 2]));
+    calls("sum_u64", 1, &|| comm.sum_u64(&mut [r]));
+    calls("max_f64", 1, &|| comm.max_f64(&mut [r as f64]));
+    calls("allgather_u64", 1, &|| {
+        comm.allgather_u64(r);
+    });
+    calls("alltoallv, rank 0 sends nothing", 1, &|| {
+        let counts: Vec<usize> = (0..p as usize).map(|_| r as usize).collect();
+        let send = vec![7u64; (r * p) as usize];
+        comm.alltoallv_u64(&send, &counts);
+    });
+    calls("broadcast of 5 bytes", 2, &|| {
+        let mut msg = b"hello".to_vec();
+        comm.broadcast_bytes(0, &mut msg);
+    });
+    calls("broadcast of nothing", 1, &|| {
+        let mut msg = Vec::new();
+        comm.broadcast_bytes(0, &mut msg);
+    });
 
     // Over all ranks, what was sent arrived.
     let total = comm.traffic();

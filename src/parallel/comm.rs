@@ -14,7 +14,6 @@ use std::ops::{Add, AddAssign, Sub};
 use std::rc::Rc;
 
 use mpi::collective::SystemOperation;
-use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 
@@ -42,7 +41,9 @@ pub trait Comm {
     fn allgather_u64(&self, value: u64) -> Vec<u64>;
     /// Personalised all-to-all: `send[displs[q]..displs[q]+counts[q]]` goes to
     /// rank `q`; returns what every rank sent here, concatenated in rank order,
-    /// and the count received from each rank.
+    /// and the count received from each rank. Sparse: only the ranks that
+    /// exchange data send messages, so a rank's traffic is its data, with
+    /// nothing per other rank.
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>);
     /// Replaces `bytes` on every rank with rank `root`'s bytes.
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>);
@@ -58,6 +59,16 @@ pub trait Comm {
     fn comm_seconds(&self) -> f64 {
         0.0
     }
+    /// Collective operations this rank has handed to MPI so far: one per
+    /// reduction, all-gather, barrier and all-to-all (whose messages go
+    /// between neighbours; only its closing barrier involves all ranks), two
+    /// per non-empty broadcast (the length, then the bytes). Each costs
+    /// rounds that grow with the number of ranks, so a phase scales only if
+    /// its count stays flat. Not collective. The default, for communicators
+    /// that do not count, is zero.
+    fn collectives(&self) -> u64 {
+        0
+    }
     /// Number of this communicator's ranks on this rank's node (sharing its
     /// memory). Collective. The default, for communicators of one node, is
     /// all of them.
@@ -72,7 +83,7 @@ pub trait Comm {
 /// The count is the data octmesh hands to MPI, not the bytes on the wire of
 /// MPI's internal algorithms (trees, rings, pipelining), which depend on the
 /// MPI library: an all-to-all counts each block once at its sender and once
-/// at its receiver (plus the 4-byte element counts exchanged first); a
+/// at its receiver; a
 /// broadcast counts the message once per receiving rank at the root and once
 /// at each receiver; a reduction or all-gather counts each rank's
 /// contribution as sent to, and the result as received from, the other
@@ -212,7 +223,12 @@ pub struct MpiComm {
     sent: Cell<u64>,
     received: Cell<u64>,
     busy: Cell<f64>,
+    calls: Cell<u64>,
+    exchanges: Cell<u64>,
 }
+
+/// The tags of [`Comm::alltoallv_u64`]'s messages (this one and the next).
+const SPARSE_TAG: i32 = 7001;
 
 impl MpiComm {
     /// Wraps a communicator octmesh owns (the world, or a duplicate).
@@ -222,11 +238,25 @@ impl MpiComm {
             sent: Cell::new(0),
             received: Cell::new(0),
             busy: Cell::new(0.0),
+            calls: Cell::new(0),
+            exchanges: Cell::new(0),
         }
     }
 
-    /// Runs one collective, adding its wall time to [`Comm::comm_seconds`].
+    /// Runs `calls` collective operations, adding their wall time to
+    /// [`Comm::comm_seconds`] and their number to [`Comm::collectives`].
+    fn timed_n<T>(&self, calls: u64, f: impl FnOnce() -> T) -> T {
+        self.calls.set(self.calls.get() + calls);
+        self.time_only(f)
+    }
+
+    /// Runs one collective operation (see [`MpiComm::timed_n`]).
     fn timed<T>(&self, f: impl FnOnce() -> T) -> T {
+        self.timed_n(1, f)
+    }
+
+    /// Adds the wall time of `f` to [`Comm::comm_seconds`].
+    fn time_only<T>(&self, f: impl FnOnce() -> T) -> T {
         let t0 = std::time::Instant::now();
         let r = f();
         self.busy.set(self.busy.get() + t0.elapsed().as_secs_f64());
@@ -252,19 +282,13 @@ impl MpiComm {
     }
 }
 
-fn to_i32_counts(counts: &[usize]) -> Vec<i32> {
-    counts
-        .iter()
-        .map(|&c| i32::try_from(c).expect("message larger than 2^31 elements"))
-        .collect()
-}
-
 impl Comm for MpiComm {
     fn rank(&self) -> usize {
         self.comm.rank() as usize
     }
     fn ranks_on_node(&self) -> usize {
         // MPI_Comm_split_type(MPI_COMM_TYPE_SHARED): the ranks sharing memory.
+        self.calls.set(self.calls.get() + 1);
         self.comm.split_shared(0).size() as usize
     }
     fn size(&self) -> usize {
@@ -304,43 +328,88 @@ impl Comm for MpiComm {
         out
     }
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>) {
-        let p = self.size();
-        let send_counts = to_i32_counts(counts);
-        let (recv, rc) = self.timed(|| {
-            let mut recv_counts = vec![0i32; p];
-            self.comm
-                .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
-            let sdispl: Vec<i32> = offsets(counts)[..p].iter().map(|&d| d as i32).collect();
-            let rc: Vec<usize> = recv_counts.iter().map(|&c| c as usize).collect();
-            let roff = offsets(&rc);
-            let rdispl: Vec<i32> = roff[..p].iter().map(|&d| d as i32).collect();
-            let mut recv = vec![0u64; roff[p]];
-            {
-                let sbuf = Partition::new(send, &send_counts[..], &sdispl[..]);
-                let mut rbuf = PartitionMut::new(&mut recv[..], &recv_counts[..], &rdispl[..]);
-                self.comm.all_to_all_varcount_into(&sbuf, &mut rbuf);
-            }
-            (recv, rc)
+        let (p, me) = (self.size(), self.rank());
+        let offs = offsets(counts);
+        // Two tags, one for even and one for odd exchanges: a rank can be at
+        // most one exchange ahead of another (each ends with a barrier), so
+        // its next messages never match this exchange's probes.
+        let round = self.exchanges.get();
+        self.exchanges.set(round + 1);
+        let tag = SPARSE_TAG + (round % 2) as i32;
+        let mut blocks: Vec<(usize, Vec<u64>)> = Vec::new();
+        // The sparse exchange of Hoefler, Siebert and Lumsdaine (NBX):
+        // synchronous sends to the ranks that get data, receives of whatever
+        // arrives, and a non-blocking barrier entered once this rank's sends
+        // were all matched; when the barrier completes, every message has
+        // been received. No rank learns anything about the ranks it does not
+        // talk to: the cost per rank follows its neighbours, not P.
+        self.timed(|| {
+            mpi::request::scope(|scope| {
+                let mut sends: Vec<_> = (0..p)
+                    .filter(|&q| q != me && counts[q] > 0)
+                    .map(|q| {
+                        self.comm
+                            .process_at_rank(q as i32)
+                            .immediate_synchronous_send_with_tag(
+                                scope,
+                                &send[offs[q]..offs[q + 1]],
+                                tag,
+                            )
+                    })
+                    .collect();
+                let mut barrier = None;
+                loop {
+                    if let Some((msg, status)) = self
+                        .comm
+                        .any_process()
+                        .immediate_matched_probe_with_tag(tag)
+                    {
+                        let n = status.count(u64::equivalent_datatype()) as usize;
+                        let mut buf = vec![0u64; n];
+                        msg.matched_receive_into(&mut buf[..]);
+                        blocks.push((status.source_rank() as usize, buf));
+                        continue;
+                    }
+                    match barrier.take() {
+                        None => {
+                            sends = sends.into_iter().filter_map(|r| r.test().err()).collect();
+                            if sends.is_empty() {
+                                barrier = Some(self.comm.immediate_barrier());
+                            }
+                        }
+                        Some(b) => match b.test() {
+                            Ok(_) => break,
+                            Err(b) => barrier = Some(b),
+                        },
+                    }
+                    // Oversubscribed ranks share cores: let the others run.
+                    std::thread::yield_now();
+                }
+            })
         });
+        blocks.push((me, send[offs[me]..offs[me + 1]].to_vec()));
+        blocks.sort_unstable_by_key(|b| b.0);
+        let mut rc = vec![0usize; p];
+        let mut recv = Vec::with_capacity(blocks.iter().map(|b| b.1.len()).sum());
+        for (src, block) in blocks {
+            rc[src] = block.len();
+            recv.extend_from_slice(&block);
+        }
         // Blocks a rank addresses to itself never leave it.
-        let me = self.rank();
-        let others = 4 * (p - 1);
-        self.count(
-            others + 8 * (counts.iter().sum::<usize>() - counts[me]),
-            others + 8 * (recv.len() - rc[me]),
-        );
+        self.count(8 * (offs[p] - counts[me]), 8 * (recv.len() - rc[me]));
         (recv, rc)
     }
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>) {
         let mut len = bytes.len() as u64;
         let proc = self.comm.process_at_rank(root as i32);
-        self.timed(|| {
+        self.time_only(|| {
             proc.broadcast_into(&mut len);
             bytes.resize(len as usize, 0);
             if len > 0 {
                 proc.broadcast_into(&mut bytes[..]);
             }
         });
+        self.calls.set(self.calls.get() + 1 + u64::from(len > 0));
         let others = self.size() - 1;
         let message = 8 + bytes.len();
         if self.rank() == root {
@@ -357,6 +426,9 @@ impl Comm for MpiComm {
     }
     fn comm_seconds(&self) -> f64 {
         self.busy.get()
+    }
+    fn collectives(&self) -> u64 {
+        self.calls.get()
     }
 }
 

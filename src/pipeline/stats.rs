@@ -179,6 +179,11 @@ pub struct Stats {
     pub comm_bytes: PerPhase<u64>,
     /// Bytes sent per phase, maximum over ranks.
     pub comm_bytes_sent: PerPhase<u64>,
+    /// Bytes received per phase, maximum over ranks.
+    pub comm_bytes_received: PerPhase<u64>,
+    /// Collective operations per phase, maximum over ranks (the same on
+    /// every rank; see `Comm::collectives`).
+    pub comm_calls: PerPhase<u64>,
     /// Bytes over all ranks.
     pub comm_bytes_sum: TrafficSum,
     /// Seconds inside collectives per phase, minimum over ranks.
@@ -245,7 +250,13 @@ impl Session {
             .map(|k| t.traffic_of(k))
             .chain([total])
             .collect();
-        let mut max: Vec<u64> = per.iter().flat_map(|x| [x.total(), x.sent]).collect();
+        let calls_total: u64 = t.calls().iter().map(|p| p.1).sum();
+        let calls = keys.iter().map(|k| t.calls_of(k)).chain([calls_total]);
+        let mut max: Vec<u64> = per
+            .iter()
+            .zip(calls)
+            .flat_map(|(x, c)| [x.total(), x.sent, x.received, c])
+            .collect();
         comm.max_u64(&mut max);
         let mut sums = [total.sent, total.received];
         comm.sum_u64(&mut sums);
@@ -334,14 +345,28 @@ impl Session {
                 keys_total
                     .iter()
                     .enumerate()
-                    .map(|(i, k)| (k.to_string(), max[2 * i]))
+                    .map(|(i, k)| (k.to_string(), max[4 * i]))
                     .collect(),
             ),
             comm_bytes_sent: PerPhase(
                 keys_total
                     .iter()
                     .enumerate()
-                    .map(|(i, k)| (k.to_string(), max[2 * i + 1]))
+                    .map(|(i, k)| (k.to_string(), max[4 * i + 1]))
+                    .collect(),
+            ),
+            comm_bytes_received: PerPhase(
+                keys_total
+                    .iter()
+                    .enumerate()
+                    .map(|(i, k)| (k.to_string(), max[4 * i + 2]))
+                    .collect(),
+            ),
+            comm_calls: PerPhase(
+                keys_total
+                    .iter()
+                    .enumerate()
+                    .map(|(i, k)| (k.to_string(), max[4 * i + 3]))
                     .collect(),
             ),
             comm_bytes_sum: TrafficSum {

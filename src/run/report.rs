@@ -56,12 +56,14 @@ pub const TRIM_MIN_FREE: usize = 64 << 20;
 
 /// Wall-clock phases, each reported as the maximum over ranks, and, for this
 /// rank, the bytes exchanged with other ranks ([`Traffic`]), the seconds
-/// inside collectives and the peak memory in each phase.
+/// inside collectives, the number of collective operations
+/// ([`Comm::collectives`]) and the peak memory in each phase.
 #[derive(Clone, Debug, Default)]
 pub struct PhaseTimer {
     phases: Vec<(String, f64)>,
     traffic: Vec<(String, Traffic)>,
     waits: Vec<(String, f64)>,
+    calls: Vec<(String, u64)>,
     peaks: Vec<(String, u64)>,
 }
 
@@ -77,17 +79,20 @@ impl PhaseTimer {
         comm.barrier();
         let bytes0 = comm.traffic();
         let wait0 = comm.comm_seconds();
+        let calls0 = comm.collectives();
         let t0 = Instant::now();
         let r = f();
         let elapsed = t0.elapsed().as_secs_f64();
         // Read before the reduction below, which is bookkeeping, not the phase.
         let bytes = comm.traffic() - bytes0;
         let wait = comm.comm_seconds() - wait0;
+        let calls = comm.collectives() - calls0;
         let mut dt = [elapsed];
         comm.max_f64(&mut dt);
         self.phases.push((name.to_string(), dt[0]));
         self.traffic.push((name.to_string(), bytes));
         self.waits.push((name.to_string(), wait));
+        self.calls.push((name.to_string(), calls));
         self.peaks.push((name.to_string(), peak_rss_bytes()));
         r
     }
@@ -100,11 +105,12 @@ impl PhaseTimer {
     }
 
     /// Appends every phase of `other` (time, traffic, time inside
-    /// collectives and peak), in its order.
+    /// collectives, collective operations and peak), in its order.
     pub fn append(&mut self, other: &PhaseTimer) {
         self.phases.extend_from_slice(&other.phases);
         self.traffic.extend_from_slice(&other.traffic);
         self.waits.extend_from_slice(&other.waits);
+        self.calls.extend_from_slice(&other.calls);
         self.peaks.extend_from_slice(&other.peaks);
     }
 
@@ -128,6 +134,19 @@ impl PhaseTimer {
     /// slowest rank, the smallest is closer to the cost of the exchanges.
     pub fn wait_of(&self, name: &str) -> f64 {
         self.waits.iter().filter(|p| p.0 == name).map(|p| p.1).sum()
+    }
+
+    /// Collective operations this rank took part in during phase `name`,
+    /// summed over the phases of that name. Rank-local, not reduced (every
+    /// rank calls the same collectives, so it is the same on all ranks).
+    pub fn calls_of(&self, name: &str) -> u64 {
+        self.calls.iter().filter(|p| p.0 == name).map(|p| p.1).sum()
+    }
+
+    /// This rank's collective operations per phase, in the order the phases
+    /// ran.
+    pub fn calls(&self) -> &[(String, u64)] {
+        &self.calls
     }
 
     /// This rank's seconds inside collectives per phase, in the order the
