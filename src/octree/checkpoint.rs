@@ -472,22 +472,20 @@ fn read_head(
     file: &SharedFile,
     shown: &str,
 ) -> Result<(CheckpointInfo, u64, u64, Layout)> {
+    // Measured first: MPI-IO does not always report a read past the end.
+    let size = agree(comm, file.size())?;
+    if size < HEADER_BYTES {
+        return Err(Error::format(format!(
+            "{shown} has {size} bytes, fewer than a checkpoint's header ({HEADER_BYTES}): it is \
+             truncated or not a checkpoint"
+        )));
+    }
     let mut h = vec![0u8; HEADER_BYTES as usize];
-    let got = file.read_at_all(0, &mut h).map_err(|e| {
-        if e.kind() == ErrorKind::Format {
-            Error::format(format!(
-                "{shown} is shorter than a checkpoint's header ({HEADER_BYTES} bytes): it is \
-                 truncated or not a checkpoint"
-            ))
-        } else {
-            e
-        }
-    });
+    let got = file.read_at_all(0, &mut h);
     agree(comm, got)?;
     let head = decode_header(&h, shown).and_then(|(info, block, table)| {
         let layout = Layout::new(info.leaves, info.data_size, block)
             .ok_or_else(|| Error::format(format!("{shown} is damaged: its sizes overflow")))?;
-        let size = file.size()?;
         if size < layout.end {
             return Err(Error::format(format!(
                 "{shown} is truncated: it has {size} bytes, its header announces {}",

@@ -301,7 +301,9 @@ impl<'a> SharedFile<'a> {
 
 impl std::fmt::Debug for SharedFile<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SharedFile").field("path", &self.path).finish()
+        f.debug_struct("SharedFile")
+            .field("path", &self.path)
+            .finish()
     }
 }
 
