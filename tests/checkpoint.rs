@@ -319,14 +319,7 @@ fn command_tests(r: &mut common::runner::Runner) {
     });
     r.test("another surface is refused on every rank", || {
         let ckpt = p("sphere.ckpt");
-        let args = [
-            "mesh",
-            "torus",
-            "--load",
-            s(&ckpt),
-            "--keep",
-            "inside",
-        ];
+        let args = ["mesh", "torus", "--load", s(&ckpt), "--keep", "inside"];
         let out = common::mpirun(3, &common::octmesh_bin(), &args, LIMIT);
         for line in common::rank_error_lines(&out, 3, "mesh torus --load") {
             assert!(line.contains("saved from another surface"), "{line}");
