@@ -19,7 +19,7 @@
 //! its data, cut into 8-byte words (the last one padded with zeros), are
 //! the words `i (1 + W) ..` of one stream (`W` words of data per leaf); a
 //! block of [`BLOCK_LEAVES`] leaves has the keyed sum of its words
-//! ([`keyed_share`]), which ranks holding pieces of the block add up. The
+//! (`geometry::hash::keyed_share`), which ranks holding pieces of the block add up. The
 //! table of block sums has its own sum in the header, and the header its
 //! sum in its last word. Any one changed word changes a sum, so a flipped
 //! byte anywhere is found.
