@@ -237,7 +237,7 @@ pub struct OctreeConfig {
     /// it stops before allocating (see [`crate::run::budget`]). Unset: the
     /// node's available memory shared among its ranks.
     pub memory_budget: Option<ByteSize>,
-    /// Mesh the octree of this checkpoint (written by `output.save`)
+    /// Take the octree of this checkpoint (written by `output.save`)
     /// instead of refining: the surface is still read, to classify the
     /// leaves, and must be the one the checkpoint was saved from.
     pub load: Option<PathBuf>,

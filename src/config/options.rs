@@ -556,9 +556,9 @@ options! {
     range,
     set |c, v, _g| { c.output.save = Some(v.into()); }
 
-    /// Mesh the octree of a checkpoint written by --save instead of
+    /// Take the octree of a checkpoint written by --save instead of
     /// refining (the surface must be the one it was saved from)
-    Mesh "load" <"FILE.ckpt">: One String = path,
+    Octree "load" <"FILE.ckpt">: One String = path,
     keys ["octree.load"],
     default none,
     range,
