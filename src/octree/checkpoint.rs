@@ -239,20 +239,28 @@ fn add_block_sums(
     size: usize,
 ) {
     let per = words_per_leaf(size as u64);
-    for (k, o) in keys.iter().enumerate() {
+    let mut k = 0usize;
+    // Block by block: no division per leaf.
+    while k < keys.len() {
         let i = first + k as u64;
-        let p = i * per;
-        let mut s = keyed_share(o.key(), p);
-        if size > 0 {
-            let d = &data[k * size..(k + 1) * size];
-            for (j, c) in d.chunks(8).enumerate() {
-                let mut w = [0u8; 8];
-                w[..c.len()].copy_from_slice(c);
-                s = s.wrapping_add(keyed_share(u64::from_le_bytes(w), p + 1 + j as u64));
+        let b = i / block;
+        let end = (((b + 1) * block - first) as usize).min(keys.len());
+        let mut s = 0u64;
+        for (j, o) in keys[k..end].iter().enumerate() {
+            let p = (i + j as u64) * per;
+            s = s.wrapping_add(keyed_share(o.key(), p));
+            if size > 0 {
+                let d = &data[(k + j) * size..(k + j + 1) * size];
+                for (w, c) in d.chunks(8).enumerate() {
+                    let mut word = [0u8; 8];
+                    word[..c.len()].copy_from_slice(c);
+                    s = s.wrapping_add(keyed_share(u64::from_le_bytes(word), p + 1 + w as u64));
+                }
             }
         }
-        let b = (i / block - first_block) as usize;
-        sums[b] = sums[b].wrapping_add(s);
+        let at = (b - first_block) as usize;
+        sums[at] = sums[at].wrapping_add(s);
+        k = end;
     }
 }
 
@@ -350,6 +358,7 @@ impl LinearOctree {
             surface_hash,
         };
         let file = SharedFile::open(comm, path, Mode::Create)?;
+
         let mut head = Vec::new();
         if comm.rank() == 0 {
             head.extend_from_slice(&encode_header(
@@ -366,6 +375,7 @@ impl LinearOctree {
         // Every rank made all three calls; now agree, then close.
         let written = agree(comm, written);
         let closed = file.close();
+
         written.and(closed)
     }
 
