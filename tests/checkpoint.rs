@@ -16,8 +16,9 @@
 //!   the data's checksums over all ranks equal the saver's.
 //! - Damage: copies of the file truncated, with a byte flipped in the
 //!   header, the block table, the leaves and the data, of another version
-//!   and with another magic number, and a missing path, each refused on
-//!   every rank of 3 with its message, the session's octree intact and a
+//!   and with another magic number, and a missing path (to load, and a
+//!   directory that does not exist to save in), each refused on every
+//!   rank of 3 with its message, the session's octree intact and a
 //!   good file loading after.
 //!
 //! Run by `cargo test`, this program launches itself under `mpirun`.
@@ -226,6 +227,11 @@ fn damage(comm: &CommRef, good: &Path) {
             println!("REFUSED {name}: {}", e.message());
         }
     }
+    let e = session
+        .save_octree(&dir().join("missing/none.ckpt"))
+        .unwrap_err();
+    assert_eq!(e.kind(), ErrorKind::Io, "{}", e.message());
+    assert!(e.message().contains("cannot create"), "{}", e.message());
     let e = session
         .load_octree(&dir().join("missing/none.ckpt"))
         .unwrap_err();
