@@ -19,10 +19,10 @@
 //! its data, cut into 8-byte words (the last one padded with zeros), are
 //! the words `i (1 + W) ..` of one stream (`W` words of data per leaf); a
 //! block of [`BLOCK_LEAVES`] leaves has the keyed sum of its words
-//! (`geometry::hash::keyed_share`), which ranks holding pieces of the block add up. The
-//! table of block sums has its own sum in the header, and the header its
-//! sum in its last word. Any one changed word changes a sum, so a flipped
-//! byte anywhere is found.
+//! (`geometry::hash::keyed_share`), which ranks holding pieces of the
+//! block add up. The table of block sums has its own sum in the header,
+//! and the header its sum in its last word. Any one changed word changes
+//! a sum, so a flipped byte anywhere is found.
 
 use std::path::Path;
 
@@ -358,7 +358,6 @@ impl LinearOctree {
             surface_hash,
         };
         let file = SharedFile::open(comm, path, Mode::Create)?;
-
         let mut head = Vec::new();
         if comm.rank() == 0 {
             head.extend_from_slice(&encode_header(
@@ -372,10 +371,10 @@ impl LinearOctree {
             .write_at_all(0, &head)
             .and(file.write_at_all(layout.leaves + 8 * first, &key_bytes(self.leaves())))
             .and(file.write_at_all(layout.data + size * first, bytes));
-        // Every rank made all three calls; now agree, then close.
+        // `and` evaluated all three calls: every rank made them. Now agree,
+        // then close.
         let written = agree(comm, written);
         let closed = file.close();
-
         written.and(closed)
     }
 
@@ -549,6 +548,8 @@ mod tests {
         assert_eq!(got.data.as_ref(), Some(&data));
         assert_eq!(got.info.domain, domain);
         assert_eq!(got.info.surface_hash, 42);
+        let info = LinearOctree::checkpoint_info(&SerialComm, &path).unwrap();
+        assert_eq!((info.leaves, info.data_size), (n, 5));
         let e = LinearOctree::load(comm.clone(), &path, Some(43)).unwrap_err();
         assert!(e.message().contains("another surface"), "{}", e.message());
         // Every byte matters.
