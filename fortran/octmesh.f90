@@ -151,6 +151,7 @@ module octmesh
   public :: octmesh_octree_balance_ext
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_write_gmsh_f, octmesh_mesh_write_abaqus_f
+  public :: octmesh_octree_save_f, octmesh_octree_load_f
   public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
@@ -553,6 +554,20 @@ module octmesh
        integer(c_int) :: c_octmesh_mesh_write_vtu
      end function c_octmesh_mesh_write_vtu
 
+     function c_octmesh_octree_save(h, path) bind(c, name="octmesh_octree_save")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_octree_save
+     end function c_octmesh_octree_save
+
+     function c_octmesh_octree_load(h, path) bind(c, name="octmesh_octree_load")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_octree_load
+     end function c_octmesh_octree_load
+
      function c_octmesh_mesh_write_gmsh(h, path) bind(c, name="octmesh_mesh_write_gmsh")
        import :: c_ptr, c_char, c_int
        type(c_ptr), value :: h
@@ -847,6 +862,24 @@ contains
     integer(c_int) :: status
     status = c_octmesh_mesh_write_vtu(h, trim(pvtu) // c_null_char)
   end function octmesh_mesh_write_vtu_f
+
+  !> Saves the octree, its domain and its leaf data to one checkpoint file
+  !> (octmesh_octree_save). Collective.
+  function octmesh_octree_save_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_octree_save(h, trim(path) // c_null_char)
+  end function octmesh_octree_save_f
+
+  !> Loads the octree of a checkpoint on any number of ranks, with its leaf
+  !> data (octmesh_octree_load). Collective.
+  function octmesh_octree_load_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_octree_load(h, trim(path) // c_null_char)
+  end function octmesh_octree_load_f
 
   !> Writes the mesh as one Gmsh MSH 4.1 file (octmesh_mesh_write_gmsh).
   !> Collective.

@@ -1041,6 +1041,36 @@ octmesh_status_t octmesh_octree_balance_ext(octmesh_t *h,
 octmesh_status_t octmesh_octree_partition(octmesh_t *h, octmesh_weight_fn weight, void *ctx);
 
 /**
+ * Saves the octree, its domain and the attached leaf data
+ * (`octmesh_octree_data_set_size`) to one checkpoint file, like the
+ * command's `--save`: every rank writes its leaves and data at their
+ * global offset (MPI-IO), with the hash of the handle's surface (0
+ * without one). The layout is in docs/formats.md. Needs an octree.
+ * Collective; a path that cannot be written fails every rank.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file, NUL-terminated (same on every rank)
+ */
+octmesh_status_t octmesh_octree_save(octmesh_t *h, const char *path);
+
+/**
+ * Replaces the octree by the one of a checkpoint written by
+ * `octmesh_octree_save` on any number of ranks: the same leaves in Morton
+ * order, in the equal-count partition of `octmesh_octree_partition`, in
+ * the checkpoint's domain, with its leaf data attached when it holds some
+ * (`octmesh_octree_data_get` reads it). With a surface loaded, a
+ * checkpoint saved from another surface is refused. Drops the mesh.
+ * Collective: a missing or unreadable file, one that is not a checkpoint,
+ * of another version, truncated, or with a damaged byte (its checksums
+ * differ) fails every rank with the same message, `OCTMESH_STATUS_FORMAT`
+ * for a bad file, and leaves the handle as it was.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file, NUL-terminated (same on every rank)
+ */
+octmesh_status_t octmesh_octree_load(octmesh_t *h, const char *path);
+
+/**
  * The number of leaves on this rank and over all ranks. Needs an octree.
  * Not collective.
  *

@@ -156,6 +156,16 @@ class Mesher {
   void partition() {
     detail::check(octmesh_octree_partition(h_, nullptr, nullptr), h_, "octmesh_octree_partition");
   }
+  /// octmesh_octree_save: the octree, its domain and its leaf data in one
+  /// checkpoint file, written by all ranks.
+  void save(const std::string &path) {
+    detail::check(octmesh_octree_save(h_, path.c_str()), h_, "octmesh_octree_save");
+  }
+  /// octmesh_octree_load: the octree of a checkpoint, on any number of
+  /// ranks, with its leaf data (data<T>() reads it).
+  void load(const std::string &path) {
+    detail::check(octmesh_octree_load(h_, path.c_str()), h_, "octmesh_octree_load");
+  }
   /// Partitions by `w(octant)` (a uint64_t; must not throw).
   template <class W>
   void partition(W &&w) {

@@ -81,6 +81,13 @@
 //! # }
 //! ```
 //!
+//! 6. **Checkpoints.** [`Session::save_octree`] writes the octree, its
+//!    domain and the attached leaf data to one file, every rank its own
+//!    leaves (MPI-IO); [`Session::load_octree`] reads it back on any number
+//!    of ranks, in equal shares, checking the file's checksums and that the
+//!    session's surface is the one it was saved from. Without a session:
+//!    [`LinearOctree::save`] and [`LinearOctree::load`] ([`Loaded`]).
+//!
 //! The `octmesh` command runs the whole sequence a [`Config`] asks for with
 //! [`Session::run`]; the C API's handle calls the same stages.
 //!
@@ -119,6 +126,7 @@ pub use geometry::Surface;
 pub use mesh::quality::Quality;
 pub use mesh::snap::{SnapOptions, SnapReport};
 pub use mesh::{Boundary, Faces, Mesh, MeshCounts};
+pub use octree::checkpoint::{CheckpointInfo, Loaded};
 pub use octree::domain::Domain;
 pub use octree::octant::{Connectivity, Octant, MAX_LEVEL};
 pub use octree::LinearOctree;

@@ -711,7 +711,8 @@ fn leaf_data_from_fortran_on_1_to_3_ranks() {
         ],
     );
     for np in [1, 2, 3] {
-        let out = run_ok(np, &dir.join("leaf_data_f"), &[]);
+        let ckpt = dir.join(format!("np{np}.ckpt"));
+        let out = run_ok(np, &dir.join("leaf_data_f"), &[ckpt.to_str().unwrap()]);
         assert_eq!(out.matches("FORTRAN LEAF DATA OK").count(), np, "{out}");
     }
 }
@@ -751,7 +752,8 @@ fn leaf_data_from_cpp_on_1_to_3_ranks() {
         String::from_utf8_lossy(&out.stderr)
     );
     for np in [1, 2, 3] {
-        let out = run_ok(np, &exe, &[]);
+        let ckpt = dir.join(format!("np{np}.ckpt"));
+        let out = run_ok(np, &exe, &[ckpt.to_str().unwrap()]);
         assert_eq!(out.matches("CPP LEAF DATA OK").count(), np, "{out}");
     }
 }

@@ -237,6 +237,10 @@ pub struct OctreeConfig {
     /// it stops before allocating (see [`crate::run::budget`]). Unset: the
     /// node's available memory shared among its ranks.
     pub memory_budget: Option<ByteSize>,
+    /// Take the octree of this checkpoint (written by `output.save`)
+    /// instead of refining: the surface is still read, to classify the
+    /// leaves, and must be the one the checkpoint was saved from.
+    pub load: Option<PathBuf>,
 }
 
 impl OctreeConfig {
@@ -358,6 +362,9 @@ pub struct OutputConfig {
     pub leaves: Option<PathBuf>,
     /// The leaves before balance, same format.
     pub refined_leaves: Option<PathBuf>,
+    /// An octree checkpoint of the balanced octree and its domain, one file
+    /// written by all ranks ([`crate::octree::checkpoint`]).
+    pub save: Option<PathBuf>,
     /// The mesh: one binary VTU per rank and a PVTU (a name ending in
     /// `.pvtu`).
     pub vtu: Option<PathBuf>,
@@ -458,6 +465,10 @@ impl Config {
             return Ok(());
         }
         let Some(level) = self.octree.level else {
+            if self.octree.load.is_some() {
+                // The checkpoint holds the octree: no level is needed.
+                return options::check_ranges(self, command == Command::Mesh);
+            }
             return Err(ConfigError::new("octree.level", "is required"));
         };
         options::check_ranges(self, command == Command::Mesh)?;

@@ -547,6 +547,23 @@ options! {
     range,
     set |c, v, _g| { c.output.refined_leaves = Some(v.into()); }
 
+    /// Save the balanced octree to one checkpoint file (written by all
+    /// ranks with MPI-IO; reloads on any number of ranks with `mesh
+    /// --load`, see docs/formats.md)
+    Octree "save" <"FILE.ckpt">: One String = path,
+    keys ["output.save"],
+    default none,
+    range,
+    set |c, v, _g| { c.output.save = Some(v.into()); }
+
+    /// Take the octree of a checkpoint written by --save instead of
+    /// refining (the surface must be the one it was saved from)
+    Octree "load" <"FILE.ckpt">: One String = path,
+    keys ["octree.load"],
+    default none,
+    range,
+    set |c, v, _g| { c.octree.load = Some(v.into()); }
+
     /// Remove zero-area facets right after loading
     Octree "drop-degenerate": Switch bool,
     keys ["surface.drop_degenerate"],
@@ -898,6 +915,7 @@ mod tests {
         (out.stats, out.leaves, out.refined_leaves) =
             (Some("s".into()), Some("l".into()), Some("r".into()));
         (out.gmsh, out.abaqus) = (Some("g.msh".into()), Some("a.inp".into()));
+        (out.save, c.octree.load) = (Some("s.ckpt".into()), Some("l.ckpt".into()));
         (out.vtu, out.openfoam, out.quality_out, out.quality_worst) = (
             Some("v".into()),
             Some("f".into()),

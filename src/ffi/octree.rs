@@ -5,7 +5,8 @@ use std::ffi::{c_char, c_void};
 use super::handle::octmesh_t;
 use super::{
     non_null, octmesh_connect_t, octmesh_gloidx_t, octmesh_locidx_t, octmesh_octant_t,
-    octmesh_status_t, out_slice, slice_arg, str_arg, with_mut, with_ref, write_out, FromC,
+    octmesh_status_t, out_slice, path_arg, slice_arg, str_arg, with_mut, with_ref, write_out,
+    FromC,
 };
 use crate::error::{Error, ErrorKind, Result};
 use crate::octree::LinearOctree;
@@ -352,6 +353,44 @@ pub extern "C" fn octmesh_octree_partition(
                 unsafe { f(ctx, &oc) }
             }
         }))
+    })
+}
+
+/// Saves the octree, its domain and the attached leaf data
+/// (`octmesh_octree_data_set_size`) to one checkpoint file, like the
+/// command's `--save`: every rank writes its leaves and data at their
+/// global offset (MPI-IO), with the hash of the handle's surface (0
+/// without one). The layout is in docs/formats.md. Needs an octree.
+/// Collective; a path that cannot be written fails every rank.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file, NUL-terminated (same on every rank)
+#[no_mangle]
+pub extern "C" fn octmesh_octree_save(h: *mut octmesh_t, path: *const c_char) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = h.agree(path_arg(path, "path"))?;
+        h.session.save_octree(&path)
+    })
+}
+
+/// Replaces the octree by the one of a checkpoint written by
+/// `octmesh_octree_save` on any number of ranks: the same leaves in Morton
+/// order, in the equal-count partition of `octmesh_octree_partition`, in
+/// the checkpoint's domain, with its leaf data attached when it holds some
+/// (`octmesh_octree_data_get` reads it). With a surface loaded, a
+/// checkpoint saved from another surface is refused. Drops the mesh.
+/// Collective: a missing or unreadable file, one that is not a checkpoint,
+/// of another version, truncated, or with a damaged byte (its checksums
+/// differ) fails every rank with the same message, `OCTMESH_STATUS_FORMAT`
+/// for a bad file, and leaves the handle as it was.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file, NUL-terminated (same on every rank)
+#[no_mangle]
+pub extern "C" fn octmesh_octree_load(h: *mut octmesh_t, path: *const c_char) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = h.agree(path_arg(path, "path"))?;
+        h.session.load_octree(&path)
     })
 }
 

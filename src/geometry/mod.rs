@@ -290,6 +290,18 @@ impl Surface {
         &self.parts
     }
 
+    /// A 64-bit hash of the triangles (their vertex coordinates' bits, in
+    /// order), never 0: what an octree checkpoint records of the surface it
+    /// was built from. The same on every rank that read the same surface.
+    pub fn hash(&self) -> u64 {
+        let words = self
+            .triangles
+            .iter()
+            .flat_map(|t| t.v.iter().flatten().map(|c| c.to_bits()));
+        let h = hash::mix64(hash::keyed_sum(words, 0) ^ self.triangles.len() as u64);
+        h.max(1)
+    }
+
     /// The triangles, in input order.
     pub fn triangles(&self) -> &[Triangle] {
         &self.triangles

@@ -53,6 +53,14 @@ impl LeafData {
         }
     }
 
+    /// Data of `size` bytes per leaf from `bytes`, leaf after leaf (a
+    /// length that is a multiple of `size`; `size` 0 gives no leaves).
+    pub fn from_bytes(size: usize, bytes: Vec<u8>) -> LeafData {
+        let len = bytes.len().checked_div(size).unwrap_or(0);
+        debug_assert_eq!(len * size, bytes.len());
+        LeafData { size, len, bytes }
+    }
+
     /// Zeroed data of `size` bytes for each local leaf of `tree`.
     pub fn for_tree(tree: &LinearOctree, size: usize) -> LeafData {
         LeafData::new(size, tree.local_len())

@@ -10,6 +10,7 @@
 pub mod adapt;
 pub mod balance;
 pub mod brick;
+pub mod checkpoint;
 pub mod domain;
 pub mod ghost;
 pub mod leaf_data;

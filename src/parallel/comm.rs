@@ -47,6 +47,11 @@ pub trait Comm {
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>);
     /// Replaces `bytes` on every rank with rank `root`'s bytes.
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>);
+    /// The MPI communicator underneath, for MPI-IO ([`super::file`]);
+    /// `None` for a single process without MPI.
+    fn mpi_raw(&self) -> Option<mpi_sys::MPI_Comm> {
+        None
+    }
     /// Bytes this rank has exchanged with other ranks so far (see
     /// [`Traffic`]). Not collective. The default, for communicators that do
     /// not count, is zero.
@@ -417,6 +422,9 @@ impl Comm for MpiComm {
         } else {
             self.count(0, message);
         }
+    }
+    fn mpi_raw(&self) -> Option<mpi_sys::MPI_Comm> {
+        Some(self.comm.as_raw())
     }
     fn traffic(&self) -> Traffic {
         Traffic {

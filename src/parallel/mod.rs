@@ -1,5 +1,7 @@
 //! How the work spreads: the collective operations between ranks
-//! ([`comm`]) and a spare core beside a rank ([`cores`]).
+//! ([`comm`]), one file shared by the ranks ([`file`]) and a spare core
+//! beside a rank ([`cores`]).
 
 pub mod comm;
 pub mod cores;
+pub mod file;

@@ -20,6 +20,7 @@
 //! as it was before the call.
 
 mod adapt;
+mod checkpoint;
 mod classes;
 mod data;
 mod fe;
@@ -136,6 +137,8 @@ pub struct Session {
     surface: Option<SurfaceState>,
     /// The surface's box and volume after [`Session::release_surface`].
     released: Option<(Aabb, f64, String)>,
+    /// The hash of the last surface loaded, kept when it is released.
+    surface_hash: Option<u64>,
     /// The octree and the cube it was built in.
     tree: Option<(LinearOctree, Domain)>,
     /// User data per local leaf, when attached (`data.rs`).
@@ -178,6 +181,7 @@ impl Session {
             observer: Box::new(Silent),
             surface: None,
             released: None,
+            surface_hash: None,
             tree: None,
             classes: Classes::default(),
             mesh: None,
@@ -323,33 +327,19 @@ impl Session {
         self.inside = self.config.inside_rule(command);
         self.plan = command;
         self.load_surface()?;
-        // Known now: sizes became levels once the domain was.
-        // Parts with their own levels start from the least of them.
-        let level = agree(
-            &*self.comm,
-            self.config
-                .first_surface_level()
-                .ok_or_else(|| Error::invalid("octree.level is required")),
-        )?;
         if command == Command::Mesh {
             // Renames name the surface's parts: check them before the work.
             agree(&*self.comm, self.patch_names())?;
         }
-        let parts = self.config.surface_ranges(self.surface_name(), &self.parts);
-        agree(&*self.comm, parts)?;
-        self.refine_surface(level)?;
-        self.refine_curvature()?;
-        self.refine_regions()?;
-        self.partition()?;
-        if let Some(p) = self.config.output.refined_leaves.clone() {
-            self.write_leaves(&p, "refined leaves")?;
-        }
-        if let Some(conn) = self.config.octree.balance.connectivity() {
-            self.balance(conn)?;
-            self.partition()?;
+        match self.config.octree.load.clone() {
+            Some(p) => self.load_octree(&p)?,
+            None => self.build_octree()?,
         }
         if let Some(p) = self.config.output.leaves.clone() {
             self.write_leaves(&p, "balanced leaves")?;
+        }
+        if let Some(p) = self.config.output.save.clone() {
+            self.save_octree(&p)?;
         }
         // Leak checks need the cut bits, which parity gives cheapest.
         let point = self.config.leak.inside_point;
@@ -410,6 +400,33 @@ impl Session {
             crate::io::json::write_json(&*self.comm, &path, &stats)?;
         }
         leak.map(|_| stats)
+    }
+
+    /// The octree stages of [`Session::run`]: refine (surface, curvature,
+    /// regions), partition, balance and partition again as configured.
+    fn build_octree(&mut self) -> Result<()> {
+        // Known now: sizes became levels once the domain was.
+        // Parts with their own levels start from the least of them.
+        let level = agree(
+            &*self.comm,
+            self.config
+                .first_surface_level()
+                .ok_or_else(|| Error::invalid("octree.level is required")),
+        )?;
+        let parts = self.config.surface_ranges(self.surface_name(), &self.parts);
+        agree(&*self.comm, parts)?;
+        self.refine_surface(level)?;
+        self.refine_curvature()?;
+        self.refine_regions()?;
+        self.partition()?;
+        if let Some(p) = self.config.output.refined_leaves.clone() {
+            self.write_leaves(&p, "refined leaves")?;
+        }
+        if let Some(conn) = self.config.octree.balance.connectivity() {
+            self.balance(conn)?;
+            self.partition()?;
+        }
+        Ok(())
     }
 }
 

@@ -220,6 +220,7 @@ impl Session {
         let mut keys = vec!["read", "construct", "refine"];
         keys.extend(["curvature", "regions"].into_iter().filter(|k| ran(k)));
         keys.extend(["partition", "balance"]);
+        keys.extend(["load", "save"].into_iter().filter(|k| ran(k)));
         if self.classes.rule.is_some() || f.winding.is_some() {
             keys.push("classify");
         }

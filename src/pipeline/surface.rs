@@ -115,6 +115,7 @@ impl Session {
         // The phase's row comes after the facts it found.
         self.report_phase(None);
         self.parts = state.surface.parts().names.clone();
+        self.surface_hash = Some(state.surface.hash());
         self.locator = None;
         self.surface = Some(state);
         self.released = None;

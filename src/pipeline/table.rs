@@ -54,22 +54,34 @@ impl Observer for Table {
                         r.unwrap_or_default()
                     ),
                 };
+                // A loaded octree has the levels its file gives.
+                let octree = match &c.octree.load {
+                    Some(p) => format!("the octree of {}", p.display()),
+                    None => format!(
+                        "level {}, balance {}",
+                        c.octree.level.unwrap_or(0),
+                        c.octree.balance
+                    ),
+                };
                 say!(
-                    "octmesh {what}: {name} ({triangles} triangles), level {}, balance {}, {} rank(s)",
-                    c.octree.level.unwrap_or(0), c.octree.balance, self.ranks
+                    "octmesh {what}: {name} ({triangles} triangles), {octree}, {} rank(s)",
+                    self.ranks
                 );
                 if let Some(n) = dropped {
                     say!("  dropped {n} facet(s) (degenerate or duplicate)");
                 }
                 let (o, s) = (domain.origin, domain.side);
-                if domain.brick.is_cube() {
+                // A loaded octree brings its own domain: the configured one
+                // is not shown.
+                let shown = c.octree.load.is_none();
+                if shown && domain.brick.is_cube() {
                     say!(
                         "  cube: origin ({:.6}, {:.6}, {:.6}), side {s:.6}",
                         o[0],
                         o[1],
                         o[2]
                     );
-                } else {
+                } else if shown {
                     let (u, r) = (domain.upper(), domain.brick.roots());
                     say!(
                         "  box: ({:.6}, {:.6}, {:.6}) to ({:.6}, {:.6}, {:.6}), {}x{}x{} root cells \

@@ -4,7 +4,8 @@
 // leaf's data is its own. A replace callable that throws makes the call
 // throw octmesh::Error on every rank with the data unchanged. Then fields
 // across one step with the previous mesh kept (transfer_nodes,
-// transfer_elements, element_map). Prints
+// transfer_elements, element_map), and a checkpoint saved and loaded back
+// with the data (argv[1] is its path). Prints
 // CPP LEAF DATA OK on every rank.
 // First: it keeps mpi.h from pulling in the MPI C++ bindings.
 #include "octmesh.hpp"
@@ -98,6 +99,21 @@ int main(int argc, char **argv) {
     }
     require(threw, "a throwing replace fails the call");
     require(m.leaves().size() == before.size(), "leaves unchanged");
+    check_own(m);
+    // A checkpoint (argv[1]): a missing file throws with the leaves
+    // intact; the saved one brings every leaf back with its own data.
+    require(argc == 2, "usage: leaf_data_cpp CHECKPOINT");
+    m.save(argv[1]);
+    threw = false;
+    try {
+      m.load(std::string(argv[1]) + ".missing");
+    } catch (const octmesh::Error &) {
+      threw = true;
+    }
+    require(threw, "a missing checkpoint throws");
+    require(m.leaves().size() == before.size(), "leaves unchanged");
+    m.load(argv[1]);
+    require(m.data_size() == (int32_t)sizeof(Datum), "the data size comes back");
     check_own(m);
   }
   {

@@ -2,7 +2,9 @@
 ! by copy and restricted by the mean in a bind(c) replace function, through
 ! octmesh_octree_adapt_ext, _refine_once_ext, _balance_ext, _coarsen_ext
 ! and both partitions; the integral (volume x value) must stay the same to
-! round-off, and a failing replace must fail the call and change nothing.
+! round-off, also through a checkpoint saved and loaded (its path is the
+! first argument), and a failing replace must fail the call and change
+! nothing.
 ! Prints FORTRAN LEAF DATA OK on every rank.
 module leaf_data_callbacks
   use, intrinsic :: iso_c_binding
@@ -65,6 +67,7 @@ program leaf_data
   integer(c_int64_t), target :: refined, coarsened
   real(c_double) :: start
   real(c_double), allocatable :: before(:)
+  character(len=4096) :: path
   call MPI_Init(ierr)
   call MPI_Comm_rank(MPI_COMM_WORLD, rank, ierr)
   call ok(octmesh_create_f(MPI_COMM_WORLD, h))
@@ -90,6 +93,15 @@ program leaf_data
                                      c_loc(coarsened)))
   call same(start)
   call ok(octmesh_octree_partition(h, c_null_funptr, c_null_ptr))
+  call same(start)
+  ! A checkpoint (the first argument): saved, a missing file refused, and
+  ! loaded back with the data.
+  call get_command_argument(1, path)
+  call ok(octmesh_octree_save_f(h, path))
+  if (octmesh_octree_load_f(h, trim(path) // ".missing") /= OCTMESH_STATUS_IO) &
+       call fail("a missing checkpoint was not refused")
+  call same(start)
+  call ok(octmesh_octree_load_f(h, path))
   call same(start)
   ! A failing replace: an error on every rank, the data as it was.
   allocate(before(0))
