@@ -1,4 +1,5 @@
-//! Stages: the single-file finite-element meshes (Gmsh, Abaqus/CalculiX).
+//! Stages: the single-file finite-element meshes (Gmsh, Abaqus/CalculiX,
+//! Exodus II, CGNS).
 
 use std::path::Path;
 
@@ -44,6 +45,30 @@ impl Session {
     pub fn write_abaqus(&mut self, path: &Path) -> Result<()> {
         self.write_gathered(path, "abaqus", |g, patches| {
             crate::io::abaqus::write_abaqus(path, g, patches)
+        })
+    }
+
+    /// Writes the mesh as one Exodus II file ([`crate::io::exodus`]: element
+    /// block `volume`, a side set and a node set per patch, the hanging
+    /// nodes' constraints in the node set `hanging` and the variables
+    /// `hanging_parents`, `hanging_weights`) through the netCDF library,
+    /// gathered on rank 0, with the session's patch names. Phases `faces`,
+    /// `boundary` (when not made yet), `gather` and `exodus`.
+    pub fn write_exodus(&mut self, path: &Path) -> Result<()> {
+        self.write_gathered(path, "exodus", |g, patches| {
+            crate::io::exodus::write_exodus(path, g, patches).map(|_| ())
+        })
+    }
+
+    /// Writes the mesh as one CGNS file ([`crate::io::cgns`]: an
+    /// unstructured zone of HEXA_8 elements, per patch a QUAD_4 section, a
+    /// boundary condition and a family, the hanging nodes' constraints as
+    /// the zone's user data `HangingNodes`) through the CGNS library,
+    /// gathered on rank 0, with the session's patch names. Phases `faces`,
+    /// `boundary` (when not made yet), `gather` and `cgns`.
+    pub fn write_cgns(&mut self, path: &Path) -> Result<()> {
+        self.write_gathered(path, "cgns", |g, patches| {
+            crate::io::cgns::write_cgns(path, g, patches).map(|_| ())
         })
     }
 

@@ -387,6 +387,12 @@ impl Session {
             if let Some(path) = self.config.output.abaqus.clone() {
                 self.write_abaqus(&path)?;
             }
+            if let Some(path) = self.config.output.exodus.clone() {
+                self.write_exodus(&path)?;
+            }
+            if let Some(path) = self.config.output.cgns.clone() {
+                self.write_cgns(&path)?;
+            }
             if self.config.output.wants_quality() {
                 self.quality()?;
             }
