@@ -13,7 +13,11 @@ pub(crate) struct FoldHasher(u64);
 impl std::hash::Hasher for FoldHasher {
     #[inline]
     fn finish(&self) -> u64 {
-        self.0
+        // The product's low bits depend only on the key's low bits, and
+        // hash tables index by the low bits: keys whose low bits are all
+        // zero (Morton keys of a coarse lattice) would share one bucket.
+        // Fold the high half in.
+        self.0 ^ (self.0 >> 32)
     }
     #[inline]
     fn write(&mut self, bytes: &[u8]) {
@@ -34,3 +38,23 @@ pub(crate) type FoldMap<K, V> = HashMap<K, V, BuildHasherDefault<FoldHasher>>;
 
 /// A set with [`FoldHasher`].
 pub(crate) type FoldSet<K> = HashSet<K, BuildHasherDefault<FoldHasher>>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::hash::{BuildHasher, Hasher};
+
+    /// Keys that differ only in their high bits (Morton keys of a coarse
+    /// lattice) spread over a table's low index bits.
+    #[test]
+    fn keys_with_zero_low_bits_spread() {
+        let build = BuildHasherDefault::<FoldHasher>::default();
+        let mut low = HashSet::new();
+        for k in 0u64..4096 {
+            let mut h = build.build_hasher();
+            h.write_u64(k << 30);
+            low.insert(h.finish() & 0xffff);
+        }
+        assert!(low.len() > 4000, "{} distinct low halves of 4096", low.len());
+    }
+}
