@@ -3,21 +3,18 @@
 use std::collections::{HashMap, HashSet};
 use std::hash::BuildHasherDefault;
 
-/// A fast, fixed hash: each word of the key folded into the state by a
-/// rotation, an exclusive or and a multiplication. Not for keys an
-/// adversary picks; for the snap's welding maps and feature cells, whose
-/// order never shows (the outputs follow the triangles' order).
+/// A fast, fixed hash: each word of the key folded into the state by an
+/// exclusive or and a full-width multiplication whose halves are folded
+/// together. Not for keys an adversary picks; for the snap's welding maps
+/// and feature cells and the gathered mesh's node maps, whose order never
+/// shows (the outputs follow the triangles' or the elements' order).
 #[derive(Default)]
 pub(crate) struct FoldHasher(u64);
 
 impl std::hash::Hasher for FoldHasher {
     #[inline]
     fn finish(&self) -> u64 {
-        // The product's low bits depend only on the key's low bits, and
-        // hash tables index by the low bits: keys whose low bits are all
-        // zero (Morton keys of a coarse lattice) would share one bucket.
-        // Fold the high half in.
-        self.0 ^ (self.0 >> 32)
+        self.0
     }
     #[inline]
     fn write(&mut self, bytes: &[u8]) {
@@ -29,7 +26,11 @@ impl std::hash::Hasher for FoldHasher {
     }
     #[inline]
     fn write_u64(&mut self, x: u64) {
-        self.0 = (self.0.rotate_left(26) ^ x).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        // The full 128-bit product, its halves folded: hash tables index by
+        // the low bits, and a 64-bit product's low bits see only the key's
+        // low bits (all zero in the Morton keys of a coarse lattice).
+        let m = u128::from(self.0 ^ x) * 0x9e37_79b9_7f4a_7c15;
+        self.0 = (m as u64) ^ ((m >> 64) as u64);
     }
 }
 
@@ -55,6 +56,10 @@ mod tests {
             h.write_u64(k << 30);
             low.insert(h.finish() & 0xffff);
         }
-        assert!(low.len() > 4000, "{} distinct low halves of 4096", low.len());
+        assert!(
+            low.len() > 4000,
+            "{} distinct low halves of 4096",
+            low.len()
+        );
     }
 }

@@ -136,11 +136,23 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
     assemble(&elements, &nodes, &faces)
 }
 
-/// One node as the ranks sent it, merged over the ranks.
+/// One node as the ranks sent it, merged over the ranks: its position and
+/// the keys of its dependencies (`deps[..count]`, none when independent).
+/// Fixed size, so that a million nodes cost no allocation each.
 struct NodeRecord {
     position: [f64; 3],
-    deps: Vec<u64>,
-    patches: Vec<u16>,
+    deps: [u64; 4],
+    count: u8,
+    /// The node's number, [`NodeRecord::NONE`] until the elements use it.
+    number: u32,
+}
+
+impl NodeRecord {
+    const NONE: u32 = u32::MAX;
+
+    fn deps(&self) -> &[u64] {
+        &self.deps[..self.count as usize]
+    }
 }
 
 /// Rank 0's half of [`gather`].
@@ -149,6 +161,8 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
     // Fixed fast hash: the maps' order never shows (numbers follow the
     // elements' order).
     let mut records: FoldMap<u64, NodeRecord> = FoldMap::default();
+    // (node key, patch), every rank's.
+    let mut on_patch: Vec<(u64, u16)> = Vec::new();
     let mut i = 0;
     let take = |i: &mut usize| -> Result<u64> {
         let v = *nodes.get(*i).ok_or_else(corrupt)?;
@@ -162,52 +176,56 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
             *x = f64::from_bits(take(&mut i)?);
         }
         let nd = take(&mut i)? as usize;
-        let mut deps = Vec::with_capacity(nd);
-        for _ in 0..nd {
-            deps.push(take(&mut i)?);
+        if nd > 4 {
+            return Err(corrupt());
+        }
+        let mut deps = [0u64; 4];
+        for d in deps.iter_mut().take(nd) {
+            *d = take(&mut i)?;
         }
         let np = take(&mut i)? as usize;
-        let mut patches = Vec::with_capacity(np);
         for _ in 0..np {
-            patches.push(take(&mut i)? as u16);
+            on_patch.push((key, take(&mut i)? as u16));
         }
+        let record = NodeRecord {
+            position,
+            deps,
+            count: nd as u8,
+            number: NodeRecord::NONE,
+        };
         match records.get_mut(&key) {
             None => {
-                records.insert(
-                    key,
-                    NodeRecord {
-                        position,
-                        deps,
-                        patches,
-                    },
-                );
+                records.insert(key, record);
             }
             Some(r) => {
-                if r.deps.is_empty() && !deps.is_empty() {
-                    r.deps = deps;
+                if r.count == 0 && nd > 0 {
+                    *r = NodeRecord {
+                        position: r.position,
+                        ..record
+                    };
                 }
-                r.patches.extend(patches);
             }
         }
     }
     // Number the nodes by first use: independent ones, then hanging ones.
-    let mut number: FoldMap<u64, u32> =
-        FoldMap::with_capacity_and_hasher(records.len(), Default::default());
+    let number = |records: &FoldMap<u64, NodeRecord>, k: &u64| -> Result<u32> {
+        match records.get(k).map(|r| r.number) {
+            Some(n) if n != NodeRecord::NONE => Ok(n),
+            _ => Err(corrupt()),
+        }
+    };
     let mut order: Vec<u64> = Vec::with_capacity(records.len());
     for hanging in [false, true] {
         for &k in elements {
-            let r = records.get(&k).ok_or_else(corrupt)?;
-            if r.deps.is_empty() != hanging && !number.contains_key(&k) {
-                number.insert(k, order.len() as u32);
+            let r = records.get_mut(&k).ok_or_else(corrupt)?;
+            if (r.count == 0) != hanging && r.number == NodeRecord::NONE {
+                r.number = order.len() as u32;
                 order.push(k);
             }
         }
     }
     let mut out = Gathered {
-        num_independent: order
-            .iter()
-            .take_while(|k| records[k].deps.is_empty())
-            .count(),
+        num_independent: order.iter().take_while(|k| records[k].count == 0).count(),
         ..Gathered::default()
     };
     out.elements = elements
@@ -215,31 +233,34 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
         .map(|c| {
             let mut e = [0u32; 8];
             for (x, k) in e.iter_mut().zip(c) {
-                *x = number[k];
+                *x = number(&records, k)?;
             }
-            e
+            Ok(e)
         })
-        .collect();
-    for (n, k) in order.iter().enumerate() {
+        .collect::<Result<_>>()?;
+    for k in &order {
         let r = &records[k];
         out.coordinates.push(r.position);
-        if !r.deps.is_empty() {
+        if r.count > 0 {
             let d = r
-                .deps
+                .deps()
                 .iter()
-                .map(|k| number.get(k).copied().ok_or_else(corrupt))
+                .map(|k| number(&records, k))
                 .collect::<Result<Vec<u32>>>()?;
             if d.iter().any(|&m| m as usize >= out.num_independent) {
                 return Err(corrupt());
             }
             out.dependencies.push(d);
         }
-        for &p in &r.patches {
-            let p = p as usize;
-            if out.patch_nodes.len() <= p {
-                out.patch_nodes.resize(p + 1, Vec::new());
-            }
-            out.patch_nodes[p].push(n as u32);
+    }
+    for (k, p) in on_patch {
+        let p = p as usize;
+        if out.patch_nodes.len() <= p {
+            out.patch_nodes.resize(p + 1, Vec::new());
+        }
+        // A node no element uses has no number (and is on no face).
+        if let Ok(n) = number(&records, &k) {
+            out.patch_nodes[p].push(n);
         }
     }
     for l in &mut out.patch_nodes {
