@@ -143,24 +143,25 @@ struct NodeRecord {
     position: [f64; 3],
     deps: [u64; 4],
     count: u8,
-    /// The node's number, [`NodeRecord::NONE`] until the elements use it.
-    number: u32,
 }
 
 impl NodeRecord {
-    const NONE: u32 = u32::MAX;
-
     fn deps(&self) -> &[u64] {
         &self.deps[..self.count as usize]
     }
 }
 
+/// No number yet.
+const NONE: u32 = u32::MAX;
+
 /// Rank 0's half of [`gather`].
 fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> {
     let corrupt = || Error::io("the gathered mesh is inconsistent (an internal error)");
-    // Fixed fast hash: the maps' order never shows (numbers follow the
-    // elements' order).
-    let mut records: FoldMap<u64, NodeRecord> = FoldMap::default();
+    // Each node's slot in `records`. Fixed fast hash: the map's order never
+    // shows (numbers follow the elements' order). The element corners are
+    // looked up once; the numbering then runs on plain arrays.
+    let mut slot: FoldMap<u64, u32> = FoldMap::default();
+    let mut records: Vec<NodeRecord> = Vec::new();
     // (node key, patch), every rank's.
     let mut on_patch: Vec<(u64, u16)> = Vec::new();
     let mut i = 0;
@@ -187,65 +188,60 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
         for _ in 0..np {
             on_patch.push((key, take(&mut i)? as u16));
         }
-        let record = NodeRecord {
-            position,
-            deps,
-            count: nd as u8,
-            number: NodeRecord::NONE,
-        };
-        match records.get_mut(&key) {
-            None => {
-                records.insert(key, record);
-            }
-            Some(r) => {
-                if r.count == 0 && nd > 0 {
-                    *r = NodeRecord {
-                        position: r.position,
-                        ..record
-                    };
-                }
+        let next = records.len() as u32;
+        let at = *slot.entry(key).or_insert(next);
+        if at == next {
+            records.push(NodeRecord {
+                position,
+                deps,
+                count: nd as u8,
+            });
+        } else {
+            let r = &mut records[at as usize];
+            if r.count == 0 && nd > 0 {
+                (r.deps, r.count) = (deps, nd as u8);
             }
         }
     }
+    let corners: Vec<u32> = elements
+        .iter()
+        .map(|k| slot.get(k).copied().ok_or_else(corrupt))
+        .collect::<Result<_>>()?;
     // Number the nodes by first use: independent ones, then hanging ones.
-    let number = |records: &FoldMap<u64, NodeRecord>, k: &u64| -> Result<u32> {
-        match records.get(k).map(|r| r.number) {
-            Some(n) if n != NodeRecord::NONE => Ok(n),
-            _ => Err(corrupt()),
-        }
-    };
-    let mut order: Vec<u64> = Vec::with_capacity(records.len());
+    let mut number = vec![NONE; records.len()];
+    let mut order: Vec<u32> = Vec::with_capacity(records.len());
     for hanging in [false, true] {
-        for &k in elements {
-            let r = records.get_mut(&k).ok_or_else(corrupt)?;
-            if (r.count == 0) != hanging && r.number == NodeRecord::NONE {
-                r.number = order.len() as u32;
-                order.push(k);
+        for &c in &corners {
+            if (records[c as usize].count == 0) != hanging && number[c as usize] == NONE {
+                number[c as usize] = order.len() as u32;
+                order.push(c);
             }
         }
     }
+    let number_of = |k: &u64| -> Option<u32> {
+        slot.get(k)
+            .map(|&c| number[c as usize])
+            .filter(|&n| n != NONE)
+    };
     let mut out = Gathered {
-        num_independent: order.iter().take_while(|k| records[k].count == 0).count(),
+        num_independent: order
+            .iter()
+            .take_while(|&&c| records[c as usize].count == 0)
+            .count(),
         ..Gathered::default()
     };
-    out.elements = elements
+    out.elements = corners
         .chunks_exact(8)
-        .map(|c| {
-            let mut e = [0u32; 8];
-            for (x, k) in e.iter_mut().zip(c) {
-                *x = number(&records, k)?;
-            }
-            Ok(e)
-        })
-        .collect::<Result<_>>()?;
-    for k in &order {
-        let r = &records[k];
+        .map(|c| std::array::from_fn(|v| number[c[v] as usize]))
+        .collect();
+    for &c in &order {
+        let r = &records[c as usize];
         out.coordinates.push(r.position);
         if r.count > 0 {
             let d = r
                 .deps()
                 .iter()
-                .map(|k| number(&records, k))
+                .map(|k| number_of(k).ok_or_else(corrupt))
                 .collect::<Result<Vec<u32>>>()?;
             if d.iter().any(|&m| m as usize >= out.num_independent) {
                 return Err(corrupt());
@@ -259,7 +255,7 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
             out.patch_nodes.resize(p + 1, Vec::new());
         }
         // A node no element uses has no number (and is on no face).
-        if let Ok(n) = number(&records, &k) {
+        if let Some(n) = number_of(&k) {
             out.patch_nodes[p].push(n);
         }
     }
