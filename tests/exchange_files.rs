@@ -25,7 +25,8 @@
 //!   have the same content (`cgnsdiff -d` finds nothing, and finds a
 //!   difference between two different meshes: the check can fail). HDF5
 //!   stores modification times, so CGNS bytes differ.
-//! - A file that cannot be written fails the run on every rank.
+//! - A file that cannot be written fails the run on every rank, and so
+//!   does a patch name too long for CGNS.
 
 mod common;
 
@@ -616,5 +617,35 @@ fn an_unwritable_file_fails_every_rank() {
         let lines = common::rank_error_lines(&out, 2, option);
         assert!(lines[0].contains(name), "{option}: {}", lines[0]);
         assert!(!path.exists());
+    }
+}
+
+/// A patch name too long for CGNS (over 32 characters) stops the run on
+/// every rank with a message that says how to rename it.
+#[test]
+fn a_long_patch_name_fails_cgns_on_every_rank() {
+    let dir = scratch("exchange_long_name");
+    let path = dir.join("m.cgns");
+    let rename = format!("sphere={}", "w".repeat(33));
+    let args = [
+        "mesh",
+        "sphere",
+        "--level",
+        "3",
+        "--keep",
+        "inside",
+        "--patch",
+        &rename,
+        "--cgns",
+        path.to_str().unwrap(),
+    ];
+    let out = common::mpirun(
+        2,
+        &common::octmesh_bin(),
+        &args,
+        std::time::Duration::from_secs(300),
+    );
+    for line in common::rank_error_lines(&out, 2, "--cgns") {
+        assert!(line.contains("--patch") && line.contains("32"), "{line}");
     }
 }
