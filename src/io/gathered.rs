@@ -160,8 +160,10 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
     // Each node's slot in `records`. Fixed fast hash: the map's order never
     // shows (numbers follow the elements' order). The element corners are
     // looked up once; the numbering then runs on plain arrays.
-    let mut slot: FoldMap<u64, u32> = FoldMap::default();
-    let mut records: Vec<NodeRecord> = Vec::new();
+    // A node's record is at least 6 words: room for all, no rehashing.
+    let most = nodes.len() / 6;
+    let mut slot: FoldMap<u64, u32> = FoldMap::with_capacity_and_hasher(most, Default::default());
+    let mut records: Vec<NodeRecord> = Vec::with_capacity(most);
     // (node key, patch), every rank's.
     let mut on_patch: Vec<(u64, u16)> = Vec::new();
     let mut i = 0;
