@@ -152,6 +152,7 @@ module octmesh
   public :: octmesh_mesh_build, octmesh_mesh_get_counts, octmesh_mesh_write_vtu_f
   public :: octmesh_mesh_write_gmsh_f, octmesh_mesh_write_abaqus_f
   public :: octmesh_octree_save_f, octmesh_octree_load_f
+  public :: octmesh_mesh_write_exodus_f, octmesh_mesh_write_cgns_f
   public :: octmesh_mesh_get_quality
   public :: octmesh_mesh_set_inside_rule, octmesh_mesh_get_inside_rule
   public :: octmesh_mesh_write_vtu_fields, octmesh_mesh_write_vtu_fields_f
@@ -582,6 +583,20 @@ module octmesh
        integer(c_int) :: c_octmesh_mesh_write_abaqus
      end function c_octmesh_mesh_write_abaqus
 
+     function c_octmesh_mesh_write_exodus(h, path) bind(c, name="octmesh_mesh_write_exodus")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_mesh_write_exodus
+     end function c_octmesh_mesh_write_exodus
+
+     function c_octmesh_mesh_write_cgns(h, path) bind(c, name="octmesh_mesh_write_cgns")
+       import :: c_ptr, c_char, c_int
+       type(c_ptr), value :: h
+       character(kind=c_char), intent(in) :: path(*)
+       integer(c_int) :: c_octmesh_mesh_write_cgns
+     end function c_octmesh_mesh_write_cgns
+
      !> The C function: `names(k)` points to a NUL-terminated name and
      !> `values(k)` to `local_nodes` doubles (see octmesh.h).
      function octmesh_mesh_write_vtu_fields(h, pvtu, nfields, names, values) &
@@ -898,6 +913,24 @@ contains
     integer(c_int) :: status
     status = c_octmesh_mesh_write_abaqus(h, trim(path) // c_null_char)
   end function octmesh_mesh_write_abaqus_f
+
+  !> Writes the mesh as one Exodus II file with the hanging nodes'
+  !> constraints (octmesh_mesh_write_exodus). Collective.
+  function octmesh_mesh_write_exodus_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_mesh_write_exodus(h, trim(path) // c_null_char)
+  end function octmesh_mesh_write_exodus_f
+
+  !> Writes the mesh as one CGNS file with the hanging nodes' constraints
+  !> (octmesh_mesh_write_cgns). Collective.
+  function octmesh_mesh_write_cgns_f(h, path) result(status)
+    type(c_ptr), intent(in) :: h
+    character(len=*), intent(in) :: path
+    integer(c_int) :: status
+    status = c_octmesh_mesh_write_cgns(h, trim(path) // c_null_char)
+  end function octmesh_mesh_write_cgns_f
 
   !> Writes the mesh as VTU pieces and the PVTU `pvtu` with point fields:
   !> `values(:, k)` (one value per local node, in local node order, hanging

@@ -1645,6 +1645,36 @@ octmesh_status_t octmesh_mesh_write_gmsh(octmesh_t *h, const char *path);
 octmesh_status_t octmesh_mesh_write_abaqus(octmesh_t *h, const char *path);
 
 /**
+ * Writes the mesh as one Exodus II file through the netCDF library, like
+ * the command's `--exodus`: element block `volume` (HEX8), per patch with
+ * boundary faces a side set and a node set named after it (names from
+ * `octmesh_mesh_rename_patch`), and the hanging nodes as plain nodes with
+ * their constraints in the node set `hanging` and the variables
+ * `hanging_nodes`, `hanging_parents`, `hanging_weights`
+ * (docs/formats.md). The mesh is gathered on rank 0, which writes the
+ * file: the same bytes on any number of ranks. Needs a mesh. Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file, NUL-terminated (same on every rank)
+ */
+octmesh_status_t octmesh_mesh_write_exodus(octmesh_t *h, const char *path);
+
+/**
+ * Writes the mesh as one CGNS file (HDF5) through the CGNS library, like
+ * the command's `--cgns`: one unstructured zone `volume` of HEXA_8
+ * elements, per patch with boundary faces a QUAD_4 section, a boundary
+ * condition and a family named after it, and the hanging nodes as plain
+ * nodes with their constraints in the zone's user data `HangingNodes`
+ * (docs/formats.md). The mesh is gathered on rank 0, which writes the
+ * file: the same content on any number of ranks. Needs a mesh.
+ * Collective.
+ *
+ * \param[in] h     the handle
+ * \param[in] path  the file, NUL-terminated (same on every rank)
+ */
+octmesh_status_t octmesh_mesh_write_cgns(octmesh_t *h, const char *path);
+
+/**
  * Writes the mesh like `octmesh_mesh_write_vtu`, with `nfields` caller
  * fields (a solution, an error, ...) added as point data: field `k` is
  * called `names[k]` (a non-empty UTF-8 string without control characters,

@@ -414,6 +414,16 @@ class Mesher {
   void write_abaqus(const std::string &path) {
     detail::check(octmesh_mesh_write_abaqus(h_, path.c_str()), h_, "octmesh_mesh_write_abaqus");
   }
+  /// octmesh_mesh_write_exodus: one Exodus II file (netCDF) with the hanging nodes' constraints,
+  /// gathered on rank 0.
+  void write_exodus(const std::string &path) {
+    detail::check(octmesh_mesh_write_exodus(h_, path.c_str()), h_, "octmesh_mesh_write_exodus");
+  }
+  /// octmesh_mesh_write_cgns: one CGNS file (HDF5) with the hanging nodes' constraints, gathered
+  /// on rank 0.
+  void write_cgns(const std::string &path) {
+    detail::check(octmesh_mesh_write_cgns(h_, path.c_str()), h_, "octmesh_mesh_write_cgns");
+  }
   /// Writes the mesh with point fields: each pair is a field name and a
   /// pointer to one double per local node (local node order, hanging nodes
   /// included). Collective; every rank passes the same names.

@@ -111,8 +111,14 @@ fn pipeline_from_c_on_1_and_2_ranks() {
     assert_eq!(sphere[0], sphere[1]);
     assert_eq!(callback[0], callback[1]);
     // ... and equal those of the octmesh command on the same input, whose
-    // Abaqus and Gmsh files are those of the C API, byte for byte.
-    let (inp, msh) = (dir.join("cli.inp"), dir.join("cli.msh"));
+    // Abaqus, Gmsh and Exodus files are those of the C API, byte for byte
+    // (a CGNS file holds HDF5 modification times: tests/exchange_files.rs
+    // compares contents).
+    let (inp, msh, exo) = (
+        dir.join("cli.inp"),
+        dir.join("cli.msh"),
+        dir.join("cli.exo"),
+    );
     let cli = common::octmesh_ok(
         1,
         &[
@@ -126,10 +132,14 @@ fn pipeline_from_c_on_1_and_2_ranks() {
             inp.to_str().unwrap(),
             "--gmsh",
             msh.to_str().unwrap(),
+            "--exodus",
+            exo.to_str().unwrap(),
         ],
     );
     for np in [1, 2] {
-        for (ext, cli_file) in [("inp", &inp), ("msh", &msh)] {
+        let cgns = dir.join(format!("sphere_np{np}.pvtu.cgns"));
+        assert!(cgns.is_file(), "{} not written", cgns.display());
+        for (ext, cli_file) in [("inp", &inp), ("msh", &msh), ("exo", &exo)] {
             let c_file = dir.join(format!("sphere_np{np}.pvtu.{ext}"));
             assert!(
                 std::fs::read(&c_file).unwrap() == std::fs::read(cli_file).unwrap(),

@@ -1,10 +1,12 @@
 // The C++ wrapper (octmesh.hpp): a solid sphere mesh refined by a lambda,
-// written with a point field, and an error reported as an exception.
+// written with a point field (and as OUT.pvtu.exo, OUT.pvtu.cgns), and an
+// error reported as an exception.
 // Usage: mesher [OUT.pvtu]
 // octmesh.hpp first: it includes mpi.h without the MPI C++ bindings.
 #include <octmesh.hpp>
 
 #include <cstdio>
+#include <string>
 #include <vector>
 
 int main(int argc, char **argv) {
@@ -33,6 +35,9 @@ int main(int argc, char **argv) {
       std::vector<double> x(static_cast<size_t>(c.local_nodes));
       for (size_t i = 0; i < x.size(); i++) x[i] = xyz[3 * i];
       m.write_vtu(argv[1], {{"x", x.data()}});
+      // The same mesh for Exodus II and CGNS readers (MOOSE, SU2, ...).
+      m.write_exodus(std::string(argv[1]) + ".exo");
+      m.write_cgns(std::string(argv[1]) + ".cgns");
     }
     if (rank == 0)
       std::printf("CPP leaves=%lld elements=%lld independent=%lld hanging=%lld\n",

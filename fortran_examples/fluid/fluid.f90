@@ -1,7 +1,8 @@
 ! Fluid mesh (elements outside the surface) around the built-in torus, with
 ! a Fortran refinement callback and a context, snapped onto the torus;
 ! prints the counts and the snap report and writes a VTU with the point
-! field "z" (height of each node). Usage: fluid [OUT.pvtu]
+! field "z" (height of each node), and the mesh as OUT.pvtu.exo (Exodus II)
+! and OUT.pvtu.cgns (CGNS). Usage: fluid [OUT.pvtu]
 module fluid_refine
   use, intrinsic :: iso_c_binding
   use octmesh
@@ -66,6 +67,9 @@ program fluid
      allocate(height(counts%local_nodes, 1))
      height(:, 1) = xyz(3, :)
      call check(octmesh_mesh_write_vtu_fields_f(h, trim(out), ['z'], height), h)
+     ! The same mesh for Exodus II and CGNS readers (MOOSE, SU2, ...).
+     call check(octmesh_mesh_write_exodus_f(h, trim(out) // '.exo'), h)
+     call check(octmesh_mesh_write_cgns_f(h, trim(out) // '.cgns'), h)
   end if
   call MPI_Reduce(ctx%calls, calls, 1, MPI_INTEGER8, MPI_SUM, 0, MPI_COMM_WORLD)
   if (rank == 0) then

@@ -376,6 +376,10 @@ pub struct OutputConfig {
     pub gmsh: Option<PathBuf>,
     /// One Abaqus/CalculiX input file of the mesh ([`crate::io::abaqus`]).
     pub abaqus: Option<PathBuf>,
+    /// One Exodus II file of the mesh ([`crate::io::exodus`]).
+    pub exodus: Option<PathBuf>,
+    /// One CGNS file of the mesh ([`crate::io::cgns`]).
+    pub cgns: Option<PathBuf>,
     /// `binary` (default) or `ascii` lists in the OpenFOAM files.
     pub openfoam_format: FoamFormat,
     /// Replace an existing OpenFOAM mesh.

@@ -677,6 +677,26 @@ options! {
     range,
     set |c, v, _g| { c.output.abaqus = Some(v.into()); }
 
+    /// Write one Exodus II file (netCDF; gathered on rank 0): element
+    /// block `volume`, a side set and a node set per patch, the hanging
+    /// nodes as a node set `hanging` with their parents and weights in
+    /// extra variables (see docs/formats.md)
+    Mesh "exodus" <"FILE.exo">: One String = path,
+    keys ["output.exodus"],
+    default none,
+    range,
+    set |c, v, _g| { c.output.exodus = Some(v.into()); }
+
+    /// Write one CGNS file (HDF5; gathered on rank 0): an unstructured
+    /// zone of HEXA_8, a QUAD_4 section, boundary condition and family per
+    /// patch, the hanging nodes' constraints as user data (see
+    /// docs/formats.md)
+    Mesh "cgns" <"FILE.cgns">: One String = path,
+    keys ["output.cgns"],
+    default none,
+    range,
+    set |c, v, _g| { c.output.cgns = Some(v.into()); }
+
     /// Lists in the OpenFOAM files: binary or ascii
     Mesh "openfoam-format" <"FORMAT">: One FoamFormat = FoamFormat::parse,
     keys ["output.openfoam_format"],
@@ -916,6 +936,7 @@ mod tests {
             (Some("s".into()), Some("l".into()), Some("r".into()));
         (out.gmsh, out.abaqus) = (Some("g.msh".into()), Some("a.inp".into()));
         (out.save, c.octree.load) = (Some("s.ckpt".into()), Some("l.ckpt".into()));
+        (out.exodus, out.cgns) = (Some("e.exo".into()), Some("c.cgns".into()));
         (out.vtu, out.openfoam, out.quality_out, out.quality_worst) = (
             Some("v".into()),
             Some("f".into()),

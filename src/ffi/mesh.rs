@@ -500,6 +500,50 @@ pub extern "C" fn octmesh_mesh_write_abaqus(
     })
 }
 
+/// Writes the mesh as one Exodus II file through the netCDF library, like
+/// the command's `--exodus`: element block `volume` (HEX8), per patch with
+/// boundary faces a side set and a node set named after it (names from
+/// `octmesh_mesh_rename_patch`), and the hanging nodes as plain nodes with
+/// their constraints in the node set `hanging` and the variables
+/// `hanging_nodes`, `hanging_parents`, `hanging_weights`
+/// (docs/formats.md). The mesh is gathered on rank 0, which writes the
+/// file: the same bytes on any number of ranks. Needs a mesh. Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file, NUL-terminated (same on every rank)
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_write_exodus(
+    h: *mut octmesh_t,
+    path: *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = h.agree(path_arg(path, "path"))?;
+        h.session.write_exodus(&path)
+    })
+}
+
+/// Writes the mesh as one CGNS file (HDF5) through the CGNS library, like
+/// the command's `--cgns`: one unstructured zone `volume` of HEXA_8
+/// elements, per patch with boundary faces a QUAD_4 section, a boundary
+/// condition and a family named after it, and the hanging nodes as plain
+/// nodes with their constraints in the zone's user data `HangingNodes`
+/// (docs/formats.md). The mesh is gathered on rank 0, which writes the
+/// file: the same content on any number of ranks. Needs a mesh.
+/// Collective.
+///
+/// \param[in] h     the handle
+/// \param[in] path  the file, NUL-terminated (same on every rank)
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_write_cgns(
+    h: *mut octmesh_t,
+    path: *const c_char,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let path = h.agree(path_arg(path, "path"))?;
+        h.session.write_cgns(&path)
+    })
+}
+
 /// Reads the `nfields` caller fields of `octmesh_mesh_write_vtu_fields`,
 /// `nodes` values each.
 ///

@@ -4,10 +4,11 @@
 use std::collections::{HashMap, HashSet};
 use std::hash::BuildHasherDefault;
 
-/// A fast, fixed hash: each word of the key folded into the state by a
-/// rotation, an exclusive or and a multiplication. Not for keys an
-/// adversary picks; for the snap's welding maps and feature cells, whose
-/// order never shows (the outputs follow the triangles' order).
+/// A fast, fixed hash: each word of the key folded into the state by an
+/// exclusive or and a full-width multiplication whose halves are folded
+/// together. Not for keys an adversary picks; for the snap's welding maps
+/// and feature cells and the gathered mesh's node maps, whose order never
+/// shows (the outputs follow the triangles' or the elements' order).
 #[derive(Default)]
 pub(crate) struct FoldHasher(u64);
 
@@ -26,7 +27,11 @@ impl std::hash::Hasher for FoldHasher {
     }
     #[inline]
     fn write_u64(&mut self, x: u64) {
-        self.0 = (self.0.rotate_left(26) ^ x).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        // The full 128-bit product, its halves folded: hash tables index by
+        // the low bits, and a 64-bit product's low bits see only the key's
+        // low bits (all zero in the Morton keys of a coarse lattice).
+        let m = u128::from(self.0 ^ x) * 0x9e37_79b9_7f4a_7c15;
+        self.0 = (m as u64) ^ ((m >> 64) as u64);
     }
 }
 
@@ -73,6 +78,7 @@ pub fn keyed_sum(words: impl IntoIterator<Item = u64>, position: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::hash::{BuildHasher, Hasher};
 
     #[test]
     fn keyed_sums_split_and_see_one_changed_word() {
@@ -90,5 +96,23 @@ mod tests {
         let mut w = words.clone();
         w.swap(3, 4);
         assert_ne!(keyed_sum(w, 7), whole);
+    }
+
+    /// Keys that differ only in their high bits (Morton keys of a coarse
+    /// lattice) spread over a table's low index bits.
+    #[test]
+    fn keys_with_zero_low_bits_spread() {
+        let build = BuildHasherDefault::<FoldHasher>::default();
+        let mut low = HashSet::new();
+        for k in 0u64..4096 {
+            let mut h = build.build_hasher();
+            h.write_u64(k << 30);
+            low.insert(h.finish() & 0xffff);
+        }
+        assert!(
+            low.len() > 4000,
+            "{} distinct low halves of 4096",
+            low.len()
+        );
     }
 }

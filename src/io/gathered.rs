@@ -189,19 +189,36 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
     assemble(&elements, &nodes, &faces)
 }
 
-/// One node as the ranks sent it, merged over the ranks.
+/// One node as the ranks sent it, merged over the ranks: its position and
+/// the keys of its dependencies (`deps[..count]`, none when independent).
+/// Fixed size, so that a million nodes cost no allocation each.
 struct NodeRecord {
     position: [f64; 3],
-    deps: Vec<u64>,
-    patches: Vec<u16>,
+    deps: [u64; 4],
+    count: u8,
 }
+
+impl NodeRecord {
+    fn deps(&self) -> &[u64] {
+        &self.deps[..self.count as usize]
+    }
+}
+
+/// No number yet.
+const NONE: u32 = u32::MAX;
 
 /// Rank 0's half of [`gather`].
 fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> {
     let corrupt = || Error::io("the gathered mesh is inconsistent (an internal error)");
-    // Fixed fast hash: the maps' order never shows (numbers follow the
-    // elements' order).
-    let mut records: FoldMap<u64, NodeRecord> = FoldMap::default();
+    // Each node's slot in `records`. Fixed fast hash: the map's order never
+    // shows (numbers follow the elements' order). The element corners are
+    // looked up once; the numbering then runs on plain arrays.
+    // A node's record is at least 6 words: room for all, no rehashing.
+    let most = nodes.len() / 6;
+    let mut slot: FoldMap<u64, u32> = FoldMap::with_capacity_and_hasher(most, Default::default());
+    let mut records: Vec<NodeRecord> = Vec::with_capacity(most);
+    // (node key, patch), every rank's.
+    let mut on_patch: Vec<(u64, u16)> = Vec::new();
     let mut i = 0;
     let take = |i: &mut usize| -> Result<u64> {
         let v = *nodes.get(*i).ok_or_else(corrupt)?;
@@ -215,84 +232,86 @@ fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> 
             *x = f64::from_bits(take(&mut i)?);
         }
         let nd = take(&mut i)? as usize;
-        let mut deps = Vec::with_capacity(nd);
-        for _ in 0..nd {
-            deps.push(take(&mut i)?);
+        if nd > 4 {
+            return Err(corrupt());
+        }
+        let mut deps = [0u64; 4];
+        for d in deps.iter_mut().take(nd) {
+            *d = take(&mut i)?;
         }
         let np = take(&mut i)? as usize;
-        let mut patches = Vec::with_capacity(np);
         for _ in 0..np {
-            patches.push(take(&mut i)? as u16);
+            on_patch.push((key, take(&mut i)? as u16));
         }
-        match records.get_mut(&key) {
-            None => {
-                records.insert(
-                    key,
-                    NodeRecord {
-                        position,
-                        deps,
-                        patches,
-                    },
-                );
-            }
-            Some(r) => {
-                if r.deps.is_empty() && !deps.is_empty() {
-                    r.deps = deps;
-                }
-                r.patches.extend(patches);
+        let next = records.len() as u32;
+        let at = *slot.entry(key).or_insert(next);
+        if at == next {
+            records.push(NodeRecord {
+                position,
+                deps,
+                count: nd as u8,
+            });
+        } else {
+            let r = &mut records[at as usize];
+            if r.count == 0 && nd > 0 {
+                (r.deps, r.count) = (deps, nd as u8);
             }
         }
     }
+    let corners: Vec<u32> = elements
+        .iter()
+        .map(|k| slot.get(k).copied().ok_or_else(corrupt))
+        .collect::<Result<_>>()?;
     // Number the nodes by first use: independent ones, then hanging ones.
-    let mut number: FoldMap<u64, u32> =
-        FoldMap::with_capacity_and_hasher(records.len(), Default::default());
-    let mut order: Vec<u64> = Vec::with_capacity(records.len());
+    let mut number = vec![NONE; records.len()];
+    let mut order: Vec<u32> = Vec::with_capacity(records.len());
     for hanging in [false, true] {
-        for &k in elements {
-            let r = records.get(&k).ok_or_else(corrupt)?;
-            if r.deps.is_empty() != hanging && !number.contains_key(&k) {
-                number.insert(k, order.len() as u32);
-                order.push(k);
+        for &c in &corners {
+            if (records[c as usize].count == 0) != hanging && number[c as usize] == NONE {
+                number[c as usize] = order.len() as u32;
+                order.push(c);
             }
         }
     }
+    let number_of = |k: &u64| -> Option<u32> {
+        slot.get(k)
+            .map(|&c| number[c as usize])
+            .filter(|&n| n != NONE)
+    };
     let mut out = Gathered {
         num_independent: order
             .iter()
-            .take_while(|k| records[k].deps.is_empty())
+            .take_while(|&&c| records[c as usize].count == 0)
             .count(),
         ..Gathered::default()
     };
-    out.elements = elements
+    out.elements = corners
         .chunks_exact(8)
-        .map(|c| {
-            let mut e = [0u32; 8];
-            for (x, k) in e.iter_mut().zip(c) {
-                *x = number[k];
-            }
-            e
-        })
+        .map(|c| std::array::from_fn(|v| number[c[v] as usize]))
         .collect();
-    for (n, k) in order.iter().enumerate() {
-        let r = &records[k];
+    for &c in &order {
+        let r = &records[c as usize];
         out.coordinates.push(r.position);
-        if !r.deps.is_empty() {
+        if r.count > 0 {
             let d = r
-                .deps
+                .deps()
                 .iter()
-                .map(|k| number.get(k).copied().ok_or_else(corrupt))
+                .map(|k| number_of(k).ok_or_else(corrupt))
                 .collect::<Result<Vec<u32>>>()?;
             if d.iter().any(|&m| m as usize >= out.num_independent) {
                 return Err(corrupt());
             }
             out.dependencies.push(d);
         }
-        for &p in &r.patches {
-            let p = p as usize;
-            if out.patch_nodes.len() <= p {
-                out.patch_nodes.resize(p + 1, Vec::new());
-            }
-            out.patch_nodes[p].push(n as u32);
+    }
+    for (k, p) in on_patch {
+        let p = p as usize;
+        if out.patch_nodes.len() <= p {
+            out.patch_nodes.resize(p + 1, Vec::new());
+        }
+        // A node no element uses has no number (and is on no face).
+        if let Some(n) = number_of(&k) {
+            out.patch_nodes[p].push(n);
         }
     }
     for l in &mut out.patch_nodes {

@@ -1,4 +1,5 @@
-//! Stages: the single-file finite-element meshes (Gmsh, Abaqus/CalculiX).
+//! Stages: the single-file finite-element meshes (Gmsh, Abaqus/CalculiX,
+//! Exodus II, CGNS).
 
 use std::path::Path;
 
@@ -45,9 +46,7 @@ impl Session {
     /// gathered on rank 0, with the session's patch names. Phases `faces`,
     /// `boundary` (when not made yet), `gather` and `gmsh`.
     pub fn write_gmsh(&mut self, path: &Path) -> Result<()> {
-        self.write_gathered(path, "gmsh", |g, patches| {
-            crate::io::gmsh::write_gmsh(path, g, patches).map(|_| ())
-        })
+        self.write_fe_files(&[(FeFormat::Gmsh, path)])
     }
 
     /// Writes the mesh as one Abaqus/CalculiX input file
@@ -56,32 +55,82 @@ impl Session {
     /// gathered on rank 0, with the session's patch names. Phases `faces`,
     /// `boundary` (when not made yet), `gather` and `abaqus`.
     pub fn write_abaqus(&mut self, path: &Path) -> Result<()> {
-        self.write_gathered(path, "abaqus", |g, patches| {
-            crate::io::abaqus::write_abaqus(path, g, patches)
-        })
+        self.write_fe_files(&[(FeFormat::Abaqus, path)])
     }
 
-    /// Gathers the mesh and has rank 0 `write` it as phase `phase`; every
-    /// rank returns rank 0's result. Collective.
-    fn write_gathered(
-        &mut self,
-        path: &Path,
-        phase: &str,
-        write: impl FnOnce(&Gathered, &PatchNames) -> Result<()>,
-    ) -> Result<()> {
+    /// Writes the mesh as one Exodus II file ([`crate::io::exodus`]: element
+    /// block `volume`, a side set and a node set per patch, the hanging
+    /// nodes' constraints in the node set `hanging` and the variables
+    /// `hanging_parents`, `hanging_weights`) through the netCDF library,
+    /// gathered on rank 0, with the session's patch names. Phases `faces`,
+    /// `boundary` (when not made yet), `gather` and `exodus`.
+    pub fn write_exodus(&mut self, path: &Path) -> Result<()> {
+        self.write_fe_files(&[(FeFormat::Exodus, path)])
+    }
+
+    /// Writes the mesh as one CGNS file ([`crate::io::cgns`]: an
+    /// unstructured zone of HEXA_8 elements, per patch a QUAD_4 section, a
+    /// boundary condition and a family, the hanging nodes' constraints as
+    /// the zone's user data `HangingNodes`) through the CGNS library,
+    /// gathered on rank 0, with the session's patch names. Phases `faces`,
+    /// `boundary` (when not made yet), `gather` and `cgns`.
+    pub fn write_cgns(&mut self, path: &Path) -> Result<()> {
+        self.write_fe_files(&[(FeFormat::Cgns, path)])
+    }
+
+    /// Gathers the mesh once and has rank 0 write each of `files`, each as
+    /// the phase named after its format; every rank returns rank 0's
+    /// result. Stops at the first file that fails. Collective.
+    pub(super) fn write_fe_files(&mut self, files: &[(FeFormat, &Path)]) -> Result<()> {
+        if files.is_empty() {
+            return Ok(());
+        }
         let patches = agree(&*self.comm, self.patch_names())?;
         self.gather()?;
         let comm = self.comm.clone();
-        let g = &self.gathered.as_ref().expect("gathered just now").1;
-        self.timer.time(&*comm, phase, || {
-            let local = match comm.rank() {
-                0 => write(g, &patches),
-                _ => Ok(()),
-            };
-            agree(&*comm, local)
-        })?;
-        self.report_phase(None);
-        self.observer.event(&Event::Wrote(path));
+        for &(format, path) in files {
+            let g = &self.gathered.as_ref().expect("gathered just now").1;
+            self.timer.time(&*comm, format.phase(), || {
+                let local = match comm.rank() {
+                    0 => format.write(path, g, &patches),
+                    _ => Ok(()),
+                };
+                agree(&*comm, local)
+            })?;
+            self.report_phase(None);
+            self.observer.event(&Event::Wrote(path));
+        }
         Ok(())
+    }
+}
+
+/// A single-file finite-element format written from the gathered mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum FeFormat {
+    Gmsh,
+    Abaqus,
+    Exodus,
+    Cgns,
+}
+
+impl FeFormat {
+    /// The phase that times the writer.
+    fn phase(self) -> &'static str {
+        match self {
+            FeFormat::Gmsh => "gmsh",
+            FeFormat::Abaqus => "abaqus",
+            FeFormat::Exodus => "exodus",
+            FeFormat::Cgns => "cgns",
+        }
+    }
+
+    /// Writes `g` (rank 0's gathered mesh) to `path`.
+    fn write(self, path: &Path, g: &Gathered, patches: &PatchNames) -> Result<()> {
+        match self {
+            FeFormat::Gmsh => crate::io::gmsh::write_gmsh(path, g, patches).map(|_| ()),
+            FeFormat::Abaqus => crate::io::abaqus::write_abaqus(path, g, patches),
+            FeFormat::Exodus => crate::io::exodus::write_exodus(path, g, patches).map(|_| ()),
+            FeFormat::Cgns => crate::io::cgns::write_cgns(path, g, patches).map(|_| ()),
+        }
     }
 }

@@ -377,12 +377,18 @@ impl Session {
             if let Some(dir) = self.config.output.openfoam.clone() {
                 self.write_openfoam(&dir)?;
             }
-            if let Some(path) = self.config.output.gmsh.clone() {
-                self.write_gmsh(&path)?;
-            }
-            if let Some(path) = self.config.output.abaqus.clone() {
-                self.write_abaqus(&path)?;
-            }
+            // One gather for every single-file mesh.
+            let out = self.config.output.clone();
+            let fe: Vec<(fe::FeFormat, &std::path::Path)> = [
+                (fe::FeFormat::Gmsh, &out.gmsh),
+                (fe::FeFormat::Abaqus, &out.abaqus),
+                (fe::FeFormat::Exodus, &out.exodus),
+                (fe::FeFormat::Cgns, &out.cgns),
+            ]
+            .into_iter()
+            .filter_map(|(f, p)| p.as_deref().map(|p| (f, p)))
+            .collect();
+            self.write_fe_files(&fe)?;
             if self.config.output.wants_quality() {
                 self.quality()?;
             }

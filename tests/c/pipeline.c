@@ -110,12 +110,17 @@ int main(int argc, char **argv) {
   MPI_Allreduce(&owned, &total, 1, MPI_LONG, MPI_SUM, MPI_COMM_WORLD);
   CHECK(total == c.global_independent, h);
   OK(octmesh_mesh_write_vtu(h, argv[1]), h);
-  /* The single-file finite-element meshes beside it: ARGV1.inp, ARGV1.msh. */
+  /* The single-file finite-element meshes beside it: ARGV1.inp, .msh, .exo,
+     .cgns. */
   char fe[4096];
   snprintf(fe, sizeof fe, "%s.inp", argv[1]);
   OK(octmesh_mesh_write_abaqus(h, fe), h);
   snprintf(fe, sizeof fe, "%s.msh", argv[1]);
   OK(octmesh_mesh_write_gmsh(h, fe), h);
+  snprintf(fe, sizeof fe, "%s.exo", argv[1]);
+  OK(octmesh_mesh_write_exodus(h, fe), h);
+  snprintf(fe, sizeof fe, "%s.cgns", argv[1]);
+  OK(octmesh_mesh_write_cgns(h, fe), h);
   /* The same mesh with two point fields: x of each node, and 1. */
   double *fx = malloc(sizeof(double) * (size_t)(c.local_nodes + 1));
   double *fone = malloc(sizeof(double) * (size_t)(c.local_nodes + 1));

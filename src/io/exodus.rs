@@ -1,0 +1,374 @@
+//! Exodus II files (`.exo`), one per mesh, written by rank 0 from the
+//! gathered mesh ([`super::gathered`]) through the netCDF C library (the
+//! `netcdf` crate over the system's libnetcdf): the same bytes on any
+//! number of ranks.
+//!
+//! # What is written
+//!
+//! A netCDF file in the 64-bit offset format (CDF-2) laid out as the Exodus
+//! II library lays out a "large model" file (`file_size = 1`: one variable
+//! per coordinate), 32-bit integers (`int64_status = 0`):
+//!
+//! - Global attributes `title` (`octmesh`), `api_version` and `version`
+//!   (8.03, floats), `floating_point_word_size` (8),
+//!   `file_size` (1), `maximum_name_length` (the longest name, at least
+//!   32), `int64_status` (0).
+//! - Dimensions `len_string` (33), `len_line` (81), `four` (4), `len_name`
+//!   (`maximum_name_length + 1`), `time_step` (unlimited, no steps),
+//!   `num_dim` (3), `num_nodes`, `num_elem`, `num_el_blk` (1),
+//!   `num_el_in_blk1`, `num_nod_per_el1` (8), and when there are boundary
+//!   faces `num_side_sets`, `num_side_ss<i>`, `num_node_sets`,
+//!   `num_nod_ns<i>`.
+//! - `coor_names` (`x y z`), `coordx coordy coordz` (doubles, the
+//!   surface's units), `time_whole` (empty).
+//! - One element block, ID 1, named `volume` (the kept region, as the
+//!   Gmsh writer's physical volume): `eb_status`, `eb_prop1` (attribute
+//!   `name = "ID"`), `eb_names`, and `connect1` (attribute
+//!   `elem_type = "HEX8"`), elements `1..E` in global (Morton) element
+//!   order, corners in HEX8 order (which is VTK's).
+//! - Per patch with boundary faces, in patch order, a side set and a node
+//!   set, both with ID `patch id + 1` (the sides `xmin .. zmax` are 1..6,
+//!   as in the Gmsh file) and the patch's name (`ss_names`, `ns_names`;
+//!   `ss_status`, `ss_prop1`, `ns_status`, `ns_prop1` with `name = "ID"`).
+//!   `elem_ss<i>` and `side_ss<i>` list the faces as element and Exodus
+//!   side (HEX8 side 1 = corners 1 2 6 5, 2 = 2 3 7 6, 3 = 3 4 8 7,
+//!   4 = 1 5 8 4, 5 = 1 4 3 2, 6 = 5 6 7 8); `node_ns<i>` the patch's
+//!   nodes, hanging ones included. A face only partly on the boundary
+//!   (where some of the finer elements across it were not kept) is listed
+//!   whole.
+//! - Nodes `1..N`: the independent nodes first, then the hanging nodes,
+//!   each run in the order the elements first use them.
+//!
+//! # Hanging nodes
+//!
+//! Exodus II has no constraints. The hanging nodes are ordinary nodes
+//! (corners of the finer elements only, so the mesh is non-conforming as
+//! written) and, when there are any, the file has one more node set,
+//! named `hanging` (ID: the last patch set's ID + 1), listing them, and
+//! three variables Exodus readers skip:
+//!
+//! - dimensions `num_hanging_nodes` (H) and `num_hanging_parents` (4);
+//! - `hanging_nodes(num_hanging_nodes)`: the hanging nodes (1-based);
+//! - `hanging_parents(num_hanging_nodes, num_hanging_parents)`: the
+//!   independent nodes each depends on (1-based; 4 corners of the coarse
+//!   face for a face-hanging node, the 2 ends of the coarse edge then 0 0
+//!   for an edge-hanging one);
+//! - `hanging_weights(num_hanging_nodes, num_hanging_parents)`: their
+//!   weights (1/4 each, or 1/2 1/2 0 0): a hanging node's value is the
+//!   weighted sum of its parents' values.
+
+use std::path::Path;
+
+use netcdf::types::{NcTypeDescriptor, NcVariableType};
+use netcdf::{FileMut, Options};
+
+use super::gathered::Gathered;
+use crate::error::{Error, Result};
+use crate::mesh::patches::PatchNames;
+
+/// The Exodus side (1..6) of each face label of [`Gathered`] (the Abaqus
+/// face `S1..S6` less one): S1 (z low) is side 5, S2 (z high) 6, S3 (y
+/// low) 1, S4 (x high) 2, S5 (y high) 3, S6 (x low) 4.
+pub const EXODUS_SIDE: [i32; 6] = [5, 6, 1, 2, 3, 4];
+
+/// The Exodus API version the layout follows (`api_version`, `version`).
+const EXODUS_VERSION: f32 = 8.03;
+
+/// Exodus's shortest `maximum_name_length`.
+const MIN_NAME: usize = 32;
+
+/// What [`write_exodus`] wrote.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ExodusCounts {
+    /// Nodes, hanging ones included.
+    pub nodes: u64,
+    /// Hexahedra.
+    pub hexahedra: u64,
+    /// Side sets (one per patch with boundary faces).
+    pub side_sets: u64,
+    /// Hanging nodes.
+    pub hanging: u64,
+}
+
+/// netCDF's text type (`NC_CHAR`), for the name arrays.
+#[repr(transparent)]
+#[derive(Clone, Copy)]
+struct NcChar(u8);
+
+// SAFETY: one byte, the size and layout of NC_CHAR.
+unsafe impl NcTypeDescriptor for NcChar {
+    fn type_descriptor() -> NcVariableType {
+        NcVariableType::Char
+    }
+}
+
+/// `names` as a `names.len() x len` character array, NUL-padded.
+fn name_array(names: &[&str], len: usize) -> Vec<NcChar> {
+    let mut out = vec![NcChar(0); names.len() * len];
+    for (k, n) in names.iter().enumerate() {
+        for (i, b) in n.bytes().take(len - 1).enumerate() {
+            out[k * len + i] = NcChar(b);
+        }
+    }
+    out
+}
+
+/// `v` as an Exodus 32-bit integer, or an error naming `what`.
+fn int(v: usize, what: &str) -> Result<i32> {
+    i32::try_from(v).map_err(|_| {
+        Error::invalid(format!(
+            "the mesh has too many {what} ({v}) for an Exodus II file with 32-bit integers"
+        ))
+    })
+}
+
+/// One set of the file (side set or node set): its ID and name.
+struct Set<'a> {
+    id: i32,
+    name: &'a str,
+    /// The patch, or none for the `hanging` node set.
+    patch: Option<u16>,
+}
+
+impl Set<'_> {
+    /// The set's nodes, 1-based.
+    fn nodes(&self, g: &Gathered) -> Vec<i32> {
+        match self.patch {
+            Some(p) => g
+                .patch_nodes
+                .get(p as usize)
+                .map_or(&[][..], |l| &l[..])
+                .iter()
+                .map(|&n| n as i32 + 1)
+                .collect(),
+            None => (0..g.dependencies.len())
+                .map(|k| (g.num_independent + k) as i32 + 1)
+                .collect(),
+        }
+    }
+}
+
+/// Writes `g` (rank 0's gathered mesh; call on rank 0 only) to `path`.
+pub fn write_exodus(path: &Path, g: &Gathered, patches: &PatchNames) -> Result<ExodusCounts> {
+    let fail = |e: netcdf::Error| Error::io(format!("cannot write '{}': {e}", path.display()));
+    // The file system's own message for a path that cannot be written.
+    std::fs::File::create(path)
+        .map_err(|e| Error::io(format!("cannot write '{}': {e}", path.display())))?;
+    let (nn, ne) = (g.coordinates.len(), g.elements.len());
+    int(nn, "nodes")?;
+    int(ne.max(g.faces.len()), "elements")?;
+    let used = g.used_patches();
+    let mut sets = Vec::with_capacity(used.len());
+    for &p in &used {
+        let name = patches
+            .names()
+            .get(p as usize)
+            .ok_or_else(|| Error::invalid(format!("patch {p} has no name")))?;
+        sets.push(Set {
+            id: p as i32 + 1,
+            name,
+            patch: Some(p),
+        });
+    }
+    let hanging = g.dependencies.len();
+    let hanging_set = Set {
+        id: sets.last().map_or(1, |s| s.id + 1),
+        name: "hanging",
+        patch: None,
+    };
+    let mut node_sets: Vec<&Set> = sets.iter().collect();
+    if hanging > 0 {
+        node_sets.push(&hanging_set);
+    }
+    let name_len = node_sets
+        .iter()
+        .map(|s| s.name.len())
+        .max()
+        .unwrap_or(0)
+        .max(MIN_NAME);
+    let mut file = netcdf::create_with(path, Options::_64BIT_OFFSET).map_err(fail)?;
+    define(&mut file, g, &sets, &node_sets, name_len).map_err(fail)?;
+    file.enddef().map_err(fail)?;
+    put(&mut file, g, &sets, &node_sets, name_len).map_err(fail)?;
+    file.close().map_err(fail)?;
+    Ok(ExodusCounts {
+        nodes: nn as u64,
+        hexahedra: ne as u64,
+        side_sets: sets.len() as u64,
+        hanging: hanging as u64,
+    })
+}
+
+/// Adds variable `name` of type `T` over `dims`, without the fill pass
+/// (every value is written).
+fn variable<T: NcTypeDescriptor>(
+    file: &mut FileMut,
+    name: &str,
+    dims: &[&str],
+) -> netcdf::Result<()> {
+    let mut v = file.add_variable::<T>(name, dims)?;
+    // SAFETY: every variable is written whole before the file is closed
+    // (`put`), so no unfilled value is ever read.
+    unsafe { v.set_nofill() }
+}
+
+/// The netCDF definitions: attributes, dimensions, variables.
+fn define(
+    file: &mut FileMut,
+    g: &Gathered,
+    sets: &[Set],
+    node_sets: &[&Set],
+    name_len: usize,
+) -> netcdf::Result<()> {
+    file.add_attribute("title", "octmesh")?;
+    file.add_attribute("api_version", EXODUS_VERSION)?;
+    file.add_attribute("version", EXODUS_VERSION)?;
+    file.add_attribute("floating_point_word_size", 8i32)?;
+    file.add_attribute("file_size", 1i32)?;
+    file.add_attribute("maximum_name_length", name_len as i32)?;
+    file.add_attribute("int64_status", 0i32)?;
+    file.add_dimension("len_string", 33)?;
+    file.add_dimension("len_line", 81)?;
+    file.add_dimension("four", 4)?;
+    file.add_dimension("len_name", name_len + 1)?;
+    file.add_unlimited_dimension("time_step")?;
+    file.add_dimension("num_dim", 3)?;
+    file.add_dimension("num_nodes", g.coordinates.len())?;
+    file.add_dimension("num_elem", g.elements.len())?;
+    file.add_dimension("num_el_blk", 1)?;
+    variable::<f64>(file, "time_whole", &["time_step"])?;
+    variable::<NcChar>(file, "coor_names", &["num_dim", "len_name"])?;
+    for c in ["coordx", "coordy", "coordz"] {
+        variable::<f64>(file, c, &["num_nodes"])?;
+    }
+    // The element block.
+    variable::<i32>(file, "eb_status", &["num_el_blk"])?;
+    variable::<i32>(file, "eb_prop1", &["num_el_blk"])?;
+    file.variable_mut("eb_prop1")
+        .expect("just added")
+        .put_attribute("name", "ID")?;
+    variable::<NcChar>(file, "eb_names", &["num_el_blk", "len_name"])?;
+    file.add_dimension("num_el_in_blk1", g.elements.len())?;
+    file.add_dimension("num_nod_per_el1", 8)?;
+    variable::<i32>(file, "connect1", &["num_el_in_blk1", "num_nod_per_el1"])?;
+    file.variable_mut("connect1")
+        .expect("just added")
+        .put_attribute("elem_type", "HEX8")?;
+    // Side sets, one per patch.
+    if !sets.is_empty() {
+        file.add_dimension("num_side_sets", sets.len())?;
+        variable::<i32>(file, "ss_status", &["num_side_sets"])?;
+        variable::<i32>(file, "ss_prop1", &["num_side_sets"])?;
+        file.variable_mut("ss_prop1")
+            .expect("just added")
+            .put_attribute("name", "ID")?;
+        variable::<NcChar>(file, "ss_names", &["num_side_sets", "len_name"])?;
+        for (k, s) in sets.iter().enumerate() {
+            let n = g.faces.iter().filter(|f| Some(f.patch) == s.patch).count();
+            let dim = format!("num_side_ss{}", k + 1);
+            file.add_dimension(&dim, n)?;
+            variable::<i32>(file, &format!("elem_ss{}", k + 1), &[&dim])?;
+            variable::<i32>(file, &format!("side_ss{}", k + 1), &[&dim])?;
+        }
+    }
+    // Node sets: the patches', then `hanging`.
+    if !node_sets.is_empty() {
+        file.add_dimension("num_node_sets", node_sets.len())?;
+        variable::<i32>(file, "ns_status", &["num_node_sets"])?;
+        variable::<i32>(file, "ns_prop1", &["num_node_sets"])?;
+        file.variable_mut("ns_prop1")
+            .expect("just added")
+            .put_attribute("name", "ID")?;
+        variable::<NcChar>(file, "ns_names", &["num_node_sets", "len_name"])?;
+        for (k, s) in node_sets.iter().enumerate() {
+            let n = s.nodes(g).len();
+            let dim = format!("num_nod_ns{}", k + 1);
+            file.add_dimension(&dim, n)?;
+            variable::<i32>(file, &format!("node_ns{}", k + 1), &[&dim])?;
+        }
+    }
+    if !g.dependencies.is_empty() {
+        file.add_dimension("num_hanging_nodes", g.dependencies.len())?;
+        file.add_dimension("num_hanging_parents", 4)?;
+        variable::<i32>(file, "hanging_nodes", &["num_hanging_nodes"])?;
+        let dims = ["num_hanging_nodes", "num_hanging_parents"];
+        variable::<i32>(file, "hanging_parents", &dims)?;
+        variable::<f64>(file, "hanging_weights", &dims)?;
+    }
+    Ok(())
+}
+
+/// Writes `list` into variable `name`, whole.
+fn put_all<T: NcTypeDescriptor>(file: &mut FileMut, name: &str, list: &[T]) -> netcdf::Result<()> {
+    file.variable_mut(name)
+        .ok_or_else(|| netcdf::Error::from(format!("no variable {name}")))?
+        .put_values(list, ..)
+}
+
+/// The netCDF data, after [`define`].
+fn put(
+    file: &mut FileMut,
+    g: &Gathered,
+    sets: &[Set],
+    node_sets: &[&Set],
+    name_len: usize,
+) -> netcdf::Result<()> {
+    let len = name_len + 1;
+    put_all(file, "coor_names", &name_array(&["x", "y", "z"], len))?;
+    for (a, c) in ["coordx", "coordy", "coordz"].iter().enumerate() {
+        let x: Vec<f64> = g.coordinates.iter().map(|p| p[a]).collect();
+        put_all(file, c, &x)?;
+    }
+    put_all(file, "eb_status", &[1i32])?;
+    put_all(file, "eb_prop1", &[1i32])?;
+    put_all(file, "eb_names", &name_array(&["volume"], len))?;
+    let connect: Vec<i32> = g
+        .elements
+        .iter()
+        .flat_map(|e| e.map(|n| n as i32 + 1))
+        .collect();
+    put_all(file, "connect1", &connect)?;
+    drop(connect);
+    if !sets.is_empty() {
+        put_all(file, "ss_status", &vec![1i32; sets.len()])?;
+        let ids: Vec<i32> = sets.iter().map(|s| s.id).collect();
+        put_all(file, "ss_prop1", &ids)?;
+        let names: Vec<&str> = sets.iter().map(|s| s.name).collect();
+        put_all(file, "ss_names", &name_array(&names, len))?;
+        for (k, s) in sets.iter().enumerate() {
+            let faces = g.faces.iter().filter(|f| Some(f.patch) == s.patch);
+            let (elems, sides): (Vec<i32>, Vec<i32>) = faces
+                .map(|f| (f.element as i32 + 1, EXODUS_SIDE[f.label as usize]))
+                .unzip();
+            put_all(file, &format!("elem_ss{}", k + 1), &elems)?;
+            put_all(file, &format!("side_ss{}", k + 1), &sides)?;
+        }
+    }
+    if !node_sets.is_empty() {
+        put_all(file, "ns_status", &vec![1i32; node_sets.len()])?;
+        let ids: Vec<i32> = node_sets.iter().map(|s| s.id).collect();
+        put_all(file, "ns_prop1", &ids)?;
+        let names: Vec<&str> = node_sets.iter().map(|s| s.name).collect();
+        put_all(file, "ns_names", &name_array(&names, len))?;
+        for (k, s) in node_sets.iter().enumerate() {
+            put_all(file, &format!("node_ns{}", k + 1), &s.nodes(g))?;
+        }
+    }
+    let h = g.dependencies.len();
+    if h > 0 {
+        let hanging: Vec<i32> = (0..h).map(|k| (g.num_independent + k) as i32 + 1).collect();
+        put_all(file, "hanging_nodes", &hanging)?;
+        let mut parents = vec![0i32; 4 * h];
+        let mut weights = vec![0f64; 4 * h];
+        for (k, d) in g.dependencies.iter().enumerate() {
+            let w = 1.0 / d.len() as f64;
+            for (i, &m) in d.iter().enumerate() {
+                parents[4 * k + i] = m as i32 + 1;
+                weights[4 * k + i] = w;
+            }
+        }
+        put_all(file, "hanging_parents", &parents)?;
+        put_all(file, "hanging_weights", &weights)?;
+    }
+    Ok(())
+}
