@@ -308,6 +308,11 @@ pub struct MeshConfig {
     /// snap, in (0, 0.5]. Unset: 0.1 when writing an OpenFOAM case (what
     /// keeps `checkMesh`'s skewness below 4), else 0.001.
     pub snap_min_jacobian: Option<f64>,
+    /// Mark every element with a zone ([`crate::mesh::zones`]): `inside`
+    /// or `outside` of the surface by its centre, or the zone of the last
+    /// region (`[[regions]]` with `zone = "name"`) holding its centre.
+    /// Needs `keep` all.
+    pub zones: bool,
 }
 
 impl MeshConfig {
@@ -340,6 +345,7 @@ impl Default for MeshConfig {
             snap_layers: crate::mesh::snap::DEFAULT_LAYERS,
             snap_iterations: crate::mesh::snap::DEFAULT_ITERATIONS,
             snap_min_jacobian: None,
+            zones: false,
         }
     }
 }
@@ -548,6 +554,16 @@ impl Config {
                 return Err(ConfigError::new(
                     "output.quality_worst",
                     "needs {output.quality_out}",
+                ));
+            }
+            if self.mesh.zones && self.mesh.keep != Keep::All {
+                return Err(ConfigError::new(
+                    "mesh.zones",
+                    format!(
+                        "needs {{mesh.keep}} all (got {}): zones divide the whole domain, \
+                         the inside and the outside together",
+                        self.mesh.keep.name()
+                    ),
                 ));
             }
             if self.mesh.snap && self.mesh.keep == Keep::All {

@@ -697,6 +697,16 @@ options! {
     range,
     set |c, v, _g| { c.mesh.clean_walls = Some(v); }
 
+    /// Mark every element with a zone: inside or outside of the surface, or
+    /// the zone of the last region (--region ...:zone=NAME) holding its
+    /// centre; OpenFOAM cellZones with a faceZone per interface, Gmsh
+    /// physical volumes (needs --keep all)
+    Mesh "zones": Switch bool,
+    keys ["mesh.zones"],
+    default none,
+    range,
+    set |c, _v, _g| { c.mesh.zones = true; }
+
     /// Snap the mesh to the surface: the nodes on the surface move onto
     /// it (sharp edges kept), scaled back where an element would be
     /// invalid, the layers next to it relaxed (needs --keep inside or

@@ -128,6 +128,20 @@ impl Mesh {
             assemble(comm, domain, (d, dual_tree), elements, halo, numbering)
         });
         let mut mesh = crate::parallel::comm::agree(comm, mesh)?;
+        // Zones split a mesh of every leaf by the centre's side, which the
+        // element classes do not keep for cut leaves: one bit per element.
+        if let (Keep::All, ClassBytes::Slice(s)) = (opts.keep, &local_class) {
+            let mut bits = Vec::with_capacity(mesh.elements.len());
+            kept.select(s, &mut bits);
+            mesh.centre_inside = bits
+                .chunks(64)
+                .map(|c| {
+                    c.iter().enumerate().fold(0u64, |w, (k, &b)| {
+                        w | u64::from(b & crate::classify::CENTER_INSIDE != 0) << k
+                    })
+                })
+                .collect();
+        }
         mesh.first_element = first_element;
         mesh.first_cells = tree.first_cells().to_vec();
         let mut sums = [
@@ -608,5 +622,7 @@ fn assemble(
         timer: PhaseTimer::new(),
         moved: None,
         moved_lattice: None,
+        zones: None,
+        centre_inside: Vec::new(),
     })
 }

@@ -66,6 +66,7 @@ pub mod points;
 pub mod quality;
 pub mod snap;
 pub mod transfer;
+pub mod zones;
 
 use crate::classify::{CutRule, Keep};
 use crate::octree::domain::Domain;
@@ -82,6 +83,7 @@ pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, S
 pub use hanging::HangingDeps;
 pub use locate::locate_elements;
 pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
+pub use zones::Zones;
 
 use hanging::Hanging;
 
@@ -194,6 +196,11 @@ pub struct Mesh {
     /// The same in lattice units (what the midpoints of the faces' corners
     /// are computed from).
     moved_lattice: Option<Vec<[f64; 3]>>,
+    /// The zone of each element, when assigned ([`zones`]).
+    zones: Option<Zones>,
+    /// Whether each element's centre is inside the surface, a bit per
+    /// element (meshes of every leaf with classes; empty otherwise).
+    centre_inside: Vec<u64>,
 }
 
 impl Mesh {
