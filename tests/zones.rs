@@ -22,10 +22,14 @@
 //! - a region with `zone = "east"` adds the zone `east` after `inside` and
 //!   `outside`, with the elements whose centre it holds, in the written
 //!   cellZones too;
+//! - `--gmsh` with zones gives one physical volume per zone: Gmsh's Python
+//!   API reads the file, finds the physical volumes `inside`, `outside`
+//!   and `east` with the zones' element counts, and the file has the same
+//!   bytes on 1 and 3 ranks;
 //! - zones without keep all fail on every rank, through the library and
 //!   through the command, with a message naming keep all.
 //!
-//! Without OpenFOAM the checks that need it are skipped, and fail under
+//! Without OpenFOAM or Gmsh's Python module the checks that need it are skipped, and fail under
 //! `CI=true` (`tests/common`).
 
 mod common;
@@ -58,6 +62,7 @@ fn main() {
                 || zones_need_keep_all(np),
             );
         }
+        r.test("gmsh physical volumes per zone", gmsh_volumes);
     });
 }
 
@@ -466,4 +471,85 @@ fn patch_area(dir: &Path, name: &str) -> f64 {
             (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
         })
         .sum()
+}
+
+/// Gmsh's physical volumes of the sphere with a region's zone, written on
+/// 1 and 3 ranks.
+fn gmsh_volumes() {
+    let dir = common::scratch("zones_gmsh");
+    let mut files = Vec::new();
+    for np in [1, 3] {
+        let (msh, stats) = (
+            dir.join(format!("z{np}.msh")),
+            dir.join(format!("z{np}.json")),
+        );
+        common::octmesh_ok(
+            np,
+            &[
+                "mesh",
+                "sphere",
+                "--level",
+                "4",
+                "--keep",
+                "all",
+                "--zones",
+                "--region",
+                "box:0.5,-9,-9,9,9,9:0:zone=east",
+                "--gmsh",
+                msh.to_str().unwrap(),
+                "--stats",
+                stats.to_str().unwrap(),
+                "--quiet",
+            ],
+        );
+        files.push((msh, common::json_file(&stats)));
+    }
+    let bytes = |p: &Path| std::fs::read(p).unwrap();
+    assert!(
+        bytes(&files[0].0) == bytes(&files[1].0),
+        "the .msh differs on 1 and 3 ranks"
+    );
+    let zones: Vec<(String, u64)> = files[0].1["zones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|z| {
+            (
+                z["name"].as_str().unwrap().to_string(),
+                z["elements"].as_u64().unwrap(),
+            )
+        })
+        .collect();
+    let Some(python) = common::require(common::Oracle::Python {
+        module: "gmsh",
+        package: "python3-gmsh",
+    }) else {
+        return;
+    };
+    let script = r#"
+import sys, gmsh
+gmsh.initialize()
+gmsh.option.setNumber("General.Terminal", 0)
+gmsh.open(sys.argv[1])
+for d, t in gmsh.model.getPhysicalGroups(3):
+    n = 0
+    for e in gmsh.model.getEntitiesForPhysicalGroup(d, t):
+        types, elems, _ = gmsh.model.mesh.getElements(d, e)
+        n += sum(len(x) for x in elems)
+    print("volume", gmsh.model.getPhysicalName(d, t), n)
+gmsh.finalize()
+"#;
+    let out = std::process::Command::new(python)
+        .args(["-c", script, files[0].0.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "gmsh:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read = counted(&text, "volume ");
+    println!("gmsh physical volumes {read:?}, zones {zones:?}");
+    assert_eq!(read, zones);
 }
