@@ -454,7 +454,9 @@ options! {
 
     /// A refinement region, repeatable: box:X0,Y0,Z0,X1,Y1,Z1:LEVEL,
     /// sphere:CX,CY,CZ,R:LEVEL or cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (user
-    /// units), then :outside to refine where the shape is not
+    /// units), then :outside to refine where the shape is not, then
+    /// :zone=NAME to put the elements centred where it refines in zone NAME
+    /// (with --zones; `zone = "NAME"` in a [[regions]] table)
     Octree "region" <"SHAPE:NUMBERS:LEVEL"> hyphen yes: Many Region = Region::parse,
     keys ["regions"],
     default none,
