@@ -398,7 +398,7 @@ pub struct Halo {
     pub owners: Vec<u32>,
     /// Global element number of each.
     pub global: Vec<u64>,
-    /// Class byte of each ([`crate::classify`]).
+    /// Class byte of each (the classification's bits: centre inside, cut, void).
     pub classes: Vec<u8>,
     /// How many come before this rank's range.
     pub before: usize,
