@@ -8,10 +8,13 @@
 //! in both). Then:
 //!
 //! - the zones' element counts equal the element counts of the same run
-//!   keeping inside and keeping outside (without wall clean-up);
+//!   keeping inside and keeping outside (without wall clean-up), and with
+//!   the clean-up (an OpenFOAM case) the inside zone is what keeping inside
+//!   keeps cleaned, the outside zone the rest;
 //! - OpenFOAM's `splitMeshRegions -cellZones -overwrite` (with `-parallel`
 //!   on 3 ranks) makes exactly the two regions `inside` and `outside`, and
-//!   `checkMesh -region` says `Mesh OK.` on each, with the zone's cells;
+//!   `checkMesh -region` says `Mesh OK.` on each, with the zone's cells,
+//!   and (on 1 rank, where it judges them) no multiply connected patch;
 //! - the two sides of the interface that splitMeshRegions made,
 //!   `inside_to_outside` and `outside_to_inside`, have the same area to
 //!   1e-12 relative (read from the region meshes, which OpenFOAM wrote);
@@ -26,10 +29,14 @@
 //!   API reads the file, finds the physical volumes `inside`, `outside`
 //!   and `east` with the zones' element counts, and the file has the same
 //!   bytes on 1 and 3 ranks;
+//! - the bunny at level 7 (shared model), whose centre rule alone leaves
+//!   edges shared by four interface faces: with the wall clean-up the
+//!   inside zone is what `--keep inside --openfoam` keeps, and checkMesh
+//!   finds both sides of the interface closed and singly connected;
 //! - zones without keep all fail on every rank, through the library and
 //!   through the command, with a message naming keep all.
 //!
-//! Without OpenFOAM or Gmsh's Python module the checks that need it are skipped, and fail under
+//! Without OpenFOAM, Gmsh's Python module or the shared models the checks that need it are skipped, and fail under
 //! `CI=true` (`tests/common`).
 
 mod common;
@@ -63,6 +70,7 @@ fn main() {
             );
         }
         r.test("gmsh physical volumes per zone", gmsh_volumes);
+        r.test("the bunny's interface is manifold", bunny_interface);
     });
 }
 
@@ -98,10 +106,25 @@ fn child(mode: &str) {
     };
     match mode {
         "sphere" => {
-            for keep in [Keep::Inside, Keep::Outside] {
-                let s = run(config(keep, false)).unwrap();
+            for (keep, clean) in [
+                (Keep::Inside, false),
+                (Keep::Outside, false),
+                (Keep::Inside, true),
+            ] {
+                let mut c = config(keep, false);
+                c.mesh.clean_walls = Some(clean);
+                let s = run(c).unwrap();
+                let n = s.mesh.unwrap().counts.elements;
                 if root {
-                    println!("keep {} {}", keep.name(), s.mesh.unwrap().counts.elements);
+                    let tag = if clean { "cleaned" } else { "plain" };
+                    println!("keep {}-{tag} {n}", keep.name());
+                }
+            }
+            // Without a case the walls are not cleaned.
+            let s = run(config(Keep::All, true)).unwrap();
+            for z in s.mesh.as_ref().unwrap().zones.as_ref().unwrap() {
+                if root {
+                    println!("plain-zone {} {}", z.name, z.elements);
                 }
             }
             let mut c = config(Keep::All, true);
@@ -152,15 +175,23 @@ fn sphere_in_the_box(np: usize) {
     let case = common::scratch(&format!("zones_sphere_{np}"));
     let out = launch(np, &format!("sphere:{}", case.display()), LIMIT);
     let keep = counted(&out, "keep ");
+    let plain = counted(&out, "plain-zone ");
     let zones = counted(&out, "zone ");
-    println!("{}: keep runs {keep:?}, zones {zones:?}", ranks(np));
+    println!(
+        "{}: keep runs {keep:?}, zones {plain:?}, cleaned for OpenFOAM {zones:?}",
+        ranks(np)
+    );
+    let named = |a: u64, b: u64| [("inside".to_string(), a), ("outside".to_string(), b)];
+    assert_eq!(
+        plain,
+        named(keep[0].1, keep[1].1),
+        "the zones hold what keep inside and keep outside keep"
+    );
+    let all = keep[0].1 + keep[1].1;
     assert_eq!(
         zones,
-        [
-            ("inside".to_string(), keep[0].1),
-            ("outside".to_string(), keep[1].1)
-        ],
-        "the zones hold what keep inside and keep outside keep"
+        named(keep[2].1, all - keep[2].1),
+        "with the wall clean-up the inside zone is what keep inside keeps cleaned"
     );
     // The base mesh's zone files list every cell once.
     let mut cells = [0usize; 2];
@@ -206,6 +237,13 @@ fn sphere_in_the_box(np: usize) {
             check.contains("\nMesh OK."),
             "checkMesh -region {region}:\n{check}"
         );
+        if np == 1 {
+            // checkMesh -parallel does not judge a patch's topology.
+            assert!(
+                !check.contains("multiply connected ("),
+                "{region}:\n{check}"
+            );
+        }
         let n = common::number_after(&check, "cells:") as u64;
         assert_eq!(n, zones[k].1, "cells of region {region}");
         let patch = format!("{region}_to_{other}");
@@ -552,4 +590,46 @@ gmsh.finalize()
     let read = counted(&text, "volume ");
     println!("gmsh physical volumes {read:?}, zones {zones:?}");
     assert_eq!(read, zones);
+}
+
+/// The bunny with zones for OpenFOAM: the inside zone is the cleaned solid
+/// and both region meshes have a manifold interface.
+fn bunny_interface() {
+    let Some(bunny) = common::shared_model("bunny.stl") else {
+        return;
+    };
+    let dir = common::scratch("zones_bunny");
+    let b = bunny.to_str().unwrap();
+    let elements = |args: &[&str], name: &str| {
+        let (case, stats) = (dir.join(name), dir.join(format!("{name}.json")));
+        let mut all = vec!["mesh", b, "--level", "7"];
+        all.extend(args);
+        all.extend(["--openfoam", case.to_str().unwrap()]);
+        all.extend(["--stats", stats.to_str().unwrap(), "--quiet"]);
+        common::octmesh_ok(1, &all);
+        (case, common::json_file(&stats))
+    };
+    let (_, solid) = elements(&["--keep", "inside"], "solid");
+    let (case, s) = elements(&["--keep", "all", "--zones"], "zones");
+    let inside = s["zones"][0]["elements"].as_u64().unwrap();
+    assert_eq!(inside, solid["elements"].as_u64().unwrap());
+    assert!(
+        s["cleaned"].as_u64().unwrap() > 0,
+        "the clean-up moved no leaf"
+    );
+    let Some(rc) = common::openfoam() else { return };
+    common::foam(&rc, &case, "splitMeshRegions -cellZones -overwrite");
+    for region in ["inside", "outside"] {
+        let check = common::foam(&rc, &case, &format!("checkMesh -region {region}"));
+        assert!(check.contains("\nMesh OK."), "{region}:\n{check}");
+        assert!(
+            !check.contains("multiply connected ("),
+            "{region}:\n{check}"
+        );
+        assert!(
+            check.contains("ok (closed singly connected)"),
+            "{region}:\n{check}"
+        );
+    }
+    println!("bunny level 7: inside zone {inside} = keep inside's, a manifold interface, Mesh OK");
 }

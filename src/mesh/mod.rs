@@ -97,7 +97,9 @@ pub struct MeshOptions {
     pub cut_rule: CutRule,
     /// Drop the kept leaves that make the walls non-manifold or have kept
     /// neighbours along fewer than three axes ([`manifold`]), as a
-    /// finite-volume code wants.
+    /// finite-volume code wants. With [`Keep::All`] every leaf stays, and
+    /// the clean-up applies to the inside side of the zones' interface
+    /// instead ([`zones`]): the inside leaves it drops count as outside.
     pub clean_walls: bool,
 }
 
@@ -145,7 +147,8 @@ pub struct MeshCounts {
     /// Ghost leaves over all ranks.
     pub ghosts: u64,
     /// Leaves the selection kept but the wall clean-up dropped
-    /// ([`MeshOptions::clean_walls`]).
+    /// ([`MeshOptions::clean_walls`]; with [`Keep::All`], the inside leaves
+    /// it moved to the outside).
     pub cleaned: u64,
 }
 

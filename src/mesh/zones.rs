@@ -7,7 +7,10 @@
 //! Zone 0 is [`INSIDE`] and zone 1 is [`OUTSIDE`]: the side of the surface
 //! the element's centre lies on (the class bit the `center` cut rule keeps
 //! by, so the inside zone holds exactly the elements `keep inside` keeps
-//! without wall clean-up, and the outside zone those of `keep outside`).
+//! and the outside zone those of `keep outside`). With the wall clean-up
+//! ([`super::MeshOptions::clean_walls`], on for OpenFOAM cases) the
+//! inside zone is what `keep inside` keeps cleaned, so that the interface
+//! is manifold, and the outside zone the rest.
 //! Then each refinement region that names a zone
 //! ([`Region::zone`]) takes the elements whose centre it holds
 //! ([`Region::contains`]), the later regions winning over the earlier

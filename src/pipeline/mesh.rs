@@ -48,11 +48,13 @@ impl Session {
         let (tree, domain) = self.tree_or_state()?;
         let classes = self.classes.rule.map(|_| self.classes.bits.as_slice());
         let shown = self.progress("mesh", None);
+        // A mesh of every leaf is cleaned only for its zones.
         let clean_walls = self
             .config
             .mesh
             .clean_walls
-            .unwrap_or(self.config.output.openfoam.is_some());
+            .unwrap_or(self.config.output.openfoam.is_some())
+            && (keep != Keep::All || zones);
         let opts = MeshOptions {
             keep,
             cut_rule,
