@@ -159,6 +159,7 @@ module octmesh
   public :: octmesh_mesh_get_connectivity, octmesh_mesh_get_coordinates
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
+  public :: octmesh_mesh_set_zones, octmesh_mesh_get_zones, octmesh_mesh_get_zone_name_f
   public :: octmesh_octree_refine_curvature, octmesh_octree_refine_regions_f
   public :: octmesh_octree_refine_surface_part_f, octmesh_surface_from_files_f
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
@@ -547,6 +548,33 @@ module octmesh
        type(c_ptr), intent(out) :: out
        integer(c_int) :: octmesh_mesh_get_element_level
      end function octmesh_mesh_get_element_level
+
+     !> Collective: whether the next octmesh_mesh_build gives every element
+     !> a zone (needs OCTMESH_KEEP_ALL).
+     function octmesh_mesh_set_zones(h, on) bind(c, name="octmesh_mesh_set_zones")
+       import :: c_ptr, c_int, c_bool
+       type(c_ptr), value :: h
+       logical(c_bool), value :: on
+       integer(c_int) :: octmesh_mesh_set_zones
+     end function octmesh_mesh_set_zones
+
+     !> The number of zones and the zone (0-based) of each local element.
+     function octmesh_mesh_get_zones(h, num_zones, zones) bind(c, name="octmesh_mesh_get_zones")
+       import :: c_ptr, c_int, c_int32_t
+       type(c_ptr), value :: h
+       integer(c_int32_t), intent(out) :: num_zones
+       type(c_ptr), intent(out) :: zones
+       integer(c_int) :: octmesh_mesh_get_zones
+     end function octmesh_mesh_get_zones
+
+     function c_octmesh_mesh_get_zone_name(h, zone, name) &
+          bind(c, name="octmesh_mesh_get_zone_name")
+       import :: c_ptr, c_int, c_int32_t
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: zone
+       type(c_ptr), intent(out) :: name
+       integer(c_int) :: c_octmesh_mesh_get_zone_name
+     end function c_octmesh_mesh_get_zone_name
 
      function c_octmesh_mesh_write_vtu(h, pvtu) bind(c, name="octmesh_mesh_write_vtu")
        import :: c_ptr, c_char, c_int
@@ -973,6 +1001,19 @@ contains
     status = c_octmesh_mesh_get_patch_name(h, int(patch, c_int32_t), p)
     name = c_to_f_string(p)
   end function octmesh_mesh_get_patch_name_f
+
+  !> The name of zone `zone` (0-based: 0 inside, 1 outside, then the
+  !> regions' zones). `status` is the C call's.
+  function octmesh_mesh_get_zone_name_f(h, zone, status) result(name)
+    type(c_ptr), intent(in) :: h
+    integer, intent(in) :: zone
+    integer(c_int), intent(out) :: status
+    character(len=:), allocatable :: name
+    type(c_ptr) :: p
+    p = c_null_ptr
+    status = c_octmesh_mesh_get_zone_name(h, int(zone, c_int32_t), p)
+    name = c_to_f_string(p)
+  end function octmesh_mesh_get_zone_name_f
 
   !> Renames patch `from` to `to` (an OpenFOAM word). Collective.
   function octmesh_mesh_rename_patch_f(h, from, to) result(status)

@@ -966,7 +966,9 @@ octmesh_status_t octmesh_octree_refine_surface_part(octmesh_t *h,
  *                       form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
  *                       `sphere:CX,CY,CZ,R:LEVEL` or
  *                       `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`, each
- *                       optionally followed by `:outside`; user units
+ *                       optionally followed by `:outside`, then by
+ *                       `:zone=NAME` (the zone of
+ *                       `octmesh_mesh_set_zones`); user units
  * \param[in] nbands     number of distance bands, >= 0 (bands need the
  *                       surface)
  * \param[in] distances  nbands increasing distances, user units
@@ -1445,6 +1447,49 @@ octmesh_status_t octmesh_mesh_build(octmesh_t *h, octmesh_keep_t keep, octmesh_c
 octmesh_status_t octmesh_mesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_t rule);
 
 /**
+ * Sets whether the following `octmesh_mesh_build` calls give every
+ * element a zone (off until set), like the command's `--zones`: `inside`
+ * (zone 0) or `outside` (zone 1) of the surface by the element's centre,
+ * or the zone named by the last refinement region holding the centre
+ * (`octmesh_octree_refine_regions` with `:zone=NAME`). Zones need
+ * `OCTMESH_KEEP_ALL`; `octmesh_mesh_write_openfoam` then writes cellZones
+ * and faceZones, `octmesh_mesh_write_gmsh` a physical volume per zone.
+ * Every rank must pass the same value. The current mesh is kept.
+ * Collective.
+ *
+ * \param[in] h   the handle
+ * \param[in] on  whether meshes get zones
+ */
+octmesh_status_t octmesh_mesh_set_zones(octmesh_t *h, bool on);
+
+/**
+ * Sets `*num_zones` to the number of zones and `*zones` to the zone of
+ * each local element (`0 .. num_zones - 1`; names by
+ * `octmesh_mesh_get_zone_name`). Needs a mesh built with zones
+ * (`octmesh_mesh_set_zones`). Not collective.
+ *
+ * \param[in]  h          the handle
+ * \param[out] num_zones  the number of zones (the same on every rank)
+ * \param[out] zones      local_elements zone indices, owned by the handle
+ */
+octmesh_status_t octmesh_mesh_get_zones(const octmesh_t *h,
+                                        octmesh_locidx_t *num_zones,
+                                        const octmesh_locidx_t **zones);
+
+/**
+ * Sets `*name` to the name of zone `zone` (`inside`, `outside`, then the
+ * regions' zones), NUL-terminated, owned by the handle. Needs a mesh
+ * built with zones. Not collective.
+ *
+ * \param[in]  h     the handle
+ * \param[in]  zone  0 .. num_zones - 1
+ * \param[out] name  the name
+ */
+octmesh_status_t octmesh_mesh_get_zone_name(const octmesh_t *h,
+                                            octmesh_locidx_t zone,
+                                            const char **name);
+
+/**
  * The rule the current mesh was classified with:
  * `OCTMESH_INSIDE_RULE_PARITY` or `OCTMESH_INSIDE_RULE_WINDING` (what
  * `OCTMESH_INSIDE_RULE_AUTO` chose), or `OCTMESH_INSIDE_RULE_AUTO` when it
@@ -1619,7 +1664,8 @@ octmesh_status_t octmesh_mesh_write_vtu(octmesh_t *h, const char *pvtu);
 /**
  * Writes the mesh as one Gmsh MSH 4.1 file (ASCII), like the command's
  * `--gmsh`: a physical surface per patch with boundary faces (named by
- * `octmesh_mesh_rename_patch`), the physical volume `volume`, the
+ * `octmesh_mesh_rename_patch`), the physical volume `volume` (one per
+ * zone on a mesh with zones), the
  * hanging nodes as plain nodes with their constraints in a
  * `$HangingNodes` section (docs/formats.md). The mesh is gathered on rank
  * 0, which writes the file: the same bytes on any number of ranks. Needs

@@ -360,6 +360,31 @@ class Mesher {
                   "octmesh_mesh_get_patch_name");
     return name;
   }
+  /// octmesh_mesh_set_zones: whether the next build gives every element a
+  /// zone (needs OCTMESH_KEEP_ALL; collective).
+  void set_zones(bool on = true) {
+    detail::check(octmesh_mesh_set_zones(h_, on), h_, "octmesh_mesh_set_zones");
+  }
+  /// The zone of each local element (octmesh_mesh_get_zones), a copy.
+  std::vector<octmesh_locidx_t> zones() const {
+    octmesh_locidx_t n = 0;
+    const octmesh_locidx_t *p = nullptr;
+    detail::check(octmesh_mesh_get_zones(h_, &n, &p), h_, "octmesh_mesh_get_zones");
+    return std::vector<octmesh_locidx_t>(p, p + counts().local_elements);
+  }
+  /// The zones' names by zone index: inside, outside, then the regions'.
+  std::vector<std::string> zone_names() const {
+    octmesh_locidx_t n = 0;
+    const octmesh_locidx_t *p = nullptr;
+    detail::check(octmesh_mesh_get_zones(h_, &n, &p), h_, "octmesh_mesh_get_zones");
+    std::vector<std::string> out;
+    for (octmesh_locidx_t z = 0; z < n; ++z) {
+      const char *name = nullptr;
+      detail::check(octmesh_mesh_get_zone_name(h_, z, &name), h_, "octmesh_mesh_get_zone_name");
+      out.push_back(name);
+    }
+    return out;
+  }
   void rename_patch(const std::string &from, const std::string &to) {
     detail::check(octmesh_mesh_rename_patch(h_, from.c_str(), to.c_str()), h_,
                   "octmesh_mesh_rename_patch");

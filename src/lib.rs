@@ -125,7 +125,7 @@ pub use error::{Error, ErrorKind, Result};
 pub use geometry::Surface;
 pub use mesh::quality::Quality;
 pub use mesh::snap::{SnapOptions, SnapReport};
-pub use mesh::{Boundary, Faces, Mesh, MeshCounts};
+pub use mesh::{Boundary, Faces, Mesh, MeshCounts, Zones};
 pub use octree::checkpoint::{CheckpointInfo, Loaded};
 pub use octree::domain::Domain;
 pub use octree::octant::{Connectivity, Octant, MAX_LEVEL};

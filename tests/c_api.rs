@@ -175,6 +175,57 @@ fn pipeline_from_c_on_1_and_2_ranks() {
 /// Faces, cell halo, boundary and OpenFOAM output through the C API: the
 /// program checks the arrays against each other and MPI exchanges; the
 /// global counts it prints must not depend on the number of ranks.
+/// `zones.c` on 1 and 2 ranks: its own checks pass, its zone counts are
+/// the same on both, the case it wrote has the zones in `cellZones`, and
+/// its Gmsh file has the bytes of the command's with the same settings.
+#[test]
+fn zones_from_c_on_1_and_2_ranks() {
+    let (dir, exe) = c_program("zones");
+    let mut lines = Vec::new();
+    for np in [1, 2] {
+        let case = dir.join(format!("case{np}"));
+        let msh = dir.join(format!("c{np}.msh"));
+        let out = run_ok(np, &exe, &[case.to_str().unwrap(), msh.to_str().unwrap()]);
+        lines.push(line_starting(&out, "ZONES ").to_string());
+        let cz = match np {
+            1 => case.join("constant/polyMesh/cellZones"),
+            _ => case.join("processor1/constant/polyMesh/cellZones"),
+        };
+        let text = std::fs::read_to_string(&cz).unwrap();
+        for z in ["inside", "outside", "east"] {
+            assert!(
+                text.contains(&format!("\n{z}\n{{")),
+                "{z} in {}",
+                cz.display()
+            );
+        }
+        let cli = dir.join(format!("cli{np}.msh"));
+        common::octmesh_ok(
+            np,
+            &[
+                "mesh",
+                "sphere",
+                "--level",
+                "4",
+                "--keep",
+                "all",
+                "--zones",
+                "--region",
+                "box:0.5,-9,-9,9,9,9:0:zone=east",
+                "--gmsh",
+                cli.to_str().unwrap(),
+                "--quiet",
+            ],
+        );
+        assert!(
+            std::fs::read(&msh).unwrap() == std::fs::read(&cli).unwrap(),
+            "the C API's .msh differs from the command's on {np} ranks"
+        );
+    }
+    assert_eq!(lines[0], lines[1]);
+    println!("{}", lines[0]);
+}
+
 #[test]
 fn faces_from_c_on_1_2_and_3_ranks() {
     let (dir, exe) = c_program("faces");

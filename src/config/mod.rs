@@ -312,6 +312,11 @@ pub struct MeshConfig {
     /// snap, in (0, 0.5]. Unset: 0.1 when writing an OpenFOAM case (what
     /// keeps `checkMesh`'s skewness below 4), else 0.001.
     pub snap_min_jacobian: Option<f64>,
+    /// Mark every element with a zone ([`crate::mesh::zones`]): `inside`
+    /// or `outside` of the surface by its centre, or the zone of the last
+    /// region (`[[regions]]` with `zone = "name"`) holding its centre.
+    /// Needs `keep` all.
+    pub zones: bool,
 }
 
 impl MeshConfig {
@@ -344,6 +349,7 @@ impl Default for MeshConfig {
             snap_layers: crate::mesh::snap::DEFAULT_LAYERS,
             snap_iterations: crate::mesh::snap::DEFAULT_ITERATIONS,
             snap_min_jacobian: None,
+            zones: false,
         }
     }
 }
@@ -446,11 +452,16 @@ impl ConfigError {
 
 impl Config {
     /// Whether the run writes a mesh for a solver (OpenFOAM, Gmsh,
-    /// Abaqus/CalculiX), which turns `--clean-walls` on unless it is set:
-    /// a solver needs walls it can take and a mesh in one piece.
+    /// Abaqus/CalculiX, Exodus II, CGNS), which turns `--clean-walls` on
+    /// unless it is set: a solver needs walls it can take and a mesh in one
+    /// piece.
     pub fn writes_solver_mesh(&self) -> bool {
         let o = &self.output;
-        o.openfoam.is_some() || o.gmsh.is_some() || o.abaqus.is_some()
+        o.openfoam.is_some()
+            || o.gmsh.is_some()
+            || o.abaqus.is_some()
+            || o.exodus.is_some()
+            || o.cgns.is_some()
     }
 
     /// Checks the configuration for `command`: required keys, ranges,
@@ -571,6 +582,16 @@ impl Config {
                 return Err(ConfigError::new(
                     "output.quality_worst",
                     "needs {output.quality_out}",
+                ));
+            }
+            if self.mesh.zones && self.mesh.keep != Keep::All {
+                return Err(ConfigError::new(
+                    "mesh.zones",
+                    format!(
+                        "needs {{mesh.keep}} all (got {}): zones divide the whole domain, \
+                         the inside and the outside together",
+                        self.mesh.keep.name()
+                    ),
                 ));
             }
             if self.mesh.snap && self.mesh.keep == Keep::All {

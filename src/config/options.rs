@@ -454,7 +454,9 @@ options! {
 
     /// A refinement region, repeatable: box:X0,Y0,Z0,X1,Y1,Z1:LEVEL,
     /// sphere:CX,CY,CZ,R:LEVEL or cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (user
-    /// units), then :outside to refine where the shape is not
+    /// units), then :outside to refine where the shape is not, then
+    /// :zone=NAME to put the elements centred where it refines in zone NAME
+    /// (with --zones; `zone = "NAME"` in a [[regions]] table)
     Octree "region" <"SHAPE:NUMBERS:LEVEL"> hyphen yes: Many Region = Region::parse,
     keys ["regions"],
     default none,
@@ -730,9 +732,19 @@ options! {
     /// walls are manifold
     Mesh "clean-walls" <"BOOL">: One bool = clap::value_parser!(bool),
     keys ["mesh.clean_walls"],
-    default none note "true with --openfoam, --gmsh or --abaqus, else false",
+    default none note "true with --openfoam, --gmsh, --abaqus, --exodus or --cgns, else false",
     range,
     set |c, v, _g| { c.mesh.clean_walls = Some(v); }
+
+    /// Mark every element with a zone: inside or outside of the surface, or
+    /// the zone of the last region (--region ...:zone=NAME) holding its
+    /// centre; OpenFOAM cellZones with a faceZone per interface, Gmsh
+    /// physical volumes (needs --keep all)
+    Mesh "zones": Switch bool,
+    keys ["mesh.zones"],
+    default none,
+    range,
+    set |c, _v, _g| { c.mesh.zones = true; }
 
     /// Snap the mesh to the surface: the nodes on the surface move onto
     /// it (sharp edges kept), scaled back where an element would be

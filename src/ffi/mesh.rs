@@ -56,6 +56,8 @@ pub(crate) struct MeshArrays {
     exchange: OnceCell<(Vec<i32>, Vec<i32>, Vec<i32>)>,
     hanging: OnceCell<(Vec<i32>, Vec<i32>)>,
     levels: OnceCell<Vec<i8>>,
+    zones: OnceCell<Vec<i32>>,
+    zone_names: OnceCell<Vec<std::ffi::CString>>,
     /// The faces' arrays ([`super::faces`]).
     pub(crate) faces: super::faces::FaceCells,
 }
@@ -105,6 +107,104 @@ pub extern "C" fn octmesh_mesh_set_inside_rule(
         }
         h.session.set_inside_rule(rule);
         Ok(())
+    })
+}
+
+/// Sets whether the following `octmesh_mesh_build` calls give every
+/// element a zone (off until set), like the command's `--zones`: `inside`
+/// (zone 0) or `outside` (zone 1) of the surface by the element's centre,
+/// or the zone named by the last refinement region holding the centre
+/// (`octmesh_octree_refine_regions` with `:zone=NAME`). Zones need
+/// `OCTMESH_KEEP_ALL`; `octmesh_mesh_write_openfoam` then writes cellZones
+/// and faceZones, `octmesh_mesh_write_gmsh` a physical volume per zone.
+/// Every rank must pass the same value. The current mesh is kept.
+/// Collective.
+///
+/// \param[in] h   the handle
+/// \param[in] on  whether meshes get zones
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_set_zones(h: *mut octmesh_t, on: bool) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let all = h.comm.allgather_u64(u64::from(on));
+        if all.iter().any(|&r| r != all[0]) {
+            return Err(Error::invalid(
+                "the ranks passed different values to octmesh_mesh_set_zones",
+            ));
+        }
+        h.session.config_mut().mesh.zones = on;
+        Ok(())
+    })
+}
+
+/// Sets `*num_zones` to the number of zones and `*zones` to the zone of
+/// each local element (`0 .. num_zones - 1`; names by
+/// `octmesh_mesh_get_zone_name`). Needs a mesh built with zones
+/// (`octmesh_mesh_set_zones`). Not collective.
+///
+/// \param[in]  h          the handle
+/// \param[out] num_zones  the number of zones (the same on every rank)
+/// \param[out] zones      local_elements zone indices, owned by the handle
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_get_zones(
+    h: *const octmesh_t,
+    num_zones: *mut octmesh_locidx_t,
+    zones: *mut *const octmesh_locidx_t,
+) -> octmesh_status_t {
+    with_ref(h, |h| {
+        non_null(num_zones, "num_zones")?;
+        non_null(zones, "zones")?;
+        let z = zones_of(mesh_of(h)?)?;
+        let v = h
+            .arrays
+            .zones
+            .get_or_init(|| z.of_elements().iter().map(|&k| k as i32).collect());
+        write_out(num_zones, z.names().len() as octmesh_locidx_t);
+        write_out(zones, v.as_ptr());
+        Ok(())
+    })
+}
+
+/// Sets `*name` to the name of zone `zone` (`inside`, `outside`, then the
+/// regions' zones), NUL-terminated, owned by the handle. Needs a mesh
+/// built with zones. Not collective.
+///
+/// \param[in]  h     the handle
+/// \param[in]  zone  0 .. num_zones - 1
+/// \param[out] name  the name
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_get_zone_name(
+    h: *const octmesh_t,
+    zone: octmesh_locidx_t,
+    name: *mut *const c_char,
+) -> octmesh_status_t {
+    with_ref(h, |h| {
+        non_null(name, "name")?;
+        let z = zones_of(mesh_of(h)?)?;
+        let names = h
+            .arrays
+            .zone_names
+            .get_or_init(|| z.names().iter().map(|n| super::c_string(n)).collect());
+        let k = usize::try_from(zone)
+            .ok()
+            .filter(|&k| k < names.len())
+            .ok_or_else(|| {
+                Error::invalid(format!(
+                    "zone {zone} does not exist: there are {} zones",
+                    names.len()
+                ))
+            })?;
+        write_out(name, names[k].as_ptr());
+        Ok(())
+    })
+}
+
+fn zones_of(m: &Mesh) -> Result<&crate::mesh::Zones> {
+    m.zones().ok_or_else(|| {
+        Error::new(
+            ErrorKind::State,
+            "the mesh has no zones: call octmesh_mesh_set_zones(h, true) before \
+             octmesh_mesh_build (with OCTMESH_KEEP_ALL)",
+        )
     })
 }
 
@@ -460,7 +560,8 @@ pub extern "C" fn octmesh_mesh_write_vtu(
 
 /// Writes the mesh as one Gmsh MSH 4.1 file (ASCII), like the command's
 /// `--gmsh`: a physical surface per patch with boundary faces (named by
-/// `octmesh_mesh_rename_patch`), the physical volume `volume`, the
+/// `octmesh_mesh_rename_patch`), the physical volume `volume` (one per
+/// zone on a mesh with zones), the
 /// hanging nodes as plain nodes with their constraints in a
 /// `$HangingNodes` section (docs/formats.md). The mesh is gathered on rank
 /// 0, which writes the file: the same bytes on any number of ranks. Needs

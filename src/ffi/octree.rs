@@ -162,7 +162,9 @@ pub extern "C" fn octmesh_octree_refine_surface_part(
 ///                       form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
 ///                       `sphere:CX,CY,CZ,R:LEVEL` or
 ///                       `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`, each
-///                       optionally followed by `:outside`; user units
+///                       optionally followed by `:outside`, then by
+///                       `:zone=NAME` (the zone of
+///                       `octmesh_mesh_set_zones`); user units
 /// \param[in] nbands     number of distance bands, >= 0 (bands need the
 ///                       surface)
 /// \param[in] distances  nbands increasing distances, user units

@@ -73,6 +73,12 @@ pub struct Gathered {
     pub patch_nodes: Vec<Vec<u32>>,
     /// The boundary faces, by patch, element, label.
     pub faces: Vec<GatheredFace>,
+    /// The zones' names when the mesh has zones ([`crate::mesh::zones`]),
+    /// else empty.
+    pub zone_names: Vec<String>,
+    /// Each element's zone index, global element order (empty without
+    /// zones).
+    pub element_zones: Vec<u16>,
 }
 
 impl Gathered {
@@ -183,10 +189,19 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
         buf.push(f.patch as u64);
     }
     let faces = to_root(comm, &buf);
+    let zones = mesh.zones().map(|z| {
+        let local: Vec<u64> = z.of_elements().iter().map(|&k| u64::from(k)).collect();
+        (z.names().to_vec(), to_root(comm, &local))
+    });
     if comm.rank() != 0 {
         return Ok(Gathered::default());
     }
-    assemble(&elements, &nodes, &faces)
+    let mut out = assemble(&elements, &nodes, &faces)?;
+    if let Some((names, of)) = zones {
+        out.zone_names = names;
+        out.element_zones = of.into_iter().map(|k| k as u16).collect();
+    }
+    Ok(out)
 }
 
 /// One node as the ranks sent it, merged over the ranks: its position and

@@ -9,16 +9,20 @@
 //!   has boundary faces, tag `patch id + 1` (the sides `xmin xmax ymin ymax
 //!   zmin zmax` are 1..6, the surface or its parts follow), named after the
 //!   patch; one physical volume (dimension 3, tag 1) named `volume`, the
-//!   kept region.
+//!   kept region, or on a mesh with zones ([`crate::mesh::zones`]) one
+//!   physical volume per zone that has elements, tag `zone index + 1`
+//!   (`inside` 1, `outside` 2, the regions' zones from 3), named after
+//!   the zone.
 //! - `$Entities`: one surface entity per patch (same tag as its physical
-//!   group) and one volume entity (tag 1) bounded by them, with their
-//!   bounding boxes.
+//!   group) and one volume entity per physical volume (same tag) bounded
+//!   by the patches its elements have faces on, with their bounding
+//!   boxes.
 //! - `$Nodes`: one block, on the volume entity, nodes `1..N`: the
 //!   independent nodes first, then the hanging nodes, each run in the
 //!   order the elements first use them ([`super::gathered`]).
 //! - `$Elements`: the hexahedra (type 5, Gmsh's corner order, which is
-//!   VTK's) tagged `1..E` in global (Morton) element order on the volume
-//!   entity, then per patch the boundary element faces as quadrilaterals
+//!   VTK's) tagged `1..E` in global (Morton) element order, a block per
+//!   volume entity (each block in tag order), then per patch the boundary element faces as quadrilaterals
 //!   (type 3) tagged from `E + 1`, their corners counter-clockwise seen
 //!   from outside the element. A face only partly on the boundary (where
 //!   some of the finer elements across it were not kept) is written whole.
@@ -99,17 +103,27 @@ pub fn gmsh_text(g: &Gathered, patches: &PatchNames) -> Result<String> {
         &mut s,
         format_args!("$MeshFormat\n4.1 0 8\n$EndMeshFormat\n"),
     );
-    w(&mut s, format_args!("$PhysicalNames\n{}\n", used.len() + 1));
+    let volumes = volumes(g, &used);
+    w(
+        &mut s,
+        format_args!("$PhysicalNames\n{}\n", used.len() + volumes.len()),
+    );
     for &p in &used {
         w(&mut s, format_args!("2 {} \"{}\"\n", p + 1, name(p)?));
     }
-    w(&mut s, format_args!("3 1 \"volume\"\n$EndPhysicalNames\n"));
+    for v in &volumes {
+        w(&mut s, format_args!("3 {} \"{}\"\n", v.tag, v.name));
+    }
+    w(&mut s, format_args!("$EndPhysicalNames\n"));
     // Entities with their boxes.
     let corners = |f: &super::gathered::GatheredFace| {
         let e = &g.elements[f.element as usize];
         ABAQUS_FACE_NODES[f.label as usize].map(|v| e[v])
     };
-    w(&mut s, format_args!("$Entities\n0 0 {} 1\n", used.len()));
+    w(
+        &mut s,
+        format_args!("$Entities\n0 0 {} {}\n", used.len(), volumes.len()),
+    );
     for &p in &used {
         let b = bbox(
             g.faces
@@ -132,24 +146,33 @@ pub fn gmsh_text(g: &Gathered, patches: &PatchNames) -> Result<String> {
             ),
         );
     }
-    let b = bbox(g.coordinates.iter().copied());
-    w(
-        &mut s,
-        format_args!(
-            "1 {:e} {:e} {:e} {:e} {:e} {:e} 1 1 {}",
-            b[0],
-            b[1],
-            b[2],
-            b[3],
-            b[4],
-            b[5],
-            used.len()
-        ),
-    );
-    for &p in &used {
-        w(&mut s, format_args!(" {}", p + 1));
+    for v in &volumes {
+        let b = bbox(
+            v.elements
+                .iter()
+                .flat_map(|&e| g.elements[e].map(|n| g.coordinates[n as usize])),
+        );
+        w(
+            &mut s,
+            format_args!(
+                "{} {:e} {:e} {:e} {:e} {:e} {:e} 1 {} {}",
+                v.tag,
+                b[0],
+                b[1],
+                b[2],
+                b[3],
+                b[4],
+                b[5],
+                v.tag,
+                v.patches.len()
+            ),
+        );
+        for &p in &v.patches {
+            w(&mut s, format_args!(" {}", p + 1));
+        }
+        s.push('\n');
     }
-    w(&mut s, format_args!("\n$EndEntities\n"));
+    w(&mut s, format_args!("$EndEntities\n"));
     // Nodes: one block on the volume.
     let n = g.coordinates.len();
     w(
@@ -169,17 +192,20 @@ pub fn gmsh_text(g: &Gathered, patches: &PatchNames) -> Result<String> {
     w(
         &mut s,
         format_args!(
-            "$Elements\n{} {total} {} {total}\n3 1 5 {ne}\n",
-            used.len() + 1,
+            "$Elements\n{} {total} {} {total}\n",
+            used.len() + volumes.len(),
             total.min(1)
         ),
     );
-    for (k, e) in g.elements.iter().enumerate() {
-        w(&mut s, format_args!("{}", k + 1));
-        for v in e {
-            w(&mut s, format_args!(" {}", v + 1));
+    for v in &volumes {
+        w(&mut s, format_args!("3 {} 5 {}\n", v.tag, v.elements.len()));
+        for &k in &v.elements {
+            w(&mut s, format_args!("{}", k + 1));
+            for n in &g.elements[k] {
+                w(&mut s, format_args!(" {}", n + 1));
+            }
+            s.push('\n');
         }
-        s.push('\n');
     }
     let mut tag = ne;
     for &p in &used {
@@ -231,6 +257,47 @@ pub fn gmsh_text(g: &Gathered, patches: &PatchNames) -> Result<String> {
     }
     w(&mut s, format_args!("$EndHangingNodes\n"));
     Ok(s)
+}
+
+/// A volume entity with its physical group: tag, name, elements (global
+/// order) and the patches its elements have boundary faces on.
+struct Volume {
+    tag: usize,
+    name: String,
+    elements: Vec<usize>,
+    patches: Vec<u16>,
+}
+
+/// The volumes of `g`: one per zone with elements, or one, `volume`, for
+/// the whole mesh without zones (`used`: the patches with faces).
+fn volumes(g: &Gathered, used: &[u16]) -> Vec<Volume> {
+    if g.zone_names.is_empty() || g.element_zones.len() != g.elements.len() {
+        return vec![Volume {
+            tag: 1,
+            name: "volume".to_string(),
+            elements: (0..g.elements.len()).collect(),
+            patches: used.to_vec(),
+        }];
+    }
+    let mut out: Vec<Volume> = (g.zone_names.iter().enumerate())
+        .map(|(z, name)| Volume {
+            tag: z + 1,
+            name: name.clone(),
+            elements: Vec::new(),
+            patches: Vec::new(),
+        })
+        .collect();
+    for (k, &z) in g.element_zones.iter().enumerate() {
+        out[z as usize].elements.push(k);
+    }
+    for f in &g.faces {
+        let p = &mut out[g.element_zones[f.element as usize] as usize].patches;
+        if p.last() != Some(&f.patch) {
+            p.push(f.patch);
+        }
+    }
+    out.retain(|v| !v.elements.is_empty());
+    out
 }
 
 /// Writes `g` (rank 0's gathered mesh; call on rank 0 only) to `path`.

@@ -78,6 +78,22 @@ impl Mesh {
         } else {
             local_class
         };
+        // A mesh of every leaf keeps them all; the clean-up then makes the
+        // inside side of the zones' interface manifold instead, moving the
+        // inside leaves it drops to the outside.
+        let mut zone_classes = None;
+        if let (true, Keep::All, ClassBytes::Slice(s)) = (opts.clean_walls, opts.keep, &local_class)
+        {
+            let mut c = s.to_vec();
+            let inside = |bits: u8| {
+                bits & manifold::REMOVED == 0 && keeps(Keep::Inside, opts.cut_rule, bits)
+            };
+            cleaned = timer.time(comm, "clean", || {
+                let mut ghosts = build_ghost_layer(tree, |i| c[i] as u64);
+                manifold::clean_walls(tree, &mut ghosts, &mut c, inside)
+            });
+            zone_classes = Some(c);
+        }
 
         // Each leaf travels with its class and, when kept, its global
         // element number, so the halo of the finite-volume faces needs no
@@ -128,6 +144,21 @@ impl Mesh {
             assemble(comm, domain, (d, dual_tree), elements, halo, numbering)
         });
         let mut mesh = crate::parallel::comm::agree(comm, mesh)?;
+        // Zones split a mesh of every leaf by the centre's side, which the
+        // element classes do not keep for cut leaves: one bit per element.
+        if let (Keep::All, ClassBytes::Slice(s)) = (opts.keep, &local_class) {
+            let s = zone_classes.as_deref().unwrap_or(s);
+            let mut bits = Vec::with_capacity(mesh.elements.len());
+            kept.select(s, &mut bits);
+            let inside =
+                |b: u8| b & manifold::REMOVED == 0 && b & crate::classify::CENTER_INSIDE != 0;
+            mesh.centre_inside = bits
+                .chunks(64)
+                .map(|c| {
+                    (c.iter().enumerate()).fold(0u64, |w, (k, &b)| w | u64::from(inside(b)) << k)
+                })
+                .collect();
+        }
         mesh.first_element = first_element;
         mesh.first_cells = tree.first_cells().to_vec();
         let mut sums = [
@@ -608,5 +639,7 @@ fn assemble(
         timer: PhaseTimer::new(),
         moved: None,
         moved_lattice: None,
+        zones: None,
+        centre_inside: Vec::new(),
     })
 }

@@ -66,6 +66,7 @@ pub mod points;
 pub mod quality;
 pub mod snap;
 pub mod transfer;
+pub mod zones;
 
 use crate::classify::{CutRule, Keep};
 use crate::octree::domain::Domain;
@@ -82,6 +83,7 @@ pub use faces::{CellHalo, Face, Faces, Halo, Other, NUM_PATCHES, SIDE_PATCHES, S
 pub use hanging::HangingDeps;
 pub use locate::locate_elements;
 pub use transfer::{transfer_elements, transfer_nodes, ElementMap};
+pub use zones::Zones;
 
 use hanging::Hanging;
 
@@ -95,7 +97,9 @@ pub struct MeshOptions {
     pub cut_rule: CutRule,
     /// Drop the kept leaves that make the walls non-manifold or have kept
     /// neighbours along fewer than three axes ([`manifold`]), as a
-    /// finite-volume code wants.
+    /// finite-volume code wants. With [`Keep::All`] every leaf stays, and
+    /// the clean-up applies to the inside side of the zones' interface
+    /// instead ([`zones`]): the inside leaves it drops count as outside.
     pub clean_walls: bool,
 }
 
@@ -143,7 +147,8 @@ pub struct MeshCounts {
     /// Ghost leaves over all ranks.
     pub ghosts: u64,
     /// Leaves the selection kept but the wall clean-up dropped
-    /// ([`MeshOptions::clean_walls`]).
+    /// ([`MeshOptions::clean_walls`]; with [`Keep::All`], the inside leaves
+    /// it moved to the outside).
     pub cleaned: u64,
 }
 
@@ -194,6 +199,11 @@ pub struct Mesh {
     /// The same in lattice units (what the midpoints of the faces' corners
     /// are computed from).
     moved_lattice: Option<Vec<[f64; 3]>>,
+    /// The zone of each element, when assigned ([`zones`]).
+    zones: Option<Zones>,
+    /// Whether each element's centre is inside the surface, a bit per
+    /// element (meshes of every leaf with classes; empty otherwise).
+    centre_inside: Vec<u64>,
 }
 
 impl Mesh {

@@ -19,10 +19,23 @@ impl Session {
     /// Builds the mesh of the leaves that `keep` selects, classified against
     /// the surface with the session's inside rule when there is a surface
     /// (without one only [`Keep::All`] is allowed). The octree must be
-    /// balanced for edge or corner contacts. Phases `ghost`, `nodes`,
-    /// `numbering`, `connectivity`.
+    /// balanced for edge or corner contacts. With `mesh.zones` every
+    /// element gets a zone ([`crate::mesh::zones`], the regions' zones
+    /// from the configuration), which needs [`Keep::All`]. Phases `ghost`,
+    /// `nodes`, `numbering`, `connectivity` (and `zones`).
     pub fn build_mesh(&mut self, keep: Keep, cut_rule: CutRule) -> Result<()> {
         agree(&*self.comm, self.tree_or_state().map(|_| ()))?;
+        let zones = self.config.mesh.zones;
+        if zones && keep != Keep::All {
+            return agree(
+                &*self.comm,
+                Err(Error::invalid(format!(
+                    "zones (mesh.zones, --zones) need keep all, not keep {}: the inside and \
+                     the outside are zones of one mesh",
+                    keep.name()
+                ))),
+            );
+        }
         // Classes made with another rule (or only the cut bits of a leak
         // check) are redone while the surface is there.
         let rule = self.inside.unwrap_or_default();
@@ -35,11 +48,13 @@ impl Session {
         let (tree, domain) = self.tree_or_state()?;
         let classes = self.classes.rule.map(|_| self.classes.bits.as_slice());
         let shown = self.progress("mesh", None);
+        // A mesh of every leaf is cleaned only for its zones.
         let clean_walls = self
             .config
             .mesh
             .clean_walls
-            .unwrap_or(self.config.writes_solver_mesh());
+            .unwrap_or(self.config.writes_solver_mesh())
+            && (keep != Keep::All || zones);
         let opts = MeshOptions {
             keep,
             cut_rule,
@@ -47,7 +62,7 @@ impl Session {
         };
         let mesh = Mesh::build(tree, domain, classes, &opts);
         drop(shown);
-        let mesh = mesh?;
+        let mut mesh = mesh?;
         self.timer.append(mesh.phase_timer());
         let c = *mesh.counts();
         for (name, seconds) in mesh.timings() {
@@ -64,7 +79,20 @@ impl Session {
                 count,
             });
         }
+        if zones {
+            let comm = self.comm.clone();
+            let regions = &self.config.regions;
+            self.timer
+                .time(&*comm, "zones", || mesh.assign_zones(&*comm, keep, regions))?;
+            let n = mesh.zones().map(|z| z.names().len() as u64);
+            self.report_phase(n);
+        }
         self.observer.event(&Event::Meshed { counts: c });
+        if let Some(z) = mesh.zones() {
+            let counts = z.names().iter().cloned().zip(z.counts().iter().copied());
+            self.observer
+                .event(&Event::Zones(&counts.collect::<Vec<_>>()));
+        }
         let e = self.volume_event(&mesh, keep, false);
         self.observer.event(&e);
         self.drop_mesh();

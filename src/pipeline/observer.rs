@@ -61,6 +61,9 @@ pub enum Event<'a> {
         /// Global counts.
         counts: MeshCounts,
     },
+    /// The mesh's zones ([`crate::mesh::zones`]): each name with its
+    /// elements over all ranks, in zone order.
+    Zones(&'a [(String, u64)]),
     /// The volume of the kept elements, after meshing and again after
     /// snapping, beside the volume they should fill.
     KeptVolume {

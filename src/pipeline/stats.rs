@@ -90,6 +90,19 @@ pub struct MeshStats {
     pub keep: Keep,
     /// The rule for leaves touching the surface.
     pub cut_rule: CutRule,
+    /// The zones with their elements, in zone order, when the mesh has
+    /// zones ([`crate::mesh::zones`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zones: Option<Vec<ZoneStats>>,
+}
+
+/// One zone of the mesh, under `zones`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ZoneStats {
+    /// Its name.
+    pub name: String,
+    /// Its elements over all ranks.
+    pub elements: u64,
 }
 
 /// Bytes exchanged: sent and received over all ranks, under
@@ -230,6 +243,7 @@ impl Session {
         if meshed.is_some() {
             keys.extend(["clean"].into_iter().filter(|k| ran(k)));
             keys.extend(["ghost", "nodes", "numbering", "connectivity"]);
+            keys.extend(["zones"].into_iter().filter(|k| ran(k)));
             keys.extend(["snap"].into_iter().filter(|k| ran(k)));
             keys.push("write");
             keys.extend(
@@ -297,6 +311,14 @@ impl Session {
                 kept_cells: v[0],
                 keep: self.config.mesh.keep,
                 cut_rule: self.config.mesh.cut_rule,
+                zones: m.zones().map(|z| {
+                    (z.names().iter().zip(z.counts()))
+                        .map(|(n, &c)| ZoneStats {
+                            name: n.clone(),
+                            elements: c,
+                        })
+                        .collect()
+                }),
             }
         });
         let named = |v: Vec<(String, f64)>| PerPhase(v);

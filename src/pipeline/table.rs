@@ -155,6 +155,10 @@ impl Observer for Table {
                     m.ghosts
                 );
             }
+            Event::Zones(z) => {
+                let list: Vec<String> = z.iter().map(|(n, c)| format!("{n} {c}")).collect();
+                say!("  zones: {}", list.join(" | "));
+            }
             Event::KeptVolume {
                 kept,
                 expected,

@@ -53,6 +53,10 @@ pub enum Region {
         /// Refine where the box is not, instead.
         #[serde(default)]
         outside: bool,
+        /// With `mesh.zones`, the elements whose centre lies in the region
+        /// (where it refines) belong to the zone of this name.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        zone: Option<String>,
     },
     /// The ball of `radius` around `center`.
     Sphere {
@@ -71,6 +75,10 @@ pub enum Region {
         /// Refine where the ball is not, instead.
         #[serde(default)]
         outside: bool,
+        /// With `mesh.zones`, the elements whose centre lies in the region
+        /// (where it refines) belong to the zone of this name.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        zone: Option<String>,
     },
     /// The points within `radius` of the segment `start..end` whose
     /// projection falls on the segment (flat caps).
@@ -92,6 +100,10 @@ pub enum Region {
         /// Refine where the cylinder is not, instead.
         #[serde(default)]
         outside: bool,
+        /// With `mesh.zones`, the elements whose centre lies in the region
+        /// (where it refines) belong to the zone of this name.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        zone: Option<String>,
     },
 }
 
@@ -141,6 +153,31 @@ impl Region {
         }
     }
 
+    /// The zone the region names (`mesh.zones`), if any.
+    pub fn zone(&self) -> Option<&str> {
+        match self {
+            Region::Box { zone, .. }
+            | Region::Sphere { zone, .. }
+            | Region::Cylinder { zone, .. } => zone.as_deref(),
+        }
+    }
+
+    /// Whether the point `p` (user units) is where the region refines: in
+    /// the closed shape or, for `outside`, not in its open interior.
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        let shape = match *self {
+            Region::Box { min, max, .. } => Lattice::Box(min, max),
+            Region::Sphere { center, radius, .. } => Lattice::Sphere(center, radius),
+            Region::Cylinder {
+                start, end, radius, ..
+            } => Lattice::Cylinder(start, end, radius),
+        };
+        match self.outside() {
+            false => overlaps(shape, p, p),
+            true => !inside_interior(shape, p, p),
+        }
+    }
+
     /// `box`, `sphere` or `cylinder`.
     pub fn shape(&self) -> &'static str {
         match self {
@@ -160,6 +197,12 @@ impl Region {
                 "has level {}, above the maximum level {MAX_LEVEL}",
                 self.level()
             ));
+        }
+        if let Some(z) = self.zone() {
+            if let Err(e) = crate::geometry::names::check_word(z) {
+                let why = e.message().replace("patch name", "zone name");
+                return Err(format!("has a bad zone: {why}"));
+            }
         }
         if let Some(s) = self.size() {
             if !(s.is_finite() && s > 0.0) {
@@ -251,21 +294,34 @@ impl Region {
             Some(s) => format!("size={s}"),
             None => self.level().to_string(),
         };
-        format!("{}:{numbers}:{level}{outside}", self.shape())
+        let zone = match self.zone() {
+            Some(z) => format!(":zone={z}"),
+            None => String::new(),
+        };
+        format!("{}:{numbers}:{level}{outside}{zone}", self.shape())
     }
 
     /// Parses the command line's form: `box:X0,Y0,Z0,X1,Y1,Z1:LEVEL`,
     /// `sphere:CX,CY,CZ,R:LEVEL` or `cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL`,
-    /// each optionally followed by `:outside`; `LEVEL` may be `size=S`, a
-    /// cell size in user units.
+    /// each optionally followed by `:outside`, then by `:zone=NAME`;
+    /// `LEVEL` may be `size=S`, a cell size in user units.
     pub fn parse(s: &str) -> Result<Region> {
         let bad = |why: &str| {
             Error::invalid(format!(
                 "expects box:X0,Y0,Z0,X1,Y1,Z1:LEVEL, sphere:CX,CY,CZ,R:LEVEL or \
-                 cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (then :outside if wanted), got '{s}': {why}"
+                 cylinder:X0,Y0,Z0,X1,Y1,Z1,R:LEVEL (then :outside and :zone=NAME if wanted), \
+                 got '{s}': {why}"
             ))
         };
-        let parts: Vec<&str> = s.split(':').collect();
+        let mut parts: Vec<&str> = s.split(':').collect();
+        let zone = match parts.last().and_then(|p| p.strip_prefix("zone=")) {
+            Some(z) => {
+                let z = z.to_string();
+                parts.pop();
+                Some(z)
+            }
+            None => None,
+        };
         let (shape, numbers, level, outside) = match parts.as_slice() {
             [shape, n, l] => (*shape, *n, *l, false),
             [shape, n, l, "outside"] => (*shape, *n, *l, true),
@@ -299,6 +355,7 @@ impl Region {
                 level,
                 size,
                 outside,
+                zone: zone.clone(),
             },
             ("sphere", 4) => Region::Sphere {
                 center: p(0),
@@ -306,6 +363,7 @@ impl Region {
                 level,
                 size,
                 outside,
+                zone: zone.clone(),
             },
             ("cylinder", 7) => Region::Cylinder {
                 start: p(0),
@@ -314,6 +372,7 @@ impl Region {
                 level,
                 size,
                 outside,
+                zone: zone.clone(),
             },
             ("box" | "sphere" | "cylinder", n) => return Err(bad(&format!("{n} numbers"))),
             _ => return Err(bad("unknown shape")),
@@ -887,9 +946,18 @@ mod tests {
                 max: [1.0, 2.0, 3.0],
                 level: 7,
                 size: None,
-                outside: false
+                outside: false,
+                zone: None
             }
         );
+        let r = Region::parse("sphere:0,0,0,0.5:6:zone=solid").unwrap();
+        assert_eq!((r.zone(), r.outside()), (Some("solid"), false));
+        assert_eq!(r.describe(), "sphere:0,0,0,0.5:6:zone=solid");
+        assert!(r.contains([0.5, 0.0, 0.0]) && !r.contains([0.3, 0.3, 0.3]));
+        let r = Region::parse("box:0,0,0,1,1,1:3:outside:zone=far").unwrap();
+        assert!(r.contains([2.0, 0.5, 0.5]) && r.contains([1.0, 0.5, 0.5]));
+        assert!(!r.contains([0.5, 0.5, 0.5]));
+        assert!(Region::parse("box:0,0,0,1,1,1:3:zone=9lives").is_err());
         let r = Region::parse("box:0,0,0,1,2,3:size=0.1:outside").unwrap();
         assert_eq!((r.size(), r.level(), r.outside()), (Some(0.1), 0, true));
         assert_eq!(r.describe(), "box:0,0,0,1,2,3:size=0.1:outside");
@@ -907,6 +975,7 @@ mod tests {
             "sphere:0,0,0,-1:3",
             "box:0,0,0,1,1,1:19",
             "box:0,0,0,1,1,1:3:inside",
+            "box:0,0,0,1,1,1:3:zone=a b",
         ] {
             assert!(Region::parse(bad).is_err(), "{bad}");
         }

@@ -4,8 +4,8 @@
 // leaf's data is its own. A replace callable that throws makes the call
 // throw octmesh::Error on every rank with the data unchanged. Then fields
 // across one step with the previous mesh kept (transfer_nodes,
-// transfer_elements, element_map), and a checkpoint saved and loaded back
-// with the data (argv[1] is its path). Prints
+// transfer_elements, element_map), zones, and a checkpoint saved and loaded
+// back with the data (argv[1] is its path). Prints
 // CPP LEAF DATA OK on every rank.
 // First: it keeps mpi.h from pulling in the MPI C++ bindings.
 #include "octmesh.hpp"
@@ -138,6 +138,12 @@ int main(int argc, char **argv) {
       require(std::fabs(u[i] - f(x + 3 * i)) < 1e-12, "trilinear field moved exactly");
     for (double v : m.transfer_elements(e_old)) require(v == 3.0, "constant element field");
     require(m.element_map().uncovered == 0, "every element covered");
+    // Zones without a surface: every element is outside.
+    m.set_zones();
+    m.mesh(OCTMESH_KEEP_ALL);
+    auto names = m.zone_names();
+    require(names.size() == 2 && names[0] == "inside" && names[1] == "outside", "zone names");
+    for (auto z : m.zones()) require(z == 1, "every element outside");
   }
   std::printf("CPP LEAF DATA OK rank %d\n", g_rank);
   MPI_Finalize();

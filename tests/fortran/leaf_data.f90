@@ -206,7 +206,26 @@ contains
     sums = [real(size(e_old), c_double), real(size(e), c_double)]
     call MPI_Allreduce(sums, all, 2, MPI_DOUBLE_PRECISION, MPI_SUM, MPI_COMM_WORLD, ierr)
     if (all(2) <= all(1)) call fail("the refinement added no element")
+    call zones_step()
   end subroutine transfer_step
+
+  ! Zones without a surface: two zones, every element outside.
+  subroutine zones_step()
+    type(octmesh_mesh_counts_t) :: c
+    type(c_ptr) :: p
+    integer(c_int32_t) :: nz
+    integer(c_int32_t), pointer :: zone(:)
+    integer(c_int) :: st
+    call ok(octmesh_mesh_set_zones(h, .true._c_bool))
+    call ok(octmesh_mesh_build(h, OCTMESH_KEEP_ALL, OCTMESH_CUT_RULE_CENTER))
+    call ok(octmesh_mesh_get_counts(h, c))
+    call ok(octmesh_mesh_get_zones(h, nz, p))
+    if (nz /= 2) call fail("two zones")
+    call c_f_pointer(p, zone, [c%local_elements])
+    if (any(zone /= 1)) call fail("every element outside")
+    if (octmesh_mesh_get_zone_name_f(h, 1, st) /= "outside") call fail("zone name")
+    call ok(st)
+  end subroutine zones_step
 
   subroutine same(want)
     real(c_double), intent(in) :: want

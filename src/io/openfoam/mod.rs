@@ -32,6 +32,11 @@
 //!   order ([`crate::mesh::faces`]), each starting at the same point (the
 //!   lowest in lattice order); the higher rank's then run the other way.
 //!
+//! With zones ([`crate::mesh::zones`]) each mesh also has `cellZones` and
+//! `faceZones` (see `zones.rs`): one cellZone per zone, one faceZone per
+//! interface between two zones, whose faces are internal faces (or
+//! processor faces), as `splitMeshRegions -cellZones` wants them.
+//!
 //! `system/controlDict`, `fvSchemes`, `fvSolution` (and on P ranks
 //! `decomposeParDict`) are written when absent and never overwritten.
 //!
@@ -45,6 +50,7 @@
 mod polygons;
 mod polymesh;
 mod system;
+mod zones;
 
 use std::fs;
 use std::io::Write;
@@ -65,6 +71,7 @@ use crate::parallel::comm::{agree, Comm};
 use polygons::*;
 use polymesh::*;
 use system::*;
+use zones::*;
 
 crate::named_enum! {
     /// Binary or ASCII list data.
@@ -144,6 +151,9 @@ pub fn write_case(
         Ok(())
     };
     agree(comm, check)?;
+    // The interfaces between zones, known to every rank before any
+    // writes (a rank whose directory failed must still take part).
+    let interfaces = zone_interfaces(comm, mesh, faces);
     // A core no rank of this node runs on makes the polygons while this
     // rank labels them (a serial run on a workstation, say).
     let spare_core = crate::parallel::cores::spare_core(comm);
@@ -151,7 +161,14 @@ pub fn write_case(
     let written = (|| -> Result<FoamCounts> {
         let _ = fs::remove_dir_all(&scratch);
         fs::create_dir_all(&scratch).map_err(|e| io_err(&scratch, e))?;
-        write_polymesh(&scratch, mesh, faces, opts, (me, p), spare_core)
+        write_polymesh(
+            &scratch,
+            (mesh, faces),
+            opts,
+            &interfaces,
+            (me, p),
+            spare_core,
+        )
     })();
     if written.is_err() {
         let _ = fs::remove_dir_all(&scratch);
@@ -207,9 +224,9 @@ fn create(path: &Path) -> Result<DirectWriter> {
 #[allow(clippy::too_many_arguments)]
 fn write_polymesh(
     dir: &Path,
-    mesh: &Mesh,
-    faces: &Faces,
+    (mesh, faces): (&Mesh, &Faces),
     opts: &FoamOptions,
+    interfaces: &[(u16, u16)],
     (me, p): (usize, usize),
     spare_core: bool,
 ) -> Result<FoamCounts> {
@@ -308,7 +325,11 @@ fn write_polymesh(
             writeln!(w, "    }}")?;
         }
         writeln!(w, ")")?;
-        w.flush()
+        w.flush()?;
+        match mesh.zones() {
+            Some(z) => write_zones(dir, loc, faces, z, interfaces),
+            None => Ok(()),
+        }
     })();
     result.map_err(|e| Error::io(format!("writing {}: {e}", dir.display())))?;
     Ok(counts)

@@ -398,6 +398,8 @@ pub struct Halo {
     pub owners: Vec<u32>,
     /// Global element number of each.
     pub global: Vec<u64>,
+    /// Class byte of each (the classification's bits: centre inside, cut, void).
+    pub classes: Vec<u8>,
     /// How many come before this rank's range.
     pub before: usize,
 }
@@ -418,6 +420,7 @@ impl Halo {
                 h.leaves.push(leaf);
                 h.owners.push(ghosts.owners[i]);
                 h.global.push(ghosts.data[i] >> 8);
+                h.classes.push(ghosts.data[i] as u8);
             }
         }
         if ghosts.before == ghosts.leaves.len() {
