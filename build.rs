@@ -38,7 +38,8 @@ fn cgns() {
         .allowlist_function(
             "cg_(open|close|get_error|base_write|zone_write|coord_write|section_write|\
              boco_write|boco_gridlocation_write|gopath|user_data_write|array_write|\
-             descriptor_write|dataclass_write|exponents_write|gridlocation_write|family_write|fambc_write|famname_write)",
+             descriptor_write|dataclass_write|exponents_write|gridlocation_write|family_write|fambc_write|famname_write|\
+             subreg_ptset_write)",
         )
         .allowlist_type("cg_size_type")
         .allowlist_var("CG_(OK|ERROR|MODE_WRITE|MODE_READ|FILE_.*|SIZEOF_SIZE|BUILD_64BIT)")

@@ -649,3 +649,118 @@ fn a_long_patch_name_fails_cgns_on_every_rank() {
         assert!(line.contains("--patch") && line.contains("32"), "{line}");
     }
 }
+
+/// A mesh with zones (the sphere in its box, `--keep all --zones`, and a
+/// region's zone `east`) on 1 and 3 ranks: the Exodus file has an element
+/// block per zone, named after it with ID `zone index + 1`, holding the
+/// zone's element count from the statistics, elements numbered block
+/// after block, and the box sides' side sets name faces in their planes
+/// (read through those numbers); the CGNS file passes cgnscheck with a
+/// section, a family and a sub-region per zone; both files are the same on
+/// 1 and 3 ranks.
+#[test]
+fn zones_become_blocks_and_families() {
+    let (Some(python), Some(check), Some(diff)) = (netcdf_python(), cgnscheck(), cgnsdiff()) else {
+        return;
+    };
+    let args = [
+        "--level",
+        "4",
+        "--keep",
+        "all",
+        "--zones",
+        "--region",
+        "box:0.5,0.5,0.5,1.5,1.5,1.5:0:zone=east",
+    ];
+    let dir = scratch("exchange_files_zones");
+    let runs: Vec<Run> = [1, 3]
+        .iter()
+        .map(|&np| mesh(np, &dir.join(format!("np{np}")), "sphere", &args))
+        .collect();
+    let script = r#"
+import sys, netCDF4
+d = netCDF4.Dataset(sys.argv[1])
+v = d.variables
+names = [str(s) for s in netCDF4.chartostring(v["eb_names"][:])]
+for b, (name, i) in enumerate(zip(names, v["eb_prop1"][:])):
+    print("block", name, int(i), len(d.dimensions["num_el_in_blk%d" % (b + 1)]), v["connect%d" % (b + 1)].elem_type)
+print("elements", len(d.dimensions["num_elem"]))
+# The side sets name faces by global element number (block after block):
+# every face of the box sides' sets lies in its side's plane.
+conn = []
+for b in range(len(names)):
+    conn.extend([list(map(int, r)) for r in v["connect%d" % (b + 1)][:]])
+x = [v[c][:] for c in ("coordx", "coordy", "coordz")]
+side = {1: (1, 2, 6, 5), 2: (2, 3, 7, 6), 3: (3, 4, 8, 7), 4: (1, 5, 8, 4), 5: (1, 4, 3, 2), 6: (5, 6, 7, 8)}
+for k, name in enumerate(str(s) for s in netCDF4.chartostring(v["ss_names"][:])):
+    axis, high = "xyz".index(name[0]), name.endswith("max")
+    plane = (max if high else min)(x[axis])
+    off = 0
+    for e, sd in zip(v["elem_ss%d" % (k + 1)][:], v["side_ss%d" % (k + 1)][:]):
+        for c in side[int(sd)]:
+            off += abs(x[axis][conn[int(e) - 1][c - 1] - 1] - plane) > 1e-12
+    print("sideset", name, len(v["elem_ss%d" % (k + 1)][:]), off)
+"#;
+    let out = Command::new(&python)
+        .args(["-c", script, runs[0].exo.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let zones = runs[0].stats["zones"]
+        .as_array()
+        .expect("zones in the statistics");
+    let want: Vec<String> = zones
+        .iter()
+        .enumerate()
+        .filter(|(_, z)| z["elements"].as_u64().unwrap() > 0)
+        .map(|(k, z)| {
+            format!(
+                "{} {} {} HEX8",
+                z["name"].as_str().unwrap(),
+                k + 1,
+                z["elements"].as_u64().unwrap()
+            )
+        })
+        .collect();
+    let got: Vec<String> = rows(&text, "block").iter().map(|r| r.join(" ")).collect();
+    assert_eq!(got, want, "the Exodus blocks");
+    assert!(got.iter().any(|b| b.starts_with("east ")), "{got:?}");
+    assert_eq!(
+        row(&text, "elements")[0].parse::<u64>().unwrap(),
+        common::int(&runs[0].stats, "elements")
+    );
+    let sides = rows(&text, "sideset");
+    assert_eq!(sides.len(), 6, "{text}");
+    for r in &sides {
+        assert!(
+            r[1] != "0" && r[2] == "0",
+            "side set {}: {} faces, {} corners off its plane",
+            r[0],
+            r[1],
+            r[2]
+        );
+    }
+    let report = run(&check, &[&runs[0].cgns]);
+    for z in zones.iter().filter(|z| z["elements"].as_u64().unwrap() > 0) {
+        let name = z["name"].as_str().unwrap();
+        assert!(
+            report.contains(&format!("subregion \"{name}_region\"")),
+            "cgnscheck saw no region {name}:\n{report}"
+        );
+    }
+    assert!(
+        !report.contains("ERROR") && !report.contains("WARNING"),
+        "{report}"
+    );
+    assert!(
+        std::fs::read(&runs[0].exo).unwrap() == std::fs::read(&runs[1].exo).unwrap(),
+        "the Exodus file differs on 1 and 3 ranks"
+    );
+    let d = run(&diff, &[Path::new("-d"), &runs[0].cgns, &runs[1].cgns]);
+    assert!(d.trim().is_empty(), "the CGNS files differ:\n{d}");
+}

@@ -13,7 +13,13 @@
 //!   independent nodes first, then the hanging nodes, each run in the
 //!   order the elements first use them.
 //! - `Elements_t` `volume`: `HEXA_8` elements `1..E` in global (Morton)
-//!   element order, corners in CGNS order (which is VTK's).
+//!   element order, corners in CGNS order (which is VTK's). On a mesh with
+//!   zones ([`crate::mesh::zones`]) one `HEXA_8` section per zone with
+//!   elements instead, named after the zone, numbered zone after zone
+//!   (each in global element order), and per zone a `Family_t` of its
+//!   name and a `ZoneSubRegion_t` `<zone>_region` (`GridLocation` `CellCenter`,
+//!   `PointRange` the section's elements, `FamilyName` the zone), so that
+//!   readers find each region as a family.
 //! - Per patch with boundary faces, in patch order: an `Elements_t` named
 //!   after the patch of `QUAD_4` faces numbered on from `E + 1`, corners
 //!   counter-clockwise seen from outside the mesh (a face only partly on
@@ -49,7 +55,7 @@
 use std::ffi::{c_int, CStr, CString};
 use std::path::Path;
 
-use super::gathered::{Gathered, ABAQUS_FACE_NODES};
+use super::gathered::{Blocks, Gathered, ABAQUS_FACE_NODES};
 use crate::error::{Error, Result};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::SIDE_PATCHES;
@@ -162,13 +168,19 @@ pub fn write_cgns(path: &Path, g: &Gathered, patches: &PatchNames) -> Result<Cgn
             .names()
             .get(p as usize)
             .ok_or_else(|| Error::invalid(format!("patch {p} has no name")))?;
-        if name.len() > MAX_NAME || name == "volume" {
+        if name.len() > MAX_NAME || name == "volume" || g.zone_names.contains(name) {
             return Err(Error::invalid(format!(
                 "patch '{name}' cannot name a CGNS boundary (at most {MAX_NAME} characters, \
-                 not 'volume'): rename it with --patch"
+                 not 'volume' nor a zone's name): rename it with --patch"
             )));
         }
         names.push(name.as_str());
+    }
+    let longest = MAX_NAME - REGION_SUFFIX.len();
+    if let Some(z) = g.zone_names.iter().find(|z| z.len() > longest) {
+        return Err(Error::invalid(format!(
+            "zone '{z}' cannot name a CGNS section and region (at most {longest} characters)"
+        )));
     }
     let (nn, ne, nf) = (g.coordinates.len(), g.elements.len(), g.faces.len());
     size(nn, "nodes")?;
@@ -199,6 +211,10 @@ pub fn write_cgns(path: &Path, g: &Gathered, patches: &PatchNames) -> Result<Cgn
         hanging: g.dependencies.len() as u64,
     })
 }
+
+/// The end of a zone's `ZoneSubRegion_t` name (its section has the zone's
+/// name).
+const REGION_SUFFIX: &str = "_region";
 
 /// The nodes and sections of [`write_cgns`] into the open `file`.
 fn write(file: &File, g: &Gathered, used: &[u16], names: &[&str]) -> Result<()> {
@@ -254,27 +270,61 @@ fn write(file: &File, g: &Gathered, used: &[u16], names: &[&str]) -> Result<()> 
         file.check(unsafe { sys::cg_gopath(f, at.as_ptr()) })?;
         file.check(unsafe { sys::cg_exponents_write(sys::RealSingle, length.as_ptr().cast()) })?;
     }
-    let connect: Vec<cgsize_t> = g
-        .elements
-        .iter()
-        .flat_map(|e| e.map(|n| n as cgsize_t + 1))
-        .collect();
+    // The volumes: one section (and with zones a family and a sub-region
+    // naming it) per block, numbered block after block.
+    let blocks = Blocks::of(g);
+    let zoned = blocks.blocks.len() > 1 || !g.zone_names.is_empty();
     let mut s = 0;
-    file.check(unsafe {
-        sys::cg_section_write(
-            f,
-            b,
-            z,
-            zone.as_ptr(),
-            sys::HEXA_8,
-            1,
-            ne as cgsize_t,
-            0,
-            connect.as_ptr(),
-            &mut s,
-        )
-    })?;
-    drop(connect);
+    let mut first = 1 as cgsize_t;
+    for &(_, name, n) in &blocks.blocks {
+        let at = (first - 1) as usize;
+        let connect: Vec<cgsize_t> = blocks.order[at..at + n]
+            .iter()
+            .flat_map(|&e| g.elements[e as usize].map(|n| n as cgsize_t + 1))
+            .collect();
+        let range = [first, first + n as cgsize_t - 1];
+        let cname = c(name);
+        file.check(unsafe {
+            sys::cg_section_write(
+                f,
+                b,
+                z,
+                cname.as_ptr(),
+                sys::HEXA_8,
+                range[0],
+                range[1],
+                0,
+                connect.as_ptr(),
+                &mut s,
+            )
+        })?;
+        if zoned {
+            let (mut fam, mut sub) = (0, 0);
+            file.check(unsafe { sys::cg_family_write(f, b, cname.as_ptr(), &mut fam) })?;
+            // A zone's children need distinct names: the section has the
+            // zone's.
+            let region = format!("{name}{REGION_SUFFIX}");
+            let rname = c(&region);
+            file.check(unsafe {
+                sys::cg_subreg_ptset_write(
+                    f,
+                    b,
+                    z,
+                    rname.as_ptr(),
+                    3,
+                    sys::CellCenter,
+                    sys::PointRange,
+                    2,
+                    range.as_ptr(),
+                    &mut sub,
+                )
+            })?;
+            let at = c(&format!("/Base/volume/{region}"));
+            file.check(unsafe { sys::cg_gopath(f, at.as_ptr()) })?;
+            file.check(unsafe { sys::cg_famname_write(cname.as_ptr()) })?;
+        }
+        first += n as cgsize_t;
+    }
     let mut next = ne as cgsize_t + 1;
     for (&p, &name) in used.iter().zip(names) {
         let faces: Vec<cgsize_t> = g

@@ -15,17 +15,21 @@
 //!   32), `int64_status` (0).
 //! - Dimensions `len_string` (33), `len_line` (81), `four` (4), `len_name`
 //!   (`maximum_name_length + 1`), `time_step` (unlimited, no steps),
-//!   `num_dim` (3), `num_nodes`, `num_elem`, `num_el_blk` (1),
-//!   `num_el_in_blk1`, `num_nod_per_el1` (8), and when there are boundary
+//!   `num_dim` (3), `num_nodes`, `num_elem`, `num_el_blk`,
+//!   `num_el_in_blk<b>`, `num_nod_per_el<b>` (8), and when there are boundary
 //!   faces `num_side_sets`, `num_side_ss<i>`, `num_node_sets`,
 //!   `num_nod_ns<i>`.
 //! - `coor_names` (`x y z`), `coordx coordy coordz` (doubles, the
 //!   surface's units), `time_whole` (empty).
 //! - One element block, ID 1, named `volume` (the kept region, as the
-//!   Gmsh writer's physical volume): `eb_status`, `eb_prop1` (attribute
-//!   `name = "ID"`), `eb_names`, and `connect1` (attribute
-//!   `elem_type = "HEX8"`), elements `1..E` in global (Morton) element
-//!   order, corners in HEX8 order (which is VTK's).
+//!   Gmsh writer's physical volume), or on a mesh with zones
+//!   ([`crate::mesh::zones`]) one block per zone with elements, ID `zone
+//!   index + 1` (`inside` 1, `outside` 2, the regions' zones from 3, as
+//!   the Gmsh file's volumes), named after the zone: `eb_status`,
+//!   `eb_prop1` (attribute `name = "ID"`), `eb_names`, and per block
+//!   `connect<b>` (attribute `elem_type = "HEX8"`). The elements are
+//!   numbered block after block, each block in global (Morton) element
+//!   order; corners in HEX8 order (which is VTK's).
 //! - Per patch with boundary faces, in patch order, a side set and a node
 //!   set, both with ID `patch id + 1` (the sides `xmin .. zmax` are 1..6,
 //!   as in the Gmsh file) and the patch's name (`ss_names`, `ns_names`;
@@ -62,7 +66,7 @@ use std::path::Path;
 use netcdf::types::{NcTypeDescriptor, NcVariableType};
 use netcdf::{FileMut, Options};
 
-use super::gathered::Gathered;
+use super::gathered::{Blocks, Gathered};
 use crate::error::{Error, Result};
 use crate::mesh::patches::PatchNames;
 
@@ -180,16 +184,16 @@ pub fn write_exodus(path: &Path, g: &Gathered, patches: &PatchNames) -> Result<E
     if hanging > 0 {
         node_sets.push(&hanging_set);
     }
-    let name_len = node_sets
-        .iter()
-        .map(|s| s.name.len())
+    let blocks = Blocks::of(g);
+    let name_len = (node_sets.iter().map(|s| s.name.len()))
+        .chain(blocks.blocks.iter().map(|b| b.1.len()))
         .max()
         .unwrap_or(0)
         .max(MIN_NAME);
     let mut file = netcdf::create_with(path, Options::_64BIT_OFFSET).map_err(fail)?;
-    define(&mut file, g, &sets, &node_sets, name_len).map_err(fail)?;
+    define(&mut file, g, &blocks, &sets, &node_sets, name_len).map_err(fail)?;
     file.enddef().map_err(fail)?;
-    put(&mut file, g, &sets, &node_sets, name_len).map_err(fail)?;
+    put(&mut file, g, &blocks, &sets, &node_sets, name_len).map_err(fail)?;
     file.close().map_err(fail)?;
     Ok(ExodusCounts {
         nodes: nn as u64,
@@ -216,6 +220,7 @@ fn variable<T: NcTypeDescriptor>(
 fn define(
     file: &mut FileMut,
     g: &Gathered,
+    blocks: &Blocks,
     sets: &[Set],
     node_sets: &[&Set],
     name_len: usize,
@@ -235,25 +240,32 @@ fn define(
     file.add_dimension("num_dim", 3)?;
     file.add_dimension("num_nodes", g.coordinates.len())?;
     file.add_dimension("num_elem", g.elements.len())?;
-    file.add_dimension("num_el_blk", 1)?;
+    file.add_dimension("num_el_blk", blocks.blocks.len())?;
     variable::<f64>(file, "time_whole", &["time_step"])?;
     variable::<NcChar>(file, "coor_names", &["num_dim", "len_name"])?;
     for c in ["coordx", "coordy", "coordz"] {
         variable::<f64>(file, c, &["num_nodes"])?;
     }
-    // The element block.
+    // The element blocks.
     variable::<i32>(file, "eb_status", &["num_el_blk"])?;
     variable::<i32>(file, "eb_prop1", &["num_el_blk"])?;
     file.variable_mut("eb_prop1")
         .expect("just added")
         .put_attribute("name", "ID")?;
     variable::<NcChar>(file, "eb_names", &["num_el_blk", "len_name"])?;
-    file.add_dimension("num_el_in_blk1", g.elements.len())?;
-    file.add_dimension("num_nod_per_el1", 8)?;
-    variable::<i32>(file, "connect1", &["num_el_in_blk1", "num_nod_per_el1"])?;
-    file.variable_mut("connect1")
-        .expect("just added")
-        .put_attribute("elem_type", "HEX8")?;
+    for (b, &(_, _, n)) in blocks.blocks.iter().enumerate() {
+        let (elems, nodes) = (
+            format!("num_el_in_blk{}", b + 1),
+            format!("num_nod_per_el{}", b + 1),
+        );
+        file.add_dimension(&elems, n)?;
+        file.add_dimension(&nodes, 8)?;
+        let connect = format!("connect{}", b + 1);
+        variable::<i32>(file, &connect, &[&elems, &nodes])?;
+        file.variable_mut(&connect)
+            .expect("just added")
+            .put_attribute("elem_type", "HEX8")?;
+    }
     // Side sets, one per patch.
     if !sets.is_empty() {
         file.add_dimension("num_side_sets", sets.len())?;
@@ -309,6 +321,7 @@ fn put_all<T: NcTypeDescriptor>(file: &mut FileMut, name: &str, list: &[T]) -> n
 fn put(
     file: &mut FileMut,
     g: &Gathered,
+    blocks: &Blocks,
     sets: &[Set],
     node_sets: &[&Set],
     name_len: usize,
@@ -319,16 +332,21 @@ fn put(
         let x: Vec<f64> = g.coordinates.iter().map(|p| p[a]).collect();
         put_all(file, c, &x)?;
     }
-    put_all(file, "eb_status", &[1i32])?;
-    put_all(file, "eb_prop1", &[1i32])?;
-    put_all(file, "eb_names", &name_array(&["volume"], len))?;
-    let connect: Vec<i32> = g
-        .elements
-        .iter()
-        .flat_map(|e| e.map(|n| n as i32 + 1))
-        .collect();
-    put_all(file, "connect1", &connect)?;
-    drop(connect);
+    let nb = blocks.blocks.len();
+    put_all(file, "eb_status", &vec![1i32; nb])?;
+    let ids: Vec<i32> = blocks.blocks.iter().map(|b| b.0).collect();
+    put_all(file, "eb_prop1", &ids)?;
+    let names: Vec<&str> = blocks.blocks.iter().map(|b| b.1).collect();
+    put_all(file, "eb_names", &name_array(&names, len))?;
+    let mut at = 0;
+    for (b, &(_, _, n)) in blocks.blocks.iter().enumerate() {
+        let connect: Vec<i32> = blocks.order[at..at + n]
+            .iter()
+            .flat_map(|&e| g.elements[e as usize].map(|n| n as i32 + 1))
+            .collect();
+        put_all(file, &format!("connect{}", b + 1), &connect)?;
+        at += n;
+    }
     if !sets.is_empty() {
         put_all(file, "ss_status", &vec![1i32; sets.len()])?;
         let ids: Vec<i32> = sets.iter().map(|s| s.id).collect();
@@ -338,7 +356,12 @@ fn put(
         for (k, s) in sets.iter().enumerate() {
             let faces = g.faces.iter().filter(|f| Some(f.patch) == s.patch);
             let (elems, sides): (Vec<i32>, Vec<i32>) = faces
-                .map(|f| (f.element as i32 + 1, EXODUS_SIDE[f.label as usize]))
+                .map(|f| {
+                    (
+                        blocks.number[f.element as usize],
+                        EXODUS_SIDE[f.label as usize],
+                    )
+                })
                 .unzip();
             put_all(file, &format!("elem_ss{}", k + 1), &elems)?;
             put_all(file, &format!("side_ss{}", k + 1), &sides)?;

@@ -143,6 +143,56 @@ impl Gathered {
     }
 }
 
+/// The volumes of a gathered mesh as blocks of elements, for the formats
+/// that number a block's elements after the previous block's (Exodus II
+/// element blocks, CGNS sections): one per zone with elements (ID `zone
+/// index + 1`, the zone's name, as the Gmsh file's physical volumes) on a
+/// mesh with zones, else one, `volume` with ID 1. The elements are listed
+/// block after block, each block in global element order.
+pub struct Blocks<'a> {
+    /// ID, name and element count of each block.
+    pub blocks: Vec<(i32, &'a str, usize)>,
+    /// The gathered elements in file order.
+    pub order: Vec<u32>,
+    /// The file's number (1-based) of each gathered element.
+    pub number: Vec<i32>,
+}
+
+impl<'a> Blocks<'a> {
+    /// The blocks of `g`.
+    pub fn of(g: &'a Gathered) -> Blocks<'a> {
+        let ne = g.elements.len();
+        let zoned = !g.zone_names.is_empty() && g.element_zones.len() == ne;
+        if !zoned {
+            return Blocks {
+                blocks: vec![(1, "volume", ne)],
+                order: (0..ne as u32).collect(),
+                number: (1..=ne as i32).collect(),
+            };
+        }
+        let mut count = vec![0usize; g.zone_names.len()];
+        for &z in &g.element_zones {
+            count[z as usize] += 1;
+        }
+        let mut order: Vec<u32> = (0..ne as u32).collect();
+        // Stable: each zone keeps the global element order.
+        order.sort_by_key(|&e| g.element_zones[e as usize]);
+        let mut number = vec![0i32; ne];
+        for (k, &e) in order.iter().enumerate() {
+            number[e as usize] = k as i32 + 1;
+        }
+        let blocks = (g.zone_names.iter().zip(&count).enumerate())
+            .filter(|(_, (_, &n))| n > 0)
+            .map(|(z, (name, &n))| (z as i32 + 1, name.as_str(), n))
+            .collect();
+        Blocks {
+            blocks,
+            order,
+            number,
+        }
+    }
+}
+
 /// Sends `local` to rank 0; rank 0 gets every rank's in rank order.
 fn to_root(comm: &dyn Comm, local: &[u64]) -> Vec<u64> {
     let mut counts = vec![0usize; comm.size()];
