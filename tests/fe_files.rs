@@ -182,6 +182,27 @@ fn field(p: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|i| A[i][0] * p[0] + A[i][1] * p[1] + A[i][2] * p[2] + B[i])
 }
 
+/// Runs CalculiX `ccx` on the input `job` in `dir` (one thread); its
+/// printed results (`job.dat`). Fails unless ccx succeeds without an error.
+fn run_ccx(ccx: &Path, dir: &Path, job: &str) -> String {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("job.inp"), job).unwrap();
+    let out = Command::new(ccx)
+        .args(["-i", "job"])
+        .current_dir(dir)
+        .env("OMP_NUM_THREADS", "1")
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success() && !log.contains("*ERROR"),
+        "ccx failed in {}:\n{}",
+        dir.display(),
+        &log[log.len().saturating_sub(3000)..]
+    );
+    std::fs::read_to_string(dir.join("job.dat")).unwrap()
+}
+
 /// Runs the patch test in `dir` on the deck `text` with CalculiX `ccx`:
 /// the largest error of an interior independent node relative to the
 /// field's largest value, and how many interior independent nodes there
@@ -200,22 +221,7 @@ fn patch_test(ccx: &Path, dir: &Path, text: &str) -> (f64, usize) {
         }
     }
     job.push_str("*NODE PRINT, NSET=NALL\nU\n*END STEP\n");
-    std::fs::create_dir_all(dir).unwrap();
-    std::fs::write(dir.join("job.inp"), job).unwrap();
-    let out = Command::new(ccx)
-        .args(["-i", "job"])
-        .current_dir(dir)
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && !log.contains("*ERROR"),
-        "ccx failed in {}:\n{}",
-        dir.display(),
-        &log[log.len().saturating_sub(3000)..]
-    );
-    let dat = std::fs::read_to_string(dir.join("job.dat")).unwrap();
+    let dat = run_ccx(ccx, dir, &job);
     let scale = deck
         .coords
         .values()
@@ -372,23 +378,7 @@ fn gravity_test(name: &str, np: usize, input: &str, args: &[&str]) -> Option<[f6
          *SOLID SECTION, ELSET=EALL, MATERIAL=M\n*STEP\n*STATIC\n*BOUNDARY\nHELD, 1, 3, 0.\n\
          *DLOAD\nEALL, GRAV, 4., 0., 0., -1.\n*NODE PRINT, NSET=HELD, TOTALS=ONLY\nRF\n*END STEP\n",
     );
-    let run = dir.join("gravity");
-    std::fs::create_dir_all(&run).unwrap();
-    std::fs::write(run.join("job.inp"), job).unwrap();
-    let out = Command::new(&ccx)
-        .args(["-i", "job"])
-        .current_dir(&run)
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && !log.contains("*ERROR"),
-        "{name}: ccx failed in {}:\n{}",
-        run.display(),
-        &log[log.len().saturating_sub(3000)..]
-    );
-    let dat = std::fs::read_to_string(run.join("job.dat")).unwrap();
+    let dat = run_ccx(&ccx, &dir.join("gravity"), &job);
     let total = dat
         .split("total force")
         .nth(1)
