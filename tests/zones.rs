@@ -70,6 +70,7 @@ fn main() {
             );
         }
         r.test("gmsh physical volumes per zone", gmsh_volumes);
+        r.test("a zone per closed solid", zones_per_solid);
         r.test("the bunny's interface is manifold", bunny_interface);
     });
 }
@@ -632,4 +633,124 @@ fn bunny_interface() {
         );
     }
     println!("bunny level 7: inside zone {inside} = keep inside's, a manifold interface, Mesh OK");
+}
+
+/// Writes an ASCII STL of the built-in sphere scaled by `r` and moved by
+/// each of `centres`, one solid each, named by `names`; all in one solid
+/// named `both` when `one` is set.
+fn write_spheres(path: &Path, names: &[&str], centres: &[[f64; 3]], r: f64, one: bool) {
+    let s = octmesh::internals::geometry::shapes::default_sphere();
+    let mut text = String::new();
+    for (k, (name, c)) in names.iter().zip(centres).enumerate() {
+        if !one || k == 0 {
+            let name = if one { "both" } else { name };
+            text.push_str(&format!("solid {name}\n"));
+        }
+        for t in s.triangles() {
+            text.push_str("facet normal 0 0 0\n outer loop\n");
+            for v in &t.v {
+                let p: Vec<String> = (0..3).map(|a| format!("{:e}", c[a] + r * v[a])).collect();
+                text.push_str(&format!("  vertex {}\n", p.join(" ")));
+            }
+            text.push_str(" endloop\nendfacet\n");
+        }
+        if !one || k + 1 == names.len() {
+            let name = if one { "both" } else { name };
+            text.push_str(&format!("endsolid {name}\n"));
+        }
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// The zones of `stl` (level 5, keep all, zones) on `np` ranks: names and
+/// element counts, and the Gmsh file's bytes.
+fn solid_zones(dir: &Path, stl: &Path, np: usize) -> (Vec<(String, u64)>, Vec<u8>) {
+    let tag = format!("{}_{np}", stl.file_stem().unwrap().to_string_lossy());
+    let (msh, stats) = (
+        dir.join(format!("{tag}.msh")),
+        dir.join(format!("{tag}.json")),
+    );
+    common::octmesh_ok(
+        np,
+        &[
+            "mesh",
+            stl.to_str().unwrap(),
+            "--level",
+            "5",
+            "--keep",
+            "all",
+            "--zones",
+            "--gmsh",
+            msh.to_str().unwrap(),
+            "--stats",
+            stats.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
+    let s = common::json_file(&stats);
+    let zones = s["zones"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|z| {
+            let name = z["name"].as_str().unwrap().to_string();
+            (name, z["elements"].as_u64().unwrap())
+        })
+        .collect();
+    (zones, std::fs::read(msh).unwrap())
+}
+
+/// Two spheres apart, each its own solid of an ASCII STL: the inside
+/// splits into a zone per solid (`left`, `right`), which together hold
+/// what the same triangles as one solid keep inside, on 1 and 3 ranks
+/// alike. The halves of one sphere (open solids) do not split it.
+fn zones_per_solid() {
+    let dir = common::scratch("zones_solids");
+    let (two, one, halves) = (
+        dir.join("two.stl"),
+        dir.join("one.stl"),
+        dir.join("halves.stl"),
+    );
+    let centres = [[-0.61, 0.013, 0.027], [0.59, -0.021, 0.011]];
+    write_spheres(&two, &["left", "right"], &centres, 0.47, false);
+    write_spheres(&one, &["left", "right"], &centres, 0.47, true);
+    common::write_sphere_solids(&halves, &[("top", Some(true)), ("bottom", Some(false))]);
+    let (zones, msh1) = solid_zones(&dir, &two, 1);
+    let names: Vec<&str> = zones.iter().map(|z| z.0.as_str()).collect();
+    assert_eq!(names, ["inside", "outside", "left", "right"]);
+    let (whole, _) = solid_zones(&dir, &one, 1);
+    assert_eq!(whole.len(), 2, "one solid: {whole:?}");
+    assert_eq!(
+        zones[0].1, 0,
+        "every inside element is in a solid: {zones:?}"
+    );
+    assert!(zones[2].1 > 0 && zones[3].1 > 0, "{zones:?}");
+    assert_eq!(
+        zones[2].1 + zones[3].1,
+        whole[0].1,
+        "{zones:?} against {whole:?}"
+    );
+    assert_eq!(zones[1].1, whole[1].1);
+    // Mirror images: the same count each side.
+    assert!(
+        zones[2].1.abs_diff(zones[3].1) * 10 < zones[2].1,
+        "{zones:?}"
+    );
+    let (three, msh3) = solid_zones(&dir, &two, 3);
+    assert_eq!(three, zones);
+    assert!(msh1 == msh3, "the .msh differs on 1 and 3 ranks");
+    let text = String::from_utf8_lossy(&msh1);
+    for name in ["left", "right"] {
+        assert!(
+            text.contains(&format!(
+                "3 {} \"{name}\"",
+                if name == "left" { 3 } else { 4 }
+            )),
+            "no volume {name}"
+        );
+    }
+    let (open, _) = solid_zones(&dir, &halves, 1);
+    let names: Vec<&str> = open.iter().map(|z| z.0.as_str()).collect();
+    assert_eq!(names, ["inside", "outside"], "open halves are no solids");
+    println!("zones per solid: {zones:?}; one solid: {whole:?}");
 }

@@ -1,8 +1,13 @@
 //! The part of a surface nearest a point: how a boundary face on the
-//! surface finds the solid (patch) it belongs to.
+//! surface finds the solid (patch) it belongs to; and the closed solids of
+//! a surface, which contain the zones of a mesh with zones.
 
 use super::bvh::Bvh;
 use super::distance::point_triangle2;
+use std::collections::HashMap;
+
+use super::diagnostics::weld;
+use super::winding::WindingTree;
 use super::{Surface, Triangle};
 
 /// Nearest-triangle look-ups for a surface of two or more parts. Kept
@@ -60,6 +65,67 @@ impl PartLocator {
             }
         }
     }
+}
+
+/// The closed solids of a surface of two or more parts, for zones: each
+/// part whose triangles close up (every edge, its corners welded by
+/// position, shared by an even number of the part's triangles) with its
+/// winding-number tree. `None` unless the surface has two or more parts
+/// and every one of them is closed (the halves of one body are not
+/// solids of their own).
+pub struct Solids {
+    names: Vec<String>,
+    trees: Vec<WindingTree>,
+}
+
+impl Solids {
+    /// The solids of `surface`, see [`Solids`].
+    pub fn new(surface: &Surface) -> Option<Solids> {
+        let parts = surface.parts();
+        if parts.names.len() < 2 || parts.of.len() != surface.len() {
+            return None;
+        }
+        let mut trees = Vec::with_capacity(parts.names.len());
+        for k in 0..parts.names.len() {
+            let tris: Vec<Triangle> = (surface.triangles().iter().zip(&parts.of))
+                .filter(|(_, &of)| of as usize == k)
+                .map(|(t, _)| *t)
+                .collect();
+            if tris.is_empty() || !closed(&tris) {
+                return None;
+            }
+            trees.push(WindingTree::new(&tris));
+        }
+        Some(Solids {
+            names: parts.names.clone(),
+            trees,
+        })
+    }
+
+    /// The solids' names, in the surface's part order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The first solid (in part order) whose winding number at `p` is at
+    /// least one half in size.
+    pub fn holding(&self, p: [f64; 3]) -> Option<usize> {
+        self.trees.iter().position(|t| t.eval(p).abs() >= 0.5)
+    }
+}
+
+/// Whether every edge of `tris` (corners welded by position) is shared by
+/// an even number of them.
+fn closed(tris: &[Triangle]) -> bool {
+    let (ids, _) = weld(tris);
+    let mut edges: HashMap<(u64, u64), u32> = HashMap::new();
+    for t in &ids {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    edges.values().all(|n| n % 2 == 0)
 }
 
 #[cfg(test)]

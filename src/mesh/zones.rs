@@ -11,7 +11,13 @@
 //! ([`super::MeshOptions::clean_walls`], on for OpenFOAM cases) the
 //! inside zone is what `keep inside` keeps cleaned, so that the interface
 //! is manifold, and the outside zone the rest.
-//! Then each refinement region that names a zone
+//! When the surface has two or more parts (the solids of an ASCII STL,
+//! several `--surface` files) and each is closed
+//! ([`crate::geometry::parts::Solids`]), the inside splits by solid:
+//! zones 2, 3, ... are the solids, in part order, named after them, and
+//! an inside element goes to the first solid whose winding number at its
+//! centre is at least one half (`inside` keeps what none holds: nothing,
+//! up to rounding). Then each refinement region that names a zone
 //! ([`Region::zone`]) takes the elements whose centre it holds
 //! ([`Region::contains`]), the later regions winning over the earlier
 //! ones. Zones named by regions follow the two in the order their names
@@ -33,6 +39,7 @@
 
 use crate::classify::{Keep, CENTER_INSIDE};
 use crate::error::{Error, Result};
+use crate::geometry::parts::Solids;
 use crate::octree::octant::Octant;
 use crate::parallel::comm::{agree, Comm};
 use crate::refine::regions::Region;
@@ -78,8 +85,9 @@ impl Zones {
 
     /// The names of `regions`' zones after `inside` and `outside`, each
     /// once, and the zone index of each region (`None` without a zone).
-    fn names_of(regions: &[Region]) -> (Vec<String>, Vec<Option<u16>>) {
+    fn names_of(solids: &[String], regions: &[Region]) -> (Vec<String>, Vec<Option<u16>>) {
         let mut names = vec![INSIDE.to_string(), OUTSIDE.to_string()];
+        names.extend(solids.iter().cloned());
         let index = regions
             .iter()
             .map(|r| {
@@ -108,7 +116,13 @@ impl Mesh {
     /// built keeping: zones need every leaf ([`Keep::All`]), so that the
     /// zones meet along internal faces. Collective; an error (on every
     /// rank) changes nothing.
-    pub fn assign_zones(&mut self, comm: &dyn Comm, keep: Keep, regions: &[Region]) -> Result<()> {
+    pub fn assign_zones(
+        &mut self,
+        comm: &dyn Comm,
+        keep: Keep,
+        regions: &[Region],
+        solids: Option<&Solids>,
+    ) -> Result<()> {
         let check = if keep != Keep::All {
             Err(Error::invalid(format!(
                 "zones need a mesh keeping all leaves (this one keeps {}): \
@@ -121,7 +135,18 @@ impl Mesh {
             Ok(())
         };
         agree(comm, check)?;
-        let (names, index) = Zones::names_of(regions);
+        let solid_names = solids.map_or(&[][..], |s| s.names());
+        let dup = (solid_names.iter().enumerate())
+            .find(|(k, n)| *n == INSIDE || *n == OUTSIDE || solid_names[..*k].contains(n));
+        if let Some((_, n)) = dup {
+            return agree(
+                comm,
+                Err(Error::invalid(format!(
+                    "the solid '{n}' cannot name a zone: its name is taken"
+                ))),
+            );
+        }
+        let (names, index) = Zones::names_of(solid_names, regions);
         if names.len() > u16::MAX as usize {
             return Err(Error::invalid("more than 65535 zones"));
         }
@@ -132,12 +157,17 @@ impl Mesh {
             .collect();
         let domain = self.domain;
         let zone_of = |o: &Octant, class: u8| -> u16 {
-            let base = if class & CENTER_INSIDE != 0 { 0 } else { 1 };
+            let (c, h) = (o.coords(), o.side() as f64 / 2.0);
+            let p = || domain.from_lattice(c.map(|x| x as f64 + h));
+            let base = match (class & CENTER_INSIDE != 0, solids) {
+                (false, _) => 1,
+                (true, None) => 0,
+                (true, Some(s)) => s.holding(p()).map_or(0, |k| 2 + k as u16),
+            };
             if zoned.is_empty() {
                 return base;
             }
-            let (c, h) = (o.coords(), o.side() as f64 / 2.0);
-            let p = domain.from_lattice(c.map(|x| x as f64 + h));
+            let p = p();
             zoned
                 .iter()
                 .rev()
@@ -220,7 +250,7 @@ mod tests {
             r("sphere:0,0,0,1:3:zone=b"),
             r("sphere:0,0,0,2:3:zone=a"),
         ];
-        let (names, index) = Zones::names_of(&regions);
+        let (names, index) = Zones::names_of(&[], &regions);
         assert_eq!(names, ["inside", "outside", "a", "b"]);
         assert_eq!(index, [Some(2), None, Some(0), Some(3), Some(2)]);
     }

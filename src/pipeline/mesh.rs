@@ -14,6 +14,7 @@ use crate::mesh::{Boundary, Mesh, MeshOptions};
 use crate::parallel::comm::agree;
 
 use super::*;
+use crate::geometry::parts::Solids;
 
 impl Session {
     /// Builds the mesh of the leaves that `keep` selects, classified against
@@ -82,8 +83,11 @@ impl Session {
         if zones {
             let comm = self.comm.clone();
             let regions = &self.config.regions;
-            self.timer
-                .time(&*comm, "zones", || mesh.assign_zones(&*comm, keep, regions))?;
+            let surface = self.surface.as_ref();
+            self.timer.time(&*comm, "zones", || {
+                let solids = surface.and_then(|s| Solids::new(&s.surface));
+                mesh.assign_zones(&*comm, keep, regions, solids.as_ref())
+            })?;
             let n = mesh.zones().map(|z| z.names().len() as u64);
             self.report_phase(n);
         }

@@ -357,14 +357,19 @@ impl Session {
                 return leak.map(|_| Stats::default());
             }
         }
-        // A snap needs the surface after meshing.
+        // A snap needs the surface after meshing, zones while meshing (the
+        // solids they split the inside by).
         let snap = command == Command::Mesh && self.config.mesh.snap;
-        if !snap {
+        let zones = command == Command::Mesh && self.config.mesh.zones;
+        if !snap && !zones {
             self.release_surface();
         }
         if command == Command::Mesh && leak.is_ok() {
             let m = self.config.mesh.clone();
             self.build_mesh(m.keep, m.cut_rule)?;
+            if zones && !snap {
+                self.release_surface();
+            }
             if snap {
                 let foam = self.config.output.openfoam.is_some();
                 self.snap(&m.snap_options(foam))?;
