@@ -25,8 +25,9 @@
 //!   have the same content (`cgnsdiff -d` finds nothing, and finds a
 //!   difference between two different meshes: the check can fail). HDF5
 //!   stores modification times, so CGNS bytes differ.
-//! - A file that cannot be written fails the run on every rank, and so
-//!   does a patch name too long for CGNS.
+//! - A patch name too long for CGNS fails the run on every rank (a file
+//!   that cannot be written is `tests/fe_files.rs`'s, for all four
+//!   single-file formats).
 
 mod common;
 
@@ -595,29 +596,6 @@ fn solid_bunny_on_1_and_3_ranks() {
         &["--level", "5", "--keep", "inside"],
         &["bunny"],
     );
-}
-
-/// A file that cannot be written fails the run on every rank with the
-/// path in the message, and nothing is left behind.
-#[test]
-fn an_unwritable_file_fails_every_rank() {
-    let dir = scratch("exchange_unwritable");
-    for (option, name) in [("--exodus", "m.exo"), ("--cgns", "m.cgns")] {
-        let path = dir.join("no_such_dir").join(name);
-        let p = path.to_str().unwrap();
-        let args = [
-            "mesh", "sphere", "--level", "3", "--keep", "inside", option, p,
-        ];
-        let out = common::mpirun(
-            2,
-            &common::octmesh_bin(),
-            &args,
-            std::time::Duration::from_secs(300),
-        );
-        let lines = common::rank_error_lines(&out, 2, option);
-        assert!(lines[0].contains(name), "{option}: {}", lines[0]);
-        assert!(!path.exists());
-    }
 }
 
 /// A patch name too long for CGNS (over 32 characters) stops the run on

@@ -26,7 +26,8 @@
 //! - Gmsh opens the `.msh`: its node, hexahedron and quadrilateral
 //!   counts are octmesh's and the `.inp`'s, its physical surfaces are the
 //!   patches with faces, and its physical volume is `volume`.
-//! - A file that cannot be written fails the run on every rank.
+//! - A file that cannot be written (Abaqus, Gmsh, Exodus II, CGNS) fails
+//!   the run on every rank.
 
 mod common;
 
@@ -653,7 +654,12 @@ fn gmsh_reads_the_msh() {
 #[test]
 fn an_unwritable_file_fails_every_rank() {
     let dir = scratch("fe_files_unwritable");
-    for (option, name) in [("--abaqus", "m.inp"), ("--gmsh", "m.msh")] {
+    for (option, name) in [
+        ("--abaqus", "m.inp"),
+        ("--gmsh", "m.msh"),
+        ("--exodus", "m.exo"),
+        ("--cgns", "m.cgns"),
+    ] {
         let path = dir.join("no_such_dir").join(name);
         let p = path.to_str().unwrap();
         let args = [

@@ -126,30 +126,16 @@ fn int(v: usize, what: &str) -> Result<i32> {
     })
 }
 
-/// One set of the file (side set or node set): its ID and name.
+/// One set of the file (side set or node set): its ID, name and members,
+/// made once for the definitions and the data.
 struct Set<'a> {
     id: i32,
     name: &'a str,
-    /// The patch, or none for the `hanging` node set.
-    patch: Option<u16>,
-}
-
-impl Set<'_> {
-    /// The set's nodes, 1-based.
-    fn nodes(&self, g: &Gathered) -> Vec<i32> {
-        match self.patch {
-            Some(p) => g
-                .patch_nodes
-                .get(p as usize)
-                .map_or(&[][..], |l| &l[..])
-                .iter()
-                .map(|&n| n as i32 + 1)
-                .collect(),
-            None => (0..g.dependencies.len())
-                .map(|k| (g.num_independent + k) as i32 + 1)
-                .collect(),
-        }
-    }
+    /// Its nodes, 1-based.
+    nodes: Vec<i32>,
+    /// A side set's faces as element (1-based, file numbering) and Exodus
+    /// side; empty for the `hanging` node set.
+    faces: (Vec<i32>, Vec<i32>),
 }
 
 /// Writes `g` (rank 0's gathered mesh; call on rank 0 only) to `path`.
@@ -161,6 +147,7 @@ pub fn write_exodus(path: &Path, g: &Gathered, patches: &PatchNames) -> Result<E
     let (nn, ne) = (g.coordinates.len(), g.elements.len());
     int(nn, "nodes")?;
     int(ne.max(g.faces.len()), "elements")?;
+    let blocks = Blocks::of(g);
     let used = g.used_patches();
     let mut sets = Vec::with_capacity(used.len());
     for &p in &used {
@@ -168,23 +155,35 @@ pub fn write_exodus(path: &Path, g: &Gathered, patches: &PatchNames) -> Result<E
             .names()
             .get(p as usize)
             .ok_or_else(|| Error::invalid(format!("patch {p} has no name")))?;
+        let nodes = g.patch_nodes.get(p as usize).map_or(&[][..], |l| &l[..]);
+        let faces = (g.faces.iter().filter(|f| f.patch == p))
+            .map(|f| {
+                (
+                    blocks.number[f.element as usize],
+                    EXODUS_SIDE[f.label as usize],
+                )
+            })
+            .unzip();
         sets.push(Set {
             id: p as i32 + 1,
             name,
-            patch: Some(p),
+            nodes: nodes.iter().map(|&n| n as i32 + 1).collect(),
+            faces,
         });
     }
     let hanging = g.dependencies.len();
     let hanging_set = Set {
         id: sets.last().map_or(1, |s| s.id + 1),
         name: "hanging",
-        patch: None,
+        nodes: (0..hanging)
+            .map(|k| (g.num_independent + k) as i32 + 1)
+            .collect(),
+        faces: (Vec::new(), Vec::new()),
     };
     let mut node_sets: Vec<&Set> = sets.iter().collect();
     if hanging > 0 {
         node_sets.push(&hanging_set);
     }
-    let blocks = Blocks::of(g);
     let name_len = (node_sets.iter().map(|s| s.name.len()))
         .chain(blocks.blocks.iter().map(|b| b.1.len()))
         .max()
@@ -214,6 +213,32 @@ fn variable<T: NcTypeDescriptor>(
     // SAFETY: every variable is written whole before the file is closed
     // (`put`), so no unfilled value is ever read.
     unsafe { v.set_nofill() }
+}
+
+/// Defines the `<prefix>_status`, `<prefix>_prop1` (the IDs) and
+/// `<prefix>_names` of a list of blocks or sets counted by `count`.
+fn define_list(file: &mut FileMut, prefix: &str, count: &str) -> netcdf::Result<()> {
+    variable::<i32>(file, &format!("{prefix}_status"), &[count])?;
+    let ids = format!("{prefix}_prop1");
+    variable::<i32>(file, &ids, &[count])?;
+    file.variable_mut(&ids)
+        .expect("just added")
+        .put_attribute("name", "ID")?;
+    variable::<NcChar>(file, &format!("{prefix}_names"), &[count, "len_name"])
+}
+
+/// Writes the lists of [`define_list`]: every entry active, its ID and
+/// name (`len` bytes each).
+fn put_list(
+    file: &mut FileMut,
+    prefix: &str,
+    ids: &[i32],
+    names: &[&str],
+    len: usize,
+) -> netcdf::Result<()> {
+    put_all(file, &format!("{prefix}_status"), &vec![1i32; ids.len()])?;
+    put_all(file, &format!("{prefix}_prop1"), ids)?;
+    put_all(file, &format!("{prefix}_names"), &name_array(names, len))
 }
 
 /// The netCDF definitions: attributes, dimensions, variables.
@@ -247,12 +272,7 @@ fn define(
         variable::<f64>(file, c, &["num_nodes"])?;
     }
     // The element blocks.
-    variable::<i32>(file, "eb_status", &["num_el_blk"])?;
-    variable::<i32>(file, "eb_prop1", &["num_el_blk"])?;
-    file.variable_mut("eb_prop1")
-        .expect("just added")
-        .put_attribute("name", "ID")?;
-    variable::<NcChar>(file, "eb_names", &["num_el_blk", "len_name"])?;
+    define_list(file, "eb", "num_el_blk")?;
     for (b, &(_, _, n)) in blocks.blocks.iter().enumerate() {
         let (elems, nodes) = (
             format!("num_el_in_blk{}", b + 1),
@@ -269,14 +289,9 @@ fn define(
     // Side sets, one per patch.
     if !sets.is_empty() {
         file.add_dimension("num_side_sets", sets.len())?;
-        variable::<i32>(file, "ss_status", &["num_side_sets"])?;
-        variable::<i32>(file, "ss_prop1", &["num_side_sets"])?;
-        file.variable_mut("ss_prop1")
-            .expect("just added")
-            .put_attribute("name", "ID")?;
-        variable::<NcChar>(file, "ss_names", &["num_side_sets", "len_name"])?;
+        define_list(file, "ss", "num_side_sets")?;
         for (k, s) in sets.iter().enumerate() {
-            let n = g.faces.iter().filter(|f| Some(f.patch) == s.patch).count();
+            let n = s.faces.0.len();
             let dim = format!("num_side_ss{}", k + 1);
             file.add_dimension(&dim, n)?;
             variable::<i32>(file, &format!("elem_ss{}", k + 1), &[&dim])?;
@@ -286,14 +301,9 @@ fn define(
     // Node sets: the patches', then `hanging`.
     if !node_sets.is_empty() {
         file.add_dimension("num_node_sets", node_sets.len())?;
-        variable::<i32>(file, "ns_status", &["num_node_sets"])?;
-        variable::<i32>(file, "ns_prop1", &["num_node_sets"])?;
-        file.variable_mut("ns_prop1")
-            .expect("just added")
-            .put_attribute("name", "ID")?;
-        variable::<NcChar>(file, "ns_names", &["num_node_sets", "len_name"])?;
+        define_list(file, "ns", "num_node_sets")?;
         for (k, s) in node_sets.iter().enumerate() {
-            let n = s.nodes(g).len();
+            let n = s.nodes.len();
             let dim = format!("num_nod_ns{}", k + 1);
             file.add_dimension(&dim, n)?;
             variable::<i32>(file, &format!("node_ns{}", k + 1), &[&dim])?;
@@ -332,12 +342,9 @@ fn put(
         let x: Vec<f64> = g.coordinates.iter().map(|p| p[a]).collect();
         put_all(file, c, &x)?;
     }
-    let nb = blocks.blocks.len();
-    put_all(file, "eb_status", &vec![1i32; nb])?;
     let ids: Vec<i32> = blocks.blocks.iter().map(|b| b.0).collect();
-    put_all(file, "eb_prop1", &ids)?;
     let names: Vec<&str> = blocks.blocks.iter().map(|b| b.1).collect();
-    put_all(file, "eb_names", &name_array(&names, len))?;
+    put_list(file, "eb", &ids, &names, len)?;
     let mut at = 0;
     for (b, &(_, _, n)) in blocks.blocks.iter().enumerate() {
         let connect: Vec<i32> = blocks.order[at..at + n]
@@ -348,39 +355,27 @@ fn put(
         at += n;
     }
     if !sets.is_empty() {
-        put_all(file, "ss_status", &vec![1i32; sets.len()])?;
         let ids: Vec<i32> = sets.iter().map(|s| s.id).collect();
-        put_all(file, "ss_prop1", &ids)?;
         let names: Vec<&str> = sets.iter().map(|s| s.name).collect();
-        put_all(file, "ss_names", &name_array(&names, len))?;
+        put_list(file, "ss", &ids, &names, len)?;
         for (k, s) in sets.iter().enumerate() {
-            let faces = g.faces.iter().filter(|f| Some(f.patch) == s.patch);
-            let (elems, sides): (Vec<i32>, Vec<i32>) = faces
-                .map(|f| {
-                    (
-                        blocks.number[f.element as usize],
-                        EXODUS_SIDE[f.label as usize],
-                    )
-                })
-                .unzip();
-            put_all(file, &format!("elem_ss{}", k + 1), &elems)?;
-            put_all(file, &format!("side_ss{}", k + 1), &sides)?;
+            put_all(file, &format!("elem_ss{}", k + 1), &s.faces.0)?;
+            put_all(file, &format!("side_ss{}", k + 1), &s.faces.1)?;
         }
     }
     if !node_sets.is_empty() {
-        put_all(file, "ns_status", &vec![1i32; node_sets.len()])?;
         let ids: Vec<i32> = node_sets.iter().map(|s| s.id).collect();
-        put_all(file, "ns_prop1", &ids)?;
         let names: Vec<&str> = node_sets.iter().map(|s| s.name).collect();
-        put_all(file, "ns_names", &name_array(&names, len))?;
+        put_list(file, "ns", &ids, &names, len)?;
         for (k, s) in node_sets.iter().enumerate() {
-            put_all(file, &format!("node_ns{}", k + 1), &s.nodes(g))?;
+            put_all(file, &format!("node_ns{}", k + 1), &s.nodes)?;
         }
     }
     let h = g.dependencies.len();
     if h > 0 {
-        let hanging: Vec<i32> = (0..h).map(|k| (g.num_independent + k) as i32 + 1).collect();
-        put_all(file, "hanging_nodes", &hanging)?;
+        // The `hanging` node set's list, the last node set.
+        let hanging = &node_sets.last().expect("the hanging node set").nodes;
+        put_all(file, "hanging_nodes", hanging)?;
         let mut parents = vec![0i32; 4 * h];
         let mut weights = vec![0f64; 4 * h];
         for (k, d) in g.dependencies.iter().enumerate() {
