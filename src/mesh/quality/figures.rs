@@ -246,8 +246,9 @@ impl Figures {
         self.sums[COSINE + 1] += w[1];
         self.add_words(WEIGHT, weight);
         self.add_words(VOL_RATIO, ratio);
-        let degrees = cos.clamp(-1.0, 1.0).acos().to_degrees();
-        self.sums[COUNTS] += (degrees > limits::MAX_NON_ORTHO) as u64;
+        // More than maxNonOrtho degrees: a cosine below the limit's.
+        let limit = limits::MAX_NON_ORTHO.to_radians().cos();
+        self.sums[COUNTS] += (cos < limit) as u64;
         self.sums[COUNTS + 1] += (skew > limits::MAX_INTERNAL_SKEWNESS) as u64;
         self.sums[COUNTS + 4] += (weight < limits::MIN_FACE_WEIGHT) as u64;
         self.sums[COUNTS + 5] += (ratio < limits::MIN_VOL_RATIO) as u64;
