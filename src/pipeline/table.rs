@@ -227,13 +227,16 @@ impl Observer for Table {
             }
             Event::Snapped(r) => {
                 say!(
-                    "  snap: surface nodes {} | snapped {} ({} to features) | partly {} | not {} | \
-                     relaxed {} | elements reported {} | scaled Jacobian min {:.4}",
+                    "  snap: surface nodes {} | snapped {} ({} to features) | partly {} ({:?} at cells \
+                     with <=1/2/3 wall faces) | not {} ({:?}) | relaxed {} | elements reported {} | \
+                     scaled Jacobian min {:.4}",
                     r.surface_nodes,
                     r.snapped,
                     r.feature_nodes,
                     r.partial,
+                    r.partial_by_wall_faces,
                     r.unsnapped,
+                    r.unsnapped_by_wall_faces,
                     r.relaxed_nodes,
                     r.reported_elements,
                     r.min_scaled_jacobian

@@ -90,6 +90,16 @@ use nearest::NearTriangles;
 use options::{CHUNK, SPLIT_AT};
 use snapper::Snapper;
 
+/// The corners of a hexahedron's faces, in VTK order.
+const HEX_FACES: [[usize; 4]; 6] = [
+    [0, 1, 2, 3],
+    [4, 5, 6, 7],
+    [0, 1, 5, 4],
+    [1, 2, 6, 5],
+    [2, 3, 7, 6],
+    [3, 0, 4, 7],
+];
+
 /// Whether a node with patch mask `mask` is on the surface patch.
 fn is_on_surface(mask: u64) -> bool {
     mask >> SURFACE_PATCH & 1 != 0
@@ -331,19 +341,45 @@ impl Mesh {
         s.place_surface_nodes();
         s.update_hanging();
 
+        // The most wall faces (faces whose four corners are on the surface
+        // patch) of an element around each node, over the ranks: two or
+        // three mark a convex corner of the staircase, which snapping
+        // flattens.
+        let mut walls = vec![0u8; ni];
+        for c in self.connectivity() {
+            let w = HEX_FACES
+                .iter()
+                .filter(|f| f.iter().all(|&v| on_surface(c[v] as usize)))
+                .count()
+                .min(3) as u8;
+            for &n in c {
+                if let Some(x) = walls.get_mut(n as usize) {
+                    *x = (*x).max(w);
+                }
+            }
+        }
+        s.exchange(&mut walls, 1, |a, b| *a = (*a).max(b as u8));
+
         // Figures, each node once (by its owner).
         let owned = self.num_owned();
-        let mut counts = [0u64; 8];
+        let mut counts = [0u64; 14];
         for n in 0..owned {
             if on_surface(n) {
                 counts[0] += 1;
+                let w = walls[n].max(1) as usize - 1;
                 match (s.snap[n], s.step[n]) {
                     (true, 0) => {
                         counts[1] += 1;
                         counts[4] += feature[n] as u64;
                     }
-                    (true, k) if k < STEPS => counts[2] += 1,
-                    _ => counts[3] += 1,
+                    (true, k) if k < STEPS => {
+                        counts[2] += 1;
+                        counts[8 + w] += 1;
+                    }
+                    _ => {
+                        counts[3] += 1;
+                        counts[11 + w] += 1;
+                    }
                 }
             }
             counts[6] += relaxed[n] as u64;
@@ -389,6 +425,8 @@ impl Mesh {
             feature_nodes: counts[4],
             relaxed_nodes: counts[6],
             reported_elements: counts[7],
+            partial_by_wall_faces: [counts[8], counts[9], counts[10]],
+            unsnapped_by_wall_faces: [counts[11], counts[12], counts[13]],
             min_scaled_jacobian: -worst[0],
             iterations,
         })
@@ -441,6 +479,14 @@ mod tests {
             eprintln!("{keep:?} {r:?}");
             assert!(r.surface_nodes > 1000);
             assert_eq!(r.snapped + r.partial + r.unsnapped, r.surface_nodes);
+            assert_eq!(r.partial_by_wall_faces.iter().sum::<u64>(), r.partial);
+            assert_eq!(r.unsnapped_by_wall_faces.iter().sum::<u64>(), r.unsnapped);
+            // Around the sphere the partly snapped nodes are at the
+            // staircase's convex corners, every one.
+            if keep == Keep::Outside {
+                assert!(r.partial > 100, "{r:?}");
+            }
+            assert_eq!(r.partial_by_wall_faces[0], 0, "{r:?}");
             assert!(
                 r.min_scaled_jacobian >= DEFAULT_MIN_JACOBIAN * 0.99,
                 "{r:?}"

@@ -87,6 +87,13 @@ pub struct SnapReport {
     pub relaxed_nodes: u64,
     /// Elements that depend on a partly or not snapped surface node.
     pub reported_elements: u64,
+    /// The partly snapped nodes by the most wall faces (faces with four
+    /// corners on the surface patch) of an element around them: at most
+    /// one, two, three or more. Two or three are the staircase's convex
+    /// corners.
+    pub partial_by_wall_faces: [u64; 3],
+    /// The same for the nodes not moved.
+    pub unsnapped_by_wall_faces: [u64; 3],
     /// Smallest scaled Jacobian over all elements afterwards.
     pub min_scaled_jacobian: f64,
     /// Relaxation iterations run (they stop early when nothing moves).
