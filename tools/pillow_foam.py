@@ -300,6 +300,21 @@ def main():
     # staircase corner is often beside it, over one of its faces), the closest point where no hit is near.
     t = cast(p, normal, CAST * size)
     s = np.where(np.isfinite(t)[:, None], p + normal * np.where(np.isfinite(t), t, 0)[:, None], near)
+    # Where that ray finds nothing near, the nearest hit of rays along the faces' normals and between.
+    miss = np.nonzero(~np.isfinite(t))[0]
+    if len(miss):
+        best = np.full(len(miss), np.inf)
+        for k in range(7):
+            dk = []
+            for i in miss:
+                d = dirs[i]
+                v = d[k] if k < len(d) else (d[k - 3] + normal[i] if 3 <= k < 3 + len(d) else normal[i])
+                dk.append(v / np.linalg.norm(v))
+            dk = np.array(dk)
+            tk = cast(p[miss], dk, CAST * size[miss])
+            better = tk < best
+            best[better] = tk[better]
+            s[miss[better]] = p[miss[better]] + dk[better] * tk[better, None]
 
     def margin(x):
         return np.array([np.min(d @ (x[i] - p[i])) for i, d in enumerate(dirs)])
@@ -334,6 +349,7 @@ def main():
         opposite = np.array([len(d) > 1 and np.min(d @ d.T) < -0.5 for d in dirs])
         print("short", int(short.sum()), "opposite", int(opposite.sum()), "short&opposite",
               int((short & opposite).sum()), file=sys.stderr)
+        print("opposite points", sorted({wpts[i] for i in np.nonzero(opposite)[0]}), file=sys.stderr)
         for i in np.nonzero(short)[0][:10]:
             print(" ", wpts[i], p[i], s[i], dirs[i].tolist(), need[i] / size[i], np.linalg.norm(s[i] - p[i]) / size[i],
                   file=sys.stderr)
