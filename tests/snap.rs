@@ -310,6 +310,10 @@ fn report_words(r: &SnapReport) -> Vec<u64> {
         r.reported_elements,
         r.min_scaled_jacobian.to_bits(),
     ]
+    .into_iter()
+    .chain(r.partial_by_wall_faces)
+    .chain(r.unsnapped_by_wall_faces)
+    .collect()
 }
 
 /// Snapped on all ranks and on rank 0 alone: the same bits at every node.

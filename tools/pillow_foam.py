@@ -1,23 +1,27 @@
 #!/usr/bin/python3
 """Pillow the wall of an octmesh OpenFOAM case (a measurement of the design, not the product).
 
-Reads an ASCII polyMesh that octmesh wrote from the staircase (castellated) mesh, and writes a new case
-where every wall face has one more hexahedron between it and the surface:
+Reads an ASCII polyMesh that octmesh wrote from the staircase kept off the surface (`--cut-rule none`) and
+writes a new case where every wall face has one more hexahedron between it and the surface:
 
-- each wall point p gets a twin on the surface (its closest point s), which becomes the wall's point;
-- p itself moves into the kept region along the mean outward normal n of its wall faces, as far as needed
-  for s to lie at least DEPTH cells beyond it along n (at most REACH cells), so no pillow cell is flat;
-- each wall face becomes an internal face between its cell and its pillow cell; the pillow cells meet
-  across the wall's edges (hanging points included: the polygons carry them), and their outer faces are
-  the wall patch.
+- each wall vertex (a wall point, or one fan of wall faces at a pinched point) gets a twin on the surface,
+  which becomes the wall's point: the first hit of a ray along the mean normal of its faces within CAST
+  cells, else of rays along its faces' normals and between, else its closest point;
+- the twins spread along the surface by SMOOTH rounds of neighbour means projected back, a round kept per
+  point only where its twin stays ahead of its faces;
+- the wall point itself moves into the kept region along its mean normal until its twin is DEPTH cells
+  ahead of each of its faces (at most REACH cells), so no pillow cell starts flat;
+- each wall face becomes an internal face between its cell and its pillow cell; the pillow cells meet across
+  the wall's edges (hanging points included: the polygons carry them), and their outer faces are the wall.
 
-No old cell keeps a face on the wall, so a staircase corner cell with two or three wall faces is no longer
-flattened: every wall point reaches the surface. Usage:
+No old cell keeps a face on the wall, so a staircase corner cell with two or three wall faces is not
+flattened, and every wall point is on the surface. Usage:
 
     pillow_foam.py CASE SURFACE OUT [--patch NAME]
 
-SURFACE is a binary STL or `sphere` (the built-in unit sphere, projected exactly). Prints the distances of
-the wall points to the surface before and after as JSON.
+SURFACE is a binary STL or `sphere` (the unit sphere, exactly). Prints counts as JSON; PILLOW_DEPTH,
+PILLOW_REACH, PILLOW_CAST and PILLOW_SMOOTH override the constants, PILLOW_DEBUG=1 lists the points whose
+twin stays too near.
 """
 import json
 import os
@@ -411,7 +415,7 @@ def main():
         f.write(")\n")
     print(json.dumps({
         "cells": nc, "pillow_cells": len(wall), "wall_points": len(set(wpts)), "pinched_points": int(len(set(np.array(wpts)[pinched]))),
-        "before_max_distance": float(before.max()), "after_max_distance": 0.0,
+        "before_max_distance": float(before.max()),
         "moved_in_max_cells": float((shift / size).max()),
         "moved_in_points": int((shift > 0).sum()),
     }))

@@ -42,7 +42,9 @@
 //! surface; where the surface bends away from the kept side (a fluid mesh
 //! around a convex body, a saddle) moving all their nodes onto it flattens
 //! or inverts the element, so some of those nodes stay partly snapped
-//! (about half of a fluid sphere's). Hanging nodes on the surface cannot
+//! (about half of a fluid sphere's); the report counts the partly and not
+//! snapped nodes by the most wall faces of an element around them, and
+//! nearly all have two or three. Hanging nodes on the surface cannot
 //! reach it either: refining the leaves next to the surface to its level
 //! (a distance band) keeps 2:1 steps off it.
 //!
