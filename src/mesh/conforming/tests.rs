@@ -1,0 +1,248 @@
+//! Brute-force checks of every template against the scheme's rules.
+
+use super::*;
+use crate::geometry::cells::{corner_scaled_jacobians, hexahedron_volume};
+use std::collections::{BTreeMap, BTreeSet};
+
+/// The faces of a VTK hexahedron.
+const HEX_FACES: [[usize; 4]; 6] = [
+    [0, 3, 2, 1],
+    [4, 5, 6, 7],
+    [0, 1, 5, 4],
+    [1, 2, 6, 5],
+    [2, 3, 7, 6],
+    [3, 0, 4, 7],
+];
+
+/// The edges of a VTK hexahedron.
+const HEX_EDGES: [[usize; 2]; 12] = [
+    [0, 1],
+    [1, 2],
+    [2, 3],
+    [3, 0],
+    [4, 5],
+    [5, 6],
+    [6, 7],
+    [7, 4],
+    [0, 4],
+    [1, 5],
+    [2, 6],
+    [3, 7],
+];
+
+type Quad = [Point; 4];
+
+fn key(q: Quad) -> Quad {
+    let mut k = q;
+    k.sort();
+    k
+}
+
+fn coords(h: &Hex) -> [[f64; 3]; 8] {
+    h.map(|p| p.map(f64::from))
+}
+
+/// Whether `p` lies on the segment from `a` to `b`, not at an end.
+fn strictly_inside(p: Point, a: Point, b: Point) -> bool {
+    let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let e = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+    let cross = [
+        d[1] * e[2] - d[2] * e[1],
+        d[2] * e[0] - d[0] * e[2],
+        d[0] * e[1] - d[1] * e[0],
+    ];
+    let t = d[0] * e[0] + d[1] * e[1] + d[2] * e[2];
+    let len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    cross == [0; 3] && t > 0 && t < len2
+}
+
+/// What a mesh of the box `[lo, hi]` shows when it passes the checks.
+struct Checked {
+    min_sj: f64,
+    /// The quadrilaterals on each side of the box, by (axis, side).
+    sides: BTreeMap<(usize, usize), BTreeSet<Quad>>,
+}
+
+/// Checks the hexahedra `hexes` as a conforming mesh of the box `[lo, hi]`:
+/// volumes add up to the box's, every inner face is in exactly two
+/// hexahedra and every face on the box's sides in one, and no node lies
+/// inside an edge of a hexahedron it is not a corner of.
+fn check_box(hexes: &[Hex], lo: Point, hi: Point) -> Result<Checked, String> {
+    let mut min_sj = f64::INFINITY;
+    let mut volume = 0.0;
+    for h in hexes {
+        let sj = corner_scaled_jacobians(&coords(h));
+        min_sj = sj.iter().copied().fold(min_sj, f64::min);
+        volume += hexahedron_volume(&coords(h));
+    }
+    let box_volume: f64 = (0..3).map(|a| f64::from(hi[a] - lo[a])).product();
+    if (volume - box_volume).abs() > 1e-9 * box_volume {
+        return Err(format!("volume {volume} for a box of {box_volume}"));
+    }
+    let mut uses: BTreeMap<Quad, usize> = BTreeMap::new();
+    for h in hexes {
+        for f in HEX_FACES {
+            *uses.entry(key(f.map(|i| h[i]))).or_default() += 1;
+        }
+    }
+    let mut sides: BTreeMap<(usize, usize), BTreeSet<Quad>> = BTreeMap::new();
+    for (q, &n) in &uses {
+        let side = (0..3).find_map(|a| {
+            [(lo[a], 0), (hi[a], 1)]
+                .into_iter()
+                .find(|&(x, _)| q.iter().all(|p| p[a] == x))
+                .map(|(_, s)| (a, s))
+        });
+        match side {
+            Some(s) if n == 1 => {
+                sides.entry(s).or_default().insert(*q);
+            }
+            None if n == 2 => {}
+            _ => return Err(format!("face {q:?} in {n} hexahedra")),
+        }
+    }
+    let nodes: BTreeSet<Point> = hexes.iter().flatten().copied().collect();
+    for h in hexes {
+        for [i, j] in HEX_EDGES {
+            if let Some(p) = nodes.iter().find(|&&p| strictly_inside(p, h[i], h[j])) {
+                return Err(format!("node {p:?} inside the edge {:?} {:?}", h[i], h[j]));
+            }
+        }
+    }
+    Ok(Checked { min_sj, sides })
+}
+
+fn pattern_keys(marks: Marks, axis: usize, side: usize) -> Option<BTreeSet<Quad>> {
+    face_pattern(marks, axis, side).map(|qs| qs.into_iter().map(key).collect())
+}
+
+#[test]
+fn the_configurations_are_the_22_classes_of_256_mark_sets() {
+    let classes = configurations();
+    assert_eq!(classes.len(), 22);
+    assert_eq!(classes.iter().map(|c| c.members).sum::<usize>(), 256);
+    for m in 0..=255u8 {
+        let rep = Marks(m).class();
+        assert!(Symmetry::all().any(|s| Marks(m).transform(s) == rep));
+        assert_eq!(rep.class(), rep);
+    }
+}
+
+#[test]
+fn every_template_passes_the_brute_force_check() {
+    let mut worst = f64::INFINITY;
+    let mut covered = 0;
+    for m in 0..=255u8 {
+        let marks = Marks(m);
+        let Some(hexes) = macro_template(marks) else {
+            continue;
+        };
+        covered += 1;
+        let checked =
+            check_box(&hexes, [0; 3], [MACRO; 3]).unwrap_or_else(|e| panic!("marks {m:08b}: {e}"));
+        assert!(
+            checked.min_sj >= 0.3,
+            "marks {m:08b}: scaled Jacobian {}",
+            checked.min_sj
+        );
+        worst = worst.min(checked.min_sj);
+        for axis in 0..3 {
+            for side in 0..2 {
+                let want = pattern_keys(marks, axis, side)
+                    .unwrap_or_else(|| panic!("marks {m:08b}: no pattern for face {axis} {side}"));
+                let got = checked
+                    .sides
+                    .get(&(axis, side))
+                    .cloned()
+                    .unwrap_or_default();
+                assert_eq!(got, want, "marks {m:08b}, face {axis} {side}");
+            }
+        }
+    }
+    eprintln!("{covered} of 256 mark sets have a template; worst scaled Jacobian {worst:.3}");
+    // Every mark set whose marked edges share no corner, and all eight.
+    let expected = (0..=255u8)
+        .filter(|&m| Marks(m).is_matching() || m == 0xff)
+        .count();
+    assert_eq!(covered, expected);
+    assert!(worst >= 0.40, "worst scaled Jacobian {worst}");
+}
+
+#[test]
+fn face_patterns_do_not_depend_on_the_frame() {
+    // The pattern of a face seen through any symmetry of the cube is the
+    // pattern of the image face under the image marks: a face's pattern is
+    // a function of its own corner marks, not of where it sits.
+    for m in 0..=255u8 {
+        let marks = Marks(m);
+        for s in Symmetry::all() {
+            let image = marks.transform(s);
+            for axis in 0..3 {
+                for side in 0..2 {
+                    let Some(quads) = pattern_keys(marks, axis, side) else {
+                        continue;
+                    };
+                    let out_axis = (0..3).find(|&a| s.perm[a] == axis).unwrap();
+                    let out_side = side ^ (s.flip as usize >> out_axis & 1);
+                    let moved: BTreeSet<Quad> = quads
+                        .into_iter()
+                        .map(|q| key(q.map(|p| apply(s, p))))
+                        .collect();
+                    assert_eq!(
+                        Some(moved),
+                        pattern_keys(image, out_axis, out_side),
+                        "marks {m:08b} face {axis} {side} under {s:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// A lattice point of the macro cell under the symmetry `s`.
+fn apply(s: Symmetry, p: Point) -> Point {
+    std::array::from_fn(|a| {
+        let x = p[s.perm[a]];
+        if s.flip >> a & 1 == 1 {
+            MACRO - x
+        } else {
+            x
+        }
+    })
+}
+
+#[test]
+fn symmetry_maps_corners_as_points() {
+    for s in Symmetry::all() {
+        for c in 0..8 {
+            let p: Point = std::array::from_fn(|a| MACRO * (c >> a & 1) as i32);
+            let q = apply(s, p);
+            let image: usize = (0..3).map(|a| ((q[a] / MACRO) as usize) << a).sum();
+            assert_eq!(image, s.corner(c));
+        }
+    }
+}
+
+#[test]
+fn a_face_with_all_four_corners_marked_is_fine_cells_and_none_is_leaves() {
+    let all = pattern_keys(Marks(0xff), 2, 0).unwrap();
+    assert_eq!(all.len(), 16);
+    assert!(all
+        .iter()
+        .all(|q| q[3][0] - q[0][0] == FINE && q[3][1] - q[0][1] == FINE));
+    let none = pattern_keys(Marks(0), 2, 0).unwrap();
+    assert_eq!(none.len(), 4);
+}
+
+#[test]
+fn the_classes_without_a_template_are_listed() {
+    let open: Vec<String> = configurations()
+        .into_iter()
+        .filter(|c| !c.covered)
+        .map(|c| format!("{:08b}", c.representative.0))
+        .collect();
+    eprintln!("classes without a template: {}", open.join(" "));
+    let covered = configurations().iter().filter(|c| c.covered).count();
+    assert_eq!(covered + open.len(), 22);
+    assert!(covered >= 10, "{covered} classes covered");
+}
