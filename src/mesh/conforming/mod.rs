@@ -65,6 +65,7 @@
 //! inner structure crosses the octants; [`configurations`] lists what is
 //! covered and what is not.
 
+pub mod conditions;
 pub mod marks;
 pub mod pieces;
 

@@ -2,6 +2,7 @@
 
 use super::*;
 use crate::geometry::cells::{corner_scaled_jacobians, hexahedron_volume};
+use crate::octree::octant::Octant;
 use std::collections::{BTreeMap, BTreeSet};
 
 /// The faces of a VTK hexahedron.
@@ -245,4 +246,127 @@ fn the_classes_without_a_template_are_listed() {
     let covered = configurations().iter().filter(|c| c.covered).count();
     assert_eq!(covered + open.len(), 22);
     assert!(covered >= 10, "{covered} classes covered");
+}
+
+/// Leaves of a random complete octree (each octant split with probability
+/// `p` down to `max_level`), corner balanced.
+fn random_leaves(seed: u64, max_level: u8, p: f64) -> Vec<Octant> {
+    use crate::octree::octant::Connectivity;
+    use crate::octree::LinearOctree;
+    let mut rng = crate::testutil::Rng(seed);
+    let mut out = Vec::new();
+    let mut stack = vec![Octant::ROOT];
+    while let Some(o) = stack.pop() {
+        if o.level() < 2 || (o.level() < max_level && rng.unit() < p) {
+            stack.extend(o.children().into_iter().rev());
+        } else {
+            out.push(o);
+        }
+    }
+    let mut t = LinearOctree::from_local_leaves(serial(), out).unwrap();
+    t.balance(Connectivity::Corner).unwrap();
+    t.leaves().to_vec()
+}
+
+fn serial() -> crate::parallel::comm::CommRef {
+    std::rc::Rc::new(crate::parallel::comm::SerialComm)
+}
+
+/// How a leaf set fares under the scheme: the extra refinement of the
+/// conditions and the macro cells per class, covered or not.
+struct Census {
+    leaves: usize,
+    macros: usize,
+    covered: usize,
+    /// Macro cells per open class representative.
+    open: BTreeMap<u8, usize>,
+}
+
+fn census(leaves: &[Octant]) -> Census {
+    let macros = conditions::macro_tree(serial(), leaves).unwrap();
+    let marks = conditions::marks(&macros);
+    // The conditions, checked on their own: every macro corner is touched
+    // by cells at most one level finer, and the children of the macro cells
+    // cover what the leaves covered.
+    let mut finest: BTreeMap<[u32; 3], u8> = BTreeMap::new();
+    for &o in &macros {
+        for c in 0..8 {
+            let p: [u32; 3] =
+                std::array::from_fn(|d| o.coords()[d] + (c >> d & 1) as u32 * o.side());
+            let e = finest.entry(p).or_insert(0);
+            *e = (*e).max(o.level());
+        }
+    }
+    for &o in &macros {
+        for c in 0..8 {
+            let p: [u32; 3] =
+                std::array::from_fn(|d| o.coords()[d] + (c >> d & 1) as u32 * o.side());
+            assert!(
+                finest[&p] <= o.level() + 1,
+                "macro tree not corner balanced"
+            );
+        }
+    }
+    let volume = |os: &[Octant]| os.iter().map(|o| (o.side() as f64).powi(3)).sum::<f64>();
+    assert_eq!(volume(&macros), volume(leaves));
+    let mut open = BTreeMap::new();
+    let mut covered = 0;
+    for m in &marks {
+        if macro_template(*m).is_some() {
+            covered += 1;
+        } else {
+            *open.entry(m.class().0).or_default() += 1;
+        }
+    }
+    Census {
+        leaves: leaves.len(),
+        macros: macros.len(),
+        covered,
+        open,
+    }
+}
+
+fn print_census(name: &str, c: &Census) {
+    let open: Vec<String> = c.open.iter().map(|(k, n)| format!("{k:08b}:{n}")).collect();
+    eprintln!(
+        "{name}: {} leaves -> {} macro cells ({} leaves, x{:.2}); {} covered, {} open [{}]",
+        c.leaves,
+        c.macros,
+        8 * c.macros,
+        8.0 * c.macros as f64 / c.leaves as f64,
+        c.covered,
+        c.macros - c.covered,
+        open.join(" ")
+    );
+}
+
+#[test]
+fn the_conditions_hold_on_random_octrees_and_the_census_names_the_open_classes() {
+    for seed in 0..6 {
+        let leaves = random_leaves(seed, 6, 0.3);
+        let c = census(&leaves);
+        print_census(&format!("random {seed}"), &c);
+        assert!(8 * c.macros >= c.leaves);
+        // A random octree has transitions across faces: the open face class
+        // (four marks on a face) must show up, or the census is not looking.
+        assert!(c.open.contains_key(&0b0000_1111), "seed {seed}");
+    }
+}
+
+#[test]
+fn census_of_the_sphere() {
+    use crate::octree::domain::{Domain, DEFAULT_FIT};
+    use crate::octree::octant::Connectivity;
+    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+    let s = crate::geometry::load_surface("sphere").unwrap();
+    let b = s.bbox();
+    let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+    let index = SurfaceIndex::new(&s, &domain);
+    for level in [4u8, 5] {
+        let mut t = build_from_surface(serial(), &index, level, NO_LIMIT).unwrap();
+        t.balance(Connectivity::Corner).unwrap();
+        let c = census(t.leaves());
+        print_census(&format!("sphere level {level}"), &c);
+        assert!(c.covered > 0 && c.covered < c.macros);
+    }
 }
