@@ -79,6 +79,18 @@ impl Symmetry {
             .flat_map(|perm| (0..8u8).map(move |flip| Symmetry { perm, flip }))
     }
 
+    /// The image of a lattice point of the macro cell.
+    pub fn point(self, p: super::Point) -> super::Point {
+        std::array::from_fn(|a| {
+            let x = p[self.perm[a]];
+            if self.flip >> a & 1 == 1 {
+                super::MACRO - x
+            } else {
+                x
+            }
+        })
+    }
+
     /// The image of Morton corner `c`.
     pub fn corner(self, c: usize) -> usize {
         (0..3)

@@ -48,7 +48,7 @@
 //! half-edge pieces, see [`pieces`]); all eight marked is 4 x 4 x 4 fine
 //! cells. Every template is checked by brute force in the unit tests:
 //! volumes add up to the macro cell's, every corner's scaled Jacobian at
-//! least 0.3 (the pieces reach 0.408), every inner face in exactly two
+//! least 0.3 (the templates reach 0.400), every inner face in exactly two
 //! hexahedra, the boundary equal to the canonical pattern of each face.
 //!
 //! # Configurations without a template

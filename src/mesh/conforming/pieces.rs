@@ -30,7 +30,7 @@
 //!
 //! A macro cell with all eight corners marked is 4 x 4 x 4 fine cells.
 
-use super::marks::{away, Marks};
+use super::marks::{away, Marks, Symmetry};
 use super::{Hex, Point, FINE, MACRO};
 
 /// A hexahedron in an octant's own frame: fine cells from the macro corner
@@ -42,6 +42,9 @@ type LocalHex = [[f64; 3]; 8];
 pub fn macro_template(marks: Marks) -> Option<Vec<Hex>> {
     if marks.0 == 0xff {
         return Some(grid(4));
+    }
+    if let Some(s) = Symmetry::all().find(|&s| Marks(0x0f).transform(s) == marks) {
+        return Some(face_template().iter().map(|h| turn(s, h)).collect());
     }
     if !marks.is_matching() {
         return None;
@@ -171,22 +174,122 @@ fn half_edge_piece(d: usize) -> Vec<LocalHex> {
     out.iter().map(|h| rotate(h, d)).collect()
 }
 
+/// The face template: the four corners of the face z = 0 marked, nothing
+/// else. Fine cells in `z` in [0, 1]; in [1, 2] the 2D pair template in
+/// (x, z), whose four lower quadrilaterals each carry the pair template in
+/// y swept across them (4 segments along y at their lower edge, 2 at their
+/// upper), and whose two upper quadrilaterals are swept along y in 2
+/// segments; leaves above; the mid-plane y = 2 lifted ([`lift`]). Every
+/// side face shows fine cells, then the pair template, then leaves: the
+/// canonical pattern of a face with one marked edge (48 hexahedra).
+fn face_template() -> Vec<Hex> {
+    // The pair template over [0, 4] with its lower side at 0 and its upper
+    // at 1: nodes, then lower (from the lower edge) and upper quadrilaterals.
+    const B: [[f64; 2]; 5] = [[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0]];
+    const P: [f64; 2] = [1.0, 0.5];
+    const M: [f64; 2] = [2.0, 0.5];
+    const Q: [f64; 2] = [3.0, 0.5];
+    const T: [[f64; 2]; 3] = [[0.0, 1.0], [2.0, 1.0], [4.0, 1.0]];
+    let lower = [
+        [B[0], B[1], P, T[0]],
+        [B[1], B[2], M, P],
+        [B[2], B[3], Q, M],
+        [B[3], B[4], T[2], Q],
+    ];
+    let upper = [[P, M, T[1], T[0]], [M, Q, T[2], T[1]]];
+    let mut local: Vec<LocalHex> = Vec::new();
+    for j in 0..4 {
+        for i in 0..4 {
+            let (i, j) = (f64::from(i), f64::from(j));
+            local.push(boxed([i, j, 0.0], [i + 1.0, j + 1.0, 1.0]));
+        }
+    }
+    // (x, z) of a lower quadrilateral `c` at (s, w): s across it from its
+    // left side to its right, w from its lower edge to its upper.
+    let bilinear = |c: [[f64; 2]; 4], s: f64, w: f64| -> [f64; 2] {
+        std::array::from_fn(|k| {
+            (1.0 - s) * (1.0 - w) * c[0][k]
+                + s * (1.0 - w) * c[1][k]
+                + s * w * c[2][k]
+                + (1.0 - s) * w * c[3][k]
+        })
+    };
+    for c in lower {
+        for y_quad in lower.iter().chain(upper.iter()) {
+            local.push(std::array::from_fn(|k| {
+                let [y, w] = y_quad[k % 4];
+                let [x, z] = bilinear(c, (k / 4) as f64, w);
+                [x, y, 1.0 + z]
+            }));
+        }
+    }
+    for c in upper {
+        for y0 in [0.0, 2.0] {
+            local.push(std::array::from_fn(|k| {
+                let [x, z] = c[k % 4];
+                [x, y0 + 2.0 * (k / 4) as f64, 1.0 + z]
+            }));
+        }
+    }
+    for j in 0..2 {
+        for i in 0..2 {
+            let (i, j) = (2.0 * f64::from(i), 2.0 * f64::from(j));
+            local.push(boxed([i, j, 2.0], [i + 2.0, j + 2.0, 4.0]));
+        }
+    }
+    local.iter().map(|h| place(0, &h.map(lift))).collect()
+}
+
+/// The face template's nodes on the mid-plane y = 2 inside the macro cell,
+/// raised: the sweep alone leaves the pair template in y squeezed into half
+/// a fine cell under the pair template in x (scaled Jacobian 0.22); lifted,
+/// the inner U-turn arches over the outer one and every corner reaches 0.4
+/// (found by maximising the smallest corner over the free nodes, then
+/// rounded to half fine cells).
+fn lift(p: [f64; 3]) -> [f64; 3] {
+    const LIFTS: [([f64; 3], f64); 5] = [
+        ([1.0, 2.0, 1.25], 1.5),
+        ([1.0, 2.0, 1.5], 2.0),
+        ([2.0, 2.0, 1.25], 1.5),
+        ([2.0, 2.0, 1.5], 2.5),
+        ([2.0, 2.0, 2.0], 3.0),
+    ];
+    let mirrored = [4.0 - p[0], p[1], p[2]];
+    for (from, z) in LIFTS {
+        if p == from || mirrored == from {
+            return [p[0], p[1], z];
+        }
+    }
+    p
+}
+
+/// A macro-lattice hexahedron under the symmetry `s`, turned to a positive
+/// volume.
+fn turn(s: Symmetry, h: &Hex) -> Hex {
+    orient(h.map(|p| s.point(p)))
+}
+
+/// The hexahedron, its two faces swapped if its volume is negative.
+fn orient(hex: Hex) -> Hex {
+    if signed_volume(&hex) < 0 {
+        [
+            hex[4], hex[5], hex[6], hex[7], hex[0], hex[1], hex[2], hex[3],
+        ]
+    } else {
+        hex
+    }
+}
+
 /// An octant-frame hexahedron placed at macro corner `c`, in lattice units,
 /// turned to a positive volume.
 fn place(c: usize, h: &LocalHex) -> Hex {
-    let mut hex: Hex = h.map(|p| {
+    orient(h.map(|p| {
         std::array::from_fn(|a| {
             let quarters = p[a] * FINE as f64;
             debug_assert_eq!(quarters, quarters.round(), "off the lattice");
             away(c, a, quarters as i32)
         })
-    });
-    if signed_volume(&hex) < 0 {
-        hex = [
-            hex[4], hex[5], hex[6], hex[7], hex[0], hex[1], hex[2], hex[3],
-        ];
-    }
-    hex
+    }))
 }
 
 /// Six times the volume of the tetrahedra of a hexahedron's corner 0 (for
