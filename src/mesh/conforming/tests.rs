@@ -376,3 +376,143 @@ fn census_of_the_sphere() {
         assert!(c.covered > 0 && c.covered < c.macros);
     }
 }
+
+/// A box of macro cells: lowest and past-the-highest indices.
+type Region = ([u32; 3], [u32; 3]);
+
+/// The leaves of macro cells of `level` filling the root, with the boxes
+/// `refined` (in macro cells of that level, half-open) one macro level
+/// finer, and the boxes `deeper` two levels finer.
+fn boxed_leaves(level: u8, refined: &[Region], deeper: &[Region]) -> Vec<Octant> {
+    let inside = |o: Octant, boxes: &[Region], l: u8| {
+        let side = 1u32 << (crate::octree::octant::MAX_LEVEL + 1 - l);
+        let c = o.coords();
+        boxes
+            .iter()
+            .any(|(lo, hi)| (0..3).all(|d| c[d] >= lo[d] * side && c[d] < hi[d] * side))
+    };
+    let mut out = Vec::new();
+    let mut stack = vec![Octant::ROOT];
+    while let Some(o) = stack.pop() {
+        // Macro cells: `level` outside, +1 in `refined`, +2 in `deeper`;
+        // leaves one level below their macro cell.
+        let macro_level = if inside(o, deeper, level) {
+            level + 2
+        } else if inside(o, refined, level) {
+            level + 1
+        } else {
+            level
+        };
+        if o.level() <= macro_level {
+            stack.extend(o.children().into_iter().rev());
+        } else {
+            out.push(o);
+        }
+    }
+    out
+}
+
+/// Checks the assembled hexahedra of a whole octree: the volume is the
+/// root's, every face is in two hexahedra or on the root's boundary, no
+/// node lies inside a hexahedron's edge, every corner's scaled Jacobian is
+/// at least 0.3. Returns the number of hexahedra.
+fn check_global(hexes: &[[assemble::GlobalPoint; 8]]) -> usize {
+    let root = (1u64 << (crate::octree::octant::MAX_LEVEL + 1)) * MACRO as u64;
+    let mut volume = 0.0;
+    for h in hexes {
+        let p = h.map(|q| q.map(|x| x as f64));
+        volume += hexahedron_volume(&p);
+        let sj = corner_scaled_jacobians(&p);
+        assert!(sj.iter().all(|&x| x >= 0.3), "{h:?}: {sj:?}");
+    }
+    let root_volume = (root as f64).powi(3);
+    assert!((volume - root_volume).abs() <= 1e-12 * root_volume);
+    let mut uses: BTreeMap<[assemble::GlobalPoint; 4], usize> = BTreeMap::new();
+    for h in hexes {
+        for f in HEX_FACES {
+            let mut k = f.map(|i| h[i]);
+            k.sort();
+            *uses.entry(k).or_default() += 1;
+        }
+    }
+    for (q, n) in &uses {
+        let on_boundary =
+            (0..3).any(|a| q.iter().all(|p| p[a] == 0) || q.iter().all(|p| p[a] == root));
+        assert_eq!(*n, if on_boundary { 1 } else { 2 }, "face {q:?}");
+    }
+    // A node inside an edge sits at a lattice point between its ends: walk
+    // each edge in its smallest lattice steps.
+    // Every node is a multiple of the smallest step any coordinate makes.
+    let nodes: BTreeSet<assemble::GlobalPoint> = hexes.iter().flatten().copied().collect();
+    let unit = nodes
+        .iter()
+        .flatten()
+        .fold(0i64, |g, &x| gcd(g, x as i64))
+        .max(1);
+    for h in hexes {
+        for [i, j] in HEX_EDGES {
+            let (a, b) = (h[i].map(|x| x as i64 / unit), h[j].map(|x| x as i64 / unit));
+            let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let g = d.iter().fold(0i64, |g, &x| gcd(g, x.abs()));
+            for t in 1..g {
+                let p: assemble::GlobalPoint =
+                    std::array::from_fn(|k| ((a[k] + d[k] / g * t) * unit) as u64);
+                assert!(
+                    !nodes.contains(&p),
+                    "node {p:?} inside the edge {:?} {:?}",
+                    h[i],
+                    h[j]
+                );
+            }
+        }
+    }
+    hexes.len()
+}
+
+fn gcd(a: i64, b: i64) -> i64 {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+#[test]
+fn octrees_of_covered_configurations_assemble_into_conforming_meshes() {
+    // Boxes of finer macro cells inside coarser ones: every coarse macro
+    // cell sees a face, an edge or a corner of a box (the covered classes);
+    // the nested box puts a third level inside the second.
+    let cases: [(&str, Vec<Region>, Vec<Region>); 4] = [
+        ("one box", vec![([1, 1, 1], [3, 2, 3])], vec![]),
+        ("box at the boundary", vec![([0, 0, 0], [2, 2, 1])], vec![]),
+        (
+            "two boxes",
+            vec![([0, 0, 0], [1, 1, 1]), ([2, 2, 2], [4, 4, 4])],
+            vec![],
+        ),
+        (
+            "nested",
+            vec![([0, 0, 0], [3, 3, 3])],
+            vec![([1, 1, 1], [2, 2, 2])],
+        ),
+    ];
+    for (name, refined, deeper) in cases {
+        let leaves = boxed_leaves(2, &refined, &deeper);
+        let macros = conditions::macro_tree(serial(), &leaves).unwrap();
+        assert_eq!(
+            8 * macros.len(),
+            leaves.len(),
+            "{name}: the conditions held"
+        );
+        let marks = conditions::marks(&macros);
+        let hexes = assemble::assemble(&macros, &marks)
+            .unwrap_or_else(|o| panic!("{name}: no template for {o:?}"));
+        let n = check_global(&hexes);
+        eprintln!(
+            "{name}: {} leaves, {n} hexahedra ({:.2} per leaf)",
+            leaves.len(),
+            n as f64 / leaves.len() as f64
+        );
+        assert!(n <= 4 * leaves.len());
+    }
+}
