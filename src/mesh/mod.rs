@@ -55,6 +55,7 @@
 
 pub mod boundary;
 mod build;
+pub mod conforming;
 pub(crate) mod dual;
 pub mod faces;
 pub(crate) mod hanging;
