@@ -62,6 +62,7 @@ mod locate;
 pub mod manifold;
 pub(crate) mod numbering;
 pub mod patches;
+pub mod pieces;
 pub mod points;
 pub mod quality;
 pub mod snap;

@@ -1,0 +1,110 @@
+//! The pieces of a mesh joined through faces: what a solver's stiffness
+//! sees.
+//!
+//! Two elements are joined when they share a face or a piece of one (on a
+//! 2:1-balanced mesh, a whole face or a quarter of the coarser element's):
+//! exactly the internal and halo faces of [`Mesh::faces`]. Pieces touching
+//! only along an edge or at a corner stay apart: such a joint is a hinge,
+//! and the stiffness is singular unless every piece is held.
+//!
+//! Each rank joins its elements through its internal faces (union-find,
+//! each piece named by its first element's global number) and sends rank 0
+//! its pieces' sizes and, per halo face, its element, that element's piece
+//! and the other rank's element. Rank 0 joins the pieces across ranks and
+//! broadcasts the sizes. Only the partition boundary's faces travel.
+
+use crate::geometry::hash::FoldMap;
+use crate::parallel::comm::Comm;
+
+use super::faces::{Faces, Other};
+use super::Mesh;
+
+/// The representative of `a`'s set; halves the path on the way.
+fn root(parent: &mut [u32], mut a: u32) -> u32 {
+    while parent[a as usize] != a {
+        let up = parent[parent[a as usize] as usize];
+        parent[a as usize] = up;
+        a = up;
+    }
+    a
+}
+
+/// Joins the sets of `a` and `b`; the lower representative stays.
+fn join(parent: &mut [u32], a: u32, b: u32) {
+    let (a, b) = (root(parent, a), root(parent, b));
+    parent[a.max(b) as usize] = a.min(b);
+}
+
+/// Sends `local` to rank 0; rank 0 gets every rank's in rank order.
+fn to_root(comm: &dyn Comm, local: &[u64]) -> Vec<u64> {
+    let mut counts = vec![0usize; comm.size()];
+    counts[0] = local.len();
+    comm.alltoallv_u64(local, &counts).0
+}
+
+/// The sizes (elements) of the pieces of `mesh` joined through faces,
+/// largest first, the same on every rank. `faces` is this mesh's
+/// [`Mesh::faces`]. Collective.
+pub fn pieces(comm: &dyn Comm, mesh: &Mesh, faces: &Faces) -> Vec<u64> {
+    let ne = mesh.elements().len();
+    let first = mesh.first_element();
+    let mut parent: Vec<u32> = (0..ne as u32).collect();
+    for f in &faces.faces()[..faces.num_internal()] {
+        if let Other::Element(j) = f.other() {
+            join(&mut parent, f.owner(), j);
+        }
+    }
+    // A piece's representative is its lowest element.
+    let mut size = vec![0u32; ne];
+    for e in 0..ne as u32 {
+        let r = root(&mut parent, e);
+        size[r as usize] += 1;
+    }
+    let mut local: Vec<u64> = Vec::new();
+    for (e, &s) in size.iter().enumerate() {
+        if s > 0 {
+            local.extend([first + e as u64, u64::from(s)]);
+        }
+    }
+    let sizes = to_root(comm, &local);
+    local.clear();
+    let global = &mesh.halo().global;
+    for f in &faces.faces()[faces.halo_range()] {
+        if let Other::Halo(h) = f.other() {
+            let e = f.owner();
+            let r = u64::from(root(&mut parent, e));
+            local.extend([first + u64::from(e), first + r, global[h as usize]]);
+        }
+    }
+    let across = to_root(comm, &local);
+    drop(local);
+    let mut out: Vec<u64> = Vec::new();
+    if comm.rank() == 0 {
+        // Join the ranks' pieces through the halo faces, each seen from
+        // both sides.
+        let index: FoldMap<u64, u32> = (sizes.chunks_exact(2).enumerate())
+            .map(|(i, w)| (w[0], i as u32))
+            .collect();
+        let piece_of: FoldMap<u64, u64> = across.chunks_exact(3).map(|w| (w[0], w[1])).collect();
+        let mut parent: Vec<u32> = (0..index.len() as u32).collect();
+        for w in across.chunks_exact(3) {
+            if let (Some(&a), Some(b)) = (index.get(&w[1]), piece_of.get(&w[2])) {
+                if let Some(&b) = index.get(b) {
+                    join(&mut parent, a, b);
+                }
+            }
+        }
+        let mut total = vec![0u64; parent.len()];
+        for (i, w) in sizes.chunks_exact(2).enumerate() {
+            total[root(&mut parent, i as u32) as usize] += w[1];
+        }
+        out = total.into_iter().filter(|&s| s > 0).collect();
+        out.sort_unstable_by(|a, b| b.cmp(a));
+    }
+    let mut bytes: Vec<u8> = out.iter().flat_map(|s| s.to_le_bytes()).collect();
+    comm.broadcast_bytes(0, &mut bytes);
+    bytes
+        .chunks_exact(8)
+        .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
+        .collect()
+}
