@@ -56,6 +56,42 @@ pub struct GatheredFace {
     pub label: u8,
 }
 
+/// The nodes a hanging node of a [`Gathered`] mesh is the mean of: 4 for a
+/// face-hanging node, 2 for an edge-hanging one. Fixed size, so that a
+/// million hanging nodes cost no allocation each.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Parents {
+    count: u8,
+    nodes: [u32; 4],
+}
+
+impl Parents {
+    /// The parents `nodes` (at most 4; more are dropped).
+    pub fn new(nodes: &[u32]) -> Parents {
+        let mut p = Parents::default();
+        for (&n, to) in nodes.iter().zip(&mut p.nodes) {
+            *to = n;
+            p.count += 1;
+        }
+        p
+    }
+}
+
+impl std::ops::Deref for Parents {
+    type Target = [u32];
+    fn deref(&self) -> &[u32] {
+        &self.nodes[..self.count as usize]
+    }
+}
+
+impl<'a> IntoIterator for &'a Parents {
+    type Item = &'a u32;
+    type IntoIter = std::slice::Iter<'a, u32>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
 /// The whole mesh, on rank 0 (empty elsewhere). Nodes are 0-based: the
 /// independent ones `0..num_independent`, then the hanging ones.
 #[derive(Clone, Debug, Default)]
@@ -69,7 +105,7 @@ pub struct Gathered {
     /// Hanging node `num_independent + k` is the mean of the nodes
     /// `dependencies[k]` (4 for a face-hanging node, 2 for an edge-hanging
     /// one).
-    pub dependencies: Vec<Vec<u32>>,
+    pub dependencies: Vec<Parents>,
     /// Each patch's nodes (independent and hanging), increasing; one entry
     /// per patch id up to the highest used.
     pub patch_nodes: Vec<Vec<u32>>,
@@ -207,6 +243,15 @@ const NONE: u32 = u32::MAX;
 /// Numbered by a lower rank: the number arrives in [`gather`]'s exchange.
 const REMOTE: u32 = u32::MAX - 1;
 
+/// Words of [`gather`]'s halo-corner filter (2^20 bits).
+const FILTER_WORDS: usize = 1 << 14;
+
+/// The filter bit of point key `k`.
+#[inline]
+fn filter_bit(k: u64) -> usize {
+    (k.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 44) as usize
+}
+
 /// Gathers `mesh` with its `boundary` (this mesh's) on rank 0. Collective;
 /// the result is empty on the other ranks.
 ///
@@ -238,8 +283,13 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
     halo_corners.dedup();
     let mut first: FoldMap<u64, u32> =
         FoldMap::with_capacity_and_hasher(halo_corners.len(), Default::default());
+    // A bit per hashed key in front of the map: most nodes are no halo
+    // element's corner, and the bits stay in cache.
+    let mut filter = vec![0u64; FILTER_WORDS];
     for (i, &(k, _)) in halo_corners.iter().enumerate().rev() {
         first.insert(k, i as u32);
+        let b = filter_bit(k);
+        filter[b / 64] |= 1 << (b % 64);
     }
     // Number the nodes this rank uses first, in the order its elements
     // list them: independent and hanging ones apart.
@@ -253,8 +303,10 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
             if num[n] != NONE {
                 continue;
             }
-            if !first.is_empty() {
-                if let Some(&i) = first.get(&key(n)) {
+            let k = key(n);
+            let b = filter_bit(k);
+            if filter[b / 64] & 1 << (b % 64) != 0 {
+                if let Some(&i) = first.get(&k) {
                     if halo_corners[i as usize].1 < me {
                         num[n] = REMOTE;
                         continue;
@@ -334,23 +386,34 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
     let elements = to_root(comm, &buf);
     // The positions of the nodes numbered here, in their order.
     buf.clear();
-    let coords = mesh.coordinates();
+    let domain = mesh.domain();
+    let position = |n: usize| match mesh.moved() {
+        Some(m) => m[n],
+        None => domain.from_lattice(lattice[n].map(f64::from)),
+    };
     for &n in order.iter().flatten() {
-        buf.extend(coords[n as usize].iter().map(|x| x.to_bits()));
+        buf.extend(position(n as usize).map(f64::to_bits));
     }
-    drop(coords);
     let positions = to_root(comm, &buf);
     // The hanging nodes' dependencies, 4 numbers in 2 words (NONE after
     // an edge-hanging node's 2).
     buf.clear();
-    for &h in &order[1] {
-        let d = mesh.hanging_deps(h as usize - ni);
+    buf.resize(2 * order[1].len(), 0);
+    let hanging_offset = offset[1] as u32;
+    for (k, d) in mesh.all_hanging_deps().enumerate() {
+        // Only the hanging nodes numbered here are sent, at their places.
+        let Some(at) = num[ni + k].checked_sub(hanging_offset) else {
+            continue;
+        };
+        let Some(slot) = buf.get_mut(2 * at as usize..2 * at as usize + 2) else {
+            continue;
+        };
         let mut w = [u64::from(NONE); 4];
         for (w, &m) in w.iter_mut().zip(d.iter()) {
             *w = number(m, &mut bad);
             bad |= *w >= total_independent;
         }
-        buf.extend([w[0] | w[1] << 32, w[2] | w[3] << 32]);
+        slot.copy_from_slice(&[w[0] | w[1] << 32, w[2] | w[3] << 32]);
     }
     let dependencies = to_root(comm, &buf);
     // Patches: (number, patch) of the nodes numbered here, in their order
@@ -461,15 +524,13 @@ impl Parts<'_> {
             .dependencies
             .chunks_exact(2)
             .map(|w| {
-                [
+                let d = [
                     w[0] as u32,
                     (w[0] >> 32) as u32,
                     w[1] as u32,
                     (w[1] >> 32) as u32,
-                ]
-                .into_iter()
-                .take_while(|&d| d != NONE)
-                .collect()
+                ];
+                Parents::new(&d[..if d[2] == NONE { 2 } else { 4 }])
             })
             .collect();
         // The independent nodes of every rank come before the hanging

@@ -380,6 +380,13 @@ impl Mesh {
         self.dep_only.iter().map(|&(n, _)| n)
     }
 
+    /// [`Mesh::hanging_deps`] of every hanging node, in order, the coarse
+    /// elements' rows fetched ahead.
+    pub(crate) fn all_hanging_deps(&self) -> impl Iterator<Item = HangingDeps> + '_ {
+        self.hanging
+            .deps_in(0..self.hanging.len(), &self.connectivity)
+    }
+
     /// The hanging nodes found by the nodes they depend on (a new index).
     pub(crate) fn hanging_index(&self) -> hanging::DepsIndex {
         hanging::DepsIndex::new(&self.hanging, &self.connectivity, self.num_independent())
