@@ -17,8 +17,9 @@
 //! dependencies, and its boundary faces, as plain integer buffers. Rank 0
 //! only copies them into place.
 //!
-//! Rank 0 holds the whole mesh: about 60 bytes per node and 40 per
-//! element. That bounds the size of meshes these files suit.
+//! Rank 0 holds the whole mesh: about 100 bytes per node and 70 per
+//! element with the buffers it receives. That bounds the size of meshes
+//! these files suit.
 
 use crate::error::{Error, Result};
 use crate::geometry::hash::FoldMap;

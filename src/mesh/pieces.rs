@@ -108,3 +108,47 @@ pub fn pieces(comm: &dyn Comm, mesh: &Mesh, faces: &Faces) -> Vec<u64> {
         .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::{classify_leaves, CutRule, Keep};
+    use crate::io::gathered::gather;
+    use crate::mesh::MeshOptions;
+    use crate::octree::domain::{Domain, DEFAULT_FIT};
+    use crate::octree::octant::Connectivity;
+    use crate::parallel::comm::{CommRef, SerialComm};
+    use crate::refine::{build_from_surface, SurfaceIndex, NO_LIMIT};
+
+    /// The pieces through the faces equal those the gathered mesh finds by
+    /// its elements' face corners (hanging quarter faces by their coarse
+    /// face), on solids without the wall clean-up, some in pieces.
+    #[test]
+    fn pieces_equal_those_of_the_gathered_mesh() {
+        let comm: CommRef = std::rc::Rc::new(SerialComm);
+        let mut in_pieces = 0;
+        for (name, level) in [("sphere", 3), ("sphere", 4), ("torus", 4), ("torus", 5), ("hull", 5)] {
+            let s = crate::geometry::load_surface(name).unwrap();
+            let b = s.bbox();
+            let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();
+            let index = SurfaceIndex::new(&s, &domain);
+            let mut t = build_from_surface(comm.clone(), &index, level, NO_LIMIT).unwrap();
+            t.balance(Connectivity::Corner).unwrap();
+            let classes = classify_leaves(t.leaves(), &index);
+            let opts = MeshOptions {
+                keep: Keep::Inside,
+                cut_rule: CutRule::Center,
+                clean_walls: false,
+            };
+            let mesh = Mesh::build(&t, &domain, Some(&classes), &opts).unwrap();
+            let faces = mesh.faces().unwrap();
+            let boundary = mesh.boundary(&SerialComm, &faces, None).unwrap();
+            let g = gather(&SerialComm, &mesh, &boundary).unwrap();
+            let got = pieces(&SerialComm, &mesh, &faces);
+            assert_eq!(got, g.pieces(), "{name} level {level}");
+            assert_eq!(got.iter().sum::<u64>(), mesh.elements().len() as u64);
+            in_pieces += usize::from(got.len() > 1);
+        }
+        assert!(in_pieces > 0, "no mesh came out in pieces");
+    }
+}
