@@ -490,7 +490,7 @@ impl Parts<'_> {
         let total = (ni + nh) as usize;
         if self.positions.len() != 3 * total
             || self.dependencies.len() as u64 != 2 * nh
-            || self.elements.len() % 4 != 0
+            || !self.elements.len().is_multiple_of(4)
         {
             return Err(corrupt());
         }

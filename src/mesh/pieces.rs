@@ -127,7 +127,13 @@ mod tests {
     fn pieces_equal_those_of_the_gathered_mesh() {
         let comm: CommRef = std::rc::Rc::new(SerialComm);
         let mut in_pieces = 0;
-        for (name, level) in [("sphere", 3), ("sphere", 4), ("torus", 4), ("torus", 5), ("hull", 5)] {
+        for (name, level) in [
+            ("sphere", 3),
+            ("sphere", 4),
+            ("torus", 4),
+            ("torus", 5),
+            ("hull", 5),
+        ] {
             let s = crate::geometry::load_surface(name).unwrap();
             let b = s.bbox();
             let domain = Domain::around(b.min, b.max, DEFAULT_FIT).unwrap();

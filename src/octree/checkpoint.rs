@@ -251,7 +251,7 @@ fn add_block_sums(
     // padded words.
     let mut padded = vec![
         0u8;
-        if size % 8 == 0 {
+        if size.is_multiple_of(8) {
             0
         } else {
             PAD_LEAVES * 8 * w as usize
@@ -264,7 +264,7 @@ fn add_block_sums(
         let b = i / block;
         let end = (((b + 1) * block - first) as usize).min(keys.len());
         let mut s = word_sum(&key_bytes[8 * k..8 * end], i);
-        if size % 8 == 0 {
+        if size.is_multiple_of(8) {
             s = s.wrapping_add(word_sum(&data[k * size..end * size], n + i * w));
         } else {
             let stride = 8 * w as usize;
