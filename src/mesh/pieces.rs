@@ -122,11 +122,11 @@ mod tests {
 
     /// The pieces through the faces equal those the gathered mesh finds by
     /// its elements' face corners (hanging quarter faces by their coarse
-    /// face), on solids without the wall clean-up, some in pieces.
+    /// face), on solids without the wall clean-up and on cells chosen to
+    /// touch along an edge only and across a 2:1 face.
     #[test]
     fn pieces_equal_those_of_the_gathered_mesh() {
         let comm: CommRef = std::rc::Rc::new(SerialComm);
-        let mut in_pieces = 0;
         for (name, level) in [
             ("sphere", 3),
             ("sphere", 4),
@@ -153,8 +153,29 @@ mod tests {
             let got = pieces(&SerialComm, &mesh, &faces);
             assert_eq!(got, g.pieces(), "{name} level {level}");
             assert_eq!(got.iter().sum::<u64>(), mesh.elements().len() as u64);
-            in_pieces += usize::from(got.len() > 1);
         }
-        assert!(in_pieces > 0, "no mesh came out in pieces");
+        // Level-2 cells kept: A and C share a face; B touches A along an
+        // edge only; D, split into 8, has a 2:1 face with B.
+        let (a, c, b, d) = ([1u32, 1, 1], [1, 1, 2], [2, 2, 1], [3, 2, 1]);
+        let mut t = crate::octree::LinearOctree::new_uniform(comm.clone(), 2).unwrap();
+        let cell = |o: crate::octree::octant::Octant| o.coords().map(|x| x >> 17);
+        t.refine_once(3, |o| cell(o) == d, u64::MAX).unwrap();
+        t.balance(Connectivity::Corner).unwrap();
+        let classes: Vec<u8> = (t.leaves().iter())
+            .map(|&o| u8::from([a, c, b, d].contains(&cell(o))))
+            .collect();
+        let opts = MeshOptions {
+            keep: Keep::Inside,
+            cut_rule: CutRule::Center,
+            clean_walls: false,
+        };
+        let domain = Domain::cube([0.0; 3], 1.0).unwrap();
+        let mesh = Mesh::build(&t, &domain, Some(&classes), &opts).unwrap();
+        let faces = mesh.faces().unwrap();
+        let boundary = mesh.boundary(&SerialComm, &faces, None).unwrap();
+        let g = gather(&SerialComm, &mesh, &boundary).unwrap();
+        let got = pieces(&SerialComm, &mesh, &faces);
+        assert_eq!(got, vec![9, 2]);
+        assert_eq!(got, g.pieces());
     }
 }
