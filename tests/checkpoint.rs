@@ -155,7 +155,7 @@ fn damage(comm: &CommRef, good: &Path) {
         b
     };
     let mut version = bytes.clone();
-    version[8] = 2;
+    version[8] = 1;
     let mut magic = bytes.clone();
     magic[0] = b'X';
     let cases: Vec<(&str, Vec<u8>, ErrorKind, &str)> = vec![
@@ -199,7 +199,7 @@ fn damage(comm: &CommRef, good: &Path) {
             "version",
             version,
             ErrorKind::Format,
-            "version 2; this octmesh reads version 1",
+            "version 1; this octmesh reads version 2",
         ),
         (
             "magic",

@@ -141,7 +141,7 @@ pub fn abaqus_text(g: &Gathered, patches: &PatchNames) -> Result<String> {
         for &m in nodes {
             match (m as usize).checked_sub(g.num_independent) {
                 None => set.push(m),
-                Some(k) => set.extend(&g.dependencies[k]),
+                Some(k) => set.extend(g.dependencies[k].iter()),
             }
         }
         set.sort_unstable();

@@ -1,26 +1,29 @@
 //! The whole mesh on rank 0, numbered the same way on any number of ranks,
 //! for the single-file finite-element writers ([`super::gmsh`],
-//! [`super::abaqus`]).
+//! [`super::abaqus`], [`super::exodus`], [`super::cgns`]).
 //!
-//! Every rank sends rank 0 its elements (the 8 corners of each as lattice
-//! point keys, in global element order), its nodes (lattice key, position,
-//! the keys of a hanging node's dependencies, the node's patches) and its
-//! boundary faces, as plain integer buffers. Rank 0 merges the nodes by
-//! lattice point and numbers them by first use: the independent nodes in
-//! the order the elements, in global (Morton) element order, first list
-//! them, then the hanging nodes the same way. Global element order and
-//! lattice points do not depend on the partition, and neither do snapped
-//! positions ([`crate::mesh::snap`]), so the numbering and every written
-//! byte are the same on any number of ranks. (The mesh's own global node
-//! numbers do depend on the partition: an owner numbers its nodes in its
-//! own traversal order.)
+//! Nodes are numbered by first use: the independent nodes in the order the
+//! elements, in global (Morton) element order, first list them, then the
+//! hanging nodes the same way. Global element order and lattice points do
+//! not depend on the partition, and neither do snapped positions
+//! ([`crate::mesh::snap`]), so the numbering and every written byte are
+//! the same on any number of ranks. (The mesh's own global node numbers do
+//! depend on the partition: an owner numbers its nodes in its own
+//! traversal order.)
 //!
-//! Rank 0 holds the whole mesh: about 150 bytes per node and 40 per
-//! element. That bounds the size of meshes these files suit.
+//! The ranks number the nodes in parallel ([`gather`]): each numbers the
+//! nodes whose first use is one of its elements, and sends rank 0 its
+//! elements' corners in the final numbers, those nodes' positions and
+//! dependencies, and its boundary faces, as plain integer buffers. Rank 0
+//! only copies them into place.
+//!
+//! Rank 0 holds the whole mesh: about 100 bytes per node and 70 per
+//! element with the buffers it receives. That bounds the size of meshes
+//! these files suit.
 
 use crate::error::{Error, Result};
 use crate::geometry::hash::FoldMap;
-use crate::mesh::points::point_key;
+use crate::mesh::points::{halo_corners, point_key};
 use crate::mesh::{Boundary, Mesh};
 use crate::parallel::comm::Comm;
 
@@ -54,6 +57,42 @@ pub struct GatheredFace {
     pub label: u8,
 }
 
+/// The nodes a hanging node of a [`Gathered`] mesh is the mean of: 4 for a
+/// face-hanging node, 2 for an edge-hanging one. Fixed size, so that a
+/// million hanging nodes cost no allocation each.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Parents {
+    count: u8,
+    nodes: [u32; 4],
+}
+
+impl Parents {
+    /// The parents `nodes` (at most 4; more are dropped).
+    pub fn new(nodes: &[u32]) -> Parents {
+        let mut p = Parents::default();
+        for (&n, to) in nodes.iter().zip(&mut p.nodes) {
+            *to = n;
+            p.count += 1;
+        }
+        p
+    }
+}
+
+impl std::ops::Deref for Parents {
+    type Target = [u32];
+    fn deref(&self) -> &[u32] {
+        &self.nodes[..self.count as usize]
+    }
+}
+
+impl<'a> IntoIterator for &'a Parents {
+    type Item = &'a u32;
+    type IntoIter = std::slice::Iter<'a, u32>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
 /// The whole mesh, on rank 0 (empty elsewhere). Nodes are 0-based: the
 /// independent ones `0..num_independent`, then the hanging ones.
 #[derive(Clone, Debug, Default)]
@@ -67,7 +106,7 @@ pub struct Gathered {
     /// Hanging node `num_independent + k` is the mean of the nodes
     /// `dependencies[k]` (4 for a face-hanging node, 2 for an edge-hanging
     /// one).
-    pub dependencies: Vec<Vec<u32>>,
+    pub dependencies: Vec<Parents>,
     /// Each patch's nodes (independent and hanging), increasing; one entry
     /// per patch id up to the highest used.
     pub patch_nodes: Vec<Vec<u32>>,
@@ -200,41 +239,202 @@ fn to_root(comm: &dyn Comm, local: &[u64]) -> Vec<u64> {
     comm.alltoallv_u64(local, &counts).0
 }
 
+/// No number yet.
+const NONE: u32 = u32::MAX;
+/// Numbered by a lower rank: the number arrives in [`gather`]'s exchange.
+const REMOTE: u32 = u32::MAX - 1;
+
+/// Words of [`gather`]'s halo-corner filter (2^20 bits).
+const FILTER_WORDS: usize = 1 << 14;
+
+/// The filter bit of point key `k`.
+#[inline]
+fn filter_bit(k: u64) -> usize {
+    (k.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 44) as usize
+}
+
 /// Gathers `mesh` with its `boundary` (this mesh's) on rank 0. Collective;
 /// the result is empty on the other ranks.
+///
+/// Each node is numbered by its *first user*, the lowest rank with an
+/// element that has it as a corner (an element of a lower rank with the
+/// node as a corner touches the local element there, so it is in the
+/// halo). The first user numbers its nodes in the order its elements list
+/// them; an exclusive scan of the counts places the independent nodes of
+/// every rank before all the hanging ones. The first user sends each
+/// number on a partition boundary to the ranks that hold the node: those
+/// of the halo elements with it as a corner and, for an independent node,
+/// its sharers (which include the ranks that use it only as a hanging
+/// node's dependency). Rank 0 then receives the connectivity in the final
+/// numbers and each node's position once, from its first user, in order.
 pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathered> {
+    let me = comm.rank() as u32;
+    let p = comm.size();
     let lattice = mesh.node_lattice();
-    let keys: Vec<u64> = lattice.iter().map(|&p| point_key(p)).collect();
-    let coords = mesh.coordinates();
+    let key = |n: usize| point_key(lattice[n]);
     let ni = mesh.num_independent();
-    // Elements: 8 keys each.
-    let mut buf: Vec<u64> = Vec::with_capacity(mesh.connectivity().len() * 8);
+    let halo = mesh.halo();
+    // The halo elements' corners with their ranks, sorted: a key's first
+    // entry has the lowest rank.
+    let mut halo_corners: Vec<(u64, u32)> = halo_corners(mesh)
+        .enumerate()
+        .map(|(i, x)| (point_key(x), halo.owners[i / 8]))
+        .collect();
+    halo_corners.sort_unstable();
+    halo_corners.dedup();
+    let mut first: FoldMap<u64, u32> =
+        FoldMap::with_capacity_and_hasher(halo_corners.len(), Default::default());
+    // A bit per hashed key in front of the map: most nodes are no halo
+    // element's corner, and the bits stay in cache.
+    let mut filter = vec![0u64; FILTER_WORDS];
+    for (i, &(k, _)) in halo_corners.iter().enumerate().rev() {
+        first.insert(k, i as u32);
+        let b = filter_bit(k);
+        filter[b / 64] |= 1 << (b % 64);
+    }
+    // Number the nodes this rank uses first, in the order its elements
+    // list them: independent and hanging ones apart.
+    let mut num = vec![NONE; mesh.num_nodes()];
+    let mut order: [Vec<u32>; 2] = [Vec::new(), Vec::new()];
+    // The nodes numbered here that other ranks hold as corners.
+    let mut border: Vec<u32> = Vec::new();
     for c in mesh.connectivity() {
-        buf.extend(c.iter().map(|&n| keys[n as usize]));
+        for &n in c {
+            let n = n as usize;
+            if num[n] != NONE {
+                continue;
+            }
+            let k = key(n);
+            let b = filter_bit(k);
+            if filter[b / 64] & 1 << (b % 64) != 0 {
+                if let Some(&i) = first.get(&k) {
+                    if halo_corners[i as usize].1 < me {
+                        num[n] = REMOTE;
+                        continue;
+                    }
+                    border.push(n as u32);
+                }
+            }
+            let list = &mut order[usize::from(n >= ni)];
+            num[n] = list.len() as u32;
+            list.push(n as u32);
+        }
+    }
+    let counts = [0, 1].map(|h| comm.allgather_u64(order[h].len() as u64));
+    let before = |h: usize| counts[h][..me as usize].iter().sum::<u64>();
+    let total_independent: u64 = counts[0].iter().sum();
+    let total = total_independent + counts[1].iter().sum::<u64>();
+    let mut bad = total >= u64::from(REMOTE);
+    let offset = [before(0), total_independent + before(1)];
+    for h in [0, 1] {
+        for &n in &order[h] {
+            num[n as usize] += offset[h] as u32;
+        }
+    }
+    // Send the numbers on partition boundaries to the ranks holding them.
+    let mut out: Vec<Vec<u64>> = vec![Vec::new(); p];
+    for &n in &border {
+        let k = key(n as usize);
+        let i = first[&k] as usize;
+        for &(_, r) in halo_corners[i..].iter().take_while(|e| e.0 == k) {
+            out[r as usize].extend([k, u64::from(num[n as usize])]);
+        }
+    }
+    for &n in mesh.shared_nodes() {
+        let v = num[n as usize];
+        if v < REMOTE {
+            let k = key(n as usize);
+            for r in mesh.sharers(n as usize) {
+                if r != me {
+                    out[r as usize].extend([k, u64::from(v)]);
+                }
+            }
+        }
+    }
+    let sizes: Vec<usize> = out.iter().map(Vec::len).collect();
+    let (got, _) = comm.alltoallv_u64(&out.concat(), &sizes);
+    drop(out);
+    if !got.is_empty() {
+        let mut given: FoldMap<u64, u32> =
+            FoldMap::with_capacity_and_hasher(got.len() / 2, Default::default());
+        for w in got.chunks_exact(2) {
+            given.insert(w[0], w[1] as u32);
+        }
+        for (n, v) in num.iter_mut().enumerate() {
+            if *v >= REMOTE {
+                match given.get(&key(n)) {
+                    Some(&g) => *v = g,
+                    // Only a dependency here, and of no node numbered here.
+                    None => bad |= *v == REMOTE,
+                }
+            }
+        }
+    }
+    drop(first);
+    drop(halo_corners);
+    let number = |n: u32, bad: &mut bool| -> u64 {
+        let v = num[n as usize];
+        *bad |= u64::from(v) >= total;
+        u64::from(v)
+    };
+    // Elements: 8 numbers in 4 words.
+    let mut buf: Vec<u64> = Vec::with_capacity(mesh.connectivity().len() * 4);
+    for c in mesh.connectivity() {
+        for pair in c.chunks_exact(2) {
+            buf.push(number(pair[0], &mut bad) | number(pair[1], &mut bad) << 32);
+        }
     }
     let elements = to_root(comm, &buf);
-    // Nodes: key, x, y, z, deps, dep keys, patches, patch ids.
+    // The positions of the nodes numbered here, in their order.
     buf.clear();
-    for n in 0..mesh.num_nodes() {
-        buf.push(keys[n]);
-        buf.extend(coords[n].iter().map(|x| x.to_bits()));
-        if n < ni {
-            buf.push(0);
-        } else {
-            let d = mesh.hanging_deps(n - ni);
-            buf.push(d.len() as u64);
-            buf.extend(d.iter().map(|&m| keys[m as usize]));
-        }
-        let p = boundary.node_patches(n);
-        buf.push(p.len() as u64);
-        buf.extend(p.iter().map(|&x| x as u64));
+    let domain = mesh.domain();
+    let position = |n: usize| match mesh.moved() {
+        Some(m) => m[n],
+        None => domain.from_lattice(lattice[n].map(f64::from)),
+    };
+    for &n in order.iter().flatten() {
+        buf.extend(position(n as usize).map(f64::to_bits));
     }
-    let nodes = to_root(comm, &buf);
+    let positions = to_root(comm, &buf);
+    // The hanging nodes' dependencies, 4 numbers in 2 words (NONE after
+    // an edge-hanging node's 2).
+    buf.clear();
+    buf.resize(2 * order[1].len(), 0);
+    let hanging_offset = offset[1] as u32;
+    for (k, d) in mesh.all_hanging_deps().enumerate() {
+        // Only the hanging nodes numbered here are sent, at their places.
+        let Some(at) = num[ni + k].checked_sub(hanging_offset) else {
+            continue;
+        };
+        let Some(slot) = buf.get_mut(2 * at as usize..2 * at as usize + 2) else {
+            continue;
+        };
+        let mut w = [u64::from(NONE); 4];
+        for (w, &m) in w.iter_mut().zip(d.iter()) {
+            *w = number(m, &mut bad);
+            bad |= *w >= total_independent;
+        }
+        slot.copy_from_slice(&[w[0] | w[1] << 32, w[2] | w[3] << 32]);
+    }
+    let dependencies = to_root(comm, &buf);
+    // Patches: (number, patch) of the nodes numbered here, in their order
+    // (every rank holding a node gives it the same patches).
+    buf.clear();
+    for &n in order.iter().flatten() {
+        let v = u64::from(num[n as usize]);
+        buf.extend(
+            boundary
+                .node_patches(n as usize)
+                .iter()
+                .map(|&q| v << 16 | u64::from(q)),
+        );
+    }
+    let patches = to_root(comm, &buf);
     // Faces: global element, label, patch.
     buf.clear();
-    let first = mesh.first_element();
+    let first_element = mesh.first_element();
     for f in boundary.faces() {
-        buf.push(first + f.element as u64);
+        buf.push(first_element + f.element as u64);
         buf.push(ABAQUS_FACE[f.face as usize] as u64);
         buf.push(f.patch as u64);
     }
@@ -243,10 +443,21 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
         let local: Vec<u64> = z.of_elements().iter().map(|&k| u64::from(k)).collect();
         (z.names().to_vec(), to_root(comm, &local))
     });
+    if bad {
+        return Err(corrupt());
+    }
     if comm.rank() != 0 {
         return Ok(Gathered::default());
     }
-    let mut out = assemble(&elements, &nodes, &faces)?;
+    let parts = Parts {
+        counts: &counts,
+        elements: &elements,
+        positions: &positions,
+        dependencies: &dependencies,
+        patches: &patches,
+        faces: &faces,
+    };
+    let mut out = parts.assemble()?;
     if let Some((names, of)) = zones {
         out.zone_names = names;
         out.element_zones = of.into_iter().map(|k| k as u16).collect();
@@ -254,144 +465,99 @@ pub fn gather(comm: &dyn Comm, mesh: &Mesh, boundary: &Boundary) -> Result<Gathe
     Ok(out)
 }
 
-/// One node as the ranks sent it, merged over the ranks: its position and
-/// the keys of its dependencies (`deps[..count]`, none when independent).
-/// Fixed size, so that a million nodes cost no allocation each.
-struct NodeRecord {
-    position: [f64; 3],
-    deps: [u64; 4],
-    count: u8,
+/// The error of a gather whose pieces do not fit together.
+fn corrupt() -> Error {
+    Error::io("the gathered mesh is inconsistent (an internal error)")
 }
 
-impl NodeRecord {
-    fn deps(&self) -> &[u64] {
-        &self.deps[..self.count as usize]
-    }
+/// What rank 0 received in [`gather`].
+struct Parts<'a> {
+    /// Independent and hanging nodes numbered by each rank.
+    counts: &'a [Vec<u64>; 2],
+    elements: &'a [u64],
+    positions: &'a [u64],
+    dependencies: &'a [u64],
+    patches: &'a [u64],
+    faces: &'a [u64],
 }
 
-/// No number yet.
-const NONE: u32 = u32::MAX;
-
-/// Rank 0's half of [`gather`].
-fn assemble(elements: &[u64], nodes: &[u64], faces: &[u64]) -> Result<Gathered> {
-    let corrupt = || Error::io("the gathered mesh is inconsistent (an internal error)");
-    // Each node's slot in `records`. Fixed fast hash: the map's order never
-    // shows (numbers follow the elements' order). The element corners are
-    // looked up once; the numbering then runs on plain arrays.
-    // A node's record is at least 6 words: room for all, no rehashing.
-    let most = nodes.len() / 6;
-    let mut slot: FoldMap<u64, u32> = FoldMap::with_capacity_and_hasher(most, Default::default());
-    let mut records: Vec<NodeRecord> = Vec::with_capacity(most);
-    // (node key, patch), every rank's.
-    let mut on_patch: Vec<(u64, u16)> = Vec::new();
-    let mut i = 0;
-    let take = |i: &mut usize| -> Result<u64> {
-        let v = *nodes.get(*i).ok_or_else(corrupt)?;
-        *i += 1;
-        Ok(v)
-    };
-    while i < nodes.len() {
-        let key = take(&mut i)?;
-        let mut position = [0.0f64; 3];
-        for x in &mut position {
-            *x = f64::from_bits(take(&mut i)?);
-        }
-        let nd = take(&mut i)? as usize;
-        if nd > 4 {
+impl Parts<'_> {
+    /// Rank 0's half of [`gather`]: copies the pieces into place.
+    fn assemble(&self) -> Result<Gathered> {
+        let [independent, hanging] = self.counts;
+        let ni: u64 = independent.iter().sum();
+        let nh: u64 = hanging.iter().sum();
+        let total = (ni + nh) as usize;
+        if self.positions.len() != 3 * total
+            || self.dependencies.len() as u64 != 2 * nh
+            || !self.elements.len().is_multiple_of(4)
+        {
             return Err(corrupt());
         }
-        let mut deps = [0u64; 4];
-        for d in deps.iter_mut().take(nd) {
-            *d = take(&mut i)?;
-        }
-        let np = take(&mut i)? as usize;
-        for _ in 0..np {
-            on_patch.push((key, take(&mut i)? as u16));
-        }
-        let next = records.len() as u32;
-        let at = *slot.entry(key).or_insert(next);
-        if at == next {
-            records.push(NodeRecord {
-                position,
-                deps,
-                count: nd as u8,
-            });
-        } else {
-            let r = &mut records[at as usize];
-            if r.count == 0 && nd > 0 {
-                (r.deps, r.count) = (deps, nd as u8);
+        let mut out = Gathered {
+            num_independent: ni as usize,
+            ..Gathered::default()
+        };
+        out.elements = self
+            .elements
+            .chunks_exact(4)
+            .map(|w| std::array::from_fn(|v| (w[v / 2] >> (32 * (v % 2))) as u32))
+            .collect();
+        // Each rank sent its independent nodes' positions, then its
+        // hanging ones'.
+        out.coordinates = vec![[0.0; 3]; total];
+        let (mut at, mut to) = (0, [0, ni as usize]);
+        for r in 0..independent.len() {
+            for h in [0, 1] {
+                let n = self.counts[h][r] as usize;
+                let from = &self.positions[3 * at..3 * (at + n)];
+                for (x, w) in out.coordinates[to[h]..to[h] + n]
+                    .iter_mut()
+                    .zip(from.chunks_exact(3))
+                {
+                    *x = [0, 1, 2].map(|k| f64::from_bits(w[k]));
+                }
+                at += n;
+                to[h] += n;
             }
         }
-    }
-    let corners: Vec<u32> = elements
-        .iter()
-        .map(|k| slot.get(k).copied().ok_or_else(corrupt))
-        .collect::<Result<_>>()?;
-    // Number the nodes by first use: independent ones, then hanging ones.
-    let mut number = vec![NONE; records.len()];
-    let mut order: Vec<u32> = Vec::with_capacity(records.len());
-    for hanging in [false, true] {
-        for &c in &corners {
-            if (records[c as usize].count == 0) != hanging && number[c as usize] == NONE {
-                number[c as usize] = order.len() as u32;
-                order.push(c);
+        out.dependencies = self
+            .dependencies
+            .chunks_exact(2)
+            .map(|w| {
+                let d = [
+                    w[0] as u32,
+                    (w[0] >> 32) as u32,
+                    w[1] as u32,
+                    (w[1] >> 32) as u32,
+                ];
+                Parents::new(&d[..if d[2] == NONE { 2 } else { 4 }])
+            })
+            .collect();
+        // The independent nodes of every rank come before the hanging
+        // ones: two passes keep each patch's list increasing.
+        for hanging in [false, true] {
+            for &w in self.patches {
+                let (n, q) = ((w >> 16) as u32, (w & 0xffff) as usize);
+                if (u64::from(n) >= ni) == hanging {
+                    if out.patch_nodes.len() <= q {
+                        out.patch_nodes.resize(q + 1, Vec::new());
+                    }
+                    out.patch_nodes[q].push(n);
+                }
             }
         }
+        out.faces = self
+            .faces
+            .chunks_exact(3)
+            .map(|f| GatheredFace {
+                patch: f[2] as u16,
+                element: f[0],
+                label: f[1] as u8,
+            })
+            .collect();
+        out.faces.sort_unstable();
+        out.faces.dedup();
+        Ok(out)
     }
-    let number_of = |k: &u64| -> Option<u32> {
-        slot.get(k)
-            .map(|&c| number[c as usize])
-            .filter(|&n| n != NONE)
-    };
-    let mut out = Gathered {
-        num_independent: order
-            .iter()
-            .take_while(|&&c| records[c as usize].count == 0)
-            .count(),
-        ..Gathered::default()
-    };
-    out.elements = corners
-        .chunks_exact(8)
-        .map(|c| std::array::from_fn(|v| number[c[v] as usize]))
-        .collect();
-    for &c in &order {
-        let r = &records[c as usize];
-        out.coordinates.push(r.position);
-        if r.count > 0 {
-            let d = r
-                .deps()
-                .iter()
-                .map(|k| number_of(k).ok_or_else(corrupt))
-                .collect::<Result<Vec<u32>>>()?;
-            if d.iter().any(|&m| m as usize >= out.num_independent) {
-                return Err(corrupt());
-            }
-            out.dependencies.push(d);
-        }
-    }
-    for (k, p) in on_patch {
-        let p = p as usize;
-        if out.patch_nodes.len() <= p {
-            out.patch_nodes.resize(p + 1, Vec::new());
-        }
-        // A node no element uses has no number (and is on no face).
-        if let Some(n) = number_of(&k) {
-            out.patch_nodes[p].push(n);
-        }
-    }
-    for l in &mut out.patch_nodes {
-        l.sort_unstable();
-        l.dedup();
-    }
-    out.faces = faces
-        .chunks_exact(3)
-        .map(|f| GatheredFace {
-            patch: f[2] as u16,
-            element: f[0],
-            label: f[1] as u8,
-        })
-        .collect();
-    out.faces.sort_unstable();
-    out.faces.dedup();
-    Ok(out)
 }

@@ -63,6 +63,7 @@ mod locate;
 pub mod manifold;
 pub(crate) mod numbering;
 pub mod patches;
+pub mod pieces;
 pub mod points;
 pub mod quality;
 pub mod snap;
@@ -378,6 +379,13 @@ impl Mesh {
     /// increasing order: no face of a local element has them.
     pub(crate) fn dependency_only_nodes(&self) -> impl Iterator<Item = u32> + '_ {
         self.dep_only.iter().map(|&(n, _)| n)
+    }
+
+    /// [`Mesh::hanging_deps`] of every hanging node, in order, the coarse
+    /// elements' rows fetched ahead.
+    pub(crate) fn all_hanging_deps(&self) -> impl Iterator<Item = HangingDeps> + '_ {
+        self.hanging
+            .deps_in(0..self.hanging.len(), &self.connectivity)
     }
 
     /// The hanging nodes found by the nodes they depend on (a new index).

@@ -15,19 +15,20 @@
 //!   header (128 bytes) | block checksums (8 per block) | leaves (8 each) | data (S each)
 //! ```
 //!
-//! Checksums do not depend on the rank count: leaf `i`'s octant key and
-//! its data, cut into 8-byte words (the last one padded with zeros), are
-//! the words `i (1 + W) ..` of one stream (`W` words of data per leaf); a
-//! block of [`BLOCK_LEAVES`] leaves has the keyed sum of its words
-//! (`geometry::hash::keyed_share`), which ranks holding pieces of the
-//! block add up. The table of block sums has its own sum in the header,
-//! and the header its sum in its last word. Any one changed word changes
-//! a sum, so a flipped byte anywhere is found.
+//! Checksums do not depend on the rank count: leaf `i`'s octant key is
+//! word `i` of one stream, and its data, cut into `W` 8-byte words (the
+//! last one padded with zeros), the words `N + i W ..` (`N` leaves); a
+//! block of [`BLOCK_LEAVES`] leaves has the word sum of its keys' and
+//! data's words (`geometry::hash::word_sum`, four lanes of one product
+//! per word), which ranks holding pieces of the block add up. The table
+//! of block sums has its keyed sum (`geometry::hash::keyed_sum`) in the
+//! header, and the header its keyed sum in its last word. Any one changed
+//! word changes a sum, so a flipped byte anywhere is found.
 
 use std::path::Path;
 
 use crate::error::{Error, ErrorKind, Result};
-use crate::geometry::hash::{keyed_share, keyed_sum};
+use crate::geometry::hash::{keyed_sum, word_sum};
 use crate::octree::brick::Brick;
 use crate::octree::domain::Domain;
 use crate::octree::leaf_data::LeafData;
@@ -40,7 +41,7 @@ use crate::parallel::file::{Mode, SharedFile};
 pub const MAGIC: [u8; 8] = *b"OCTMCKPT";
 
 /// The layout version this code writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// The endianness marker: written little-endian, read back as this value
 /// only by a reader of the same byte order.
@@ -221,41 +222,59 @@ fn decode_header(h: &[u8], path: &str) -> Result<(CheckpointInfo, u64, u64)> {
     Ok((info, block, word(h, 104)))
 }
 
-/// The words of each leaf in the checksum stream: its key, then its data.
-fn words_per_leaf(data_size: u64) -> u64 {
-    1 + data_size.div_ceil(8)
+/// The data words of each leaf in the checksum stream: its data cut into
+/// 8-byte words, the last one padded with zero bytes.
+fn data_words(data_size: u64) -> u64 {
+    data_size.div_ceil(8)
 }
 
-/// Adds the keyed sums of leaves `first..` (global indices; `keys` and
-/// `data`, `size` bytes each) to the sums of their blocks, `sums[b -
-/// first_block]`.
+/// Leaves whose data a padded copy holds at a time.
+const PAD_LEAVES: usize = 4096;
+
+/// Adds the word sums of leaves `first..` (global indices, of `n` in all;
+/// `keys` and `data`, `size` bytes each) to the sums of their blocks,
+/// `sums[b - first_block]`.
+#[allow(clippy::too_many_arguments)]
 fn add_block_sums(
     sums: &mut [u64],
     first_block: u64,
     block: u64,
     first: u64,
+    n: u64,
     keys: &[Octant],
     data: &[u8],
     size: usize,
 ) {
-    let per = words_per_leaf(size as u64);
+    let w = data_words(size as u64);
+    let key_bytes = key_bytes(keys);
+    // Data of a size that is no multiple of 8, copied leaf by leaf into
+    // padded words.
+    let mut padded = vec![
+        0u8;
+        if size.is_multiple_of(8) {
+            0
+        } else {
+            PAD_LEAVES * 8 * w as usize
+        }
+    ];
     let mut k = 0usize;
     // Block by block: no division per leaf.
     while k < keys.len() {
         let i = first + k as u64;
         let b = i / block;
         let end = (((b + 1) * block - first) as usize).min(keys.len());
-        let mut s = 0u64;
-        for (j, o) in keys[k..end].iter().enumerate() {
-            let p = (i + j as u64) * per;
-            s = s.wrapping_add(keyed_share(o.key(), p));
-            if size > 0 {
-                let d = &data[(k + j) * size..(k + j + 1) * size];
-                for (w, c) in d.chunks(8).enumerate() {
-                    let mut word = [0u8; 8];
-                    word[..c.len()].copy_from_slice(c);
-                    s = s.wrapping_add(keyed_share(u64::from_le_bytes(word), p + 1 + w as u64));
+        let mut s = word_sum(&key_bytes[8 * k..8 * end], i);
+        if size.is_multiple_of(8) {
+            s = s.wrapping_add(word_sum(&data[k * size..end * size], n + i * w));
+        } else {
+            let stride = 8 * w as usize;
+            for from in (k..end).step_by(PAD_LEAVES) {
+                let to = (from + PAD_LEAVES).min(end);
+                for (j, d) in data[from * size..to * size].chunks_exact(size).enumerate() {
+                    padded[j * stride..j * stride + size].copy_from_slice(d);
                 }
+                let at = n + (first + from as u64) * w;
+                s = s.wrapping_add(word_sum(&padded[..(to - from) * stride], at));
             }
         }
         let at = (b - first_block) as usize;
@@ -264,19 +283,21 @@ fn add_block_sums(
     }
 }
 
-/// The block sums of the global leaves, each rank adding those of its
-/// `keys` (from global index `first`). Collective.
+/// The block sums of the global leaves (`n` in all), each rank adding
+/// those of its `keys` (from global index `first`). Collective.
+#[allow(clippy::too_many_arguments)]
 fn block_sums(
     comm: &dyn Comm,
     blocks: u64,
     block: u64,
     first: u64,
+    n: u64,
     keys: &[Octant],
     data: &[u8],
     size: usize,
 ) -> Vec<u64> {
     let mut sums = vec![0u64; blocks as usize];
-    add_block_sums(&mut sums, 0, block, first, keys, data, size);
+    add_block_sums(&mut sums, 0, block, first, n, keys, data, size);
     // Wrapping sums: MPI adds unsigned integers modulo 2^64.
     comm.sum_u64(&mut sums);
     sums
@@ -346,6 +367,7 @@ impl LinearOctree {
             layout.blocks,
             BLOCK_LEAVES,
             first,
+            n,
             self.leaves(),
             bytes,
             size as usize,
@@ -357,7 +379,7 @@ impl LinearOctree {
             data_size: size,
             surface_hash,
         };
-        let file = SharedFile::open(comm, path, Mode::Create)?;
+        let file = SharedFile::open(comm, path, Mode::Create(layout.end))?;
         let mut head = Vec::new();
         if comm.rank() == 0 {
             head.extend_from_slice(&encode_header(
@@ -443,7 +465,7 @@ impl LinearOctree {
             .into_iter()
             .map(|k| Octant::from_key(u64::from_le(k)))
             .collect();
-        let sums = block_sums(c, layout.blocks, block, first, &leaves, &bytes, size);
+        let sums = block_sums(c, layout.blocks, block, first, n, &leaves, &bytes, size);
         if let Some(b) = (0..table.len()).find(|&b| sums[b] != table[b]) {
             let lo = b as u64 * block;
             let hi = (lo + block).min(n) - 1;
@@ -451,7 +473,12 @@ impl LinearOctree {
                 "the checksum of leaves {lo} to {hi} (block {b}) differs"
             )));
         }
-        let levels = match leaves.iter().position(|o| o.level() > MAX_LEVEL) {
+        // The deepest level first, in a pass without branches.
+        let deepest = leaves.iter().fold(0, |m, o| m.max(o.level()));
+        let bad_level = (deepest > MAX_LEVEL)
+            .then(|| leaves.iter().position(|o| o.level() > MAX_LEVEL))
+            .flatten();
+        let levels = match bad_level {
             Some(i) => Err(damaged(format!(
                 "leaf {} has level {}",
                 first + i as u64,

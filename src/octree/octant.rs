@@ -35,8 +35,8 @@ pub const MAX_LEVEL: u8 = 18;
 /// Number of finest cells in the root cube, `8^19`.
 pub const CELLS: u64 = 1 << (3 * LATTICE_BITS);
 
-const LEVEL_BITS: u32 = 5;
-const LEVEL_MASK: u64 = (1 << LEVEL_BITS) - 1;
+pub(crate) const LEVEL_BITS: u32 = 5;
+pub(crate) const LEVEL_MASK: u64 = (1 << LEVEL_BITS) - 1;
 
 /// Spreads the low 21 bits of `v` so that bit `i` lands on bit `3 i`.
 #[inline]

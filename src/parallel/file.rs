@@ -29,8 +29,11 @@ const CHUNK: usize = 1 << 30;
 /// How a [`SharedFile`] is opened.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {
-    /// Created, or emptied if it exists, for writing.
-    Create,
+    /// Created with this many bytes, for writing: the caller writes every
+    /// byte. An existing file is cut to (or extended to) that length, not
+    /// emptied first, so that the blocks of a file saved over again are
+    /// written over rather than freed and allocated anew.
+    Create(u64),
     /// An existing file, for reading.
     Read,
 }
@@ -72,13 +75,18 @@ impl<'a> SharedFile<'a> {
     pub fn open(comm: &'a dyn Comm, path: &Path, mode: Mode) -> Result<SharedFile<'a>> {
         let shown = path.display().to_string();
         let verb = match mode {
-            Mode::Create => "create",
+            Mode::Create(_) => "create",
             Mode::Read => "open",
         };
         let local = match comm.mpi_raw() {
             None => {
                 let f = match mode {
-                    Mode::Create => File::create(path),
+                    Mode::Create(len) => OpenOptions::new()
+                        .write(true)
+                        .create(true)
+                        .truncate(false)
+                        .open(path)
+                        .and_then(|f| f.set_len(len).map(|_| f)),
                     Mode::Read => OpenOptions::new().read(true).open(path),
                 };
                 f.map(Handle::Plain)
@@ -89,7 +97,7 @@ impl<'a> SharedFile<'a> {
                     .map_err(|_| Error::invalid(format!("the path {shown:?} holds a nul byte")));
                 name.and_then(|name| {
                     let amode = match mode {
-                        Mode::Create => mpi_sys::MPI_MODE_CREATE | mpi_sys::MPI_MODE_WRONLY,
+                        Mode::Create(_) => mpi_sys::MPI_MODE_CREATE | mpi_sys::MPI_MODE_WRONLY,
                         Mode::Read => mpi_sys::MPI_MODE_RDONLY,
                     } as c_int;
                     let mut fh: mpi_sys::MPI_File = std::ptr::null_mut();
@@ -122,15 +130,15 @@ impl<'a> SharedFile<'a> {
             path: shown,
             handle,
         };
-        if mode == Mode::Create {
-            // MPI_MODE_CREATE keeps the bytes of an existing file.
+        if let Mode::Create(len) = mode {
+            // MPI_MODE_CREATE keeps an existing file's bytes and length.
             if let Handle::Mpi(fh) = file.handle {
                 // SAFETY: an open handle; collective, as every rank got here.
-                let rc = unsafe { mpi_sys::MPI_File_set_size(fh, 0) };
+                let rc = unsafe { mpi_sys::MPI_File_set_size(fh, len as mpi_sys::MPI_Offset) };
                 let local = if rc == 0 {
                     Ok(())
                 } else {
-                    Err(file.error("empty", rc))
+                    Err(file.error("size", rc))
                 };
                 agree(comm, local)?;
             }
@@ -324,7 +332,8 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("f.bin");
         let comm = SerialComm;
-        let f = SharedFile::open(&comm, &path, Mode::Create).unwrap();
+        std::fs::write(&path, b"a longer file than the new one").unwrap();
+        let f = SharedFile::open(&comm, &path, Mode::Create(8)).unwrap();
         f.write_at_all(4, b"5678").unwrap();
         f.write_at_all(0, b"1234").unwrap();
         f.close().unwrap();

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use crate::io::gathered::{gather, Gathered};
 use crate::mesh::patches::PatchNames;
+use crate::mesh::pieces::pieces;
 use crate::parallel::comm::agree;
 
 use super::*;
@@ -13,29 +14,27 @@ impl Session {
     /// Gathers the current mesh and its boundary on rank 0
     /// ([`crate::io::gathered`]), once per mesh: every single-file writer
     /// of the same mesh uses the same copy. Reports the mesh's pieces
-    /// ([`Event::Pieces`]). Phases `faces` and `boundary` (when not made
-    /// yet) and `gather`.
+    /// ([`Event::Pieces`], [`crate::mesh::pieces`]). Phases `faces` and
+    /// `boundary` (when not made yet) and `gather` (with the pieces).
     fn gather(&mut self) -> Result<()> {
         if self.gathered.as_ref().map(|g| g.0) == Some(self.mesh_generation) {
             return Ok(());
         }
         self.boundary()?;
         let comm = self.comm.clone();
-        let (mesh, boundary) = (&self.mesh, &self.boundary);
+        let (mesh, boundary, faces) = (&self.mesh, &self.boundary, &self.faces);
         let g = self
             .timer
-            .time(&*comm, "gather", || match (mesh, boundary) {
-                (Some(m), Some((_, b))) => gather(&*comm, m, b),
-                _ => Ok(Gathered::default()),
+            .time(&*comm, "gather", || match (mesh, boundary, faces) {
+                (Some(m), Some((_, b)), Some((_, f))) => {
+                    let g = gather(&*comm, m, b);
+                    (g, pieces(&*comm, m, f))
+                }
+                _ => (Ok(Gathered::default()), Vec::new()),
             });
+        let (g, sizes) = g;
         let g = agree(&*comm, g)?;
         self.report_phase(None);
-        // Rank 0 has the mesh: it counts the pieces and tells the others.
-        let mut sizes = g.pieces();
-        let mut n = [sizes.len() as u64];
-        comm.max_u64(&mut n);
-        sizes.resize(n[0] as usize, 0);
-        comm.max_u64(&mut sizes);
         self.observer.event(&Event::Pieces(&sizes));
         self.facts.pieces = Some(sizes);
         self.gathered = Some((self.mesh_generation, g));
