@@ -17,7 +17,7 @@ use octmesh::error::panic_message;
 use octmesh::internals::classify::InsideRule;
 use octmesh::internals::config::cli::{self, Invocation};
 use octmesh::internals::geometry::diagnostics::diagnose;
-use octmesh::internals::geometry::load_surface;
+use octmesh::internals::geometry::load_surface_on;
 use octmesh::internals::parallel::comm::{agree, CommRef, MpiComm, SerialComm};
 use octmesh::internals::pipeline::{Session, Table};
 use octmesh::internals::run::progress::Style;
@@ -32,7 +32,7 @@ macro_rules! say {
 /// prints the report and writes the JSON.
 fn check(comm: &CommRef, file: &str, json: Option<&std::path::Path>, quiet: bool) -> Result<()> {
     let start = std::time::Instant::now();
-    let surface = agree(&**comm, load_surface(file))?;
+    let surface = agree(&**comm, load_surface_on(&**comm, file))?;
     let read = start.elapsed().as_secs_f64();
     let report = diagnose(&surface);
     let diagnosed = start.elapsed().as_secs_f64() - read;

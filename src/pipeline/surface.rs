@@ -5,7 +5,7 @@ use std::cell::OnceCell;
 use crate::classify::InsideRule;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::diagnostics::{clean, diagnose};
-use crate::geometry::{load_surfaces, Surface};
+use crate::geometry::{load_surfaces_on, Surface};
 use crate::octree::domain::Domain;
 use crate::parallel::comm::agree;
 use crate::refine::{estimate_leaves, SurfaceIndex};
@@ -22,12 +22,15 @@ impl Session {
     /// Reads the configured surface (`surface.file`: an STL file, `sphere`,
     /// `torus` or `hull`, and the `surface.others` meshed with it, each a
     /// part), cleans it as configured, and indexes it for the cube the next
-    /// octree will use. Phase `read`. Collective: a failure on any rank (a
-    /// file missing on one node) fails on every rank.
+    /// octree will use. Phase `read`. Each rank reads its share of an STL
+    /// file and the ranks exchange the triangles
+    /// ([`crate::geometry::stl::read_stl_file_on`]). Collective: a failure on
+    /// any rank (a file missing on one node) fails on every rank.
     pub fn load_surface(&mut self) -> Result<()> {
         let files = self.config.surface_files();
         let name = files.join(" + ");
-        self.install_surface(&name, || load_surfaces(&files))
+        let comm = self.comm.clone();
+        self.install_surface(&name, || load_surfaces_on(&*comm, &files))
     }
 
     /// Installs `surface` (read by the caller on every rank) under `name`,
