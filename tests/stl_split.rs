@@ -15,7 +15,7 @@ use std::rc::Rc;
 use std::time::Duration;
 
 use octmesh::internals::geometry::stl::{read_stl_file, read_stl_file_on, write_stl_binary};
-use octmesh::internals::parallel::comm::{Comm, CommRef, MpiComm};
+use octmesh::internals::parallel::comm::{CommRef, MpiComm};
 
 const LIMIT: Duration = Duration::from_secs(300);
 

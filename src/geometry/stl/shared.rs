@@ -247,9 +247,13 @@ fn find_cut(win: &Window, lo: u64, size: u64) -> Option<u64> {
     let newline = |c: u8| c == b'\n' || c == b'\r';
     let b = &win.bytes;
     let mut pos = (lo - win.start) as usize;
-    // Inside a line: go to the next one.
+    // Inside a line: go to the next one (none: the file's last line).
     if lo > 0 && !newline(b[pos - 1]) {
-        pos += b[pos..].iter().position(|&c| newline(c))? + 1;
+        match b[pos..].iter().position(|&c| newline(c)) {
+            Some(k) => pos += k + 1,
+            None if win.end() == size => return Some(size),
+            None => return None,
+        }
     }
     loop {
         if win.start + pos as u64 >= size {
@@ -529,8 +533,10 @@ mod tests {
             assert_eq!(s.triangles(), whole.triangles(), "{p} ranks");
             assert_eq!(s.parts(), whole.parts(), "{p} ranks");
         }
-        // More ranks than lines: most of them have nothing.
+        // More ranks than lines: most of them have nothing; and no line
+        // break at the end.
         let one = solid("x", &sphere([0.0; 3], 1.0, 0).triangles()[..2], 0);
+        let one = one.trim_end();
         let whole = read_stl_bytes(one.as_bytes()).unwrap();
         for p in [30, 200, 2 * one.len()] {
             let s = split(one.as_bytes(), p).unwrap().unwrap();
