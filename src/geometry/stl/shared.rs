@@ -63,6 +63,11 @@ fn all_ok(comm: &dyn Comm, ok: bool) -> bool {
 /// caller then reads the whole file), otherwise the surface, or the error
 /// the whole surface gives (the same on every rank).
 fn read_split(comm: &dyn Comm, path: &Path) -> Option<Result<Surface>> {
+    // Only regular files: MPI-IO may not return on a directory.
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    if !all_ok(comm, regular) {
+        return None;
+    }
     let file = SharedFile::open(comm, path, Mode::Read).ok()?;
     let size = file.size();
     // Every rank must see the same size: one reduction of the size and its
