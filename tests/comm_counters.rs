@@ -98,6 +98,27 @@ fn child() {
         8 * (p - 1),
     );
 
+    // An all-gather of r + 1 bytes from rank r: the lengths (one value),
+    // then this rank's bytes to each other rank and theirs back.
+    let t0 = comm.traffic();
+    let c0 = comm.collectives();
+    let mine = vec![r as u8; r as usize + 1];
+    let (all, lens) = comm.allgatherv_bytes(&mine);
+    let expected: Vec<u8> = (0..p).flat_map(|q| vec![q as u8; q as usize + 1]).collect();
+    assert_eq!(all, expected);
+    assert_eq!(lens, (1..=p as usize).collect::<Vec<_>>());
+    check(
+        "allgatherv_bytes",
+        comm.traffic() - t0,
+        (8 + r + 1) * (p - 1),
+        8 * (p - 1) + all.len() as u64 - (r + 1),
+    );
+    assert_eq!(
+        comm.collectives() - c0,
+        2,
+        "allgatherv_bytes: lengths and bytes"
+    );
+
     // A broadcast of 5 bytes: the 8-byte length and the bytes, once per
     // receiving rank at the root.
     let root = (p - 1) as usize;

@@ -23,6 +23,7 @@ pub mod winding;
 use std::path::Path;
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::parallel::comm::{Comm, SerialComm};
 
 pub use bvh::Bvh;
 
@@ -377,9 +378,16 @@ fn bbox_of(triangles: &[Triangle]) -> Aabb {
 /// anything else is a path to an STL file (so a file literally called
 /// `sphere` must be given as `./sphere`).
 pub fn load_surface(spec: &str) -> Result<Surface> {
+    load_surface_on(&SerialComm, spec)
+}
+
+/// [`load_surface`] on every rank of `comm`, each rank reading its share of
+/// an STL file ([`stl::read_stl_file_on`]). Collective; the result is the
+/// same on every rank.
+pub fn load_surface_on(comm: &dyn Comm, spec: &str) -> Result<Surface> {
     match shapes::builtin(spec) {
         Some(s) => Ok(s),
-        None => stl::read_stl_file(Path::new(spec)),
+        None => stl::read_stl_file_on(comm, Path::new(spec)),
     }
 }
 
@@ -388,13 +396,19 @@ pub fn load_surface(spec: &str) -> Result<Surface> {
 /// files themselves, named after their stems (`sphere`, `bunny`). One
 /// specification is [`load_surface`] itself.
 pub fn load_surfaces(specs: &[String]) -> Result<Surface> {
+    load_surfaces_on(&SerialComm, specs)
+}
+
+/// [`load_surfaces`] on every rank of `comm` ([`load_surface_on`]).
+/// Collective; the result is the same on every rank.
+pub fn load_surfaces_on(comm: &dyn Comm, specs: &[String]) -> Result<Surface> {
     if specs.len() == 1 {
-        return load_surface(&specs[0]);
+        return load_surface_on(comm, &specs[0]);
     }
     let mut triangles = Vec::new();
     let mut parts = Parts::default();
     for spec in specs {
-        let s = load_surface(spec)?;
+        let s = load_surface_on(comm, spec)?;
         let own = s.parts();
         let first = parts.names.len() as u16;
         if own.names.is_empty() {

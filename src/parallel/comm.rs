@@ -14,6 +14,7 @@ use std::ops::{Add, AddAssign, Sub};
 use std::rc::Rc;
 
 use mpi::collective::SystemOperation;
+use mpi::datatype::PartitionMut;
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 
@@ -47,6 +48,9 @@ pub trait Comm {
     fn alltoallv_u64(&self, send: &[u64], counts: &[usize]) -> (Vec<u64>, Vec<usize>);
     /// Replaces `bytes` on every rank with rank `root`'s bytes.
     fn broadcast_bytes(&self, root: usize, bytes: &mut Vec<u8>);
+    /// Gathers every rank's `mine` on every rank: returns them concatenated
+    /// in rank order, and the length of each.
+    fn allgatherv_bytes(&self, mine: &[u8]) -> (Vec<u8>, Vec<usize>);
     /// The MPI communicator underneath, for MPI-IO ([`super::file`]);
     /// `None` for a single process without MPI.
     fn mpi_raw(&self) -> Option<mpi_sys::MPI_Comm> {
@@ -93,7 +97,9 @@ pub trait Comm {
 /// at each receiver; a reduction or all-gather counts each rank's
 /// contribution as sent to, and the result as received from, the other
 /// ranks (a reduction of `n` values: `8 n` bytes each way per rank; an
-/// all-gather of one value on `p` ranks: `8 (p - 1)` each way). Summed over
+/// all-gather of one value on `p` ranks: `8 (p - 1)` each way; an all-gather
+/// of `n` bytes from this rank: `n (p - 1)` sent, the others' bytes
+/// received). Summed over
 /// the ranks, sent always equals received. One rank exchanges nothing.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Traffic {
@@ -219,6 +225,9 @@ impl Comm for SerialComm {
         (send[..counts[0]].to_vec(), counts.to_vec())
     }
     fn broadcast_bytes(&self, _root: usize, _bytes: &mut Vec<u8>) {}
+    fn allgatherv_bytes(&self, mine: &[u8]) -> (Vec<u8>, Vec<usize>) {
+        (mine.to_vec(), vec![mine.len()])
+    }
 }
 
 /// An MPI communicator. Owned: it is freed when dropped (for the world
@@ -422,6 +431,52 @@ impl Comm for MpiComm {
         } else {
             self.count(0, message);
         }
+    }
+    fn allgatherv_bytes(&self, mine: &[u8]) -> (Vec<u8>, Vec<usize>) {
+        let p = self.size();
+        let lens: Vec<usize> = self
+            .allgather_u64(mine.len() as u64)
+            .into_iter()
+            .map(|n| n as usize)
+            .collect();
+        let offs = offsets(&lens);
+        let mut out = vec![0u8; offs[p]];
+        // MPI counts and displacements are `int`: each round moves at most
+        // `cap` bytes per rank, so that one round's total fits.
+        let cap = (i32::MAX as usize / p).max(1);
+        let rounds = lens.iter().map(|n| n.div_ceil(cap)).max().unwrap_or(0);
+        let mut buf = Vec::new();
+        for k in 0..rounds {
+            let piece = |n: usize| n.saturating_sub(k * cap).min(cap);
+            let pieces: Vec<usize> = lens.iter().map(|&n| piece(n)).collect();
+            let counts: Vec<i32> = pieces.iter().map(|&c| c as i32).collect();
+            let lo = (k * cap).min(mine.len());
+            let send = &mine[lo..lo + piece(mine.len())];
+            // One round (the usual case) lands in place; more go through a
+            // buffer of one round's pieces.
+            let (target, displs): (&mut [u8], Vec<i32>) = if rounds == 1 {
+                (&mut out[..], offs[..p].iter().map(|&d| d as i32).collect())
+            } else {
+                let d = offsets(&pieces);
+                buf.resize(d[p], 0);
+                (&mut buf[..], d[..p].iter().map(|&d| d as i32).collect())
+            };
+            self.timed(|| {
+                let mut part = PartitionMut::new(target, &counts[..], &displs[..]);
+                self.comm.all_gather_varcount_into(send, &mut part);
+            });
+            if rounds > 1 {
+                for q in 0..p {
+                    let (d, c) = (displs[q] as usize, pieces[q]);
+                    let at = offs[q] + k * cap;
+                    out[at..at + c].copy_from_slice(&buf[d..d + c]);
+                }
+            }
+        }
+        if p > 1 {
+            self.count(mine.len() * (p - 1), offs[p] - mine.len());
+        }
+        (out, lens)
     }
     fn mpi_raw(&self) -> Option<mpi_sys::MPI_Comm> {
         Some(self.comm.as_raw())

@@ -22,8 +22,11 @@ impl Session {
     /// Reads the configured surface (`surface.file`: an STL file, `sphere`,
     /// `torus` or `hull`, and the `surface.others` meshed with it, each a
     /// part), cleans it as configured, and indexes it for the cube the next
-    /// octree will use. Phase `read`. Collective: a failure on any rank (a
-    /// file missing on one node) fails on every rank.
+    /// octree will use. Phase `read`. Every rank reads the whole file: while
+    /// every rank holds the whole surface this is faster than the split read
+    /// ([`crate::geometry::stl::read_stl_file_on`]) and its exchange.
+    /// Collective: a failure on any rank (a file missing on one node) fails
+    /// on every rank.
     pub fn load_surface(&mut self) -> Result<()> {
         let files = self.config.surface_files();
         let name = files.join(" + ");

@@ -22,6 +22,9 @@
 //! are ignored, consecutive solids merged into one surface whose
 //! [`Parts`] remember each triangle's solid). Coordinates are `f32` in the
 //! file and widened to `f64`.
+//!
+//! On several ranks, [`read_stl_file_on`] gives each rank its share of the
+//! file to read ([`shared`]).
 
 use std::io::Cursor;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -29,6 +32,9 @@ use std::path::Path;
 
 use super::{Parts, Surface, Triangle};
 use crate::error::{Error, Result};
+
+pub mod shared;
+pub use shared::read_stl_file_on;
 
 const HEADER: usize = 80;
 const PREAMBLE: usize = 84;
