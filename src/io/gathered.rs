@@ -129,8 +129,10 @@ impl Gathered {
     }
 }
 
+#[cfg(test)]
 impl Gathered {
-    /// The sizes (elements) of the mesh's pieces joined through faces,
+    /// The reference for [`crate::mesh::pieces`], counted here on the
+    /// gathered mesh: the sizes (elements) of its pieces joined through faces,
     /// largest first: what a solver's stiffness sees. Two elements are
     /// joined when they share a whole face, or when one's face is a
     /// quarter of the other's (a face-hanging node's four dependencies

@@ -83,7 +83,7 @@ pub enum Event<'a> {
     Snapped(&'a crate::mesh::snap::SnapReport),
     /// The mesh was gathered for a single-file writer: the sizes of its
     /// pieces joined through faces, largest first
-    /// ([`crate::io::gathered::Gathered::pieces`]). More than one piece
+    /// ([`crate::mesh::pieces`]). More than one piece
     /// leaves a finite-element solver's stiffness singular unless every
     /// piece is held.
     Pieces(&'a [u64]),

@@ -173,7 +173,7 @@ pub struct Stats {
     pub quality: Option<Quality>,
     /// The sizes of the mesh's pieces joined through faces, largest
     /// first, when a single-file writer gathered it
-    /// ([`crate::io::gathered::Gathered::pieces`]).
+    /// ([`crate::mesh::pieces`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pieces: Option<Vec<u64>>,
     /// What the snap did, when the mesh was snapped (see

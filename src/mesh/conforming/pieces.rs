@@ -32,6 +32,7 @@
 
 use super::marks::{away, Marks, Symmetry};
 use super::{Hex, Point, FINE, MACRO};
+use crate::geometry::cells::VTK_TO_MORTON;
 
 /// A hexahedron in an octant's own frame: fine cells from the macro corner
 /// toward the centre (VTK order, possibly mirrored).
@@ -80,38 +81,12 @@ fn grid(n: i32) -> Vec<Hex> {
 
 /// A box at lattice point `a` with side `s`, in VTK order.
 fn vtk_box(a: Point, s: i32) -> Hex {
-    let p = |dx: i32, dy: i32, dz: i32| [a[0] + dx * s, a[1] + dy * s, a[2] + dz * s];
-    [
-        p(0, 0, 0),
-        p(1, 0, 0),
-        p(1, 1, 0),
-        p(0, 1, 0),
-        p(0, 0, 1),
-        p(1, 0, 1),
-        p(1, 1, 1),
-        p(0, 1, 1),
-    ]
+    VTK_TO_MORTON.map(|c| [0, 1, 2].map(|k| a[k] + ((c >> k) & 1) as i32 * s))
 }
 
 /// The box `[lo, hi]` in an octant's frame.
 fn boxed(lo: [f64; 3], hi: [f64; 3]) -> LocalHex {
-    let p = |x: usize, y: usize, z: usize| {
-        [
-            if x == 0 { lo[0] } else { hi[0] },
-            if y == 0 { lo[1] } else { hi[1] },
-            if z == 0 { lo[2] } else { hi[2] },
-        ]
-    };
-    [
-        p(0, 0, 0),
-        p(1, 0, 0),
-        p(1, 1, 0),
-        p(0, 1, 0),
-        p(0, 0, 1),
-        p(1, 0, 1),
-        p(1, 1, 1),
-        p(0, 1, 1),
-    ]
+    VTK_TO_MORTON.map(|c| [0, 1, 2].map(|k| if (c >> k) & 1 == 0 { lo[k] } else { hi[k] }))
 }
 
 /// Axis `d` of an octant-frame point becomes axis 0: `[p[d], p[d+1], p[d+2]]`
