@@ -146,20 +146,26 @@ fn size_mismatch(n: u32, len: usize) -> String {
     format!("binary STL declares {n} triangles ({expected} bytes) but the file has {len} bytes ({cause})")
 }
 
-fn read_binary(bytes: &[u8], n: usize) -> Result<Surface> {
-    let f = |b: &[u8], at: usize| {
-        f64::from(f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]))
+/// The triangle of nine little-endian `f32`s (36 bytes: three vertices).
+fn triangle_of(rec: &[u8]) -> Triangle {
+    let f = |at: usize| {
+        f64::from(f32::from_le_bytes([
+            rec[at],
+            rec[at + 1],
+            rec[at + 2],
+            rec[at + 3],
+        ]))
     };
+    Triangle {
+        v: [0, 1, 2].map(|i| [0, 1, 2].map(|k| f(12 * i + 4 * k))),
+    }
+}
+
+fn read_binary(bytes: &[u8], n: usize) -> Result<Surface> {
     let mut tris = Vec::with_capacity(n);
     for rec in bytes[PREAMBLE..].chunks_exact(RECORD) {
         // Bytes 0..12 hold the normal, which is ignored.
-        let mut v = [[0.0; 3]; 3];
-        for (i, p) in v.iter_mut().enumerate() {
-            for (k, c) in p.iter_mut().enumerate() {
-                *c = f(rec, 12 + 12 * i + 4 * k);
-            }
-        }
-        tris.push(Triangle { v });
+        tris.push(triangle_of(&rec[12..48]));
     }
     debug_assert_eq!(tris.len(), n);
     Surface::new(tris)

@@ -23,7 +23,8 @@ use std::borrow::Cow;
 use std::path::Path;
 
 use super::{
-    binary_size, declared_count, parts_of, read_stl_file, starts_with_solid, PREAMBLE, RECORD,
+    binary_size, declared_count, parts_of, read_stl_file, starts_with_solid, triangle_of, PREAMBLE,
+    RECORD,
 };
 use crate::error::{Error, Result};
 use crate::geometry::{Surface, Triangle};
@@ -124,21 +125,7 @@ fn read_binary(comm: &dyn Comm, file: &SharedFile, n: u64) -> Option<Result<Surf
 
 /// The triangles of consecutive `VERTICES`-byte records of `f32`s.
 fn triangles(bytes: &[u8]) -> Vec<Triangle> {
-    let f = |b: &[u8], at: usize| {
-        f64::from(f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]))
-    };
-    bytes
-        .chunks_exact(VERTICES)
-        .map(|rec| {
-            let mut v = [[0.0; 3]; 3];
-            for (i, p) in v.iter_mut().enumerate() {
-                for (k, c) in p.iter_mut().enumerate() {
-                    *c = f(rec, 12 * i + 4 * k);
-                }
-            }
-            Triangle { v }
-        })
-        .collect()
+    bytes.chunks_exact(VERTICES).map(triangle_of).collect()
 }
 
 /// Bytes `[start, start + bytes.len())` of the file.
