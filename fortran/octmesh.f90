@@ -160,6 +160,7 @@ module octmesh
   public :: octmesh_mesh_get_global_ids, octmesh_mesh_get_owners, octmesh_mesh_get_hanging
   public :: octmesh_mesh_get_element_class, octmesh_mesh_get_element_level
   public :: octmesh_mesh_set_zones, octmesh_mesh_get_zones, octmesh_mesh_get_zone_name_f
+  public :: octmesh_mesh_set_conforming
   public :: octmesh_octree_refine_curvature, octmesh_octree_refine_regions_f
   public :: octmesh_octree_refine_surface_part_f, octmesh_surface_from_files_f
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
@@ -557,6 +558,15 @@ module octmesh
        logical(c_bool), value :: on
        integer(c_int) :: octmesh_mesh_set_zones
      end function octmesh_mesh_set_zones
+
+     !> Collective: whether the Gmsh, Abaqus, Exodus II and CGNS writers
+     !> write a conforming all-hexahedral mesh.
+     function octmesh_mesh_set_conforming(h, on) bind(c, name="octmesh_mesh_set_conforming")
+       import :: c_ptr, c_int, c_bool
+       type(c_ptr), value :: h
+       logical(c_bool), value :: on
+       integer(c_int) :: octmesh_mesh_set_conforming
+     end function octmesh_mesh_set_conforming
 
      !> The number of zones and the zone (0-based) of each local element.
      function octmesh_mesh_get_zones(h, num_zones, zones) bind(c, name="octmesh_mesh_get_zones")

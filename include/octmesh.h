@@ -1463,6 +1463,23 @@ octmesh_status_t octmesh_mesh_set_inside_rule(octmesh_t *h, octmesh_inside_rule_
 octmesh_status_t octmesh_mesh_set_zones(octmesh_t *h, bool on);
 
 /**
+ * Sets whether `octmesh_mesh_write_gmsh`, `octmesh_mesh_write_abaqus`,
+ * `octmesh_mesh_write_exodus` and `octmesh_mesh_write_cgns` write the
+ * current mesh's kept region as a conforming all-hexahedral mesh (off
+ * until set), like the command's `--conforming`: no hanging nodes, every
+ * inner face shared whole by two elements, the patches and zones of the
+ * mesh. The mesh itself, its getters and the other writers keep the
+ * hanging-node mesh. Those writers fail with `OCTMESH_STATUS_INVALID`
+ * where finer cells wrap around an edge or a corner of coarser ones,
+ * which no template covers yet. Every rank must pass the same value.
+ * Collective.
+ *
+ * \param[in] h   the handle
+ * \param[in] on  whether the single-file meshes are conforming
+ */
+octmesh_status_t octmesh_mesh_set_conforming(octmesh_t *h, bool on);
+
+/**
  * Sets `*num_zones` to the number of zones and `*zones` to the zone of
  * each local element (`0 .. num_zones - 1`; names by
  * `octmesh_mesh_get_zone_name`). Needs a mesh built with zones

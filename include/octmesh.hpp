@@ -365,6 +365,11 @@ class Mesher {
   void set_zones(bool on = true) {
     detail::check(octmesh_mesh_set_zones(h_, on), h_, "octmesh_mesh_set_zones");
   }
+  /// octmesh_mesh_set_conforming: whether the Gmsh, Abaqus, Exodus II and
+  /// CGNS writers write a conforming all-hexahedral mesh (collective).
+  void set_conforming(bool on = true) {
+    detail::check(octmesh_mesh_set_conforming(h_, on), h_, "octmesh_mesh_set_conforming");
+  }
   /// The zone of each local element (octmesh_mesh_get_zones), a copy.
   std::vector<octmesh_locidx_t> zones() const {
     octmesh_locidx_t n = 0;

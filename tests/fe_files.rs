@@ -676,3 +676,133 @@ fn an_unwritable_file_fails_every_rank() {
         assert!(!path.exists());
     }
 }
+
+/// Around the sphere at level 2, two overlapping refinement boxes at
+/// levels 4 and 5, every leaf kept, in the cube whose lattice points are
+/// short decimals: finer regions the conforming templates cover today.
+const CONFORMING: [&str; 11] = [
+    "--level",
+    "2",
+    "--domain",
+    "-1.28,-1.28,-1.28,2.56",
+    "--region",
+    "box:-0.3,-0.3,-0.3,0.3,0.3,0.3:4",
+    "--region",
+    "box:0.1,0.1,0.1,0.6,0.5,0.4:5",
+    "--conforming",
+    "--balance",
+    "corner",
+];
+
+/// `--conforming` writes meshes without hanging nodes: the checker that
+/// reads only the `.msh` finds none and every inner face in two elements,
+/// the elements fill the domain, the deck has no `*EQUATION` and passes
+/// the patch test in CalculiX as it is, Gmsh reads the counts the deck
+/// has, and the files are the same on 1 to 3 ranks.
+#[test]
+fn conforming_meshes_need_no_equations() {
+    let dir = scratch("fe_files_conforming");
+    let (inp, msh, stats) = mesh(1, &dir.join("np1"), "sphere", &CONFORMING);
+    let hanging =
+        common::int(&stats, "face_hanging_nodes") + common::int(&stats, "edge_hanging_nodes");
+    assert!(
+        hanging > 0,
+        "the octree needs 2:1 steps for the test to mean anything"
+    );
+    let c = common::conformity::check(&msh);
+    println!(
+        "conforming: {} hexahedra from {} leaves, volume {}, min scaled Jacobian {:.3}",
+        c.elements,
+        common::int(&stats, "elements"),
+        c.volume,
+        c.min_scaled_jacobian
+    );
+    assert!(c.conforming(), "not conforming: {c:?}");
+    assert!(c.elements as u64 > common::int(&stats, "elements"));
+    assert!(((c.volume - 2.56f64.powi(3)) / 2.56f64.powi(3)).abs() < 1e-12);
+    assert!(c.min_scaled_jacobian >= 0.3, "{}", c.min_scaled_jacobian);
+    let text = std::fs::read_to_string(&inp).unwrap();
+    assert!(!text.contains("*EQUATION"));
+    let deck = read_deck(&text);
+    assert!(deck.hanging.is_empty());
+    assert_eq!(deck.elements.len(), c.elements);
+    for np in [2, 3] {
+        let (i, m, _) = mesh(np, &dir.join(format!("np{np}")), "sphere", &CONFORMING);
+        assert!(
+            std::fs::read(i).unwrap() == text.as_bytes(),
+            "the .inp on {np} ranks"
+        );
+        assert!(
+            std::fs::read(m).unwrap() == std::fs::read(&msh).unwrap(),
+            "the .msh on {np} ranks"
+        );
+    }
+    if let Some(python) = gmsh_python() {
+        let (nodes, hexes, quads, groups) = gmsh_read(&python, &msh);
+        assert_eq!(
+            (nodes, hexes),
+            (deck.coords.len() as u64, c.elements as u64)
+        );
+        assert_eq!(quads as usize, deck.surfaces);
+        assert!(groups.contains(&(3, "volume".to_string())));
+    }
+    if let Some(ccx) = ccx() {
+        let (error, interior) = patch_test(&ccx, &dir.join("patch"), &text);
+        println!("conforming: patch test error {error:.3e} over {interior} interior nodes");
+        assert!(interior > 0);
+        assert!(
+            error <= 1e-8,
+            "patch test off by {error:e} without equations"
+        );
+    }
+}
+
+/// What `--conforming` cannot do yet is an error on every rank: a solid
+/// whose coarse inside meets finer cells around its staircase corners (no
+/// template for those marks) and an output it does not write.
+#[test]
+fn conforming_refuses_what_it_cannot_do() {
+    let dir = scratch("fe_files_conforming_refused");
+    let msh = dir.join("m.msh");
+    let args = [
+        "mesh",
+        "sphere",
+        "--level",
+        "4",
+        "--keep",
+        "inside",
+        "--conforming",
+        "--gmsh",
+        msh.to_str().unwrap(),
+    ];
+    let out = common::mpirun(
+        2,
+        &common::octmesh_bin(),
+        &args,
+        std::time::Duration::from_secs(300),
+    );
+    let lines = common::rank_error_lines(&out, 2, "--conforming on the solid sphere");
+    assert!(
+        lines.iter().all(|l| l.contains("without a template")),
+        "{lines:?}"
+    );
+    assert!(!msh.exists());
+    let vtu = dir.join("m.pvtu");
+    let args = [
+        "mesh",
+        "sphere",
+        "--level",
+        "2",
+        "--conforming",
+        "--out",
+        vtu.to_str().unwrap(),
+    ];
+    let out = common::mpirun(
+        2,
+        &common::octmesh_bin(),
+        &args,
+        std::time::Duration::from_secs(300),
+    );
+    let lines = common::rank_error_lines(&out, 2, "--conforming --out");
+    assert!(lines.iter().all(|l| l.contains("--out")), "{lines:?}");
+}

@@ -317,6 +317,11 @@ pub struct MeshConfig {
     /// region (`[[regions]]` with `zone = "name"`) holding its centre.
     /// Needs `keep` all.
     pub zones: bool,
+    /// Write the single-file finite-element meshes (`gmsh`, `abaqus`,
+    /// `exodus`, `cgns`) as conforming all-hexahedral meshes
+    /// ([`crate::mesh::conforming`]): no hanging nodes, every inner face
+    /// shared whole by two elements.
+    pub conforming: bool,
 }
 
 impl MeshConfig {
@@ -350,6 +355,7 @@ impl Default for MeshConfig {
             snap_iterations: crate::mesh::snap::DEFAULT_ITERATIONS,
             snap_min_jacobian: None,
             zones: false,
+            conforming: false,
         }
     }
 }
@@ -593,6 +599,24 @@ impl Config {
                         self.mesh.keep.name()
                     ),
                 ));
+            }
+            if self.mesh.conforming {
+                let o = &self.output;
+                let other = [
+                    ("mesh.snap", self.mesh.snap),
+                    ("output.vtu", o.vtu.is_some()),
+                    ("output.openfoam", o.openfoam.is_some()),
+                    ("output.quality", o.quality),
+                ];
+                if let Some((key, _)) = other.iter().find(|(_, on)| *on) {
+                    return Err(ConfigError::new(
+                        "mesh.conforming",
+                        format!(
+                            "writes the Gmsh, Abaqus, Exodus II and CGNS files only: {{{key}}} \
+                             is not available with it yet"
+                        ),
+                    ));
+                }
             }
             if self.mesh.snap && self.mesh.keep == Keep::All {
                 return Err(ConfigError::new(

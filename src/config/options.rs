@@ -746,6 +746,16 @@ options! {
     range,
     set |c, _v, _g| { c.mesh.zones = true; }
 
+    /// Write --gmsh, --abaqus, --exodus and --cgns as conforming
+    /// all-hexahedral meshes (no hanging nodes) from refinement templates;
+    /// for now only where the finer regions are boxes (a clear error
+    /// otherwise), without --snap, --vtu, --openfoam or --quality
+    Mesh "conforming": Switch bool,
+    keys ["mesh.conforming"],
+    default none,
+    range,
+    set |c, _v, _g| { c.mesh.conforming = true; }
+
     /// Snap the mesh to the surface: the nodes on the surface move onto
     /// it (sharp edges kept), scaled back where an element would be
     /// invalid, the layers next to it relaxed (needs --keep inside or

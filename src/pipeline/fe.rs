@@ -17,7 +17,8 @@ impl Session {
     /// ([`Event::Pieces`], [`crate::mesh::pieces`]). Phases `faces` and
     /// `boundary` (when not made yet) and `gather` (with the pieces).
     fn gather(&mut self) -> Result<()> {
-        if self.gathered.as_ref().map(|g| g.0) == Some(self.mesh_generation) {
+        let key = (self.mesh_generation, self.config.mesh.conforming);
+        if self.gathered.as_ref().map(|g| g.0) == Some(key) {
             return Ok(());
         }
         self.boundary()?;
@@ -35,10 +36,40 @@ impl Session {
         let (g, sizes) = g;
         let g = agree(&*comm, g)?;
         self.report_phase(None);
+        let g = match self.config.mesh.conforming {
+            true => self.conforming(g)?,
+            false => g,
+        };
         self.observer.event(&Event::Pieces(&sizes));
         self.facts.pieces = Some(sizes);
-        self.gathered = Some((self.mesh_generation, g));
+        self.gathered = Some((key, g));
         Ok(())
+    }
+
+    /// The conforming mesh of the current mesh's octree and kept leaves
+    /// in place of the gathered hanging-node mesh `g`
+    /// ([`super::conforming`]). Phase `conforming`.
+    fn conforming(&mut self, g: Gathered) -> Result<Gathered> {
+        let comm = self.comm.clone();
+        self.tree_or_state()?;
+        let (Some((tree, domain)), Some(mesh)) = (&self.tree, &self.mesh) else {
+            return Err(Error::new(
+                ErrorKind::State,
+                "there is no mesh yet: build it first",
+            ));
+        };
+        let c = self.timer.time(&*comm, "conforming", || {
+            super::conforming::conforming_gathered(
+                &*comm,
+                tree.leaves(),
+                mesh.elements(),
+                domain,
+                &g,
+            )
+        });
+        let c = agree(&*comm, c)?;
+        self.report_phase(Some(c.elements.len() as u64));
+        Ok(c)
     }
 
     /// Writes the mesh as one Gmsh MSH 4.1 file ([`crate::io::gmsh`]),

@@ -22,6 +22,7 @@
 mod adapt;
 mod checkpoint;
 mod classes;
+mod conforming;
 mod data;
 mod fe;
 mod mesh;
@@ -152,9 +153,9 @@ pub struct Session {
     faces: Option<(u64, Faces)>,
     /// The finite-element boundary of the mesh of a generation.
     boundary: Option<(u64, Boundary)>,
-    /// The mesh of a generation gathered on rank 0 for the single-file
+    /// The mesh of a generation (hanging-node or conforming) gathered on rank 0 for the single-file
     /// writers (empty on the other ranks).
-    gathered: Option<(u64, crate::io::gathered::Gathered)>,
+    gathered: Option<((u64, bool), crate::io::gathered::Gathered)>,
     /// The quality of the mesh of a generation, when measured.
     quality: Option<(u64, crate::mesh::quality::Quality)>,
     /// The snap that made the mesh of a generation.

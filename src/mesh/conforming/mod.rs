@@ -1,7 +1,8 @@
 //! Conforming all-hexahedral meshes by refinement templates: the scheme,
-//! its configurations and the templates proven so far (issue 57). Not yet
-//! a stage of the pipeline: no option builds a conforming mesh, since eleven
-//! of the 22 classes of configurations have no template.
+//! its configurations and the templates proven so far. [`build::build`]
+//! meshes a whole octree's kept leaves (`--conforming`); it refuses an
+//! octree with a kept macro cell in one of the eleven classes of
+//! configurations that have no template yet.
 //!
 //! # Macro cells and marks
 //!
@@ -79,6 +80,7 @@
 //! concave corner (`01111111`), 88 of 1,408 macro cells.
 
 pub mod assemble;
+pub mod build;
 pub mod conditions;
 pub mod marks;
 pub mod pieces;

@@ -1,0 +1,189 @@
+//! Stage: the conforming all-hexahedral mesh ([`crate::mesh::conforming`])
+//! in place of the hanging-node mesh in the single-file finite-element
+//! files. Rank 0 builds it from every rank's leaves (8 bytes a leaf) and
+//! takes the patches and zones from the gathered hanging-node mesh of the
+//! same leaves, so the files are the same on any number of ranks.
+
+use std::collections::HashMap;
+use std::rc::Rc;
+
+use crate::error::{Error, ErrorKind, Result};
+use crate::io::gathered::{Gathered, GatheredFace, ABAQUS_FACE, ABAQUS_FACE_NODES};
+use crate::mesh::conforming::build::{build, Conforming};
+use crate::mesh::conforming::MACRO;
+use crate::octree::domain::Domain;
+use crate::octree::octant::{morton_encode, Octant};
+use crate::parallel::comm::{Comm, SerialComm};
+
+/// The kept bit of a leaf key sent to rank 0 (keys use 62 bits).
+const KEPT: u64 = 1 << 63;
+
+/// Rank 0: the conforming mesh of the octree whose local leaves are
+/// `leaves` and kept ones `elements` (a sorted subset), as a gathered mesh
+/// with `hanging`'s patches and zones; other ranks: an empty one. Errors
+/// only on rank 0 (the caller agrees them). Collective.
+pub(super) fn conforming_gathered(
+    comm: &dyn Comm,
+    leaves: &[Octant],
+    elements: &[Octant],
+    domain: &Domain,
+    hanging: &Gathered,
+) -> Result<Gathered> {
+    let mut send = Vec::with_capacity(leaves.len());
+    let mut e = elements.iter().peekable();
+    for &o in leaves {
+        let kept = e.next_if(|&&k| k == o).is_some();
+        send.push(o.key() | if kept { KEPT } else { 0 });
+    }
+    let mut counts = vec![0; comm.size()];
+    counts[0] = send.len();
+    let (all, _) = comm.alltoallv_u64(&send, &counts);
+    if comm.rank() != 0 {
+        return Ok(Gathered::default());
+    }
+    let leaves: Vec<Octant> = all.iter().map(|&k| Octant::from_key(k & !KEPT)).collect();
+    let kept: Vec<Octant> = all
+        .iter()
+        .filter(|&&k| k & KEPT != 0)
+        .map(|&k| Octant::from_key(k & !KEPT))
+        .collect();
+    let zones = &hanging.element_zones;
+    let mut next = 0usize;
+    let tags: Vec<u32> = all
+        .iter()
+        .map(|&k| {
+            if k & KEPT == 0 {
+                return 0;
+            }
+            next += 1;
+            1 + zones.get(next - 1).map_or(0, |&z| u32::from(z))
+        })
+        .collect();
+    let mesh = build(Rc::new(SerialComm), &leaves, &tags)?.map_err(|u| {
+        let classes: Vec<String> = u.classes.iter().map(|m| format!("{:08b}", m.0)).collect();
+        let a = domain.from_lattice(u.first.coords().map(f64::from));
+        let s = f64::from(u.first.side()) / domain.scale();
+        Error::invalid(format!(
+            "--conforming: {} macro cells have corner marks without a template yet (classes {}, \
+             each with a face that has three of its four corners marked: where finer cells wrap \
+             around an edge or a corner of coarser ones); the first is the cube at ({:.6e}, \
+             {:.6e}, {:.6e}) of side {s:.6e}. Conforming meshes are available where the finer \
+             regions are boxes",
+            u.count,
+            classes.join(" "),
+            a[0],
+            a[1],
+            a[2],
+        ))
+    })?;
+    to_gathered(&mesh, &kept, domain, hanging)
+}
+
+/// The gathered form of `mesh`: positions in user units, boundary faces
+/// with the patch of the hanging-node mesh's element face (of `kept`, in
+/// global element order) they lie on, zones from the tags.
+fn to_gathered(
+    mesh: &Conforming,
+    kept: &[Octant],
+    domain: &Domain,
+    hanging: &Gathered,
+) -> Result<Gathered> {
+    let unit = MACRO as u64;
+    let coordinates = mesh
+        .points
+        .iter()
+        .map(|p| domain.from_lattice(p.map(|c| c as f64 / unit as f64)))
+        .collect();
+    // Faces seen once are the boundary.
+    let mut once: HashMap<[u32; 4], (u32, u8)> = HashMap::new();
+    for (h, hex) in mesh.hexes.iter().enumerate() {
+        for (label, corners) in ABAQUS_FACE_NODES.iter().enumerate() {
+            let mut key = corners.map(|c| hex[c]);
+            key.sort_unstable();
+            if once.remove(&key).is_none() {
+                once.insert(key, (h as u32, label as u8));
+            }
+        }
+    }
+    let patch_of: HashMap<(u64, u8), u16> = hanging
+        .faces
+        .iter()
+        .map(|f| ((f.element, f.label), f.patch))
+        .collect();
+    let mut faces = Vec::with_capacity(once.len());
+    for &(h, label) in once.values() {
+        let hex = &mesh.hexes[h as usize];
+        let quad = ABAQUS_FACE_NODES[label as usize].map(|c| mesh.points[hex[c] as usize]);
+        let axis = (0..3)
+            .find(|&a| quad.iter().all(|p| p[a] == quad[0][a]))
+            .ok_or_else(|| {
+                Error::new(
+                    ErrorKind::Internal,
+                    "a boundary face of the conforming mesh is not flat",
+                )
+            })?;
+        let centre: u64 = hex.iter().map(|&n| mesh.points[n as usize][axis]).sum();
+        let plane = quad[0][axis] / unit;
+        // The element is on the side of the hexahedron's centre.
+        let upper = centre < 8 * quad[0][axis];
+        let mut q = [0u32; 3];
+        for (a, c) in q.iter_mut().enumerate() {
+            *c = if a == axis {
+                (plane - u64::from(upper)) as u32
+            } else {
+                (quad.iter().map(|p| p[a]).sum::<u64>() / (4 * unit)) as u32
+            };
+        }
+        let cell = morton_encode(q[0], q[1], q[2]);
+        let e = kept.partition_point(|o| o.cell_end() <= cell);
+        let inside = kept.get(e).is_some_and(|o| o.cell_begin() <= cell);
+        let face = ABAQUS_FACE[2 * axis + usize::from(upper)];
+        let patch = inside
+            .then(|| patch_of.get(&(e as u64, face)))
+            .flatten()
+            .ok_or_else(|| {
+                Error::new(
+                    ErrorKind::Internal,
+                    format!(
+                        "a boundary face of the conforming mesh at lattice cell {q:?} lies on no \
+                     boundary face of the hanging-node mesh"
+                    ),
+                )
+            })?;
+        faces.push(GatheredFace {
+            patch: *patch,
+            element: u64::from(h),
+            label,
+        });
+    }
+    faces.sort_unstable();
+    let highest = faces
+        .iter()
+        .map(|f| f.patch as usize + 1)
+        .max()
+        .unwrap_or(0);
+    let mut patch_nodes = vec![Vec::new(); highest];
+    for f in &faces {
+        let hex = &mesh.hexes[f.element as usize];
+        patch_nodes[f.patch as usize].extend(ABAQUS_FACE_NODES[f.label as usize].map(|c| hex[c]));
+    }
+    for nodes in &mut patch_nodes {
+        nodes.sort_unstable();
+        nodes.dedup();
+    }
+    let element_zones = if hanging.zone_names.is_empty() {
+        Vec::new()
+    } else {
+        mesh.tags.iter().map(|&t| (t - 1) as u16).collect()
+    };
+    Ok(Gathered {
+        coordinates,
+        num_independent: mesh.points.len(),
+        elements: mesh.hexes.clone(),
+        dependencies: Vec::new(),
+        patch_nodes,
+        faces,
+        zone_names: hanging.zone_names.clone(),
+        element_zones,
+    })
+}
