@@ -7,13 +7,15 @@
 //!   solves a Poisson problem in the trilinear space
 //!   (`tools/fe_oracle/poisson_dolfinx.py`). On one-level meshes (the
 //!   whole cube at level 3, the solid sphere at level 4 with every leaf
-//!   at level 4) the linear solution is exact at every node to 1e-8; on
+//!   at level 4, and the same snapped to the surface: distorted
+//!   hexahedra) the linear solution is exact at every node to 1e-8; on
 //!   the solid sphere at level 4 with its 2:1 steps it is off by more than
 //!   1e-3. The smooth solution's L2 error on the one-level solid sphere
 //!   falls at least 3.5 times per level from level 3 to 5.
 //! - CalculiX (Debian `calculix-ccx`) on the `.inp` deck: the displacement
-//!   patch test is exact on the one-level decks (which have no
-//!   `*EQUATION`), and on the solid sphere at level 4 it is exact with
+//!   patch test is exact on the same one-level decks (which have no
+//!   `*EQUATION`; the snapped one's coordinates are no short decimals),
+//!   and on the solid sphere at level 4 it is exact with
 //!   the deck's equations and off by more than 1e-3 without them.
 //!
 //! The independent conformity checker ([`common::conformity`]) says which
@@ -65,12 +67,14 @@ fn whole_cube(dir: &Path) -> (PathBuf, PathBuf) {
 }
 
 /// The solid sphere at `level` in [`CUBE`], every leaf at that level when
-/// `one_level`, else with the surface's refinement and its 2:1 steps.
-fn solid_sphere(dir: &Path, level: &str, one_level: bool) -> (PathBuf, PathBuf) {
+/// `one_level`, else with the surface's refinement and its 2:1 steps;
+/// `more` are further options.
+fn solid_sphere(dir: &Path, level: &str, one_level: bool, more: &[&str]) -> (PathBuf, PathBuf) {
     let mut args = vec!["--level", level, "--keep", "inside", "--domain", CUBE];
     if one_level {
         args.extend(["--min-level", level]);
     }
+    args.extend(more);
     mesh(dir, &args)
 }
 
@@ -78,17 +82,20 @@ fn solid_sphere(dir: &Path, level: &str, one_level: bool) -> (PathBuf, PathBuf) 
 fn dolfinx_patch_test_exact_on_one_level_meshes_only() {
     let dir = scratch("fe_oracle_dolfinx_patch");
     let (_, cube) = whole_cube(&dir.join("cube3"));
-    let (_, sphere) = solid_sphere(&dir.join("sphere4_one_level"), "4", true);
-    let (_, hanging) = solid_sphere(&dir.join("sphere4"), "4", false);
+    let (_, sphere) = solid_sphere(&dir.join("sphere4_one_level"), "4", true, &[]);
+    let (_, snapped) = solid_sphere(&dir.join("sphere4_snapped"), "4", true, &["--snap"]);
+    let (_, hanging) = solid_sphere(&dir.join("sphere4"), "4", false, &[]);
     assert!(!check(&hanging).conforming());
     let Some(e_cube) = assert_patch_test_exact(&cube) else {
         return;
     };
     let e_sphere = assert_patch_test_exact(&sphere).unwrap();
+    let e_snapped = assert_patch_test_exact(&snapped).unwrap();
     let e_hanging = assert_patch_test_fails(&hanging).unwrap();
     println!(
         "dolfinx patch test, largest nodal error: whole cube level 3 {e_cube:.2e}, solid sphere \
-         level 4 one level {e_sphere:.2e}, solid sphere level 4 with hanging nodes {e_hanging:.2e}"
+         level 4 one level {e_sphere:.2e}, the same snapped {e_snapped:.2e}, solid sphere level 4 \
+         with hanging nodes {e_hanging:.2e}"
     );
 }
 
@@ -97,7 +104,7 @@ fn dolfinx_smooth_solution_converges_at_second_order_on_one_level_meshes() {
     let dir = scratch("fe_oracle_dolfinx_order");
     let meshes: Vec<PathBuf> = ["3", "4", "5"]
         .iter()
-        .map(|l| solid_sphere(&dir.join(format!("sphere{l}")), l, true).1)
+        .map(|l| solid_sphere(&dir.join(format!("sphere{l}")), l, true, &[]).1)
         .collect();
     let paths: Vec<&Path> = meshes.iter().map(PathBuf::as_path).collect();
     let Some(errors) = assert_second_order(&paths, FRAME, 3.5) else {
@@ -114,9 +121,10 @@ fn dolfinx_smooth_solution_converges_at_second_order_on_one_level_meshes() {
 fn calculix_patch_test_without_equations() {
     let dir = scratch("fe_oracle_calculix");
     let (cube, _) = whole_cube(&dir.join("cube3"));
-    let (sphere, _) = solid_sphere(&dir.join("sphere4_one_level"), "4", true);
-    let (hanging, _) = solid_sphere(&dir.join("sphere4"), "4", false);
-    for deck in [&cube, &sphere] {
+    let (sphere, _) = solid_sphere(&dir.join("sphere4_one_level"), "4", true, &[]);
+    let (snapped, _) = solid_sphere(&dir.join("sphere4_snapped"), "4", true, &["--snap"]);
+    let (hanging, _) = solid_sphere(&dir.join("sphere4"), "4", false, &[]);
+    for deck in [&cube, &sphere, &snapped] {
         let text = std::fs::read_to_string(deck).unwrap();
         assert!(!text.contains("*EQUATION"), "{}", deck.display());
     }
@@ -124,6 +132,7 @@ fn calculix_patch_test_without_equations() {
         return;
     };
     let e_sphere = assert_patch_test_exact(&sphere).unwrap();
+    let e_snapped = assert_patch_test_exact(&snapped).unwrap();
     let with = calculix_patch_test(&hanging, Equations::Keep).unwrap();
     assert!(with.equations > 0, "the level-4 sphere has hanging nodes");
     assert!(
@@ -134,7 +143,8 @@ fn calculix_patch_test_without_equations() {
     assert!(without > FAILED);
     println!(
         "CalculiX patch test, largest interior error: whole cube level 3 {e_cube:.2e}, solid \
-         sphere level 4 one level {e_sphere:.2e}; solid sphere level 4 with {} hanging nodes: \
+         sphere level 4 one level {e_sphere:.2e}, the same snapped {e_snapped:.2e}; solid sphere \
+         level 4 with {} hanging nodes: \
          {:.2e} with the equations, {without:.2e} without",
         with.equations, with.error
     );
