@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 
 packages=(libopenmpi-dev openmpi-bin libclang-dev clang cmake gfortran libp4est-dev
           pkg-config make build-essential python3 python3-numpy python3-meshio python3-vtk9 python3-matplotlib valgrind
-          openfoam calculix-ccx gmsh python3-gmsh
+          openfoam calculix-ccx gmsh python3-gmsh python3-dolfinx
           libnetcdf-dev netcdf-bin python3-netcdf4 libcgns-dev cgns-convert)
 missing=()
 for p in "${packages[@]}"; do

@@ -1,7 +1,8 @@
 //! Helpers shared by the integration tests: running programs under `mpirun`
 //! with a time limit, the oracles (outside programs and files) and what to
 //! do when one is missing, the runner of the test programs that launch
-//! themselves ([`runner`]), and checks written independently of the
+//! themselves ([`runner`]), the finite-element codes that solve on the
+//! written files ([`fe_oracle`]), and checks written independently of the
 //! library's algorithms.
 //!
 //! # Oracles
@@ -25,6 +26,7 @@
 #![allow(dead_code)]
 
 pub mod conformity;
+pub mod fe_oracle;
 pub mod runner;
 
 use std::path::{Path, PathBuf};
