@@ -480,11 +480,13 @@ fn an_unwritable_file_fails_every_rank() {
     }
 }
 
-/// Around the sphere at level 2, two overlapping refinement boxes at
+/// Every leaf at level 2 or finer, two overlapping refinement boxes at
 /// levels 4 and 5, every leaf kept, in the cube whose lattice points are
 /// short decimals: finer regions the conforming templates cover today.
-const CONFORMING: [&str; 11] = [
+const CONFORMING: [&str; 13] = [
     "--level",
+    "2",
+    "--min-level",
     "2",
     "--domain",
     "-1.28,-1.28,-1.28,2.56",
@@ -501,7 +503,8 @@ const CONFORMING: [&str; 11] = [
 /// reads only the `.msh` finds none and every inner face in two elements,
 /// the elements fill the domain, the deck has no `*EQUATION` and passes
 /// the patch test in CalculiX as it is, Gmsh reads the counts the deck
-/// has, and the files are the same on 1 to 3 ranks.
+/// has, the files are the same on 1 to 3 ranks, and dolfinx solves on the
+/// `.msh`: exact on a linear field, second order on a smooth one.
 #[test]
 fn conforming_meshes_need_no_equations() {
     let dir = scratch("fe_files_conforming");
@@ -557,6 +560,36 @@ fn conforming_meshes_need_no_equations() {
             error <= 1e-8,
             "patch test off by {error:e} without equations"
         );
+    }
+    // dolfinx, which knows no hanging nodes: exact on the linear field,
+    // and the smooth field's L2 error falls at second order when every
+    // level rises by one (a uniform level and a box one finer).
+    if let Some(error) = common::fe_oracle::assert_patch_test_exact(&msh) {
+        println!("conforming: dolfinx patch test error {error:.3e}");
+        let mut meshes = Vec::new();
+        for level in [3u8, 4, 5] {
+            let (a, region) = (
+                level.to_string(),
+                format!("box:-0.3,-0.3,-0.3,0.3,0.3,0.3:{}", level + 1),
+            );
+            let args = [
+                "--level",
+                &a,
+                "--min-level",
+                &a,
+                "--domain",
+                CONFORMING[5],
+                "--region",
+                &region,
+                "--conforming",
+            ];
+            let (_, m, _) = mesh(2, &dir.join(format!("level{level}")), "sphere", &args);
+            meshes.push(m);
+        }
+        let paths: Vec<&Path> = meshes.iter().map(|m| m.as_path()).collect();
+        let errors =
+            common::fe_oracle::assert_second_order(&paths, [-1.28, -1.28, -1.28, 2.56], 3.5);
+        println!("conforming: dolfinx L2 errors {errors:?}");
     }
 }
 
