@@ -35,8 +35,9 @@ order and every P.
     /usr/bin/python3 tools/bench/partition_boundary.py F.bin --parts 2,4,8 --json out.json
     /usr/bin/python3 tools/bench/partition_boundary.py F.bin --parts 2 --orders morton --stats s.json
 
-`--table rows.json` prints the rows as markdown, each with its ratio to the
-same order's P = 2 row of the same surface (named by the file up to `_`).
+`--table rows.json` prints the rows as markdown: per surface (the file name
+up to `_`) and P, the most ghosts and mirror pairs of a part in each order,
+with the ratio to the same order's P = 2 value.
 `--stats` checks the Morton counts against `octmesh mesh --stats` of the
 same tree on P ranks: the ghosts over all ranks, and the ghost phase's most
 bytes sent and received by a rank (16 per mirror pair and per ghost).
@@ -269,24 +270,31 @@ def analyse(path, parts_list, orders, log=print):
 
 
 def markdown(rows):
-    """Table of the rows, each order's counts with their ratio to its own
-    P = 2 row of the same surface (the file name up to its first `_`)."""
-    out = [
-        "| surface | P | leaves per part | order | ghosts max | x P=2 | ghosts mean | x P=2 "
-        "| mirror pairs max | x P=2 | neighbours mean |",
-        "|:---|---:|---:|:---|---:|---:|---:|---:|---:|---:|---:|",
-    ]
+    """One line per surface and P: the most ghosts and mirror pairs of a part
+    in each order, with the ratio to the same order's P = 2 value of the same
+    surface (the file name up to its first `_`) in parentheses."""
     surface = lambda r: Path(r["file"]).stem.split("_")[0]
-    base = {(surface(r), r["order"]): r for r in rows if r["parts"] == 2}
-    for r in sorted(rows, key=lambda r: (surface(r), r["parts"], ORDERS.index(r["order"]))):
-        b = base.get((surface(r), r["order"]))
-        ratio = lambda k: f"{r[k] / b[k]:.2f}" if b else "-"
-        out.append(
-            f"| {surface(r)} | {r['parts']} | {r['leaves_per_part']:,.0f} | {r['order']} "
-            f"| {r['ghosts_max']:,} | {ratio('ghosts_max')} | {r['ghosts_mean']:,.0f} "
-            f"| {ratio('ghosts_mean')} | {r['mirror_pairs_max']:,} | {ratio('mirror_pairs_max')} "
-            f"| {r['neighbours_mean']:.1f} |"
-        )
+    by = {(surface(r), r["parts"], r["order"]): r for r in rows}
+    orders = [o for o in ORDERS if any(k[2] == o for k in by)]
+    name = {"morton": "Morton", "hilbert": "Hilbert", "rcb": "RCB"}
+    heads = [f"ghosts, {name[o]}" for o in orders] + [f"mirror pairs, {name[o]}" for o in orders]
+    out = [
+        "| surface | P | leaves per part | " + " | ".join(heads) + " |",
+        "|:---|---:|---:|" + "---:|" * len(heads),
+    ]
+    surfaces = list(dict.fromkeys(surface(r) for r in rows))
+    for surf, parts in sorted({(k[0], k[1]) for k in by}, key=lambda k: (surfaces.index(k[0]), k[1])):
+        cells = []
+        for key in ("ghosts_max", "mirror_pairs_max"):
+            for o in orders:
+                r, b = by.get((surf, parts, o)), by.get((surf, 2, o))
+                if r is None:
+                    cells.append("-")
+                else:
+                    ratio = f" ({r[key] / b[key]:.2f})" if b else ""
+                    cells.append(f"{r[key]:,}{ratio}")
+        any_row = next(by[(surf, parts, o)] for o in orders if (surf, parts, o) in by)
+        out.append(f"| {surf} | {parts} | {any_row['leaves_per_part']:,.0f} | " + " | ".join(cells) + " |")
     return "\n".join(out)
 
 
@@ -324,6 +332,13 @@ def self_test():
     o = np.argsort(h)
     step = np.abs(np.diff(x[o])) + np.abs(np.diff(y[o])) + np.abs(np.diff(z[o]))
     assert np.all(step == 1), "Hilbert order not continuous"
+    # Every aligned cube is one run of the curve, so sorting leaves by their
+    # centres' indices is a leaf order.
+    for side in (2, 4):
+        cube = (x // side) * 64 + (y // side) * 8 + z // side
+        for c in np.unique(cube):
+            run = h[cube == c]
+            assert int(run.max() - run.min()) + 1 == run.size, "aligned cube split"
     # Contacts against brute force on a random complete tree, 2:1 or not.
     rng = np.random.default_rng(7)
     leaves = [(0, 0, 0, 0)]
