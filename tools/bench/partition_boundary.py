@@ -43,7 +43,8 @@ same tree on P ranks: the ghosts over all ranks, and the ghost phase's most
 bytes sent and received by a rank (16 per mirror pair and per ghost).
 
 numpy only. `--self-test` checks the Hilbert order (consecutive cells are
-face neighbours) and the contact pairs against brute force on a small tree.
+face neighbours, aligned cubes are runs) and the contact pairs against brute
+force on a small tree.
 """
 
 import argparse
@@ -214,7 +215,7 @@ def measure(part, pi, pj, parts):
     }
 
 
-def summary(name, per):
+def summary(per):
     g, mp, m, nb = (np.array(per[k]) for k in ("ghosts", "mirror_pairs", "mirrors", "neighbours"))
     return {
         "ghosts_max": int(g.max()),
@@ -239,7 +240,8 @@ def analyse(path, parts_list, orders, log=print):
     if n > 1 and not np.all(keys[1:] > keys[:-1]):
         sys.exit(f"{path}: leaves not in strictly increasing Morton order")
     size = np.int64(1) << (LATTICE_BITS - level)
-    if int((size.astype(object) ** 3).sum()) != ROOT ** 3:
+    volume = sum(int(c) * 8 ** (LATTICE_BITS - lv) for lv, c in enumerate(np.bincount(level)))
+    if volume != ROOT ** 3:
         sys.exit(f"{path}: the leaves do not cover the root cube")
     pi, pj = contacts(x, y, z, level, keys)
     log(f"{path}: {n} leaves, {pi.size} contacts ({time.time() - t0:.1f} s)")
@@ -257,7 +259,7 @@ def analyse(path, parts_list, orders, log=print):
             per = measure(part, pi, pj, parts)
             row = {"file": str(path), "leaves": n, "parts": parts, "order": order,
                    "leaves_per_part": n / parts}
-            row.update(summary(order, per))
+            row.update(summary(per))
             row["per_part"] = per
             rows.append(row)
             log(
@@ -273,7 +275,9 @@ def markdown(rows):
     """One line per surface and P: the most ghosts and mirror pairs of a part
     in each order, with the ratio to the same order's P = 2 value of the same
     surface (the file name up to its first `_`) in parentheses."""
-    surface = lambda r: Path(r["file"]).stem.split("_")[0]
+    def surface(r):
+        return Path(r["file"]).stem.split("_")[0]
+
     by = {(surface(r), r["parts"], r["order"]): r for r in rows}
     orders = [o for o in ORDERS if any(k[2] == o for k in by)]
     name = {"morton": "Morton", "hilbert": "Hilbert", "rcb": "RCB"}
