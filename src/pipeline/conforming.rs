@@ -4,10 +4,10 @@
 //! takes the patches and zones from the gathered hanging-node mesh of the
 //! same leaves, so the files are the same on any number of ranks.
 
-use std::collections::HashMap;
 use std::rc::Rc;
 
 use crate::error::{Error, ErrorKind, Result};
+use crate::geometry::hash::FoldMap;
 use crate::io::gathered::{Gathered, GatheredFace, ABAQUS_FACE, ABAQUS_FACE_NODES};
 use crate::mesh::conforming::build::{build, Conforming};
 use crate::mesh::conforming::MACRO;
@@ -95,7 +95,7 @@ fn to_gathered(
         .map(|p| domain.from_lattice(p.map(|c| c as f64 / unit as f64)))
         .collect();
     // Faces seen once are the boundary.
-    let mut once: HashMap<[u32; 4], (u32, u8)> = HashMap::new();
+    let mut once: FoldMap<[u32; 4], (u32, u8)> = FoldMap::default();
     for (h, hex) in mesh.hexes.iter().enumerate() {
         for (label, corners) in ABAQUS_FACE_NODES.iter().enumerate() {
             let mut key = corners.map(|c| hex[c]);
@@ -105,7 +105,7 @@ fn to_gathered(
             }
         }
     }
-    let patch_of: HashMap<(u64, u8), u16> = hanging
+    let patch_of: FoldMap<(u64, u8), u16> = hanging
         .faces
         .iter()
         .map(|f| ((f.element, f.label), f.patch))

@@ -10,11 +10,11 @@
 //! tag of the cell it refines. Dropped macro cells still mark corners,
 //! which only makes a kept cell's pattern finer where it meets them.
 
-use std::collections::HashMap;
 
 use super::assemble::GlobalPoint;
 use super::{conditions, macro_template, Marks, MACRO};
 use crate::error::Result;
+use crate::geometry::hash::FoldMap;
 use crate::octree::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::parallel::comm::CommRef;
@@ -90,7 +90,7 @@ pub fn build(
     let mut uncovered: Vec<Octant> = Vec::new();
     let mut classes: Vec<Marks> = Vec::new();
     let mut out = Conforming::default();
-    let mut index: HashMap<GlobalPoint, u32> = HashMap::new();
+    let mut index: FoldMap<GlobalPoint, u32> = FoldMap::default();
     for ((&o, &m), &tag) in balanced.iter().zip(&marks).zip(&keep) {
         if tag == 0 {
             continue;

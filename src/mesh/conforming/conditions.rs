@@ -4,10 +4,10 @@
 
 use super::Marks;
 use crate::error::Result;
+use crate::geometry::hash::FoldMap;
 use crate::octree::octant::{Connectivity, Octant};
 use crate::octree::LinearOctree;
 use crate::parallel::comm::CommRef;
-use std::collections::HashMap;
 
 /// The macro tree of a complete, sorted set of leaves: a leaf whose
 /// siblings are not all leaves becomes a macro cell of its own (it will be
@@ -45,7 +45,7 @@ pub fn marks(macros: &[Octant]) -> Vec<Marks> {
         let (a, s) = (o.coords(), o.side());
         std::array::from_fn(|d| a[d] + if c >> d & 1 == 1 { s } else { 0 })
     };
-    let mut finest: HashMap<[u32; 3], u8> = HashMap::new();
+    let mut finest: FoldMap<[u32; 3], u8> = FoldMap::default();
     for &o in macros {
         for c in 0..8 {
             let level = finest.entry(corner(o, c)).or_insert(0);
