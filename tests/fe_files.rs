@@ -642,3 +642,44 @@ fn conforming_refuses_what_it_cannot_do() {
     let lines = common::rank_error_lines(&out, 2, "--conforming --out");
     assert!(lines.iter().all(|l| l.contains("--out")), "{lines:?}");
 }
+
+/// `--conforming --openfoam`: one serial case of hexahedra only, which
+/// checkMesh accepts (`Mesh OK.`, no polyhedra), the same files on 1 and
+/// 3 ranks.
+#[test]
+fn conforming_openfoam_case_is_all_hexahedra() {
+    let dir = scratch("fe_files_conforming_foam");
+    let mut cases = Vec::new();
+    for np in [1, 3] {
+        let case = dir.join(format!("np{np}"));
+        let _ = std::fs::remove_dir_all(&case);
+        let mut args = vec!["mesh", "sphere"];
+        args.extend(CONFORMING);
+        args.extend(["--openfoam", case.to_str().unwrap(), "--quiet"]);
+        octmesh_ok(np, &args);
+        cases.push(case);
+    }
+    let poly = |c: &Path, f: &str| std::fs::read(c.join("constant/polyMesh").join(f)).unwrap();
+    for f in ["points", "faces", "owner", "neighbour", "boundary"] {
+        assert!(
+            poly(&cases[0], f) == poly(&cases[1], f),
+            "{f} differs on 3 ranks"
+        );
+    }
+    assert!(!cases[1].join("processor0").exists());
+    let Some(rc) = common::openfoam() else {
+        return;
+    };
+    let text = common::foam(&rc, &cases[0], "checkMesh -allGeometry -allTopology");
+    let count = |what: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(what))
+            .unwrap_or_else(|| panic!("no {what} in:\n{text}"));
+        line.split_whitespace().last().unwrap().parse().unwrap()
+    };
+    assert!(text.contains("Mesh OK."), "{text}");
+    assert_eq!(count("polyhedra:"), 0);
+    assert_eq!(count("hexahedra:"), count("cells:"));
+    println!("conforming: checkMesh OK on {} hexahedra", count("cells:"));
+}

@@ -318,7 +318,8 @@ pub struct MeshConfig {
     /// Needs `keep` all.
     pub zones: bool,
     /// Write the single-file finite-element meshes (`gmsh`, `abaqus`,
-    /// `exodus`, `cgns`) as conforming all-hexahedral meshes
+    /// `exodus`, `cgns`) and the OpenFOAM case (serial) as conforming
+    /// all-hexahedral meshes
     /// ([`crate::mesh::conforming`]): no hanging nodes, every inner face
     /// shared whole by two elements.
     pub conforming: bool,
@@ -605,15 +606,14 @@ impl Config {
                 let other = [
                     ("mesh.snap", self.mesh.snap),
                     ("output.vtu", o.vtu.is_some()),
-                    ("output.openfoam", o.openfoam.is_some()),
                     ("output.quality", o.quality),
                 ];
                 if let Some((key, _)) = other.iter().find(|(_, on)| *on) {
                     return Err(ConfigError::new(
                         "mesh.conforming",
                         format!(
-                            "writes the Gmsh, Abaqus, Exodus II and CGNS files only: {{{key}}} \
-                             is not available with it yet"
+                            "writes the OpenFOAM, Gmsh, Abaqus, Exodus II and CGNS files only: \
+                             {{{key}}} is not available with it yet"
                         ),
                     ));
                 }

@@ -746,10 +746,10 @@ options! {
     range,
     set |c, _v, _g| { c.mesh.zones = true; }
 
-    /// Write --gmsh, --abaqus, --exodus and --cgns as conforming
-    /// all-hexahedral meshes (no hanging nodes) from refinement templates;
-    /// for now only where the finer regions are boxes (a clear error
-    /// otherwise), without --snap, --vtu, --openfoam or --quality
+    /// Write --gmsh, --abaqus, --exodus, --cgns and --openfoam (one serial
+    /// case) as conforming all-hexahedral meshes (no hanging nodes) from
+    /// refinement templates; for now only where the finer regions are
+    /// boxes (a clear error otherwise), without --snap, --out or --quality
     Mesh "conforming": Switch bool,
     keys ["mesh.conforming"],
     default none,

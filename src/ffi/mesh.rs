@@ -137,8 +137,9 @@ pub extern "C" fn octmesh_mesh_set_zones(h: *mut octmesh_t, on: bool) -> octmesh
 }
 
 /// Sets whether `octmesh_mesh_write_gmsh`, `octmesh_mesh_write_abaqus`,
-/// `octmesh_mesh_write_exodus` and `octmesh_mesh_write_cgns` write the
-/// current mesh's kept region as a conforming all-hexahedral mesh (off
+/// `octmesh_mesh_write_exodus`, `octmesh_mesh_write_cgns` and
+/// `octmesh_mesh_write_openfoam` (then one serial case written by rank 0)
+/// write the current mesh's kept region as a conforming all-hexahedral mesh (off
 /// until set), like the command's `--conforming`: no hanging nodes, every
 /// inner face shared whole by two elements, the patches and zones of the
 /// mesh. The mesh itself, its getters and the other writers keep the

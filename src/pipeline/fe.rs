@@ -16,7 +16,7 @@ impl Session {
     /// of the same mesh uses the same copy. Reports the mesh's pieces
     /// ([`Event::Pieces`], [`crate::mesh::pieces`]). Phases `faces` and
     /// `boundary` (when not made yet) and `gather` (with the pieces).
-    fn gather(&mut self) -> Result<()> {
+    pub(super) fn gather_fe(&mut self) -> Result<()> {
         let key = (self.mesh_generation, self.config.mesh.conforming);
         if self.gathered.as_ref().map(|g| g.0) == Some(key) {
             return Ok(());
@@ -116,7 +116,7 @@ impl Session {
             return Ok(());
         }
         let patches = agree(&*self.comm, self.patch_names())?;
-        self.gather()?;
+        self.gather_fe()?;
         let comm = self.comm.clone();
         for &(format, path) in files {
             let g = &self.gathered.as_ref().expect("gathered just now").1;

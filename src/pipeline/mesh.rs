@@ -362,6 +362,9 @@ impl Session {
     /// (when not extracted yet) and `openfoam`.
     pub fn write_openfoam(&mut self, dir: &Path) -> Result<FoamCounts> {
         let patches = agree(&*self.comm, self.patch_names())?;
+        if self.config.mesh.conforming {
+            return self.write_conforming_openfoam(dir, &patches);
+        }
         self.faces()?;
         let opts = FoamOptions {
             format: self.config.output.openfoam_format,
@@ -376,6 +379,32 @@ impl Session {
                 (Some(m), Some((_, f))) => write_case(&*comm, dir, m, f, &opts),
                 _ => Ok(FoamCounts::default()),
             })?;
+        self.report_phase(None);
+        self.observer.event(&Event::Wrote(dir));
+        Ok(counts)
+    }
+}
+
+impl Session {
+    /// The conforming mesh as one serial case written by rank 0
+    /// ([`crate::io::openfoam::write_gathered_case`]). Phases of the gather
+    /// and `openfoam`.
+    fn write_conforming_openfoam(
+        &mut self,
+        dir: &Path,
+        patches: &PatchNames,
+    ) -> Result<FoamCounts> {
+        self.gather_fe()?;
+        let comm = self.comm.clone();
+        let overwrite = self.config.output.overwrite;
+        let g = &self.gathered.as_ref().expect("gathered just now").1;
+        let counts = self.timer.time(&*comm, "openfoam", || {
+            let local = match comm.rank() {
+                0 => crate::io::openfoam::write_gathered_case(dir, g, patches, overwrite),
+                _ => Ok(FoamCounts::default()),
+            };
+            agree(&*comm, local)
+        })?;
         self.report_phase(None);
         self.observer.event(&Event::Wrote(dir));
         Ok(counts)

@@ -47,6 +47,7 @@
 //! are moved in only when every rank has written its own: a failure on one
 //! rank leaves no case looking complete, and every rank reports it.
 
+mod gathered;
 mod polygons;
 mod polymesh;
 mod system;
@@ -55,6 +56,8 @@ mod zones;
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+pub use gathered::write_gathered_case;
 
 use super::direct::DirectWriter;
 use crate::error::{Error, ErrorKind, Result};

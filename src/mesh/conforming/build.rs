@@ -10,7 +10,6 @@
 //! tag of the cell it refines. Dropped macro cells still mark corners,
 //! which only makes a kept cell's pattern finer where it meets them.
 
-
 use super::assemble::GlobalPoint;
 use super::{conditions, macro_template, Marks, MACRO};
 use crate::error::Result;
