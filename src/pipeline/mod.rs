@@ -23,6 +23,7 @@ mod adapt;
 mod checkpoint;
 mod classes;
 mod data;
+mod distributed;
 mod fe;
 mod mesh;
 pub mod observer;
@@ -72,6 +73,9 @@ struct SurfaceState {
     /// surface itself is released.
     bbox: Aabb,
     volume: f64,
+    /// This rank's home share when the surface is distributed over the
+    /// ranks (`index` then holds only the triangles near its leaves).
+    dist: Option<distributed::Distributed>,
 }
 
 impl SurfaceState {
@@ -118,6 +122,10 @@ struct Facts {
     rss_read: u64,
     /// The sizes of the last gathered mesh's pieces joined through faces.
     pieces: Option<Vec<u64>>,
+    /// Whether the surface was distributed over the ranks.
+    distributed: bool,
+    /// The most triangles this rank's surface index held.
+    held: usize,
 }
 
 /// A meshing session over a communicator: the pipeline's state and stages.
@@ -164,6 +172,8 @@ pub struct Session {
     /// Which part is nearest a point, for surfaces of several parts.
     locator: Option<PartLocator>,
     facts: Facts,
+    /// Whether the next surface read is distributed ([`Session::run`]).
+    distribute: bool,
 }
 
 impl Session {
@@ -198,6 +208,7 @@ impl Session {
                 rss_start: peak_rss_bytes(),
                 ..Facts::default()
             },
+            distribute: false,
         }
     }
 
@@ -326,7 +337,9 @@ impl Session {
     pub fn run(&mut self, command: Command) -> Result<Stats> {
         self.inside = self.config.inside_rule(command);
         self.plan = command;
+        self.distribute = self.may_distribute(command);
         self.load_surface()?;
+        self.distribute = false;
         if command == Command::Mesh {
             // Renames name the surface's parts: check them before the work.
             agree(&*self.comm, self.patch_names())?;

@@ -132,6 +132,12 @@ pub struct Stats {
     pub ranks: u64,
     /// Triangles after clean-up.
     pub triangles: u64,
+    /// Whether each rank held only the triangles near its leaves
+    /// (`--distributed-surface`).
+    pub distributed_surface: bool,
+    /// The most triangles a rank's surface index held (the largest over
+    /// the ranks).
+    pub triangles_held: u64,
     /// Level of the leaves touching the surface.
     pub level: u8,
     /// The balance applied.
@@ -298,6 +304,8 @@ impl Session {
             })
             .collect();
         comm.max_u64(&mut after);
+        let mut held = [f.held as u64];
+        comm.max_u64(&mut held);
         let mut rss = [peak_rss_bytes(), f.rss_start, f.rss_read];
         comm.max_u64(&mut rss);
         let mesh = meshed.map(|m| {
@@ -330,6 +338,8 @@ impl Session {
             surface: f.report.as_ref().map(SurfaceStats::from),
             ranks: comm.size() as u64,
             triangles: f.triangles as u64,
+            distributed_surface: f.distributed,
+            triangles_held: held[0],
             level: self.config.octree.level.unwrap_or(0),
             balance,
             octants_refined: f.octants_refined,
