@@ -120,6 +120,8 @@ struct Facts {
     /// Peak memory before anything and after reading, bytes (this rank).
     rss_start: u64,
     rss_read: u64,
+    /// Peak memory after the distributed surface's first redistribution.
+    rss_distributed: u64,
     /// The sizes of the last gathered mesh's pieces joined through faces.
     pieces: Option<Vec<u64>>,
     /// Whether the surface was distributed over the ranks.

@@ -134,6 +134,7 @@ impl Session {
         let planned = agree(&*comm, planned)?;
         if let Some((_, held)) = &planned {
             self.facts.held = self.facts.held.max(*held);
+            self.facts.rss_distributed = crate::run::report::peak_rss_bytes();
             self.report_phase(None);
         }
         let index = match &self.surface {

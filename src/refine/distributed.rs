@@ -43,6 +43,10 @@ use crate::parallel::comm::{agree, Comm, CommRef};
 /// rounding of the lattice and fixed-point coordinates stays far below it.
 pub const MARGIN: f64 = 4.0;
 
+/// Longest piece of a path segment searched at once, lattice units (a
+/// cell of level 8).
+const PIECE: f64 = (ROOT_LEN >> 8) as f64;
+
 /// Words per triangle sent: the global id, the part, nine coordinates.
 const WORDS: usize = 11;
 
@@ -195,8 +199,10 @@ fn top_bits(tris: &[Triangle], max_level: u8) -> Vec<u64> {
         for l in 0..=stop.min(max_level.saturating_sub(1)) {
             let side = (ROOT_LEN >> l) as f64;
             let n = 1i64 << l;
+            // Cell `i` meets the box when `i side <= max` and `(i + 1) side
+            // >= min` (exact: `side` is a power of two).
             let range = |k: usize| {
-                let lo = ((b.min[k] / side).floor() as i64 - 1).clamp(0, n - 1);
+                let lo = ((b.min[k] / side).ceil() as i64 - 1).clamp(0, n - 1);
                 let hi = ((b.max[k] / side).floor() as i64).clamp(0, n - 1);
                 lo..=hi
             };
@@ -209,9 +215,13 @@ fn top_bits(tris: &[Triangle], max_level: u8) -> Vec<u64> {
                             l,
                         );
                         let (lo, hi) = o.bounds_f64();
+                        let i = base(l) + rank_in_level(o);
+                        // Marked already: the exact test would change nothing.
+                        if bits[i / 64] >> (i % 64) & 1 != 0 {
+                            continue;
+                        }
                         let meets = (0..3).all(|k| b.min[k] <= hi[k] && lo[k] <= b.max[k]);
                         if meets && (l == stop || triangle_box_overlap(t, lo, hi)) {
-                            let i = base(l) + rank_in_level(o);
                             bits[i / 64] |= 1 << (i % 64);
                         }
                     }
@@ -453,15 +463,27 @@ pub fn redistribute(
         for (r, list) in to.iter_mut().enumerate() {
             let before = list.len();
             for (a, b) in path_segments(first_cells, r) {
-                let lo: [f64; 3] = std::array::from_fn(|k| a[k].min(b[k]) - MARGIN);
-                let hi: [f64; 3] = std::array::from_fn(|k| a[k].max(b[k]) + MARGIN);
-                found.clear();
-                bvh.query_candidates(lo, hi, &mut found);
-                for &i in &found {
-                    let bb = lat[i as usize].aabb();
-                    let (l, h) = (bb.min.map(|x| x - MARGIN), bb.max.map(|x| x + MARGIN));
-                    if segment_meets(a, b, l, h) {
-                        list.push(i);
+                // In pieces no longer than a cell of level 8 per axis, whose
+                // boxes hold few triangles the segment misses.
+                let len = (0..3).map(|k| (b[k] - a[k]).abs()).fold(0.0, f64::max);
+                let pieces = (len / PIECE).ceil().max(1.0) as usize;
+                for j in 0..pieces {
+                    let at =
+                        |f: f64| -> [f64; 3] { std::array::from_fn(|k| a[k] + (b[k] - a[k]) * f) };
+                    let (pa, pb) = (
+                        at(j as f64 / pieces as f64),
+                        at((j + 1) as f64 / pieces as f64),
+                    );
+                    let lo: [f64; 3] = std::array::from_fn(|k| pa[k].min(pb[k]) - MARGIN);
+                    let hi: [f64; 3] = std::array::from_fn(|k| pa[k].max(pb[k]) + MARGIN);
+                    found.clear();
+                    bvh.query_candidates(lo, hi, &mut found);
+                    for &i in &found {
+                        let bb = lat[i as usize].aabb();
+                        let (l, h) = (bb.min.map(|x| x - MARGIN), bb.max.map(|x| x + MARGIN));
+                        if segment_meets(a, b, l, h) {
+                            list.push(i);
+                        }
                     }
                 }
             }
