@@ -57,7 +57,7 @@ fn main() {
                 },
             ];
             let models = r.test("the shared models", || {
-                ["bunny.stl", "dragon.stl", "bunny_open.stl"].map(|m| common::shared_model(m))
+                ["bunny.stl", "dragon.stl", "bunny_open.stl"].map(common::shared_model)
             });
             if let Some([Some(bunny), Some(dragon), Some(open)]) = models {
                 cases.push(Case {
