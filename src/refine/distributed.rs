@@ -3,7 +3,7 @@
 //! triangles near its part of the domain.
 //!
 //! - The top of the surface refinement ([`plan_top`]) is the same as
-//!   [`construct_top_for_surface`]'s without the whole surface: whether an
+//!   [`super::construct_top_for_surface`]'s without the whole surface: whether an
 //!   octant of the top splits is whether some triangle touches it, an "or"
 //!   over triangles, so each rank marks the octants its home triangles
 //!   touch (levels below [`COARSE_LEVEL`]; at that level, the octants some
@@ -233,7 +233,7 @@ fn top_bits(tris: &[Triangle], max_level: u8) -> Vec<u64> {
 }
 
 /// The top of the surface refinement to `level` and its split over the
-/// ranks, the same as [`construct_top_for_surface`] makes from the whole
+/// ranks, the same as [`super::construct_top_for_surface`] makes from the whole
 /// surface.
 pub struct TopPlan {
     coarse: Vec<(Octant, u64)>,
