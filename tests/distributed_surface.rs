@@ -2,7 +2,8 @@
 //! triangles near its part of the domain) against every rank holding the
 //! whole surface, on 1 to 4 ranks: the same leaves, the same Gmsh file
 //! (classes decide which leaves are kept) and the same OpenFOAM case, for a
-//! binary sphere, the bunny, the dragon and the open bunny under parity;
+//! binary sphere, the bunny (also with curvature levels and a distance
+//! band), the dragon and the open bunny under parity;
 //! runs that need the whole surface (the winding rule, a file of several
 //! solids) keep it whole, say so in their statistics, and give the same
 //! files. The dragon's surface on 8 ranks costs each rank at most a quarter
@@ -23,7 +24,7 @@ use octmesh::internals::geometry::stl::write_stl_binary;
 struct Case {
     name: &'static str,
     file: PathBuf,
-    level: u8,
+    level: &'static str,
     args: Vec<&'static str>,
     distributes: bool,
 }
@@ -44,14 +45,14 @@ fn main() {
                 Case {
                     name: "sphere",
                     file: sphere.clone(),
-                    level: 5,
+                    level: "5",
                     args: parity.clone(),
                     distributes: true,
                 },
                 Case {
                     name: "solids",
                     file: halves,
-                    level: 5,
+                    level: "5",
                     args: parity.clone(),
                     distributes: false,
                 },
@@ -62,29 +63,43 @@ fn main() {
             if let Some([Some(bunny), Some(dragon), Some(open)]) = models {
                 cases.push(Case {
                     name: "bunny",
-                    file: bunny,
-                    level: 7,
+                    file: bunny.clone(),
+                    level: "7",
                     args: parity.clone(),
+                    distributes: true,
+                });
+                cases.push(Case {
+                    name: "bunny_bands",
+                    file: bunny.clone(),
+                    level: "6:8",
+                    args: vec![
+                        "--inside",
+                        "parity",
+                        "--feature-angle",
+                        "20",
+                        "--distance",
+                        "0.02:7",
+                    ],
                     distributes: true,
                 });
                 cases.push(Case {
                     name: "dragon",
                     file: dragon.clone(),
-                    level: 7,
+                    level: "7",
                     args: parity.clone(),
                     distributes: true,
                 });
                 cases.push(Case {
                     name: "open_parity",
                     file: open.clone(),
-                    level: 7,
+                    level: "7",
                     args: parity.clone(),
                     distributes: true,
                 });
                 cases.push(Case {
                     name: "open_winding",
                     file: open,
-                    level: 7,
+                    level: "7",
                     args: vec!["--inside", "winding"],
                     distributes: false,
                 });
@@ -138,12 +153,11 @@ fn run(dir: &Path, c: &Case, np: usize, distributed: bool) -> Run {
     let case = dir.join(format!("{tag}_case"));
     let stats = dir.join(format!("{tag}.json"));
     let _ = std::fs::remove_dir_all(&case);
-    let level = c.level.to_string();
     let mut args = vec![
         "mesh",
         c.file.to_str().unwrap(),
         "--level",
-        &level,
+        c.level,
         "--keep",
         "outside",
         "--write-leaves",
