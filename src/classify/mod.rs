@@ -141,7 +141,7 @@
 //! ancestors only, so the classes are the same on any number of ranks.
 
 use crate::geometry::diagnostics::diagnose;
-use crate::geometry::{Aabb, Surface};
+use crate::geometry::{Aabb, Surface, Triangle};
 use crate::octree::octant::{Octant, ROOT_LEN};
 use crate::refine::SurfaceIndex;
 
@@ -159,6 +159,54 @@ pub use rules::{
 };
 
 use walk::Classifier;
+
+/// What the walk of a rank holding part of the surface needs from the whole
+/// of it: the largest coordinate (which sets the fixed point) and the signed
+/// count of crossings to the root's centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SharedCounts {
+    pub big: f64,
+    pub root_count: i32,
+}
+
+/// [`SharedCounts`] of the surface whose share on this rank is `home`
+/// (lattice units; each triangle on exactly one rank): maxima and sums over
+/// the ranks, the same as the whole surface gives. Collective.
+pub fn shared_counts(comm: &dyn crate::parallel::comm::Comm, home: &[Triangle]) -> SharedCounts {
+    let mut big = [ROOT_LEN as f64];
+    for c in home.iter().flat_map(|t| t.v.iter().flatten()) {
+        if c.is_finite() && c.abs() > big[0] {
+            big[0] = c.abs();
+        }
+    }
+    comm.max_f64(&mut big);
+    let big = big[0];
+    let shift = walk::shift_for(big);
+    let scale = 2f64.powi(shift);
+    let round = |p: [f64; 3]| p.map(|c| crate::geometry::predicates::round_half_away(c * scale));
+    let fixed: Vec<crate::geometry::predicates::FixedTri> = home
+        .iter()
+        .filter(|t| t.is_finite())
+        .map(|t| crate::geometry::predicates::FixedTri::new(t.v.map(round)))
+        .collect();
+    let half = (ROOT_LEN / 2) as u64;
+    let c = if shift >= 0 {
+        (half as i64) << shift
+    } else {
+        (half as f64 * 2f64.powi(shift)).round() as i64
+    };
+    let p = [c; 3];
+    // Coordinates within 2^40: exact as f64.
+    let mut far = [walk::far_x(&fixed, p) as f64];
+    comm.max_f64(&mut far);
+    let n = walk::count_along(&fixed, p, far[0] as i64);
+    let mut v = [n.max(0) as u64, (-n).max(0) as u64];
+    comm.sum_u64(&mut v);
+    SharedCounts {
+        big,
+        root_count: v[0] as i32 - v[1] as i32,
+    }
+}
 
 /// Class byte of every leaf (bits [`CENTER_INSIDE`] | [`CUT`]) by ray
 /// parity, for a sorted run of disjoint leaves (one rank's part of a linear
@@ -211,6 +259,17 @@ impl<'a> InsideClassifier<'a> {
         InsideClassifier {
             c: Classifier::new(index, rule == InsideRule::Winding),
             rule,
+        }
+    }
+
+    /// The parity rule over `index`, a part of a surface distributed over
+    /// the ranks that holds every triangle the walk to this rank's leaves
+    /// meets ([`crate::refine::distributed`]); `shared` gives what needs the
+    /// whole surface ([`shared_counts`]).
+    pub fn parity_shared(index: &'a SurfaceIndex, shared: SharedCounts) -> InsideClassifier<'a> {
+        InsideClassifier {
+            c: Classifier::with_shared(index, false, Some(shared)),
+            rule: InsideRule::Parity,
         }
     }
 

@@ -7,6 +7,7 @@ use std::collections::HashMap;
 
 use super::masks::*;
 use super::rules::*;
+use super::SharedCounts;
 use crate::geometry::diagnostics::weld;
 use crate::geometry::intersect::triangle_box_overlap;
 use crate::geometry::predicates::*;
@@ -50,6 +51,8 @@ pub(crate) struct Classifier<'a> {
     /// The processor has AVX-512F: the child masks take the eight children
     /// side by side ([`crate::parallel::cores::avx512`]; the same bits).
     pub(crate) wide: bool,
+    /// The root's count, when it comes from all ranks.
+    pub(crate) root: Option<i32>,
 }
 
 /// Margin by which Barill et al.'s estimate of the caps' winding number
@@ -71,6 +74,17 @@ pub(crate) const CAP_REGION_ERR: f64 = 0.25;
 
 impl<'a> Classifier<'a> {
     pub(crate) fn new(index: &'a SurfaceIndex, winding: bool) -> Classifier<'a> {
+        Classifier::with_shared(index, winding, None)
+    }
+
+    /// [`Classifier::new`]; with `shared`, the largest coordinate and the
+    /// root's count of the whole surface, of which `index` holds a part
+    /// (the distributed surface).
+    pub(crate) fn with_shared(
+        index: &'a SurfaceIndex,
+        winding: bool,
+        shared: Option<SharedCounts>,
+    ) -> Classifier<'a> {
         let surface = index.triangles();
         // Orientation first: it only swaps vertices, so the box tests and
         // the fixed-point range are those of the input.
@@ -94,13 +108,11 @@ impl<'a> Classifier<'a> {
                 }
             }
         }
-        let big = most.into_iter().fold(ROOT_LEN as f64, f64::max);
-        // Every fixed-point coordinate, query points included, stays within
-        // 2^39 (+1 for the far point), so differences stay below 2^41.
-        let mut shift = 20i32;
-        while shift > -1000 && big * 2f64.powi(shift) > (1u64 << 39) as f64 {
-            shift -= 1;
+        let mut big = most.into_iter().fold(ROOT_LEN as f64, f64::max);
+        if let Some(s) = shared {
+            big = s.big;
         }
+        let shift = shift_for(big);
         let scale = 2f64.powi(shift);
         let round = |p: [f64; 3]| p.map(|c| round_half_away(c * scale));
         let mut fixed: Vec<FixedTri> = tris
@@ -201,6 +213,7 @@ impl<'a> Classifier<'a> {
             cap_ids,
             summary,
             wide: crate::parallel::cores::avx512(),
+            root: shared.map(|s| s.root_count),
         }
     }
 
@@ -232,30 +245,12 @@ impl<'a> Classifier<'a> {
     /// in `+x` (where the winding number is 0) to the root's centre, over
     /// all triangles: +1 for each entered from its positive side.
     pub(crate) fn root_count(&self) -> i32 {
-        let p = self.center(Octant::ROOT);
-        let far_x = self
-            .fixed
-            .iter()
-            .filter(|t| t.nsign != 0)
-            .flat_map(|t| t.v.iter().map(|v| v[0]))
-            .fold(p[0], i64::max)
-            + 1;
-        let q = [far_x, p[1], p[2]];
-        let mut count = 0;
-        for t in &self.fixed {
-            // Only a triangle whose box meets the ray can cross it.
-            let meets = (1..3).all(|k| {
-                let (a, b) = (
-                    t.v[0][k].min(t.v[1][k]).min(t.v[2][k]),
-                    t.v[0][k].max(t.v[1][k]).max(t.v[2][k]),
-                );
-                a <= p[k] && p[k] <= b
-            }) && t.v.iter().any(|v| v[0] >= p[0]);
-            if meets && t.nsign != 0 && crosses(p, q, t) {
-                count += if t.positive_side(q) { 1 } else { -1 };
-            }
+        if let Some(c) = self.root {
+            return c;
         }
-        count
+        let p = self.center(Octant::ROOT);
+        let far_x = far_x(&self.fixed, p);
+        count_along(&self.fixed, p, far_x)
     }
 
     /// Whether the centre of `o` is inside, given the signed crossing count
@@ -559,4 +554,47 @@ pub(crate) fn gallop(leaves: &[Octant], key: u64) -> usize {
     let lo = hi / 2;
     let hi = hi.min(leaves.len());
     lo + leaves[lo..hi].partition_point(|l| l.key() < key)
+}
+
+/// Fixed-point units per lattice unit are `2^shift` for a surface whose
+/// largest coordinate (or the lattice's) is `big`: every fixed-point
+/// coordinate, query points included, stays within 2^39 (+1 for the far
+/// point), so differences stay below 2^41.
+pub(crate) fn shift_for(big: f64) -> i32 {
+    let mut shift = 20i32;
+    while shift > -1000 && big * 2f64.powi(shift) > (1u64 << 39) as f64 {
+        shift -= 1;
+    }
+    shift
+}
+
+/// One past the largest `x` of the triangles' vertices and `p`.
+pub(crate) fn far_x(fixed: &[FixedTri], p: [i64; 3]) -> i64 {
+    fixed
+        .iter()
+        .filter(|t| t.nsign != 0)
+        .flat_map(|t| t.v.iter().map(|v| v[0]))
+        .fold(p[0], i64::max)
+        + 1
+}
+
+/// Signed count of crossings of `fixed` from the point `far_x` along `+x`
+/// from `p` back to `p`: +1 for each entered from its positive side.
+pub(crate) fn count_along(fixed: &[FixedTri], p: [i64; 3], far_x: i64) -> i32 {
+    let q = [far_x, p[1], p[2]];
+    let mut count = 0;
+    for t in fixed {
+        // Only a triangle whose box meets the ray can cross it.
+        let meets = (1..3).all(|k| {
+            let (a, b) = (
+                t.v[0][k].min(t.v[1][k]).min(t.v[2][k]),
+                t.v[0][k].max(t.v[1][k]).max(t.v[2][k]),
+            );
+            a <= p[k] && p[k] <= b
+        }) && t.v.iter().any(|v| v[0] >= p[0]);
+        if meets && t.nsign != 0 && crosses(p, q, t) {
+            count += if t.positive_side(q) { 1 } else { -1 };
+        }
+    }
+    count
 }

@@ -136,6 +136,9 @@ pub struct SurfaceConfig {
     pub drop_degenerate: bool,
     /// Remove facets with the same (welded) vertices as an earlier facet.
     pub drop_duplicates: bool,
+    /// On several ranks, each rank keeps only the triangles near its part of
+    /// the domain (where the run allows it; see `Session::run`).
+    pub distributed: bool,
 }
 
 /// `[domain]`: the root cube, fitted around the surface or given, or a box

@@ -573,6 +573,17 @@ options! {
     range,
     set |c, _v, _g| { c.surface.drop_degenerate = true; }
 
+    /// On several ranks, each rank reads a share of the surface and keeps
+    /// only the triangles near its part of the domain (binary STL files are
+    /// read in shares). Used with the parity rule and without snapping,
+    /// zones, several parts, clean-up or checkpoints; otherwise every rank
+    /// holds the whole surface, as without it. The same mesh either way
+    Octree "distributed-surface": Switch bool,
+    keys ["surface.distributed"],
+    default none,
+    range,
+    set |c, _v, _g| { c.surface.distributed = true; }
+
     /// Remove facets with the same (welded) vertices as an earlier facet
     Octree "drop-duplicates": Switch bool,
     keys ["surface.drop_duplicates"],

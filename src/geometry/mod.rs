@@ -266,6 +266,19 @@ impl Surface {
         })
     }
 
+    /// A surface without triangles standing for one distributed over the
+    /// ranks (each holds a share elsewhere): its box and part names.
+    pub(crate) fn stand_in(bbox: Aabb, names: Vec<String>) -> Surface {
+        Surface {
+            triangles: Vec::new(),
+            bbox,
+            parts: Parts {
+                names,
+                of: Vec::new(),
+            },
+        }
+    }
+
     /// The surface with these parts (`parts.of`, when not empty, has one
     /// entry per triangle below `parts.names.len()`).
     pub fn with_parts(mut self, parts: Parts) -> Result<Surface> {

@@ -39,13 +39,28 @@ impl Session {
         let (domain, rule) = agree(&*self.comm, checked)?;
         self.index_for(domain)?;
         let comm = self.comm.clone();
+        if let (Some((tree, _)), Some(state)) = (&self.tree, self.surface.as_mut()) {
+            let near = self.timer.time(&*comm, "distribute", || {
+                super::distributed::classify_near(&comm, state, tree)
+            });
+            if let Some((_, held)) = near {
+                self.facts.held = self.facts.held.max(held);
+                self.report_phase(None);
+            }
+        }
         let (tree, surface) = (&self.tree, &self.surface);
         let spare = crate::parallel::cores::spare_core(&*comm);
         let (bits, summary) = self.timer.time(&*comm, "classify", || {
             let (Some((tree, _)), Some(surface)) = (tree, surface) else {
                 return (Vec::new(), None);
             };
-            let c = InsideClassifier::new(&surface.index, rule);
+            let c = match surface.dist.as_ref().and_then(|d| d.shared) {
+                // Only the parity rule distributes the surface.
+                Some(shared) if rule == InsideRule::Parity => {
+                    InsideClassifier::parity_shared(&surface.index, shared)
+                }
+                _ => InsideClassifier::new(&surface.index, rule),
+            };
             (c.classify_spare(tree.leaves(), spare), c.summary().cloned())
         });
         self.report_phase(None);
@@ -75,8 +90,10 @@ impl Session {
             self.classes = Classes::default();
             return;
         };
-        // The surface is there on every rank or on none.
-        if self.index_for(domain).is_err() {
+        // The surface is there on every rank or on none; a distributed one
+        // holds the triangles near other leaves: classify again.
+        let spread = self.surface.as_ref().is_some_and(|s| s.dist.is_some());
+        if spread || self.index_for(domain).is_err() {
             self.classes = Classes::default();
             return;
         }

@@ -24,6 +24,7 @@ mod checkpoint;
 mod classes;
 mod conforming;
 mod data;
+mod distributed;
 mod fe;
 mod mesh;
 pub mod observer;
@@ -73,6 +74,9 @@ struct SurfaceState {
     /// surface itself is released.
     bbox: Aabb,
     volume: f64,
+    /// This rank's home share when the surface is distributed over the
+    /// ranks (`index` then holds only the triangles near its leaves).
+    dist: Option<distributed::Distributed>,
 }
 
 impl SurfaceState {
@@ -117,8 +121,14 @@ struct Facts {
     /// Peak memory before anything and after reading, bytes (this rank).
     rss_start: u64,
     rss_read: u64,
+    /// Peak memory after the distributed surface's first redistribution.
+    rss_distributed: u64,
     /// The sizes of the last gathered mesh's pieces joined through faces.
     pieces: Option<Vec<u64>>,
+    /// Whether the surface was distributed over the ranks.
+    distributed: bool,
+    /// The most triangles this rank's surface index held.
+    held: usize,
 }
 
 /// A meshing session over a communicator: the pipeline's state and stages.
@@ -165,6 +175,8 @@ pub struct Session {
     /// Which part is nearest a point, for surfaces of several parts.
     locator: Option<PartLocator>,
     facts: Facts,
+    /// Whether the next surface read is distributed ([`Session::run`]).
+    distribute: bool,
 }
 
 impl Session {
@@ -199,6 +211,7 @@ impl Session {
                 rss_start: peak_rss_bytes(),
                 ..Facts::default()
             },
+            distribute: false,
         }
     }
 
@@ -327,7 +340,9 @@ impl Session {
     pub fn run(&mut self, command: Command) -> Result<Stats> {
         self.inside = self.config.inside_rule(command);
         self.plan = command;
+        self.distribute = self.may_distribute(command);
         self.load_surface()?;
+        self.distribute = false;
         if command == Command::Mesh {
             // Renames name the surface's parts: check them before the work.
             agree(&*self.comm, self.patch_names())?;

@@ -60,7 +60,15 @@ impl Session {
                 (!v[0], source)
             }
         };
-        let triangles = self.surface.as_ref().map_or(0, |s| s.surface.len()) as u64;
+        // A distributed surface: a rank's home share and about as many near
+        // its leaves.
+        let triangles = match &self.surface {
+            Some(s) => match &s.dist {
+                Some(d) => 2 * d.home.total.div_ceil(comm.size() as u64),
+                None => s.surface.len() as u64,
+            },
+            None => 0,
+        };
         let b = MemoryBudget {
             per_rank,
             source,
@@ -109,14 +117,35 @@ impl Session {
             let index = self.index_for(domain)?;
             agree(&*comm, check_budget(&b, index, level))?;
         }
+        // Distance bands read the triangles within their distance.
+        let halo = self
+            .config
+            .octree
+            .distance
+            .iter()
+            .map(|b| b.0 * domain.scale())
+            .fold(0.0, f64::max);
+        let Some(state) = self.surface.as_mut() else {
+            return Err(Error::new(ErrorKind::Internal, "the surface vanished"));
+        };
+        let planned = self.timer.time(&*comm, "distribute", || {
+            super::distributed::plan_near(&comm, state, level, halo)
+        });
+        let planned = agree(&*comm, planned)?;
+        if let Some((_, held)) = &planned {
+            self.facts.held = self.facts.held.max(*held);
+            self.facts.rss_distributed = crate::run::report::peak_rss_bytes();
+            self.report_phase(None);
+        }
         let index = match &self.surface {
             Some(s) => &s.index,
             None => return Err(Error::new(ErrorKind::Internal, "the surface vanished")),
         };
         let expected = self.facts.estimate.map(|e| e.refined);
         let shown = self.progress("construct", None);
-        let top = self.timer.time(&*comm, "construct", || {
-            construct_top_for_surface(comm.clone(), index, level)
+        let top = self.timer.time(&*comm, "construct", || match &planned {
+            Some((plan, _)) => plan.top(comm.clone(), index),
+            None => construct_top_for_surface(comm.clone(), index, level),
         })?;
         drop(shown);
         report(

@@ -132,6 +132,12 @@ pub struct Stats {
     pub ranks: u64,
     /// Triangles after clean-up.
     pub triangles: u64,
+    /// Whether each rank held only the triangles near its leaves
+    /// (`--distributed-surface`).
+    pub distributed_surface: bool,
+    /// The most triangles a rank's surface index held (the largest over
+    /// the ranks).
+    pub triangles_held: u64,
     /// Level of the leaves touching the surface.
     pub level: u8,
     /// The balance applied.
@@ -212,6 +218,11 @@ pub struct Stats {
     pub rss_start_bytes: u64,
     /// Peak memory after reading the surface.
     pub rss_after_read_bytes: u64,
+    /// With a distributed surface, the same after the triangles near each
+    /// rank's chunk arrived and were indexed, before the octree is built
+    /// (the surface's whole cost on a rank).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rss_after_distribute_bytes: Option<u64>,
     /// Side of the root cube, user units.
     pub domain_side: f64,
     /// The memory budget per rank, bytes, when one was known.
@@ -230,7 +241,9 @@ impl Session {
         let f = &self.facts;
         let meshed = self.mesh.as_ref();
         let ran = |name: &str| self.timer.phases().iter().any(|p| p.0 == name);
-        let mut keys = vec!["read", "construct", "refine"];
+        let mut keys = vec!["read"];
+        keys.extend(["distribute"].into_iter().filter(|k| ran(k)));
+        keys.extend(["construct", "refine"]);
         keys.extend(["curvature", "regions"].into_iter().filter(|k| ran(k)));
         keys.extend(["partition", "balance"]);
         keys.extend(["load", "save"].into_iter().filter(|k| ran(k)));
@@ -298,7 +311,9 @@ impl Session {
             })
             .collect();
         comm.max_u64(&mut after);
-        let mut rss = [peak_rss_bytes(), f.rss_start, f.rss_read];
+        let mut held = [f.held as u64];
+        comm.max_u64(&mut held);
+        let mut rss = [peak_rss_bytes(), f.rss_start, f.rss_read, f.rss_distributed];
         comm.max_u64(&mut rss);
         let mesh = meshed.map(|m| {
             let c = m.counts();
@@ -330,6 +345,8 @@ impl Session {
             surface: f.report.as_ref().map(SurfaceStats::from),
             ranks: comm.size() as u64,
             triangles: f.triangles as u64,
+            distributed_surface: f.distributed,
+            triangles_held: held[0],
             level: self.config.octree.level.unwrap_or(0),
             balance,
             octants_refined: f.octants_refined,
@@ -414,6 +431,7 @@ impl Session {
             peak_rss_after: PerPhase(keys.iter().map(|k| k.to_string()).zip(after).collect()),
             rss_start_bytes: rss[1],
             rss_after_read_bytes: rss[2],
+            rss_after_distribute_bytes: f.distributed.then_some(rss[3]),
             domain_side: self.domain().map_or(0.0, |d| d.side),
             memory_budget_bytes: f.budget.map(|b| b.per_rank),
             memory_budget_octants: f.budget.map(|b| b.octant_limit()),

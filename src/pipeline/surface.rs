@@ -28,6 +28,9 @@ impl Session {
     /// Collective: a failure on any rank (a file missing on one node) fails
     /// on every rank.
     pub fn load_surface(&mut self) -> Result<()> {
+        if self.distribute {
+            return self.load_distributed();
+        }
         let files = self.config.surface_files();
         let name = files.join(" + ");
         self.install_surface(&name, || load_surfaces(&files))
@@ -86,12 +89,14 @@ impl Session {
                 surface,
                 dropped,
                 report,
+                dist: None,
             })
         });
         let state = agree(&*self.comm, loaded)?;
         // Sizes count from the root cells, as levels do.
         self.resolve_sizes(state.index_domain.root_side())?;
         self.facts.rss_read = peak_rss_bytes();
+        self.facts.held = self.facts.held.max(state.index.triangles().len());
         let level = self.config.octree.level;
         // Levels count from the root cells.
         let k = state.index_domain.brick.level();
@@ -129,7 +134,7 @@ impl Session {
     /// Turns the configuration's cell sizes (`octree.size`, `max_size`,
     /// `min_size`) into levels for a domain of side `side`, and checks the
     /// levels they give. Nothing to do without sizes.
-    fn resolve_sizes(&mut self, side: f64) -> Result<()> {
+    pub(super) fn resolve_sizes(&mut self, side: f64) -> Result<()> {
         if !self.config.has_sizes() {
             return Ok(());
         }
@@ -161,7 +166,7 @@ impl Session {
             .surface
             .as_mut()
             .ok_or_else(|| Error::new(ErrorKind::State, "there is no surface: load one first"))?;
-        if s.index_domain != domain {
+        if s.index_domain != domain && s.dist.is_none() {
             s.index = SurfaceIndex::new(&s.surface, &domain);
             s.index_domain = domain;
         }

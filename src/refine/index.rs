@@ -21,8 +21,14 @@ impl SurfaceIndex {
     /// Maps the surface to the lattice of `domain` and builds its
     /// bounding-box tree.
     pub fn new(surface: &Surface, domain: &Domain) -> SurfaceIndex {
-        let tris: Vec<Triangle> = surface
-            .triangles()
+        SurfaceIndex::of_triangles(surface.triangles(), &surface.parts().of, domain)
+    }
+
+    /// [`SurfaceIndex::new`] for triangles in user units and their parts
+    /// (`of`: one per triangle, or empty), which need not make a valid
+    /// surface (a rank's share of one may be empty).
+    pub fn of_triangles(triangles: &[Triangle], of: &[u16], domain: &Domain) -> SurfaceIndex {
+        let tris: Vec<Triangle> = triangles
             .iter()
             .map(|t| Triangle {
                 v: [
@@ -38,7 +44,6 @@ impl SurfaceIndex {
         let mut bvh = Bvh::new(&tris);
         let order = bvh.renumber();
         let tris: Vec<Triangle> = order.iter().map(|&i| tris[i as usize]).collect();
-        let of = &surface.parts().of;
         let part = if of.is_empty() {
             Vec::new()
         } else {

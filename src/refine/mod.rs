@@ -43,6 +43,7 @@ use crate::octree::LinearOctree;
 use crate::parallel::comm::{agree, CommRef};
 
 pub mod curvature;
+pub mod distributed;
 mod estimate;
 mod index;
 pub mod regions;

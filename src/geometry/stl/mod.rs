@@ -34,7 +34,7 @@ use super::{Parts, Surface, Triangle};
 use crate::error::{Error, Result};
 
 pub mod shared;
-pub use shared::read_stl_file_on;
+pub use shared::{read_stl_file_on, read_stl_share, StlShare};
 
 const HEADER: usize = 80;
 const PREAMBLE: usize = 84;

@@ -98,7 +98,7 @@ fn read_split(comm: &dyn Comm, path: &Path) -> Option<Result<Surface>> {
 }
 
 /// The range `[r n / p, (r + 1) n / p)` of rank `r`.
-fn share(n: u64, r: usize, p: usize) -> (u64, u64) {
+pub(crate) fn share(n: u64, r: usize, p: usize) -> (u64, u64) {
     let at = |k: usize| (u128::from(n) * k as u128 / p as u128) as u64;
     (at(r), at(r + 1))
 }
@@ -121,6 +121,57 @@ fn read_binary(comm: &dyn Comm, file: &SharedFile, n: u64) -> Option<Result<Surf
     let (all, _) = comm.allgatherv_bytes(&mine);
     drop(mine);
     Some(Surface::new(triangles(&all)))
+}
+
+/// One rank's share of a binary STL file, for the distributed surface:
+/// triangles `first..first + triangles.len()` of the file's `total`, not
+/// validated (the ranks validate the whole together).
+pub struct StlShare {
+    pub triangles: Vec<Triangle>,
+    pub first: u64,
+    pub total: u64,
+}
+
+/// Reads this rank's share of the binary STL file at `path` (records
+/// `r n / P` to `(r + 1) n / P`) and nothing else. `None` on every rank
+/// when the file is not a binary STL whose size matches its count, or a
+/// rank failed to read: the caller then reads the file whole. Collective.
+pub fn read_stl_share(comm: &dyn Comm, path: &Path) -> Option<StlShare> {
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    if !all_ok(comm, regular) {
+        return None;
+    }
+    let file = SharedFile::open(comm, path, Mode::Read).ok()?;
+    let s = file.size().unwrap_or(0);
+    let mut head = vec![0u8; s.min(PREAMBLE as u64) as usize];
+    let read = file.read_at_all(0, &mut head).is_ok();
+    let n = if head.len() == PREAMBLE {
+        declared_count(&head)
+    } else {
+        0
+    };
+    let binary = read && head.len() == PREAMBLE && binary_size(n) == s;
+    if !all_ok(comm, binary) {
+        return None;
+    }
+    let n = n as u64;
+    let (lo, hi) = share(n, comm.rank(), comm.size());
+    let mut records = vec![0u8; ((hi - lo) as usize) * RECORD];
+    let ok = file
+        .read_at_all(PREAMBLE as u64 + lo * RECORD as u64, &mut records)
+        .is_ok();
+    if !all_ok(comm, ok) {
+        return None;
+    }
+    let triangles = records
+        .chunks_exact(RECORD)
+        .map(|rec| triangle_of(&rec[12..12 + VERTICES]))
+        .collect();
+    Some(StlShare {
+        triangles,
+        first: lo,
+        total: n,
+    })
 }
 
 /// The triangles of consecutive `VERTICES`-byte records of `f32`s.
