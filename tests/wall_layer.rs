@@ -70,7 +70,10 @@ fn read_foam(mesh: &Path) -> Foam {
         .collect();
     let text = std::fs::read_to_string(mesh.join("boundary")).unwrap();
     let mut wall = Vec::new();
-    for block in text.split('}').filter(|b| b.contains("type            wall;")) {
+    for block in text
+        .split('}')
+        .filter(|b| b.contains("type            wall;"))
+    {
         let num = |k: &str| common::number_after(block, k) as usize;
         let start = num("startFace");
         wall.push(start..start + num("nFaces"));
@@ -158,7 +161,11 @@ impl Near {
     fn new(tris: Vec<[[f64; 3]; 3]>, tol: f64) -> Near {
         let mean: f64 = tris
             .iter()
-            .map(|t| (0..3).map(|k| t[1][k].max(t[2][k]).max(t[0][k]) - t[0][k].min(t[1][k]).min(t[2][k])).fold(0.0, f64::max))
+            .map(|t| {
+                (0..3)
+                    .map(|k| t[1][k].max(t[2][k]).max(t[0][k]) - t[0][k].min(t[1][k]).min(t[2][k]))
+                    .fold(0.0, f64::max)
+            })
             .sum::<f64>()
             / tris.len() as f64;
         let cell = 2.0 * mean;
@@ -178,7 +185,11 @@ impl Near {
                 }
             }
         }
-        Near { tris, cell, buckets }
+        Near {
+            tris,
+            cell,
+            buckets,
+        }
     }
 
     fn within(&self, p: [f64; 3], tol: f64) -> bool {
@@ -200,12 +211,10 @@ fn triangles(surface: &str) -> Vec<[[f64; 3]; 3]> {
     (0..n)
         .map(|i| {
             let rec = &data[84 + 50 * i..84 + 50 * i + 50];
-            let f = |k: usize| f32::from_le_bytes(rec[12 + 4 * k..16 + 4 * k].try_into().unwrap()) as f64;
-            [
-                [f(0), f(1), f(2)],
-                [f(3), f(4), f(5)],
-                [f(6), f(7), f(8)],
-            ]
+            let f = |k: usize| {
+                f32::from_le_bytes(rec[12 + 4 * k..16 + 4 * k].try_into().unwrap()) as f64
+            };
+            [[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]]
         })
         .collect()
 }
@@ -248,7 +257,10 @@ fn check_case(rc: &Path, case: &Path, np: usize, near: &Near, size: f64, tag: &s
         assert!(most <= 1, "{tag}: a cell has {most} faces on the wall");
         points.extend(m.points.iter().map(|p| p.map(f64::to_bits)));
     }
-    assert_eq!(far, 0, "{tag}: {far} wall face corners farther than {tol:e} from the surface");
+    assert_eq!(
+        far, 0,
+        "{tag}: {far} wall face corners farther than {tol:e} from the surface"
+    );
     points.sort_unstable();
     points.dedup();
     println!("{tag}: Mesh OK, {cells} cells, {wall_faces} wall faces, every wall point within {tol:.1e} of the surface");
@@ -269,7 +281,11 @@ fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
     }
     for (surface, size) in &models {
         let near = Near::new(triangles(surface), 1e-9 * size);
-        let name = Path::new(surface).file_stem().unwrap().to_string_lossy().into_owned();
+        let name = Path::new(surface)
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         for keep in ["outside", "inside"] {
             let mut seen: Vec<Summary> = Vec::new();
             for np in [1, 3] {
@@ -300,7 +316,10 @@ fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
                 let tag = format!("{name} {keep} np {np}");
                 let s = check_case(&rc, &case, np, &near, *size, &tag);
                 if let Some(first) = seen.first() {
-                    assert!(s == *first, "{tag}: the case differs from the one of 1 rank");
+                    assert!(
+                        s == *first,
+                        "{tag}: the case differs from the one of 1 rank"
+                    );
                 }
                 seen.push(s);
             }
@@ -317,12 +336,35 @@ fn bad_wall_layer_requests_fail_on_every_rank() {
     let base = ["mesh", "sphere", "--level", "4", "--wall-layer"];
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["--keep", "outside", "--openfoam", c], "cut_rule"),
-        (vec!["--keep", "outside", "--cut-rule", "none", "--snap", "--openfoam", c], "snap"),
         (
-            vec!["--keep", "outside", "--cut-rule", "none", "--openfoam", c, "--out", vtu.to_str().unwrap()],
+            vec![
+                "--keep",
+                "outside",
+                "--cut-rule",
+                "none",
+                "--snap",
+                "--openfoam",
+                c,
+            ],
+            "snap",
+        ),
+        (
+            vec![
+                "--keep",
+                "outside",
+                "--cut-rule",
+                "none",
+                "--openfoam",
+                c,
+                "--out",
+                vtu.to_str().unwrap(),
+            ],
             "OpenFOAM writer only",
         ),
-        (vec!["--keep", "all", "--cut-rule", "none", "--openfoam", c], "no wall"),
+        (
+            vec!["--keep", "all", "--cut-rule", "none", "--openfoam", c],
+            "no wall",
+        ),
         (vec!["--keep", "inside", "--cut-rule", "none"], "needs"),
     ];
     for (extra, word) in cases {
@@ -330,7 +372,10 @@ fn bad_wall_layer_requests_fail_on_every_rank() {
         args.extend(extra);
         let out = common::mpirun(2, &octmesh_bin(), &args, Duration::from_secs(120));
         for line in common::rank_error_lines(&out, 2, &format!("{args:?}")) {
-            assert!(line.contains("wall") && line.contains(word), "{args:?}: {line}");
+            assert!(
+                line.contains("wall") && line.contains(word),
+                "{args:?}: {line}"
+            );
         }
     }
     assert!(!case.exists(), "a refused run wrote a case");

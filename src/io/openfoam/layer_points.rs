@@ -187,37 +187,43 @@ impl Directory {
         (Directory { entries }, merged)
     }
 
-    /// Sums the integer rows of the points several ranks have, over those
-    /// ranks (collective): the rows by key.
-    fn sum_shared(&self, comm: &dyn Comm, rows: &[(u64, [i64; 4])]) -> HashMap<u64, [i64; 4]> {
+    /// Combines the rows (`w` words each) of the points several ranks
+    /// have over those ranks with `combine`, which must not depend on the
+    /// order (collective): the combined rows by key.
+    fn merge_shared(
+        &self,
+        comm: &dyn Comm,
+        rows: &[(u64, Vec<u64>)],
+        w: usize,
+        combine: impl Fn(&mut [u64], &[u64]),
+    ) -> HashMap<u64, Vec<u64>> {
         let p = comm.size();
         let mut out = vec![Vec::new(); p];
         for (k, v) in rows {
             out[home(*k, p)].push(*k);
-            out[home(*k, p)].extend(v.map(|x| x as u64));
+            out[home(*k, p)].extend_from_slice(v);
         }
-        let mut sums: BTreeMap<u64, [i64; 4]> = BTreeMap::new();
+        let mut merged: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
         for recs in exchange(comm, out) {
-            for c in recs.chunks_exact(5) {
-                let s = sums.entry(c[0]).or_default();
-                for j in 0..4 {
-                    s[j] = s[j].wrapping_add(c[1 + j] as i64);
+            for c in recs.chunks_exact(w + 1) {
+                match merged.get_mut(&c[0]) {
+                    Some(m) => combine(m, &c[1..]),
+                    None => {
+                        merged.insert(c[0], c[1..].to_vec());
+                    }
                 }
             }
         }
         let mut reply = vec![Vec::new(); p];
-        for (k, s) in &sums {
+        for (k, m) in &merged {
             for &r in self.entries.get(k).map_or(&[][..], |e| &e.walls) {
                 reply[r as usize].push(*k);
-                reply[r as usize].extend(s.map(|x| x as u64));
+                reply[r as usize].extend_from_slice(m);
             }
         }
         exchange(comm, reply)
             .iter()
-            .flat_map(|r| {
-                r.chunks_exact(5)
-                    .map(|c| (c[0], [c[1], c[2], c[3], c[4]].map(|x| x as i64)))
-            })
+            .flat_map(|r| r.chunks_exact(w + 1).map(|c| (c[0], c[1..].to_vec())))
             .collect()
     }
 
@@ -356,33 +362,17 @@ pub(super) fn place(
         .map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
         .collect();
     let shared: Vec<usize> = (0..nw).filter(|&i| merged[i].walls > 1).collect();
-    let fixed = |x: [f64; 3]| domain.to_lattice(x).map(|v| (v * FIXED).round() as i64);
+    let ctx = Ctx {
+        comm,
+        directory: &directory,
+        wall,
+        shared: &shared,
+        domain,
+    };
     for _ in 0..SMOOTH {
-        let mut sums = vec![[0i64; 4]; nw];
-        for poly in &wall.polys {
-            for j in 0..poly.len() {
-                let (a, b) = (poly[j] as usize, poly[(j + 1) % poly.len()] as usize);
-                let (fa, fb) = (fixed(s[a]), fixed(s[b]));
-                for k in 0..3 {
-                    sums[a][k] += fb[k];
-                    sums[b][k] += fa[k];
-                }
-                sums[a][3] += 1;
-                sums[b][3] += 1;
-            }
-        }
-        let rows: Vec<(u64, [i64; 4])> = shared.iter().map(|&i| (wall.keys[i], sums[i])).collect();
-        let total = directory.sum_shared(comm, &rows);
-        for &i in &shared {
-            if let Some(t) = total.get(&wall.keys[i]) {
-                sums[i] = *t;
-            }
-        }
+        let means = ctx.neighbour_means(&s);
         for i in 0..nw {
-            let deg = sums[i][3].max(1) as f64;
-            let mean =
-                domain.from_lattice(std::array::from_fn(|k| sums[i][k] as f64 / deg / FIXED));
-            let x = near.project(scale(add(s[i], mean), 0.5));
+            let x = near.project(scale(add(s[i], means[i]), 0.5));
             let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
             if margin(x, p[i], d) >= m.min(DEPTH * h[i]) {
                 s[i] = x;
@@ -402,6 +392,7 @@ pub(super) fn place(
             add_scaled(p[i], n, -need.min(REACH * h[i]))
         })
         .collect();
+    ctx.untangle(&near, &inner, &mut s);
     let me = comm.rank() as u64;
     let rows: Vec<(u64, [f64; 3])> = (0..nw)
         .filter(|&i| merged[i].watchers > 0 && merged[i].lowest == me)
@@ -419,4 +410,227 @@ pub(super) fn place(
         }
     }
     Ok((inner, s))
+}
+
+/// What the passes over the wall points share.
+struct Ctx<'a> {
+    comm: &'a dyn Comm,
+    directory: &'a Directory,
+    wall: &'a Wall,
+    /// The wall points with faces on several ranks.
+    shared: &'a [usize],
+    domain: &'a Domain,
+}
+
+impl Ctx<'_> {
+    /// The mean of each wall point's neighbours along the wall's edges
+    /// (each edge counted once per face that has it), summed in fixed
+    /// point so that it does not depend on the ranks (collective).
+    fn neighbour_means(&self, s: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let fixed = |x: [f64; 3]| {
+            self.domain
+                .to_lattice(x)
+                .map(|v| (v * FIXED).round() as i64)
+        };
+        let mut sums = vec![[0i64; 4]; s.len()];
+        for poly in &self.wall.polys {
+            for j in 0..poly.len() {
+                let (a, b) = (poly[j] as usize, poly[(j + 1) % poly.len()] as usize);
+                let (fa, fb) = (fixed(s[a]), fixed(s[b]));
+                for k in 0..3 {
+                    sums[a][k] += fb[k];
+                    sums[b][k] += fa[k];
+                }
+                sums[a][3] += 1;
+                sums[b][3] += 1;
+            }
+        }
+        let rows: Vec<(u64, Vec<u64>)> = self
+            .shared
+            .iter()
+            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
+            .collect();
+        let total = self.directory.merge_shared(self.comm, &rows, 4, |m, v| {
+            for j in 0..4 {
+                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
+            }
+        });
+        for &i in self.shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                sums[i] = std::array::from_fn(|j| t[j] as i64);
+            }
+        }
+        sums.iter()
+            .map(|v| {
+                let deg = v[3].max(1) as f64;
+                self.domain
+                    .from_lattice(std::array::from_fn(|k| v[k] as f64 / deg / FIXED))
+            })
+            .collect()
+    }
+
+    /// The least over wall points of `q` (each point's rows combined by
+    /// the least over the ranks; collective).
+    fn least_shared(&self, q: &mut [Vec<f64>]) {
+        let rows: Vec<(u64, Vec<u64>)> = self
+            .shared
+            .iter()
+            .map(|&i| {
+                (
+                    self.wall.keys[i],
+                    q[i].iter().map(|x| x.to_bits()).collect(),
+                )
+            })
+            .collect();
+        let w = q.first().map_or(0, Vec::len);
+        let total = self.directory.merge_shared(self.comm, &rows, w, |m, v| {
+            for j in 0..m.len() {
+                m[j] = f64::from_bits(m[j]).min(f64::from_bits(v[j])).to_bits();
+            }
+        });
+        for &i in self.shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                q[i] = t.iter().map(|&b| f64::from_bits(b)).collect();
+            }
+        }
+    }
+
+    /// Moves the outer points of new cells that would be invalid (a face
+    /// pyramid of nearly no or negative volume, [`cell_quality`]) along
+    /// the surface, towards their neighbours' mean: each round, every
+    /// point of such a cell takes the best of a few candidates if it makes
+    /// its worst cell better. Collective; the same moves on every rank.
+    fn untangle(&self, near: &Near, inner: &[[f64; 3]], s: &mut [[f64; 3]]) {
+        let nw = s.len();
+        let mut cells_at: Vec<Vec<u32>> = vec![Vec::new(); nw];
+        for (k, poly) in self.wall.polys.iter().enumerate() {
+            for &i in poly {
+                cells_at[i as usize].push(k as u32);
+            }
+        }
+        let worst = |s: &[[f64; 3]], i: usize, x: [f64; 3]| {
+            cells_at[i]
+                .iter()
+                .map(|&k| cell_quality(self.wall, k as usize, inner, s, (i as u32, x)))
+                .fold(f64::INFINITY, f64::min)
+        };
+        // Towards the neighbours' mean, and towards the place that copies
+        // the inner points' shape (the inner point's offset from its
+        // neighbours' mean) onto the surface, which spreads outer points
+        // that crowd where the surface runs nearly along the faces.
+        const WEIGHTS: [f64; 6] = [0.25, 0.5, 0.75, 1.0, 0.5, 1.0];
+        let inner_means = self.neighbour_means(inner);
+        for _ in 0..UNTANGLE {
+            let mut q: Vec<Vec<f64>> = (0..nw).map(|i| vec![worst(s, i, s[i])]).collect();
+            self.least_shared(&mut q);
+            let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < GOOD).collect();
+            let mut any = [bad.len() as u64];
+            self.comm.sum_u64(&mut any);
+            if any[0] == 0 {
+                return;
+            }
+            let means = self.neighbour_means(s);
+            let mut tries: Vec<Vec<f64>> = vec![vec![f64::INFINITY; WEIGHTS.len()]; nw];
+            let mut cand: Vec<[[f64; 3]; WEIGHTS.len()]> = vec![[[0.0; 3]; WEIGHTS.len()]; nw];
+            for &i in &bad {
+                let shape = add(means[i], sub(inner[i], inner_means[i]));
+                for (j, &w) in WEIGHTS.iter().enumerate() {
+                    let to = if j < 4 { means[i] } else { shape };
+                    let x = near.project(add_scaled(s[i], sub(to, s[i]), w));
+                    cand[i][j] = x;
+                    tries[i][j] = worst(s, i, x);
+                }
+            }
+            self.least_shared(&mut tries);
+            for &i in &bad {
+                let best = (0..WEIGHTS.len()).fold(None, |b: Option<usize>, j| match b {
+                    Some(b) if tries[i][b] >= tries[i][j] => Some(b),
+                    _ => Some(j),
+                });
+                if let Some(j) = best.filter(|&j| tries[i][j] > q[i][0]) {
+                    s[i] = cand[i][j];
+                }
+            }
+        }
+    }
+}
+
+/// Rounds of untangling at most.
+const UNTANGLE: usize = 30;
+/// The least [`cell_quality`] a new cell needs to be left alone.
+const GOOD: f64 = 0.01;
+
+/// A face's area vector and centre as OpenFOAM computes them: the
+/// triangles of its fan about its points' mean, the centre weighted by
+/// their areas.
+fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    use crate::geometry::vector::cross;
+    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / f.len() as f64);
+    let (mut area, mut sum_n, mut centre) = ([0.0; 3], 0.0, [0.0; 3]);
+    let tris: Vec<([f64; 3], [f64; 3])> = (0..f.len())
+        .map(|j| {
+            let (a, b) = (f[j], f[(j + 1) % f.len()]);
+            let n = scale(cross(sub(a, m), sub(b, m)), 0.5);
+            (n, scale(add(add(a, b), m), 1.0 / 3.0))
+        })
+        .collect();
+    for &(n, _) in &tris {
+        area = add(area, n);
+    }
+    for &(n, c) in &tris {
+        // OpenFOAM weighs each triangle by its area along the face's.
+        let w = dot(n, area);
+        sum_n += w;
+        centre = add_scaled(centre, c, w);
+    }
+    let centre = if sum_n.abs() > 0.0 {
+        scale(centre, 1.0 / sum_n)
+    } else {
+        m
+    };
+    (area, centre)
+}
+
+/// How far the new cell on wall face `k` is from having a face that
+/// points into it: the least over its faces of the face's area vector
+/// dotted with the way from the cell's centre to the face's, in cubes of
+/// the face's side (checkMesh's face pyramids, with OpenFOAM's face and
+/// cell centres). `moved` replaces one outer point.
+fn cell_quality(
+    wall: &Wall,
+    k: usize,
+    inner: &[[f64; 3]],
+    s: &[[f64; 3]],
+    moved: (u32, [f64; 3]),
+) -> f64 {
+    let poly = &wall.polys[k];
+    let outer = |i: u32| if i == moved.0 { moved.1 } else { s[i as usize] };
+    let n = poly.len();
+    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner[i as usize]).collect();
+    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer(i)).collect();
+    let mut faces: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(n + 2);
+    let rev: Vec<[f64; 3]> = a.iter().rev().copied().collect();
+    faces.push(face_geometry(&rev));
+    faces.push(face_geometry(&b));
+    for j in 0..n {
+        let jn = (j + 1) % n;
+        faces.push(face_geometry(&[a[j], a[jn], b[jn], b[j]]));
+    }
+    // OpenFOAM's cell centre: pyramids from the mean of the face centres.
+    let est = scale(
+        faces.iter().map(|f| f.1).fold([0.0; 3], add),
+        1.0 / faces.len() as f64,
+    );
+    let (mut vol, mut centre) = (0.0, [0.0; 3]);
+    for &(sf, cf) in &faces {
+        let v = dot(sf, sub(cf, est)).max(f64::MIN_POSITIVE);
+        vol += v;
+        centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
+    }
+    let c = scale(centre, 1.0 / vol);
+    faces
+        .iter()
+        .map(|&(sf, cf)| dot(sf, sub(cf, c)))
+        .fold(f64::INFINITY, f64::min)
+        / wall.sides[k].powi(3)
 }
