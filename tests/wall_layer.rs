@@ -335,7 +335,7 @@ fn bad_wall_layer_requests_fail_on_every_rank() {
     let vtu = dir.join("m.pvtu");
     let base = ["mesh", "sphere", "--level", "4", "--wall-layer"];
     let cases: Vec<(Vec<&str>, &str)> = vec![
-        (vec!["--keep", "outside", "--openfoam", c], "cut_rule"),
+        (vec!["--keep", "outside", "--openfoam", c], "cut-rule"),
         (
             vec![
                 "--keep",

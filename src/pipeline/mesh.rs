@@ -372,6 +372,11 @@ impl Session {
         let layer = self.config.mesh.wall_layer;
         let surface = match (layer, &self.surface) {
             (false, _) => Ok(None),
+            (true, Some(_)) if self.mesh.as_ref().is_some_and(|m| m.moved().is_some()) => {
+                Err(Error::invalid(
+                    "the wall layer needs the staircase kept off the surface, not a snapped mesh",
+                ))
+            }
             (true, Some(s)) => Ok(Some(&s.surface)),
             (true, None) => Err(Error::new(
                 ErrorKind::State,

@@ -46,7 +46,13 @@ def distances(model, pts):
     if model == "sphere":
         return np.abs(np.linalg.norm(pts, axis=1) - 1.0)
     tri = pf.read_stl(DATA / (model + ".stl"))
-    return pf.closest_points(tri, pts)[1]
+    d = pf.closest_points(tri, pts)[1]
+    # The tree search of pillow_foam can miss the nearest triangle: the points it puts off the surface are
+    # measured again against every triangle.
+    for i in np.nonzero(d > 1e-12)[0]:
+        p = np.repeat(pts[i][None], len(tri), 0)
+        d[i] = np.linalg.norm(pf.closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2]) - p, axis=1).min()
+    return d
 
 
 def checkmesh(case, np_, extra=""):
