@@ -95,7 +95,9 @@ impl Directory {
         for &(a, b) in edges {
             out[home(pair(a, b), p)].extend([a, b]);
         }
-        let mut table: BTreeMap<(u64, u64), Vec<(usize, u64, u64)>> = BTreeMap::new();
+        // By edge: who sent it, and its direction.
+        type Senders = Vec<(usize, u64, u64)>;
+        let mut table: BTreeMap<(u64, u64), Senders> = BTreeMap::new();
         for (r, recs) in exchange(comm, out).iter().enumerate() {
             for c in recs.chunks_exact(2) {
                 let k = (c[0].min(c[1]), c[0].max(c[1]));
@@ -319,6 +321,9 @@ fn margin(x: [f64; 3], p: [f64; 3], dirs: &[[f64; 3]]) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The wall points' moved-in staircase positions and their outer points.
+pub(super) type InnerOuter = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
 /// The wall points' positions: the staircase's moved in where needed
 /// (`inner`) and on the surface (`outer`), by wall point number; the
 /// points of `pm` other ranks move are moved (collective).
@@ -328,7 +333,7 @@ pub(super) fn place(
     wall: &Wall,
     domain: &Domain,
     surface: &Surface,
-) -> Result<(Vec<[f64; 3]>, Vec<[f64; 3]>)> {
+) -> Result<InnerOuter> {
     let nw = wall.labels.len();
     let (mut mask, mut size) = (vec![0u64; nw], vec![f64::INFINITY; nw]);
     for (k, poly) in wall.polys.iter().enumerate() {
@@ -401,10 +406,10 @@ pub(super) fn place(
     let moved = directory.tell_watchers(comm, &rows);
     if !moved.is_empty() {
         let by_key: HashMap<u64, [f64; 3]> = moved.into_iter().collect();
-        for l in 0..pm.points.len() {
+        for (l, x) in pm.points.iter_mut().enumerate() {
             if pm.watch[l] && !on_wall[l] {
-                if let Some(x) = by_key.get(&point_key(pm.lattice[l])) {
-                    pm.points[l] = *x;
+                if let Some(y) = by_key.get(&point_key(pm.lattice[l])) {
+                    *x = *y;
                 }
             }
         }

@@ -56,6 +56,7 @@ mod zones;
 
 use std::fs;
 use std::io::Write;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use super::direct::DirectWriter;
@@ -274,7 +275,7 @@ fn write_polymesh(
             Other::Element(j) => j,
             _ => 0,
         });
-        let patches: Vec<std::ops::Range<usize>> = (0..faces.num_patches())
+        let patches: Vec<Range<usize>> = (0..faces.num_patches())
             .map(|q| faces.patch_range(q))
             .collect();
         write_cells(
@@ -294,6 +295,9 @@ fn write_polymesh(
     Ok(counts)
 }
 
+/// A processor patch: the neighbour rank and its faces.
+type ProcFaces = (u32, Range<usize>);
+
 /// The location in the files' headers of rank `me`'s mesh of `p`.
 fn location(me: usize, p: usize) -> String {
     if p == 1 {
@@ -312,7 +316,7 @@ fn write_cells(
     counts: &FoamCounts,
     (owners, neighbours): (impl Iterator<Item = u32>, impl Iterator<Item = u32>),
     opts: &FoamOptions,
-    (patches, procs): (&[std::ops::Range<usize>], &[(u32, std::ops::Range<usize>)]),
+    (patches, procs): (&[Range<usize>], &[ProcFaces]),
 ) -> std::io::Result<()> {
     let note = format!(
         "nPoints:{} nCells:{} nFaces:{} nInternalFaces:{}",
