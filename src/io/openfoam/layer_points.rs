@@ -526,7 +526,14 @@ impl Ctx<'_> {
         const WEIGHTS: [f64; 6] = [0.25, 0.5, 0.75, 1.0, 0.5, 1.0];
         let inner_means = self.neighbour_means(inner);
         for _ in 0..UNTANGLE {
-            let mut q: Vec<Vec<f64>> = (0..nw).map(|i| vec![worst(s, i, s[i])]).collect();
+            // Each cell measured once; a point's figure is its worst cell's.
+            let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
+            for (k, poly) in self.wall.polys.iter().enumerate() {
+                let c = cell_quality(self.wall, k, inner, s, (poly[0], s[poly[0] as usize]));
+                for &i in poly {
+                    q[i as usize][0] = q[i as usize][0].min(c);
+                }
+            }
             self.least_shared(&mut q);
             let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < GOOD).collect();
             let mut any = [bad.len() as u64];
@@ -547,6 +554,7 @@ impl Ctx<'_> {
                 }
             }
             self.least_shared(&mut tries);
+            let mut moves = [0u64];
             for &i in &bad {
                 let best = (0..WEIGHTS.len()).fold(None, |b: Option<usize>, j| match b {
                     Some(b) if tries[i][b] >= tries[i][j] => Some(b),
@@ -554,7 +562,13 @@ impl Ctx<'_> {
                 });
                 if let Some(j) = best.filter(|&j| tries[i][j] > q[i][0]) {
                     s[i] = cand[i][j];
+                    moves[0] += 1;
                 }
+            }
+            // Stuck everywhere: more rounds would change nothing.
+            self.comm.sum_u64(&mut moves);
+            if moves[0] == 0 {
+                return;
             }
         }
     }
