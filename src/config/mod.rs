@@ -326,6 +326,12 @@ pub struct MeshConfig {
     /// ([`crate::mesh::conforming`]): no hanging nodes, every inner face
     /// shared whole by two elements.
     pub conforming: bool,
+    /// Add a layer of cells between the staircase and the surface when
+    /// writing the OpenFOAM case ([`crate::io::openfoam`]): every wall
+    /// point on the surface, no old cell with a face on the wall. Needs
+    /// `keep` inside or outside, `cut_rule` none and an OpenFOAM case as
+    /// the only mesh output; replaces `snap`.
+    pub wall_layer: bool,
 }
 
 impl MeshConfig {
@@ -360,6 +366,7 @@ impl Default for MeshConfig {
             snap_min_jacobian: None,
             zones: false,
             conforming: false,
+            wall_layer: false,
         }
     }
 }
@@ -608,6 +615,7 @@ impl Config {
                 let o = &self.output;
                 let other = [
                     ("mesh.snap", self.mesh.snap),
+                    ("mesh.wall_layer", self.mesh.wall_layer),
                     ("output.vtu", o.vtu.is_some()),
                     ("output.quality", o.quality),
                 ];
@@ -620,6 +628,9 @@ impl Config {
                         ),
                     ));
                 }
+            }
+            if self.mesh.wall_layer {
+                self.check_wall_layer()?;
             }
             if self.mesh.snap && self.mesh.keep == Keep::All {
                 return Err(ConfigError::new(
@@ -640,6 +651,60 @@ impl Config {
                         format!("two patches are renamed '{to}': names must be unique"),
                     ));
                 }
+            }
+        }
+        Ok(())
+    }
+
+    /// The wall layer's needs: a wall, the staircase kept off the surface,
+    /// an OpenFOAM case and no other mesh output (only the OpenFOAM writer
+    /// makes the layer).
+    fn check_wall_layer(&self) -> Result<(), ConfigError> {
+        let key = "mesh.wall_layer";
+        if self.mesh.keep == Keep::All {
+            return Err(ConfigError::new(
+                key,
+                "needs {mesh.keep} inside or outside: with all leaves kept there is no wall",
+            ));
+        }
+        if self.mesh.cut_rule != CutRule::None {
+            return Err(ConfigError::new(
+                key,
+                format!(
+                    "needs {{mesh.cut_rule}} none (got {}): the layer fills the room between \
+                     the surface and the staircase kept off it",
+                    self.mesh.cut_rule.name()
+                ),
+            ));
+        }
+        if self.mesh.snap {
+            return Err(ConfigError::new(
+                key,
+                "and {mesh.snap} exclude each other: the layer puts the wall on the surface",
+            ));
+        }
+        if self.output.openfoam.is_none() {
+            return Err(ConfigError::new(
+                key,
+                "needs {output.openfoam}: only the OpenFOAM case gets the layer",
+            ));
+        }
+        let o = &self.output;
+        for (other, given) in [
+            ("{output.vtu}", o.vtu.is_some()),
+            ("{output.gmsh}", o.gmsh.is_some()),
+            ("{output.abaqus}", o.abaqus.is_some()),
+            ("{output.exodus}", o.exodus.is_some()),
+            ("{output.cgns}", o.cgns.is_some()),
+        ] {
+            if given {
+                return Err(ConfigError::new(
+                    key,
+                    format!(
+                        "is made by the OpenFOAM writer only: {other} would get the mesh \
+                         without it; write it in a separate run"
+                    ),
+                ));
             }
         }
         Ok(())

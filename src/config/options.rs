@@ -767,6 +767,16 @@ options! {
     range,
     set |c, _v, _g| { c.mesh.conforming = true; }
 
+    /// Add a layer of cells between the staircase and the surface in the
+    /// OpenFOAM case: every wall point on the surface, no old cell with a
+    /// face on the wall (needs --keep inside or outside, --cut-rule none
+    /// and --openfoam as the only mesh output; instead of --snap)
+    Mesh "wall-layer": Switch bool,
+    keys ["mesh.wall_layer"],
+    default none,
+    range,
+    set |c, _v, _g| { c.mesh.wall_layer = true; }
+
     /// Snap the mesh to the surface: the nodes on the surface move onto
     /// it (sharp edges kept), scaled back where an element would be
     /// invalid, the layers next to it relaxed (needs --keep inside or

@@ -315,6 +315,26 @@ impl Bvh {
         best
     }
 
+    /// The least `t` in `[0, tmax]` where the segment `o + t d` meets a
+    /// triangle (Möller and Trumbore's test over the triangles whose boxes
+    /// meet the segment's box), if any. The answer is a minimum over the
+    /// triangles, so it does not depend on the order they are visited in.
+    pub fn first_hit(&self, tris: &[Triangle], o: [f64; 3], d: [f64; 3], tmax: f64) -> Option<f64> {
+        let end: [f64; 3] = std::array::from_fn(|k| o[k] + tmax * d[k]);
+        let lo: [f64; 3] = std::array::from_fn(|k| o[k].min(end[k]));
+        let hi: [f64; 3] = std::array::from_fn(|k| o[k].max(end[k]));
+        let mut best: Option<f64> = None;
+        self.visit(lo, hi, |ti, _| {
+            if let Some(t) = ray_triangle(o, d, &tris[ti as usize]) {
+                if t <= tmax && best.is_none_or(|b| t < b) {
+                    best = Some(t);
+                }
+            }
+            false
+        });
+        best
+    }
+
     /// Calls `hit` for each triangle whose box overlaps the query box, until
     /// `hit` returns true; returns whether it did.
     #[inline]
@@ -362,6 +382,26 @@ impl Bvh {
         }
         false
     }
+}
+
+/// Where the ray `o + t d`, `t >= 0`, meets the closed triangle `tri`
+/// (Möller and Trumbore), if it does and is not parallel to it.
+pub fn ray_triangle(o: [f64; 3], d: [f64; 3], tri: &Triangle) -> Option<f64> {
+    use super::vector::{cross, dot, sub};
+    let [a, b, c] = tri.v;
+    let (e1, e2) = (sub(b, a), sub(c, a));
+    let pv = cross(d, e2);
+    let det = dot(e1, pv);
+    if det.abs() < 1e-300 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let tv = sub(o, a);
+    let u = dot(tv, pv) * inv;
+    let qv = cross(tv, e1);
+    let v = dot(d, qv) * inv;
+    let t = dot(e2, qv) * inv;
+    (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t >= 0.0).then_some(t)
 }
 
 #[cfg(test)]

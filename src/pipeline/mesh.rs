@@ -372,11 +372,26 @@ impl Session {
             patches,
         };
         let comm = self.comm.clone();
+        let layer = self.config.mesh.wall_layer;
+        let surface = match (layer, &self.surface) {
+            (false, _) => Ok(None),
+            (true, Some(_)) if self.mesh.as_ref().is_some_and(|m| m.moved().is_some()) => {
+                Err(Error::invalid(
+                    "the wall layer needs the staircase kept off the surface, not a snapped mesh",
+                ))
+            }
+            (true, Some(s)) => Ok(Some(&s.surface)),
+            (true, None) => Err(Error::new(
+                ErrorKind::State,
+                "the wall layer needs the surface: load it again (it was released after meshing)",
+            )),
+        };
+        let surface = agree(&*comm, surface)?;
         let (mesh, faces) = (&self.mesh, &self.faces);
         let counts = self
             .timer
             .time(&*comm, "openfoam", || match (mesh, faces) {
-                (Some(m), Some((_, f))) => write_case(&*comm, dir, m, f, &opts),
+                (Some(m), Some((_, f))) => write_case(&*comm, dir, (m, f), &opts, surface),
                 _ => Ok(FoamCounts::default()),
             })?;
         self.report_phase(None);

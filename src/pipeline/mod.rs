@@ -375,7 +375,8 @@ impl Session {
         }
         // A snap needs the surface after meshing, zones while meshing (the
         // solids they split the inside by).
-        let snap = command == Command::Mesh && self.config.mesh.snap;
+        let snap =
+            command == Command::Mesh && (self.config.mesh.snap || self.config.mesh.wall_layer);
         let zones = command == Command::Mesh && self.config.mesh.zones;
         if !snap && !zones {
             self.release_surface();
@@ -386,7 +387,7 @@ impl Session {
             if zones && !snap {
                 self.release_surface();
             }
-            if snap {
+            if snap && self.config.mesh.snap {
                 let foam = self.config.output.openfoam.is_some();
                 self.snap(&m.snap_options(foam))?;
                 self.release_surface();
@@ -397,6 +398,7 @@ impl Session {
             }
             if let Some(dir) = self.config.output.openfoam.clone() {
                 self.write_openfoam(&dir)?;
+                self.release_surface();
             }
             // One gather for every single-file mesh.
             let out = self.config.output.clone();

@@ -48,6 +48,8 @@
 //! rank leaves no case looking complete, and every rank reports it.
 
 mod gathered;
+mod layer;
+mod layer_points;
 mod polygons;
 mod polymesh;
 mod system;
@@ -55,6 +57,7 @@ mod zones;
 
 use std::fs;
 use std::io::Write;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 pub use gathered::write_gathered_case;
@@ -62,6 +65,7 @@ pub use gathered::write_gathered_case;
 use super::direct::DirectWriter;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::{corner_coords, VTK_TO_MORTON};
+use crate::geometry::Surface;
 use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
 use crate::mesh::hanging::{face_diagonal, DepsIndex};
 use crate::mesh::patches::PatchNames;
@@ -131,13 +135,16 @@ fn io_err(what: &Path, e: std::io::Error) -> Error {
     Error::io(format!("{}: {e}", what.display()))
 }
 
-/// Writes the case `dir` for `mesh`'s `faces` (collective).
+/// Writes the case `dir` for `mesh`'s `faces` (collective). With
+/// `wall_layer`, the mesh is the staircase kept off that surface and the
+/// case gets a layer of cells between its wall and the surface (see
+/// `layer.rs`).
 pub fn write_case(
     comm: &dyn Comm,
     dir: &Path,
-    mesh: &Mesh,
-    faces: &Faces,
+    (mesh, faces): (&Mesh, &Faces),
     opts: &FoamOptions,
+    wall_layer: Option<&Surface>,
 ) -> Result<FoamCounts> {
     let (me, p) = (comm.rank(), comm.size());
     let target = mesh_dir(dir, me, p);
@@ -157,6 +164,10 @@ pub fn write_case(
     // The interfaces between zones, known to every rank before any
     // writes (a rank whose directory failed must still take part).
     let interfaces = zone_interfaces(comm, mesh, faces);
+    let layered = match wall_layer {
+        Some(surface) => Some(layer::layered_case(comm, mesh, faces, surface)?),
+        None => None,
+    };
     // A core no rank of this node runs on makes the polygons while this
     // rank labels them (a serial run on a workstation, say).
     let spare_core = crate::parallel::cores::spare_core(comm);
@@ -164,6 +175,10 @@ pub fn write_case(
     let written = (|| -> Result<FoamCounts> {
         let _ = fs::remove_dir_all(&scratch);
         fs::create_dir_all(&scratch).map_err(|e| io_err(&scratch, e))?;
+        if let Some(pm) = &layered {
+            let loc = location(me, p);
+            return layer::write_layered(&scratch, pm, opts, (&loc, me));
+        }
         write_polymesh(
             &scratch,
             (mesh, faces),
@@ -234,11 +249,7 @@ fn write_polymesh(
     spare_core: bool,
 ) -> Result<FoamCounts> {
     let fmt = opts.format;
-    let location = if p == 1 {
-        "constant/polyMesh".to_string()
-    } else {
-        format!("processor{me}/constant/polyMesh")
-    };
+    let location = location(me, p);
     let loc = location.as_str();
     let nodes = NodeLabels::new(mesh);
     let mut points = PointsOut::new(&dir.join("points"), fmt, loc, mesh)?;
@@ -261,74 +272,23 @@ fn write_polymesh(
         internal_faces: ni as u64,
         cells: mesh.elements().len() as u64,
     };
-    let note = format!(
-        "nPoints:{} nCells:{} nFaces:{} nInternalFaces:{}",
-        counts.points, counts.cells, counts.faces, counts.internal_faces
-    );
     let result = (|| -> std::io::Result<()> {
         let owners = faces.faces().iter().map(|f| f.owner());
-        let path = dir.join("owner");
-        let mut w = create(&path).map_err(std::io::Error::other)?;
-        header(&mut w, fmt, "labelList", loc, "owner", Some(&note))?;
-        write_label_iter(&mut w, fmt, nf, owners)?;
-        w.flush()?;
-
         let neighbours = faces.faces()[..ni].iter().map(|f| match f.other() {
             Other::Element(j) => j,
             _ => 0,
         });
-        let path = dir.join("neighbour");
-        let mut w = create(&path).map_err(std::io::Error::other)?;
-        header(&mut w, fmt, "labelList", loc, "neighbour", Some(&note))?;
-        write_label_iter(&mut w, fmt, ni, neighbours)?;
-        w.flush()?;
-
-        let path = dir.join("boundary");
-        let mut w = create(&path).map_err(std::io::Error::other)?;
-        header(
-            &mut w,
-            FoamFormat::Ascii,
-            "polyBoundaryMesh",
-            loc,
-            "boundary",
-            None,
+        let patches: Vec<Range<usize>> = (0..faces.num_patches())
+            .map(|q| faces.patch_range(q))
+            .collect();
+        write_cells(
+            dir,
+            (fmt, loc, me),
+            &counts,
+            (owners, neighbours),
+            opts,
+            (&patches, faces.halo_ranges()),
         )?;
-        let halo = faces.halo_ranges();
-        let np = faces.num_patches();
-        if opts.patches.names().len() != np {
-            return Err(std::io::Error::other(format!(
-                "{} patch names for {np} patches",
-                opts.patches.names().len()
-            )));
-        }
-        writeln!(w, "{}\n(", np + halo.len())?;
-        for q in 0..np {
-            let r = faces.patch_range(q);
-            writeln!(w, "    {}\n    {{", opts.patches.name(q))?;
-            if q >= SURFACE_PATCH as usize {
-                writeln!(w, "        type            wall;")?;
-                writeln!(w, "        inGroups        List<word> 1(wall);")?;
-            } else {
-                writeln!(w, "        type            patch;")?;
-            }
-            writeln!(w, "        nFaces          {};", r.len())?;
-            writeln!(w, "        startFace       {};", r.start)?;
-            writeln!(w, "    }}")?;
-        }
-        for (r, range) in halo {
-            writeln!(w, "    procBoundary{me}to{r}\n    {{")?;
-            writeln!(w, "        type            processor;")?;
-            writeln!(w, "        inGroups        List<word> 1(processor);")?;
-            writeln!(w, "        nFaces          {};", range.len())?;
-            writeln!(w, "        startFace       {};", range.start)?;
-            writeln!(w, "        matchTolerance  0.0001;")?;
-            writeln!(w, "        transform       unknown;")?;
-            writeln!(w, "        myProcNo        {me};")?;
-            writeln!(w, "        neighbProcNo    {r};")?;
-            writeln!(w, "    }}")?;
-        }
-        writeln!(w, ")")?;
-        w.flush()?;
         match mesh.zones() {
             Some(z) => write_zones(dir, loc, faces, z, interfaces),
             None => Ok(()),
@@ -336,4 +296,90 @@ fn write_polymesh(
     })();
     result.map_err(|e| Error::io(format!("writing {}: {e}", dir.display())))?;
     Ok(counts)
+}
+
+/// A processor patch: the neighbour rank and its faces.
+type ProcFaces = (u32, Range<usize>);
+
+/// The location in the files' headers of rank `me`'s mesh of `p`.
+fn location(me: usize, p: usize) -> String {
+    if p == 1 {
+        "constant/polyMesh".to_string()
+    } else {
+        format!("processor{me}/constant/polyMesh")
+    }
+}
+
+/// Writes `owner`, `neighbour` and `boundary`: the boundary faces by patch
+/// (`patches`, named by `opts`), then a processor patch per neighbour rank
+/// (`procs`).
+fn write_cells(
+    dir: &Path,
+    (fmt, loc, me): (FoamFormat, &str, usize),
+    counts: &FoamCounts,
+    (owners, neighbours): (impl Iterator<Item = u32>, impl Iterator<Item = u32>),
+    opts: &FoamOptions,
+    (patches, procs): (&[Range<usize>], &[ProcFaces]),
+) -> std::io::Result<()> {
+    let note = format!(
+        "nPoints:{} nCells:{} nFaces:{} nInternalFaces:{}",
+        counts.points, counts.cells, counts.faces, counts.internal_faces
+    );
+    let (nf, ni) = (counts.faces as usize, counts.internal_faces as usize);
+    let path = dir.join("owner");
+    let mut w = create(&path).map_err(std::io::Error::other)?;
+    header(&mut w, fmt, "labelList", loc, "owner", Some(&note))?;
+    write_label_iter(&mut w, fmt, nf, owners)?;
+    w.flush()?;
+
+    let path = dir.join("neighbour");
+    let mut w = create(&path).map_err(std::io::Error::other)?;
+    header(&mut w, fmt, "labelList", loc, "neighbour", Some(&note))?;
+    write_label_iter(&mut w, fmt, ni, neighbours)?;
+    w.flush()?;
+
+    let path = dir.join("boundary");
+    let mut w = create(&path).map_err(std::io::Error::other)?;
+    header(
+        &mut w,
+        FoamFormat::Ascii,
+        "polyBoundaryMesh",
+        loc,
+        "boundary",
+        None,
+    )?;
+    let np = patches.len();
+    if opts.patches.names().len() != np {
+        return Err(std::io::Error::other(format!(
+            "{} patch names for {np} patches",
+            opts.patches.names().len()
+        )));
+    }
+    writeln!(w, "{}\n(", np + procs.len())?;
+    for (q, r) in patches.iter().enumerate() {
+        writeln!(w, "    {}\n    {{", opts.patches.name(q))?;
+        if q >= SURFACE_PATCH as usize {
+            writeln!(w, "        type            wall;")?;
+            writeln!(w, "        inGroups        List<word> 1(wall);")?;
+        } else {
+            writeln!(w, "        type            patch;")?;
+        }
+        writeln!(w, "        nFaces          {};", r.len())?;
+        writeln!(w, "        startFace       {};", r.start)?;
+        writeln!(w, "    }}")?;
+    }
+    for (r, range) in procs {
+        writeln!(w, "    procBoundary{me}to{r}\n    {{")?;
+        writeln!(w, "        type            processor;")?;
+        writeln!(w, "        inGroups        List<word> 1(processor);")?;
+        writeln!(w, "        nFaces          {};", range.len())?;
+        writeln!(w, "        startFace       {};", range.start)?;
+        writeln!(w, "        matchTolerance  0.0001;")?;
+        writeln!(w, "        transform       unknown;")?;
+        writeln!(w, "        myProcNo        {me};")?;
+        writeln!(w, "        neighbProcNo    {r};")?;
+        writeln!(w, "    }}")?;
+    }
+    writeln!(w, ")")?;
+    w.flush()
 }

@@ -1,0 +1,655 @@
+//! The points of the wall layer: where each wall point of the staircase
+//! goes on the surface, and how far the staircase point moves in.
+//!
+//! A wall point's outer point is the first hit of a ray along the mean of
+//! its faces' outward normals within [`CAST`] cells (else along its faces'
+//! normals and between, the nearest hit; else its closest surface point).
+//! The outer points then spread along the surface by [`SMOOTH`] rounds of
+//! neighbour means projected back onto it, a round kept per point only
+//! where its outer point stays ahead of its faces, and the staircase point
+//! moves in along its normal until the outer point is [`DEPTH`] cells ahead
+//! of each of its faces (at most [`REACH`] cells), so no new cell starts
+//! flat.
+//!
+//! Parallel: a wall point's faces may lie on several ranks. Each point has
+//! a home rank (by a hash of its lattice key) that merges what the ranks
+//! know of it (the normals of its faces, its finest face), sums the
+//! neighbour means of each round as integers (fixed point), and tells the
+//! ranks that only have the point in a cell where it moved. Every rank that
+//! has a wall point then computes the same position from the same data, and
+//! the positions do not depend on the number of ranks.
+
+use std::collections::{BTreeMap, HashMap};
+
+use super::layer::{PolyMesh, Wall};
+use super::*;
+use crate::geometry::bvh::Bvh;
+use crate::geometry::distance::closest_point_triangle;
+use crate::geometry::vector::{add, add_scaled, dot, norm, scale, sub};
+use crate::geometry::{Surface, Triangle};
+use crate::octree::domain::Domain;
+
+/// How far (in cells of the point's finest wall face) a ray looks for the
+/// surface.
+const CAST: f64 = 3.0;
+/// Rounds of smoothing along the surface.
+const SMOOTH: usize = 10;
+/// How far (cells) the outer point must be ahead of each face of its
+/// staircase point.
+const DEPTH: f64 = 0.2;
+/// How far (cells) a staircase point may move in.
+const REACH: f64 = 0.6;
+/// Fixed-point scale of the neighbour sums, in lattice units.
+const FIXED: f64 = (1u64 << 32) as f64;
+
+/// The home rank of a key.
+fn home(key: u64, p: usize) -> usize {
+    ((key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) % p as u64) as usize
+}
+
+/// Sends `out[r]` to rank `r`; returns what each rank sent here.
+fn exchange(comm: &dyn Comm, out: Vec<Vec<u64>>) -> Vec<Vec<u64>> {
+    let counts: Vec<usize> = out.iter().map(Vec::len).collect();
+    let (recv, rc) = comm.alltoallv_u64(&out.concat(), &counts);
+    let mut at = 0;
+    rc.iter()
+        .map(|&n| {
+            at += n;
+            recv[at - n..at].to_vec()
+        })
+        .collect()
+}
+
+/// What a home rank knows of one wall point.
+#[derive(Default)]
+struct Entry {
+    mask: u64,
+    size: u64,
+    walls: Vec<u32>,
+    watchers: Vec<u32>,
+}
+
+/// The wall points' home ranks and what they know.
+pub(crate) struct Directory {
+    entries: BTreeMap<u64, Entry>,
+}
+
+/// What the home rank tells a rank with faces at a wall point.
+#[derive(Clone, Copy, Default)]
+struct Merged {
+    mask: u64,
+    size: f64,
+    walls: u64,
+    lowest: u64,
+    watchers: u64,
+}
+
+impl Directory {
+    /// For each directed edge `(ka, kb)` (lattice keys) of this rank's wall
+    /// faces whose other face is not here, the rank whose face has `(kb,
+    /// ka)`: `None` when no rank or several do (collective).
+    pub(super) fn match_edges(comm: &dyn Comm, edges: &[(u64, u64)]) -> Vec<Option<u32>> {
+        let p = comm.size();
+        let pair = |a: u64, b: u64| a.min(b) ^ a.max(b).rotate_left(29);
+        let mut out = vec![Vec::new(); p];
+        for &(a, b) in edges {
+            out[home(pair(a, b), p)].extend([a, b]);
+        }
+        // By edge: who sent it, and its direction.
+        type Senders = Vec<(usize, u64, u64)>;
+        let mut table: BTreeMap<(u64, u64), Senders> = BTreeMap::new();
+        for (r, recs) in exchange(comm, out).iter().enumerate() {
+            for c in recs.chunks_exact(2) {
+                let k = (c[0].min(c[1]), c[0].max(c[1]));
+                table.entry(k).or_default().push((r, c[0], c[1]));
+            }
+        }
+        let mut reply = vec![Vec::new(); p];
+        for v in table.values() {
+            let ok = v.len() == 2 && v[0].0 != v[1].0 && v[0].1 == v[1].2 && v[0].2 == v[1].1;
+            for (i, &(r, a, b)) in v.iter().enumerate() {
+                let partner = if ok { v[1 - i].0 as u64 } else { u64::MAX };
+                reply[r].extend([a, b, partner]);
+            }
+        }
+        let back: HashMap<(u64, u64), u64> = exchange(comm, reply)
+            .iter()
+            .flat_map(|r| r.chunks_exact(3).map(|c| ((c[0], c[1]), c[2])))
+            .collect();
+        edges
+            .iter()
+            .map(|e| back.get(e).filter(|&&r| r != u64::MAX).map(|&r| r as u32))
+            .collect()
+    }
+
+    /// Registers this rank's wall points (key, normals mask, finest face)
+    /// and the points it has in cells only (`watch`, keys); returns the
+    /// directory and, per wall point, the merged data (collective).
+    fn register(comm: &dyn Comm, wall: &[(u64, u64, f64)], watch: &[u64]) -> (Self, Vec<Merged>) {
+        let p = comm.size();
+        let mut out = vec![Vec::new(); p];
+        for &(k, m, s) in wall {
+            out[home(k, p)].extend([k, 1, m, s.to_bits()]);
+        }
+        for &k in watch {
+            out[home(k, p)].extend([k, 0, 0, 0]);
+        }
+        let mut entries: BTreeMap<u64, Entry> = BTreeMap::new();
+        for (r, recs) in exchange(comm, out).iter().enumerate() {
+            for c in recs.chunks_exact(4) {
+                let e = entries.entry(c[0]).or_insert_with(|| Entry {
+                    size: u64::MAX,
+                    ..Entry::default()
+                });
+                if c[1] == 1 {
+                    e.mask |= c[2];
+                    // Positive numbers order as their bits do.
+                    e.size = e.size.min(c[3]);
+                    e.walls.push(r as u32);
+                } else {
+                    e.watchers.push(r as u32);
+                }
+            }
+        }
+        let mut reply = vec![Vec::new(); p];
+        for (&k, e) in &entries {
+            let lowest = e.walls.first().copied().unwrap_or(0) as u64;
+            for &r in &e.walls {
+                reply[r as usize].extend([
+                    k,
+                    e.mask,
+                    e.size,
+                    e.walls.len() as u64,
+                    lowest,
+                    e.watchers.len() as u64,
+                ]);
+            }
+        }
+        let back: HashMap<u64, Merged> = exchange(comm, reply)
+            .iter()
+            .flat_map(|r| {
+                r.chunks_exact(6).map(|c| {
+                    (
+                        c[0],
+                        Merged {
+                            mask: c[1],
+                            size: f64::from_bits(c[2]),
+                            walls: c[3],
+                            lowest: c[4],
+                            watchers: c[5],
+                        },
+                    )
+                })
+            })
+            .collect();
+        let merged = wall
+            .iter()
+            .map(|w| back.get(&w.0).copied().unwrap_or_default())
+            .collect();
+        (Directory { entries }, merged)
+    }
+
+    /// Combines the rows (`w` words each) of the points several ranks
+    /// have over those ranks with `combine`, which must not depend on the
+    /// order (collective): the combined rows by key.
+    fn merge_shared(
+        &self,
+        comm: &dyn Comm,
+        rows: &[(u64, Vec<u64>)],
+        w: usize,
+        combine: impl Fn(&mut [u64], &[u64]),
+    ) -> HashMap<u64, Vec<u64>> {
+        let p = comm.size();
+        let mut out = vec![Vec::new(); p];
+        for (k, v) in rows {
+            out[home(*k, p)].push(*k);
+            out[home(*k, p)].extend_from_slice(v);
+        }
+        let mut merged: BTreeMap<u64, Vec<u64>> = BTreeMap::new();
+        for recs in exchange(comm, out) {
+            for c in recs.chunks_exact(w + 1) {
+                match merged.get_mut(&c[0]) {
+                    Some(m) => combine(m, &c[1..]),
+                    None => {
+                        merged.insert(c[0], c[1..].to_vec());
+                    }
+                }
+            }
+        }
+        let mut reply = vec![Vec::new(); p];
+        for (k, m) in &merged {
+            for &r in self.entries.get(k).map_or(&[][..], |e| &e.walls) {
+                reply[r as usize].push(*k);
+                reply[r as usize].extend_from_slice(m);
+            }
+        }
+        exchange(comm, reply)
+            .iter()
+            .flat_map(|r| r.chunks_exact(w + 1).map(|c| (c[0], c[1..].to_vec())))
+            .collect()
+    }
+
+    /// Sends the final positions of wall points to the ranks that have them
+    /// in cells only (collective): what arrived here, by key.
+    fn tell_watchers(&self, comm: &dyn Comm, rows: &[(u64, [f64; 3])]) -> Vec<(u64, [f64; 3])> {
+        let p = comm.size();
+        let mut out = vec![Vec::new(); p];
+        for (k, x) in rows {
+            out[home(*k, p)].push(*k);
+            out[home(*k, p)].extend(x.map(f64::to_bits));
+        }
+        let mut reply = vec![Vec::new(); p];
+        for recs in exchange(comm, out) {
+            for c in recs.chunks_exact(4) {
+                for &r in self.entries.get(&c[0]).map_or(&[][..], |e| &e.watchers) {
+                    reply[r as usize].extend_from_slice(c);
+                }
+            }
+        }
+        exchange(comm, reply)
+            .iter()
+            .flat_map(|r| {
+                r.chunks_exact(4)
+                    .map(|c| (c[0], [c[1], c[2], c[3]].map(f64::from_bits)))
+            })
+            .collect()
+    }
+}
+
+/// The surface and its tree.
+struct Near<'s> {
+    tris: &'s [Triangle],
+    bvh: Bvh,
+}
+
+impl Near<'_> {
+    /// The closest surface point to `x`.
+    fn project(&self, x: [f64; 3]) -> [f64; 3] {
+        match self.bvh.nearest(self.tris, x, f64::INFINITY) {
+            Some((t, _)) => {
+                let [a, b, c] = self.tris[t as usize].v;
+                closest_point_triangle(x, a, b, c)
+            }
+            None => x,
+        }
+    }
+
+    /// The outer point of the wall point `p` with face normals `dirs`,
+    /// mean normal `n` and finest face `h`.
+    fn target(&self, p: [f64; 3], n: Option<[f64; 3]>, dirs: &[[f64; 3]], h: f64) -> [f64; 3] {
+        let Some(n) = n else {
+            return self.project(p);
+        };
+        if let Some(t) = self.bvh.first_hit(self.tris, p, n, CAST * h) {
+            return add_scaled(p, n, t);
+        }
+        let mut best: Option<(f64, [f64; 3])> = None;
+        let between = dirs.iter().filter_map(|&d| unit(add(d, n)));
+        for d in dirs.iter().copied().chain(between) {
+            if let Some(t) = self.bvh.first_hit(self.tris, p, d, CAST * h) {
+                if best.is_none_or(|b| t < b.0) {
+                    best = Some((t, add_scaled(p, d, t)));
+                }
+            }
+        }
+        best.map_or_else(|| self.project(p), |b| b.1)
+    }
+}
+
+fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+    let l = norm(v);
+    (l > 1e-9).then(|| scale(v, 1.0 / l))
+}
+
+/// The unit outward normals of the axis directions in `mask`.
+fn axes(mask: u64) -> Vec<[f64; 3]> {
+    (0..6)
+        .filter(|d| mask >> d & 1 == 1)
+        .map(|d| {
+            let mut v = [0.0; 3];
+            v[d / 2] = if d % 2 == 1 { 1.0 } else { -1.0 };
+            v
+        })
+        .collect()
+}
+
+/// How far `x` lies ahead of the least of the planes through `p` with
+/// normals `dirs`.
+fn margin(x: [f64; 3], p: [f64; 3], dirs: &[[f64; 3]]) -> f64 {
+    dirs.iter()
+        .map(|&d| dot(d, sub(x, p)))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The wall points' moved-in staircase positions and their outer points.
+pub(super) type InnerOuter = (Vec<[f64; 3]>, Vec<[f64; 3]>);
+
+/// The wall points' positions: the staircase's moved in where needed
+/// (`inner`) and on the surface (`outer`), by wall point number; the
+/// points of `pm` other ranks move are moved (collective).
+pub(super) fn place(
+    comm: &dyn Comm,
+    pm: &mut PolyMesh,
+    wall: &Wall,
+    domain: &Domain,
+    surface: &Surface,
+) -> Result<InnerOuter> {
+    let nw = wall.labels.len();
+    let (mut mask, mut size) = (vec![0u64; nw], vec![f64::INFINITY; nw]);
+    for (k, poly) in wall.polys.iter().enumerate() {
+        for &i in poly {
+            mask[i as usize] |= 1 << wall.dirs[k];
+            size[i as usize] = size[i as usize].min(wall.sides[k]);
+        }
+    }
+    let mut on_wall = vec![false; pm.points.len()];
+    wall.labels.iter().for_each(|&l| on_wall[l as usize] = true);
+    let mut watch: Vec<u64> = (0..pm.points.len())
+        .filter(|&l| pm.watch[l] && !on_wall[l])
+        .map(|l| point_key(pm.lattice[l]))
+        .collect();
+    watch.sort_unstable();
+    watch.dedup();
+    let recs: Vec<(u64, u64, f64)> = (0..nw).map(|i| (wall.keys[i], mask[i], size[i])).collect();
+    let (directory, merged) = Directory::register(comm, &recs, &watch);
+    let near = Near {
+        tris: surface.triangles(),
+        bvh: crate::geometry::bvh::Bvh::new(surface.triangles()),
+    };
+    let p: Vec<[f64; 3]> = wall.labels.iter().map(|&l| pm.points[l as usize]).collect();
+    let dirs: Vec<Vec<[f64; 3]>> = merged.iter().map(|m| axes(m.mask)).collect();
+    let h: Vec<f64> = merged.iter().map(|m| m.size).collect();
+    let normal: Vec<Option<[f64; 3]>> = dirs
+        .iter()
+        .map(|d| unit(d.iter().copied().fold([0.0; 3], add)))
+        .collect();
+    let mut s: Vec<[f64; 3]> = (0..nw)
+        .map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
+        .collect();
+    let shared: Vec<usize> = (0..nw).filter(|&i| merged[i].walls > 1).collect();
+    let ctx = Ctx {
+        comm,
+        directory: &directory,
+        wall,
+        shared: &shared,
+        domain,
+    };
+    for _ in 0..SMOOTH {
+        let means = ctx.neighbour_means(&s);
+        for i in 0..nw {
+            let x = near.project(scale(add(s[i], means[i]), 0.5));
+            let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
+            if margin(x, p[i], d) >= m.min(DEPTH * h[i]) {
+                s[i] = x;
+            }
+        }
+    }
+    // The staircase point moves in along its normal until its outer point
+    // is DEPTH cells ahead of each of its faces.
+    let inner: Vec<[f64; 3]> = (0..nw)
+        .map(|i| {
+            let Some(n) = normal[i] else { return p[i] };
+            let need = dirs[i]
+                .iter()
+                .filter(|&&d| dot(d, n) > 1e-9)
+                .map(|&d| (DEPTH * h[i] - dot(d, sub(s[i], p[i]))) / dot(d, n))
+                .fold(0.0, f64::max);
+            add_scaled(p[i], n, -need.min(REACH * h[i]))
+        })
+        .collect();
+    ctx.untangle(&near, &inner, &mut s);
+    let me = comm.rank() as u64;
+    let rows: Vec<(u64, [f64; 3])> = (0..nw)
+        .filter(|&i| merged[i].watchers > 0 && merged[i].lowest == me)
+        .map(|i| (wall.keys[i], inner[i]))
+        .collect();
+    let moved = directory.tell_watchers(comm, &rows);
+    if !moved.is_empty() {
+        let by_key: HashMap<u64, [f64; 3]> = moved.into_iter().collect();
+        for (l, x) in pm.points.iter_mut().enumerate() {
+            if pm.watch[l] && !on_wall[l] {
+                if let Some(y) = by_key.get(&point_key(pm.lattice[l])) {
+                    *x = *y;
+                }
+            }
+        }
+    }
+    Ok((inner, s))
+}
+
+/// What the passes over the wall points share.
+struct Ctx<'a> {
+    comm: &'a dyn Comm,
+    directory: &'a Directory,
+    wall: &'a Wall,
+    /// The wall points with faces on several ranks.
+    shared: &'a [usize],
+    domain: &'a Domain,
+}
+
+impl Ctx<'_> {
+    /// The mean of each wall point's neighbours along the wall's edges
+    /// (each edge counted once per face that has it), summed in fixed
+    /// point so that it does not depend on the ranks (collective).
+    fn neighbour_means(&self, s: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let fixed = |x: [f64; 3]| {
+            self.domain
+                .to_lattice(x)
+                .map(|v| (v * FIXED).round() as i64)
+        };
+        let mut sums = vec![[0i64; 4]; s.len()];
+        for poly in &self.wall.polys {
+            for j in 0..poly.len() {
+                let (a, b) = (poly[j] as usize, poly[(j + 1) % poly.len()] as usize);
+                let (fa, fb) = (fixed(s[a]), fixed(s[b]));
+                for k in 0..3 {
+                    sums[a][k] += fb[k];
+                    sums[b][k] += fa[k];
+                }
+                sums[a][3] += 1;
+                sums[b][3] += 1;
+            }
+        }
+        let rows: Vec<(u64, Vec<u64>)> = self
+            .shared
+            .iter()
+            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
+            .collect();
+        let total = self.directory.merge_shared(self.comm, &rows, 4, |m, v| {
+            for j in 0..4 {
+                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
+            }
+        });
+        for &i in self.shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                sums[i] = std::array::from_fn(|j| t[j] as i64);
+            }
+        }
+        sums.iter()
+            .map(|v| {
+                let deg = v[3].max(1) as f64;
+                self.domain
+                    .from_lattice(std::array::from_fn(|k| v[k] as f64 / deg / FIXED))
+            })
+            .collect()
+    }
+
+    /// The least over wall points of `q` (each point's rows combined by
+    /// the least over the ranks; collective).
+    fn least_shared(&self, q: &mut [Vec<f64>]) {
+        let rows: Vec<(u64, Vec<u64>)> = self
+            .shared
+            .iter()
+            .map(|&i| {
+                (
+                    self.wall.keys[i],
+                    q[i].iter().map(|x| x.to_bits()).collect(),
+                )
+            })
+            .collect();
+        let w = q.first().map_or(0, Vec::len);
+        let total = self.directory.merge_shared(self.comm, &rows, w, |m, v| {
+            for j in 0..m.len() {
+                m[j] = f64::from_bits(m[j]).min(f64::from_bits(v[j])).to_bits();
+            }
+        });
+        for &i in self.shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                q[i] = t.iter().map(|&b| f64::from_bits(b)).collect();
+            }
+        }
+    }
+
+    /// Moves the outer points of new cells that would be invalid (a face
+    /// pyramid of nearly no or negative volume, [`cell_quality`]) along
+    /// the surface, towards their neighbours' mean: each round, every
+    /// point of such a cell takes the best of a few candidates if it makes
+    /// its worst cell better. Collective; the same moves on every rank.
+    fn untangle(&self, near: &Near, inner: &[[f64; 3]], s: &mut [[f64; 3]]) {
+        let nw = s.len();
+        let mut cells_at: Vec<Vec<u32>> = vec![Vec::new(); nw];
+        for (k, poly) in self.wall.polys.iter().enumerate() {
+            for &i in poly {
+                cells_at[i as usize].push(k as u32);
+            }
+        }
+        let worst = |s: &[[f64; 3]], i: usize, x: [f64; 3]| {
+            cells_at[i]
+                .iter()
+                .map(|&k| cell_quality(self.wall, k as usize, inner, s, (i as u32, x)))
+                .fold(f64::INFINITY, f64::min)
+        };
+        // Towards the neighbours' mean, and towards the place that copies
+        // the inner points' shape (the inner point's offset from its
+        // neighbours' mean) onto the surface, which spreads outer points
+        // that crowd where the surface runs nearly along the faces.
+        const WEIGHTS: [f64; 6] = [0.25, 0.5, 0.75, 1.0, 0.5, 1.0];
+        let inner_means = self.neighbour_means(inner);
+        for _ in 0..UNTANGLE {
+            // Each cell measured once; a point's figure is its worst cell's.
+            let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
+            for (k, poly) in self.wall.polys.iter().enumerate() {
+                let c = cell_quality(self.wall, k, inner, s, (poly[0], s[poly[0] as usize]));
+                for &i in poly {
+                    q[i as usize][0] = q[i as usize][0].min(c);
+                }
+            }
+            self.least_shared(&mut q);
+            let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < GOOD).collect();
+            let mut any = [bad.len() as u64];
+            self.comm.sum_u64(&mut any);
+            if any[0] == 0 {
+                return;
+            }
+            let means = self.neighbour_means(s);
+            let mut tries: Vec<Vec<f64>> = vec![vec![f64::INFINITY; WEIGHTS.len()]; nw];
+            let mut cand: Vec<[[f64; 3]; WEIGHTS.len()]> = vec![[[0.0; 3]; WEIGHTS.len()]; nw];
+            for &i in &bad {
+                let shape = add(means[i], sub(inner[i], inner_means[i]));
+                for (j, &w) in WEIGHTS.iter().enumerate() {
+                    let to = if j < 4 { means[i] } else { shape };
+                    let x = near.project(add_scaled(s[i], sub(to, s[i]), w));
+                    cand[i][j] = x;
+                    tries[i][j] = worst(s, i, x);
+                }
+            }
+            self.least_shared(&mut tries);
+            let mut moves = [0u64];
+            for &i in &bad {
+                let best = (0..WEIGHTS.len()).fold(None, |b: Option<usize>, j| match b {
+                    Some(b) if tries[i][b] >= tries[i][j] => Some(b),
+                    _ => Some(j),
+                });
+                if let Some(j) = best.filter(|&j| tries[i][j] > q[i][0]) {
+                    s[i] = cand[i][j];
+                    moves[0] += 1;
+                }
+            }
+            // Stuck everywhere: more rounds would change nothing.
+            self.comm.sum_u64(&mut moves);
+            if moves[0] == 0 {
+                return;
+            }
+        }
+    }
+}
+
+/// Rounds of untangling at most.
+const UNTANGLE: usize = 30;
+/// The least [`cell_quality`] a new cell needs to be left alone.
+const GOOD: f64 = 0.01;
+
+/// A face's area vector and centre as OpenFOAM computes them: the
+/// triangles of its fan about its points' mean, the centre weighted by
+/// their areas.
+fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    use crate::geometry::vector::cross;
+    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / f.len() as f64);
+    let (mut area, mut sum_n, mut centre) = ([0.0; 3], 0.0, [0.0; 3]);
+    let tris: Vec<([f64; 3], [f64; 3])> = (0..f.len())
+        .map(|j| {
+            let (a, b) = (f[j], f[(j + 1) % f.len()]);
+            let n = scale(cross(sub(a, m), sub(b, m)), 0.5);
+            (n, scale(add(add(a, b), m), 1.0 / 3.0))
+        })
+        .collect();
+    for &(n, _) in &tris {
+        area = add(area, n);
+    }
+    for &(n, c) in &tris {
+        // OpenFOAM weighs each triangle by its area along the face's.
+        let w = dot(n, area);
+        sum_n += w;
+        centre = add_scaled(centre, c, w);
+    }
+    let centre = if sum_n.abs() > 0.0 {
+        scale(centre, 1.0 / sum_n)
+    } else {
+        m
+    };
+    (area, centre)
+}
+
+/// How far the new cell on wall face `k` is from having a face that
+/// points into it: the least over its faces of the face's area vector
+/// dotted with the way from the cell's centre to the face's, in cubes of
+/// the face's side (checkMesh's face pyramids, with OpenFOAM's face and
+/// cell centres). `moved` replaces one outer point.
+fn cell_quality(
+    wall: &Wall,
+    k: usize,
+    inner: &[[f64; 3]],
+    s: &[[f64; 3]],
+    moved: (u32, [f64; 3]),
+) -> f64 {
+    let poly = &wall.polys[k];
+    let outer = |i: u32| if i == moved.0 { moved.1 } else { s[i as usize] };
+    let n = poly.len();
+    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner[i as usize]).collect();
+    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer(i)).collect();
+    let mut faces: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(n + 2);
+    let rev: Vec<[f64; 3]> = a.iter().rev().copied().collect();
+    faces.push(face_geometry(&rev));
+    faces.push(face_geometry(&b));
+    for j in 0..n {
+        let jn = (j + 1) % n;
+        faces.push(face_geometry(&[a[j], a[jn], b[jn], b[j]]));
+    }
+    // OpenFOAM's cell centre: pyramids from the mean of the face centres.
+    let est = scale(
+        faces.iter().map(|f| f.1).fold([0.0; 3], add),
+        1.0 / faces.len() as f64,
+    );
+    let (mut vol, mut centre) = (0.0, [0.0; 3]);
+    for &(sf, cf) in &faces {
+        let v = dot(sf, sub(cf, est)).max(f64::MIN_POSITIVE);
+        vol += v;
+        centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
+    }
+    let c = scale(centre, 1.0 / vol);
+    faces
+        .iter()
+        .map(|&(sf, cf)| dot(sf, sub(cf, c)))
+        .fold(f64::INFINITY, f64::min)
+        / wall.sides[k].powi(3)
+}

@@ -1,0 +1,382 @@
+//! `--wall-layer`: the OpenFOAM case with a layer of cells between the
+//! staircase and the surface, judged by OpenFOAM's `checkMesh` and by the
+//! written files read back here.
+//!
+//! - The sphere and the bunny, fluid and solid, level 6, on 1 and 3 ranks:
+//!   `checkMesh` (`-parallel` on 3) prints `Mesh OK.` with its default
+//!   limits; every point of every wall face lies within 1e-9 of the model's
+//!   size from the surface's triangles (the distance computed here, from
+//!   the STL or the built-in sphere's triangles); no cell has two faces on
+//!   the wall (the staircase's corner cells keep none); the cases of 1 and
+//!   3 ranks hold the same points, bit for bit, and as many cells and wall
+//!   faces.
+//! - Bad requests fail with a clear message on every rank: without
+//!   `--cut-rule none`, with `--snap`, with another mesh output, with
+//!   `--keep all`, without `--openfoam`.
+
+mod common;
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::time::Duration;
+
+use common::{foam, octmesh_bin, openfoam, scratch, shared_model};
+
+/// The lines between the outer parentheses of an ASCII list file.
+fn list_lines(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let body = &text[text.find('}').unwrap()..];
+    let open = body.find("\n(").unwrap();
+    let close = body.rfind(')').unwrap();
+    body[open + 2..close]
+        .lines()
+        .map(|l| l.trim().to_string())
+        .filter(|l| !l.is_empty())
+        .collect()
+}
+
+/// One ASCII polyMesh: points, faces, owners and the wall faces' range.
+struct Foam {
+    points: Vec<[f64; 3]>,
+    faces: Vec<Vec<usize>>,
+    owner: Vec<usize>,
+    wall: Vec<std::ops::Range<usize>>,
+}
+
+fn read_foam(mesh: &Path) -> Foam {
+    let points = list_lines(&mesh.join("points"))
+        .iter()
+        .map(|l| {
+            let v: Vec<f64> = l
+                .trim_matches(|c| c == '(' || c == ')')
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    let faces = list_lines(&mesh.join("faces"))
+        .iter()
+        .map(|l| {
+            l[l.find('(').unwrap() + 1..l.len() - 1]
+                .split_whitespace()
+                .map(|w| w.parse().unwrap())
+                .collect()
+        })
+        .collect();
+    let owner = list_lines(&mesh.join("owner"))
+        .iter()
+        .map(|l| l.parse().unwrap())
+        .collect();
+    let text = std::fs::read_to_string(mesh.join("boundary")).unwrap();
+    let mut wall = Vec::new();
+    for block in text
+        .split('}')
+        .filter(|b| b.contains("type            wall;"))
+    {
+        let num = |k: &str| common::number_after(block, k) as usize;
+        let start = num("startFace");
+        wall.push(start..start + num("nFaces"));
+    }
+    Foam {
+        points,
+        faces,
+        owner,
+        wall,
+    }
+}
+
+/// The meshes of a case: `constant/polyMesh`, or one per processor.
+fn meshes(case: &Path, np: usize) -> Vec<Foam> {
+    if np == 1 {
+        return vec![read_foam(&case.join("constant/polyMesh"))];
+    }
+    (0..np)
+        .map(|r| read_foam(&case.join(format!("processor{r}/constant/polyMesh"))))
+        .collect()
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The squared distance from `p` to the triangle `t` (the closest point by
+/// its Voronoi regions, Ericson's "Real-Time Collision Detection" 5.1.5).
+fn distance2(p: [f64; 3], t: &[[f64; 3]; 3]) -> f64 {
+    let [a, b, c] = *t;
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let at = |u: f64, v: f64| {
+        let q = [
+            a[0] + u * ab[0] + v * ac[0],
+            a[1] + u * ab[1] + v * ac[1],
+            a[2] + u * ab[2] + v * ac[2],
+        ];
+        let d = sub(p, q);
+        dot(d, d)
+    };
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return at(0.0, 0.0);
+    }
+    let bp = sub(p, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return at(1.0, 0.0);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return at(d1 / (d1 - d3), 0.0);
+    }
+    let cp = sub(p, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return at(0.0, 1.0);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return at(0.0, d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return at(1.0 - w, w);
+    }
+    let denom = 1.0 / (va + vb + vc);
+    at(vb * denom, vc * denom)
+}
+
+/// The triangles of a surface in a grid of buckets: whether a point lies
+/// within a distance of one of them.
+struct Near {
+    tris: Vec<[[f64; 3]; 3]>,
+    cell: f64,
+    buckets: HashMap<[i64; 3], Vec<usize>>,
+}
+
+impl Near {
+    fn new(tris: Vec<[[f64; 3]; 3]>, tol: f64) -> Near {
+        let mean: f64 = tris
+            .iter()
+            .map(|t| {
+                (0..3)
+                    .map(|k| t[1][k].max(t[2][k]).max(t[0][k]) - t[0][k].min(t[1][k]).min(t[2][k]))
+                    .fold(0.0, f64::max)
+            })
+            .sum::<f64>()
+            / tris.len() as f64;
+        let cell = 2.0 * mean;
+        let mut buckets: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, t) in tris.iter().enumerate() {
+            let lo: Vec<i64> = (0..3)
+                .map(|k| ((t[0][k].min(t[1][k]).min(t[2][k]) - tol) / cell).floor() as i64)
+                .collect();
+            let hi: Vec<i64> = (0..3)
+                .map(|k| ((t[0][k].max(t[1][k]).max(t[2][k]) + tol) / cell).floor() as i64)
+                .collect();
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        buckets.entry([x, y, z]).or_default().push(i);
+                    }
+                }
+            }
+        }
+        Near {
+            tris,
+            cell,
+            buckets,
+        }
+    }
+
+    fn within(&self, p: [f64; 3], tol: f64) -> bool {
+        let key = p.map(|v| (v / self.cell).floor() as i64);
+        self.buckets
+            .get(&key)
+            .is_some_and(|l| l.iter().any(|&i| distance2(p, &self.tris[i]) <= tol * tol))
+    }
+}
+
+/// The triangles of a binary STL, or of the built-in sphere.
+fn triangles(surface: &str) -> Vec<[[f64; 3]; 3]> {
+    if surface == "sphere" {
+        let s = octmesh::internals::geometry::load_surface("sphere").unwrap();
+        return s.triangles().iter().map(|t| t.v).collect();
+    }
+    let data = std::fs::read(surface).unwrap();
+    let n = u32::from_le_bytes(data[80..84].try_into().unwrap()) as usize;
+    (0..n)
+        .map(|i| {
+            let rec = &data[84 + 50 * i..84 + 50 * i + 50];
+            let f = |k: usize| {
+                f32::from_le_bytes(rec[12 + 4 * k..16 + 4 * k].try_into().unwrap()) as f64
+            };
+            [[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]]
+        })
+        .collect()
+}
+
+/// What must not depend on the rank count: the points (bits, sorted,
+/// those on processor boundaries once) and the numbers of cells and wall
+/// faces.
+#[derive(Debug, PartialEq)]
+struct Summary {
+    points: Vec<[u64; 3]>,
+    cells: usize,
+    wall_faces: usize,
+}
+
+/// Checks one case as the module says; returns its summary.
+fn check_case(rc: &Path, case: &Path, np: usize, near: &Near, size: f64, tag: &str) -> Summary {
+    let par = if np > 1 {
+        format!("mpirun --oversubscribe -np {np} checkMesh -parallel")
+    } else {
+        "checkMesh".to_string()
+    };
+    let text = foam(rc, case, &par);
+    assert!(text.contains("\nMesh OK."), "{tag}: checkMesh:\n{text}");
+    let cells = common::number_after(&text, "cells:") as usize;
+    let tol = 1e-9 * size;
+    let (mut points, mut wall_faces, mut far) = (Vec::new(), 0, 0);
+    for m in meshes(case, np) {
+        let mut walls_of = vec![0u8; m.owner.iter().max().map_or(0, |&c| c + 1)];
+        for r in &m.wall {
+            for f in r.clone() {
+                walls_of[m.owner[f]] += 1;
+                wall_faces += 1;
+                far += m.faces[f]
+                    .iter()
+                    .filter(|&&l| !near.within(m.points[l], tol))
+                    .count();
+            }
+        }
+        let most = walls_of.iter().max().copied().unwrap_or(0);
+        assert!(most <= 1, "{tag}: a cell has {most} faces on the wall");
+        points.extend(m.points.iter().map(|p| p.map(f64::to_bits)));
+    }
+    assert_eq!(
+        far, 0,
+        "{tag}: {far} wall face corners farther than {tol:e} from the surface"
+    );
+    points.sort_unstable();
+    points.dedup();
+    println!("{tag}: Mesh OK, {cells} cells, {wall_faces} wall faces, every wall point within {tol:.1e} of the surface");
+    Summary {
+        points,
+        cells,
+        wall_faces,
+    }
+}
+
+#[test]
+fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("wall_layer");
+    let mut models = vec![("sphere".to_string(), 2.0)];
+    if let Some(p) = shared_model("bunny.stl") {
+        models.push((p.to_string_lossy().into_owned(), 0.998));
+    }
+    for (surface, size) in &models {
+        let near = Near::new(triangles(surface), 1e-9 * size);
+        let name = Path::new(surface)
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        for keep in ["outside", "inside"] {
+            let mut seen: Vec<Summary> = Vec::new();
+            for np in [1, 3] {
+                let case = dir.join(format!("{name}-{keep}-{np}"));
+                let args = [
+                    "mesh",
+                    surface.as_str(),
+                    "--level",
+                    "6",
+                    "--keep",
+                    keep,
+                    "--cut-rule",
+                    "none",
+                    "--wall-layer",
+                    "--openfoam-format",
+                    "ascii",
+                    "--overwrite",
+                    "--quiet",
+                    "--openfoam",
+                    case.to_str().unwrap(),
+                ];
+                let out = common::mpirun(np, &octmesh_bin(), &args, Duration::from_secs(600));
+                assert!(
+                    out.status.success(),
+                    "octmesh {args:?} failed:\n{}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+                let tag = format!("{name} {keep} np {np}");
+                let s = check_case(&rc, &case, np, &near, *size, &tag);
+                if let Some(first) = seen.first() {
+                    assert!(
+                        s == *first,
+                        "{tag}: the case differs from the one of 1 rank"
+                    );
+                }
+                seen.push(s);
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_wall_layer_requests_fail_on_every_rank() {
+    let dir = scratch("wall_layer_bad");
+    let case = dir.join("case");
+    let c = case.to_str().unwrap();
+    let vtu = dir.join("m.pvtu");
+    let base = ["mesh", "sphere", "--level", "4", "--wall-layer"];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--keep", "outside", "--openfoam", c], "cut-rule"),
+        (
+            vec![
+                "--keep",
+                "outside",
+                "--cut-rule",
+                "none",
+                "--snap",
+                "--openfoam",
+                c,
+            ],
+            "snap",
+        ),
+        (
+            vec![
+                "--keep",
+                "outside",
+                "--cut-rule",
+                "none",
+                "--openfoam",
+                c,
+                "--out",
+                vtu.to_str().unwrap(),
+            ],
+            "OpenFOAM writer only",
+        ),
+        (
+            vec!["--keep", "all", "--cut-rule", "none", "--openfoam", c],
+            "no wall",
+        ),
+        (vec!["--keep", "inside", "--cut-rule", "none"], "needs"),
+    ];
+    for (extra, word) in cases {
+        let mut args: Vec<&str> = base.to_vec();
+        args.extend(extra);
+        let out = common::mpirun(2, &octmesh_bin(), &args, Duration::from_secs(120));
+        for line in common::rank_error_lines(&out, 2, &format!("{args:?}")) {
+            assert!(
+                line.contains("wall") && line.contains(word),
+                "{args:?}: {line}"
+            );
+        }
+    }
+    assert!(!case.exists(), "a refused run wrote a case");
+}
