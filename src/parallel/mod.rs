@@ -4,4 +4,5 @@
 
 pub mod comm;
 pub mod cores;
+pub mod direct;
 pub mod file;

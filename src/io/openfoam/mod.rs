@@ -56,7 +56,6 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use super::direct::DirectWriter;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::{corner_coords, VTK_TO_MORTON};
 use crate::mesh::faces::{Face, Faces, Other, SURFACE_PATCH};
@@ -67,6 +66,7 @@ use crate::mesh::points::{
 };
 use crate::mesh::Mesh;
 use crate::parallel::comm::{agree, Comm};
+use crate::parallel::direct::DirectWriter;
 
 use polygons::*;
 use polymesh::*;
