@@ -341,17 +341,34 @@ impl DirectReader {
     }
 
     /// Fills `buf` from file offset `at`; an `UnexpectedEof` error when the
-    /// file ends before. The pages of `buf` the reads fill are made in bulk
-    /// (`cores::make_pages`), those of a direct read while the device
-    /// works: a fresh buffer's pages cost as much as the reads here.
+    /// file ends before. The pages of `buf` are made in bulk
+    /// (`cores::make_pages`; a fresh buffer's pages, made one by one by
+    /// the copies, cost as much as the reads here), those of a direct read
+    /// while the device works. A large range whose first page the cache
+    /// holds comes from the cache, the rest directly.
     pub fn read_exact_at(&mut self, buf: &mut [u8], at: u64) -> io::Result<()> {
         let end = at + buf.len() as u64;
         let block = BLOCK as u64;
         let (a0, a1) = (at.div_ceil(block) * block, end - end % block);
+        let whole = |buf: &mut [u8]| make_pages(&[(buf.as_ptr() as usize, buf.len())]);
         let Some(direct) = self.direct.as_ref().filter(|_| a1 >= a0 + DIRECT_READ_MIN) else {
-            make_pages(&[(buf.as_ptr() as usize, buf.len())]);
+            whole(buf);
             return self.plain.read_exact_at(buf, at);
         };
+        // What the page cache holds already is copied from there (a file
+        // just written through the cache): the device is far slower. The
+        // first page tells.
+        let first = buf.len().min(BLOCK);
+        let cached = read_cached(&self.plain, &mut buf[..first], at);
+        if cached > 0 {
+            whole(buf);
+            let more = read_cached(&self.plain, &mut buf[cached..], at + cached as u64);
+            let done = cached + more;
+            return match done == buf.len() {
+                true => Ok(()),
+                false => self.read_exact_at(&mut buf[done..], at + done as u64),
+            };
+        }
         let (p0, p1) = ((a0 - at) as usize, (a1 - at) as usize);
         // The end first: a file that ends early fails before the long read.
         self.plain.read_exact_at(&mut buf[p1..], a1)?;
@@ -361,6 +378,44 @@ impl DirectReader {
             self.plain.read_exact_at(&mut buf[p0..p1], a0)?;
         }
         Ok(())
+    }
+}
+
+/// Reads from the start of `buf` (file offset `at`) what the page cache
+/// holds without waiting on the device (`RWF_NOWAIT`); the bytes read.
+fn read_cached(file: &File, buf: &mut [u8], at: u64) -> usize {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        use std::os::fd::AsRawFd;
+        let mut done = 0usize;
+        while done < buf.len() {
+            let rest = &mut buf[done..];
+            let iov = libc::iovec {
+                iov_base: rest.as_mut_ptr().cast(),
+                iov_len: rest.len().min(1 << 30),
+            };
+            // SAFETY: one vector over the unread part of `buf`, an open
+            // descriptor; the kernel writes at most `iov_len` bytes.
+            let n = unsafe {
+                libc::preadv2(
+                    file.as_raw_fd(),
+                    &iov,
+                    1,
+                    (at + done as u64) as libc::off_t,
+                    libc::RWF_NOWAIT,
+                )
+            };
+            if n <= 0 {
+                break;
+            }
+            done += n as usize;
+        }
+        done
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        let _ = (file, buf, at);
+        0
     }
 }
 
