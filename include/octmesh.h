@@ -1046,7 +1046,7 @@ octmesh_status_t octmesh_octree_partition(octmesh_t *h, octmesh_weight_fn weight
  * Saves the octree, its domain and the attached leaf data
  * (`octmesh_octree_data_set_size`) to one checkpoint file, like the
  * command's `--save`: every rank writes its leaves and data at their
- * global offset (MPI-IO), with the hash of the handle's surface (0
+ * global offset, with the hash of the handle's surface (0
  * without one). The layout is in docs/formats.md. Needs an octree.
  * Collective; a path that cannot be written fails every rank.
  *

@@ -83,7 +83,7 @@
 //!
 //! 6. **Checkpoints.** [`Session::save_octree`] writes the octree, its
 //!    domain and the attached leaf data to one file, every rank its own
-//!    leaves (MPI-IO); [`Session::load_octree`] reads it back on any number
+//!    leaves at their offset; [`Session::load_octree`] reads it back on any number
 //!    of ranks, in equal shares, checking the file's checksums and that the
 //!    session's surface is the one it was saved from. Without a session:
 //!    [`LinearOctree::save`] and [`LinearOctree::load`] ([`Loaded`]).

@@ -549,9 +549,9 @@ options! {
     range,
     set |c, v, _g| { c.output.refined_leaves = Some(v.into()); }
 
-    /// Save the balanced octree to one checkpoint file (written by all
-    /// ranks with MPI-IO; reloads on any number of ranks with `mesh
-    /// --load`, see docs/formats.md)
+    /// Save the balanced octree to one checkpoint file (each rank writes
+    /// its leaves at their offset; reloads on any number of ranks with
+    /// `mesh --load`, see docs/formats.md)
     Octree "save" <"FILE.ckpt">: One String = path,
     keys ["output.save"],
     default none,

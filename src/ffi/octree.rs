@@ -361,7 +361,7 @@ pub extern "C" fn octmesh_octree_partition(
 /// Saves the octree, its domain and the attached leaf data
 /// (`octmesh_octree_data_set_size`) to one checkpoint file, like the
 /// command's `--save`: every rank writes its leaves and data at their
-/// global offset (MPI-IO), with the hash of the handle's surface (0
+/// global offset, with the hash of the handle's surface (0
 /// without one). The layout is in docs/formats.md. Needs an octree.
 /// Collective; a path that cannot be written fails every rank.
 ///

@@ -7,7 +7,6 @@
 
 pub mod abaqus;
 pub mod cgns;
-pub mod direct;
 pub mod exodus;
 pub mod gathered;
 pub mod gmsh;

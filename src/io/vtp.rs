@@ -19,11 +19,11 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use super::direct::DirectWriter;
 use crate::error::{Error, Result};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::{Faces, Mesh, Other};
 use crate::parallel::comm::{agree, Comm};
+use crate::parallel::direct::DirectWriter;
 
 /// The PVTP path of the boundary beside `pvtu`: `NAME_boundary.pvtp`.
 pub fn boundary_path(pvtu: &Path) -> PathBuf {

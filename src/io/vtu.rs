@@ -36,10 +36,10 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use super::direct::DirectWriter;
 use crate::error::{Error, Result};
 use crate::mesh::quality::WorstElement;
 use crate::parallel::comm::{agree, Comm};
+use crate::parallel::direct::DirectWriter;
 
 /// One rank's part of a hexahedral mesh, ready to write.
 #[derive(Clone, Copy, Debug)]

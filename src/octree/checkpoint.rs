@@ -447,15 +447,10 @@ impl LinearOctree {
         let (first, last) = (start(r), start(r + 1));
         let count = (last - first) as usize;
         let size = info.data_size as usize;
-        // Zeroed allocations take fresh pages, which the kernel makes in
-        // bulk before the reads fill them (a quarter of the load's time
-        // when the reads' first writes made them one by one).
+        // Zeroed allocations take fresh pages, which the reads make in bulk
+        // (`SharedFile::read_at_all`) as the device fills them.
         let mut keys = vec![0u64; count];
         let mut bytes = vec![0u8; count * size];
-        crate::parallel::cores::make_pages(&[
-            (keys.as_ptr() as usize, 8 * count),
-            (bytes.as_ptr() as usize, bytes.len()),
-        ]);
         let read = file
             .read_at_all(layout.leaves + 8 * first, words_as_bytes_mut(&mut keys))
             .and(file.read_at_all(layout.data + info.data_size * first, &mut bytes));

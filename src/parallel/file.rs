@@ -1,30 +1,26 @@
 //! One file that every rank of a communicator opens, reads and writes
 //! together, each rank at its own offsets.
 //!
-//! Over MPI this is MPI-IO (`MPI_File_open`, `MPI_File_write_at_all`,
-//! `MPI_File_read_at_all`) through the raw bindings, since rsmpi has no
-//! safe MPI-IO; the MPI library then gathers the ranks' pieces into large
-//! requests to the file system. On a [`SerialComm`](super::comm::SerialComm)
-//! (one process, no MPI) it is a plain file with positioned reads and
-//! writes.
+//! Each rank opens the file itself and moves its own bytes with positioned
+//! reads and writes, the whole blocks of large pieces with `O_DIRECT`
+//! ([`super::direct`]): on a host whose free memory the hypervisor has taken
+//! back, every fresh page-cache page of a new file costs a trip to the host,
+//! and a file written through the cache ran at a twentieth of the disk's
+//! speed (MPI-IO's collective writes as much as plain ones; see
+//! BENCHMARKS.md). Rank 0 sets a new file's length before any rank writes.
 //!
 //! Opening and closing are collective and agree on failure; reads and
 //! writes are collective too but return this rank's own result, for the
-//! caller to agree on once after all its transfers (a rank that failed
-//! keeps taking part in the remaining collective calls, so none waits for
-//! it).
+//! caller to agree on once after all its transfers.
 
-use std::ffi::CString;
-use std::fs::{File, OpenOptions};
-use std::os::raw::{c_char, c_int, c_void};
+use std::fs::OpenOptions;
+use std::io::Write;
 use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::parallel::comm::{agree, Comm};
-
-/// Bytes per MPI-IO call: MPI counts are `int`.
-const CHUNK: usize = 1 << 30;
+use crate::parallel::direct::{DirectReader, DirectWriter};
 
 /// How a [`SharedFile`] is opened.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,34 +35,18 @@ pub enum Mode {
 }
 
 enum Handle {
-    Plain(File),
-    Mpi(mpi_sys::MPI_File),
+    Write(Box<DirectWriter>),
+    Read(DirectReader),
     Closed,
 }
 
 /// A file shared by the ranks of a communicator (see the module
-/// documentation). Dropping it closes it, collectively; call
-/// [`SharedFile::close`] to see the error of a close.
+/// documentation). Dropping it closes it; call [`SharedFile::close`] to
+/// see the error of a close.
 pub struct SharedFile<'a> {
     comm: &'a dyn Comm,
     path: String,
-    handle: Handle,
-}
-
-/// The message of an MPI error code.
-fn mpi_message(code: c_int) -> String {
-    let mut buf = vec![0 as c_char; mpi_sys::MPI_MAX_ERROR_STRING as usize + 1];
-    let mut len: c_int = 0;
-    // SAFETY: the buffer holds MPI_MAX_ERROR_STRING characters and a nul.
-    let rc = unsafe { mpi_sys::MPI_Error_string(code, buf.as_mut_ptr(), &mut len) };
-    if rc != 0 {
-        return format!("MPI error {code}");
-    }
-    let bytes: Vec<u8> = buf[..len.max(0) as usize]
-        .iter()
-        .map(|&c| c as u8)
-        .collect();
-    String::from_utf8_lossy(&bytes).trim().to_string()
+    handle: std::cell::RefCell<Handle>,
 }
 
 impl<'a> SharedFile<'a> {
@@ -78,232 +58,157 @@ impl<'a> SharedFile<'a> {
             Mode::Create(_) => "create",
             Mode::Read => "open",
         };
-        let local = match comm.mpi_raw() {
-            None => {
-                let f = match mode {
-                    Mode::Create(len) => OpenOptions::new()
-                        .write(true)
-                        .create(true)
-                        .truncate(false)
-                        .open(path)
-                        .and_then(|f| f.set_len(len).map(|_| f)),
-                    Mode::Read => OpenOptions::new().read(true).open(path),
-                };
-                f.map(Handle::Plain)
-                    .map_err(|e| Error::io(format!("cannot {verb} {shown}: {e}")))
-            }
-            Some(raw) => {
-                let name = CString::new(path.as_os_str().as_encoded_bytes())
-                    .map_err(|_| Error::invalid(format!("the path {shown:?} holds a nul byte")));
-                name.and_then(|name| {
-                    let amode = match mode {
-                        Mode::Create(_) => mpi_sys::MPI_MODE_CREATE | mpi_sys::MPI_MODE_WRONLY,
-                        Mode::Read => mpi_sys::MPI_MODE_RDONLY,
-                    } as c_int;
-                    let mut fh: mpi_sys::MPI_File = std::ptr::null_mut();
-                    // SAFETY: a valid communicator, a nul-terminated name, and
-                    // an out-pointer to a handle.
-                    let rc = unsafe {
-                        mpi_sys::MPI_File_open(
-                            raw,
-                            name.as_ptr(),
-                            amode,
-                            mpi_sys::RSMPI_INFO_NULL,
-                            &mut fh,
-                        )
-                    };
-                    if rc != 0 {
-                        return Err(Error::io(format!(
-                            "cannot {verb} {shown}: {}",
-                            mpi_message(rc)
-                        )));
+        let failed = |e: std::io::Error| Error::io(format!("cannot {verb} {shown}: {e}"));
+        let local = match mode {
+            // Every rank creates the file (so that each sees its own
+            // error); rank 0 alone sets the length, before any rank
+            // writes, so that no rank cuts what another has written.
+            Mode::Create(len) => OpenOptions::new()
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(path)
+                .and_then(|f| {
+                    if comm.rank() == 0 {
+                        f.set_len(len)?;
                     }
-                    Ok(Handle::Mpi(fh))
-                })
-            }
+                    Ok(Handle::Write(Box::new(DirectWriter::around(f, path))))
+                }),
+            Mode::Read => DirectReader::open(path).map(Handle::Read),
         };
-        // A rank whose open worked while another's failed leaves its MPI
-        // handle unclosed: closing is collective, and the others have none.
-        let handle = agree(comm, local)?;
-        let file = SharedFile {
+        let handle = agree(comm, local.map_err(failed))?;
+        Ok(SharedFile {
             comm,
             path: shown,
-            handle,
-        };
-        if let Mode::Create(len) = mode {
-            // MPI_MODE_CREATE keeps an existing file's bytes and length.
-            if let Handle::Mpi(fh) = file.handle {
-                // SAFETY: an open handle; collective, as every rank got here.
-                let rc = unsafe { mpi_sys::MPI_File_set_size(fh, len as mpi_sys::MPI_Offset) };
-                let local = if rc == 0 {
-                    Ok(())
-                } else {
-                    Err(file.error("size", rc))
-                };
-                agree(comm, local)?;
-            }
-        }
-        Ok(file)
-    }
-
-    fn error(&self, what: &str, rc: c_int) -> Error {
-        Error::io(format!("cannot {what} {}: {}", self.path, mpi_message(rc)))
-    }
-
-    /// The rounds of calls of at most [`CHUNK`] bytes every rank makes for
-    /// transfers of `len` bytes here: the most any rank needs.
-    fn rounds(&self, len: usize) -> usize {
-        let mut n = [len.div_ceil(CHUNK) as u64];
-        self.comm.max_u64(&mut n);
-        n[0] as usize
+            handle: std::cell::RefCell::new(handle),
+        })
     }
 
     /// Writes `bytes` at `offset`. Collective (every rank calls it, with
     /// its own piece, possibly empty); returns this rank's result.
     pub fn write_at_all(&self, offset: u64, bytes: &[u8]) -> Result<()> {
-        match &self.handle {
-            Handle::Plain(f) => f
-                .write_all_at(bytes, offset)
-                .map_err(|e| Error::io(format!("cannot write {}: {e}", self.path))),
-            Handle::Mpi(fh) => {
-                let mut result = Ok(());
-                for k in 0..self.rounds(bytes.len()) {
-                    let piece = bytes.get(k * CHUNK..).unwrap_or(&[]);
-                    let piece = &piece[..piece.len().min(CHUNK)];
-                    // A failed rank still takes part, with nothing.
-                    let piece = if result.is_ok() { piece } else { &[] };
-                    // SAFETY: an open handle and a buffer of `piece.len()`
-                    // bytes; the status is ignored.
-                    let rc = unsafe {
-                        mpi_sys::MPI_File_write_at_all(
-                            *fh,
-                            (offset + (k * CHUNK) as u64) as mpi_sys::MPI_Offset,
-                            piece.as_ptr() as *const c_void,
-                            piece.len() as c_int,
-                            mpi_sys::RSMPI_UINT8_T,
-                            mpi_sys::RSMPI_STATUS_IGNORE,
-                        )
-                    };
-                    if rc != 0 && result.is_ok() {
-                        result = Err(self.error("write", rc));
-                    }
+        let failed = |e: std::io::Error| Error::io(format!("cannot write {}: {e}", self.path));
+        match &mut *self.handle.borrow_mut() {
+            Handle::Write(w) => {
+                if bytes.is_empty() {
+                    return Ok(());
                 }
-                result
+                if cached(w.file(), offset, bytes.len()) {
+                    // Over pages the cache holds (a file saved over
+                    // again): no fresh pages to make, and the cache takes
+                    // the bytes faster than the device.
+                    return w.file().write_all_at(bytes, offset).map_err(failed);
+                }
+                w.restart_at(offset).map_err(failed)?;
+                w.write_all(bytes).map_err(failed)?;
+                // The partial last block now, so that the next piece may
+                // start anywhere.
+                w.flush().map_err(failed)
             }
+            Handle::Read(_) => Err(Error::new(
+                ErrorKind::Internal,
+                "the file is open for reading",
+            )),
             Handle::Closed => Err(Error::new(ErrorKind::Internal, "the file is closed")),
         }
     }
 
     /// Reads `buf.len()` bytes at `offset`. Collective (every rank calls
     /// it, possibly with an empty buffer); returns this rank's result, an
-    /// error if the file ends before.
+    /// error if the file ends before. The pages of `buf` are made in bulk
+    /// as it is filled (see `DirectReader::read_exact_at`).
     pub fn read_at_all(&self, offset: u64, buf: &mut [u8]) -> Result<()> {
-        let end = offset + buf.len() as u64;
-        let short = || {
-            Error::format(format!(
-                "{} ends before byte {end}: it is truncated",
-                self.path
-            ))
-        };
-        match &self.handle {
-            Handle::Plain(f) => f.read_exact_at(buf, offset).map_err(|e| {
+        match &mut *self.handle.borrow_mut() {
+            Handle::Read(r) => r.read_exact_at(buf, offset).map_err(|e| {
                 if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                    short()
+                    Error::format(format!(
+                        "{} ends before byte {}: it is truncated",
+                        self.path,
+                        offset + buf.len() as u64
+                    ))
                 } else {
                     Error::io(format!("cannot read {}: {e}", self.path))
                 }
             }),
-            Handle::Mpi(fh) => {
-                let mut result = Ok(());
-                let len = buf.len();
-                for k in 0..self.rounds(len) {
-                    let (lo, hi) = ((k * CHUNK).min(len), ((k + 1) * CHUNK).min(len));
-                    let piece = if result.is_ok() {
-                        &mut buf[lo..hi]
-                    } else {
-                        &mut buf[..0]
-                    };
-                    // SAFETY: zeroed below; an open handle, a buffer of
-                    // `piece.len()` bytes and a status to read the count from.
-                    let mut status: mpi_sys::MPI_Status = unsafe { std::mem::zeroed() };
-                    let rc = unsafe {
-                        mpi_sys::MPI_File_read_at_all(
-                            *fh,
-                            (offset + lo as u64) as mpi_sys::MPI_Offset,
-                            piece.as_mut_ptr() as *mut c_void,
-                            piece.len() as c_int,
-                            mpi_sys::RSMPI_UINT8_T,
-                            &mut status,
-                        )
-                    };
-                    if result.is_err() {
-                        continue;
-                    }
-                    if rc != 0 {
-                        result = Err(self.error("read", rc));
-                        continue;
-                    }
-                    let mut got: c_int = 0;
-                    // SAFETY: the status of the read above.
-                    unsafe { mpi_sys::MPI_Get_count(&status, mpi_sys::RSMPI_UINT8_T, &mut got) };
-                    if got as usize != piece.len() {
-                        result = Err(short());
-                    }
-                }
-                result
-            }
+            Handle::Write(_) => Err(Error::new(
+                ErrorKind::Internal,
+                "the file is open for writing",
+            )),
             Handle::Closed => Err(Error::new(ErrorKind::Internal, "the file is closed")),
         }
     }
 
     /// The file's size in bytes. Rank-local.
     pub fn size(&self) -> Result<u64> {
-        match &self.handle {
-            Handle::Plain(f) => f
-                .metadata()
-                .map(|m| m.len())
-                .map_err(|e| Error::io(format!("cannot read {}: {e}", self.path))),
-            Handle::Mpi(fh) => {
-                let mut n: mpi_sys::MPI_Offset = 0;
-                // SAFETY: an open handle and an out-pointer.
-                let rc = unsafe { mpi_sys::MPI_File_get_size(*fh, &mut n) };
-                if rc != 0 {
-                    return Err(self.error("measure", rc));
-                }
-                Ok(n as u64)
+        let got = match &*self.handle.borrow() {
+            Handle::Read(r) => r.file().metadata(),
+            Handle::Write(w) => w.file().metadata(),
+            Handle::Closed => {
+                return Err(Error::new(ErrorKind::Internal, "the file is closed"));
             }
-            Handle::Closed => Err(Error::new(ErrorKind::Internal, "the file is closed")),
-        }
+        };
+        got.map(|m| m.len())
+            .map_err(|e| Error::io(format!("cannot read {}: {e}", self.path)))
     }
 
-    /// Closes the file, flushing what was written. Collective; agrees on
-    /// failure.
-    pub fn close(mut self) -> Result<()> {
+    /// Closes the file. Collective; agrees on failure. Whole blocks
+    /// written directly are on the device; the rest is not synced.
+    pub fn close(self) -> Result<()> {
         let local = self.close_handle();
         agree(self.comm, local)
     }
 
-    fn close_handle(&mut self) -> Result<()> {
-        match std::mem::replace(&mut self.handle, Handle::Closed) {
-            Handle::Plain(f) => f
-                .sync_data()
-                .or_else(|e| match e.raw_os_error() {
-                    // Special files (a pipe, /dev/null) cannot be synced.
-                    Some(libc::EINVAL) | Some(libc::EROFS) => Ok(()),
-                    _ => Err(e),
-                })
-                .map_err(|e| Error::io(format!("cannot write {}: {e}", self.path))),
-            Handle::Mpi(mut fh) => {
-                // SAFETY: an open handle, closed once (the handle is now
-                // `Closed`); collective, as every rank closes it.
-                let rc = unsafe { mpi_sys::MPI_File_close(&mut fh) };
-                if rc != 0 {
-                    return Err(self.error("close", rc));
-                }
-                Ok(())
-            }
-            Handle::Closed => Ok(()),
+    fn close_handle(&self) -> Result<()> {
+        let failed = |e: std::io::Error| Error::io(format!("cannot write {}: {e}", self.path));
+        match self.handle.replace(Handle::Closed) {
+            Handle::Write(mut w) => w.flush().map_err(failed),
+            Handle::Read(_) | Handle::Closed => Ok(()),
         }
+    }
+}
+
+/// Whether the page cache holds every page of `len` bytes of `file` from
+/// `at` (`cachestat`, Linux 6.5; false where it is missing).
+fn cached(file: &std::fs::File, at: u64, len: usize) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        #[repr(C)]
+        struct Range {
+            off: u64,
+            len: u64,
+        }
+        #[repr(C)]
+        #[derive(Default)]
+        struct Stat {
+            cache: u64,
+            dirty: u64,
+            writeback: u64,
+            evicted: u64,
+            recently_evicted: u64,
+        }
+        const SYS_CACHESTAT: libc::c_long = 451;
+        let page = 4096u64;
+        let (a, b) = (at - at % page, (at + len as u64).div_ceil(page) * page);
+        let range = Range { off: a, len: b - a };
+        let mut stat = Stat::default();
+        // SAFETY: cachestat reads the range and fills the stat, both
+        // live here; an unknown system call returns -1 (ENOSYS).
+        let rc = unsafe {
+            libc::syscall(
+                SYS_CACHESTAT,
+                file.as_raw_fd(),
+                &range as *const Range,
+                &mut stat as *mut Stat,
+                0u32,
+            )
+        };
+        rc == 0 && len > 0 && stat.cache == (b - a) / page
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (file, at, len);
+        false
     }
 }
 

@@ -2,7 +2,7 @@
 """Octree checkpoints saved and loaded against the disk's speed (issue 59).
 
 One run per repeat: `octmesh octree SURFACE --level L --fit 1 --save FILE` to a new file and
-again over it (phase 'save' of --stats: the block checksums, the MPI-IO open, the collective
+again over it (phase 'save' of --stats: the block checksums, the open, the ranks' positioned
 writes and the close, which does not sync), then `dd` writing as many bytes to the same file
 system through the page cache without a sync to a new file and over it (conv=notrunc), the
 same to compare with, and straight to the device (oflag=direct) and through the page cache

@@ -62,7 +62,6 @@ use std::path::{Path, PathBuf};
 
 pub use gathered::write_gathered_case;
 
-use super::direct::DirectWriter;
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::{corner_coords, VTK_TO_MORTON};
 use crate::geometry::Surface;
@@ -74,6 +73,7 @@ use crate::mesh::points::{
 };
 use crate::mesh::Mesh;
 use crate::parallel::comm::{agree, Comm};
+use crate::parallel::direct::DirectWriter;
 
 use polygons::*;
 use polymesh::*;

@@ -1,4 +1,4 @@
-//! Large files written around the page cache.
+//! Large files written and read around the page cache.
 //!
 //! A buffered write first copies every byte into the kernel's page cache,
 //! into pages the kernel must find and fill; on a host whose free memory
@@ -19,6 +19,12 @@
 //!
 //! Direct and ordinary writes never share a block, so no cached page ever
 //! holds stale bytes of a block written directly.
+//!
+//! A [`DirectReader`] reads the whole blocks of a large range the same way
+//! (a thread reads the next aligned buffer while the caller copies the last
+//! one into place), the partial blocks at its ends through the cache. The
+//! kernel writes cached changes of a range back before reading it directly,
+//! so a file just written through the cache reads back as written.
 
 use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
@@ -26,6 +32,8 @@ use std::os::unix::fs::FileExt;
 use std::path::Path;
 use std::sync::Arc;
 use std::thread::JoinHandle;
+
+use crate::parallel::cores::make_pages;
 
 /// Alignment of direct writes, in memory and in the file: the largest
 /// logical block size in common use.
@@ -118,8 +126,9 @@ impl DirectWriter {
         Ok(Self::around(plain, path))
     }
 
-    /// A writer of `plain`, the file at `path`.
-    fn around(plain: File, path: &Path) -> Self {
+    /// A writer of `plain`, the file at `path` opened for writing, from
+    /// offset 0.
+    pub fn around(plain: File, path: &Path) -> Self {
         DirectWriter {
             plain: Arc::new(plain),
             direct: open_direct(path).map(Arc::new),
@@ -134,6 +143,11 @@ impl DirectWriter {
     /// Whether whole blocks go straight to the file.
     pub fn is_direct(&self) -> bool {
         self.direct.is_some()
+    }
+
+    /// The ordinary handle.
+    pub fn file(&self) -> &File {
+        &self.plain
     }
 
     /// Writes what is pending, then goes on from file offset `offset`.
@@ -269,23 +283,184 @@ fn bytes_mut(blocks: &mut [Block]) -> &mut [u8] {
     }
 }
 
-/// The file at `path` opened again for direct writes, if this system and
-/// file system offer them.
+/// The file at `path` opened again for direct writes (or reads), if this
+/// system and file system offer them.
 fn open_direct(path: &Path) -> Option<File> {
+    open_direct_for(path, true)
+}
+
+fn open_direct_for(path: &Path, write: bool) -> Option<File> {
     #[cfg(target_os = "linux")]
     {
         use std::os::unix::fs::OpenOptionsExt;
         OpenOptions::new()
-            .write(true)
+            .write(write)
+            .read(!write)
             .custom_flags(libc::O_DIRECT)
             .open(path)
             .ok()
     }
     #[cfg(not(target_os = "linux"))]
     {
-        let _ = (path, OpenOptions::new());
+        let _ = (path, write, OpenOptions::new());
         None
     }
+}
+
+/// Whole blocks below which a read goes through the page cache: a direct
+/// read always waits on the device, worth it for large ranges only.
+const DIRECT_READ_MIN: u64 = 1 << 20;
+
+/// Reads of a file with `O_DIRECT` for the whole blocks of large ranges,
+/// the rest through the page cache; see the module's documentation.
+#[derive(Debug)]
+pub struct DirectReader {
+    plain: File,
+    /// The same file opened with `O_DIRECT`, while the file system takes it.
+    direct: Option<File>,
+}
+
+impl DirectReader {
+    /// Opens the file at `path` for reading.
+    pub fn open(path: &Path) -> io::Result<Self> {
+        let plain = File::open(path)?;
+        Ok(DirectReader {
+            plain,
+            direct: open_direct_for(path, false),
+        })
+    }
+
+    /// The ordinary handle.
+    pub fn file(&self) -> &File {
+        &self.plain
+    }
+
+    /// Whether whole blocks come straight from the file.
+    pub fn is_direct(&self) -> bool {
+        self.direct.is_some()
+    }
+
+    /// Fills `buf` from file offset `at`; an `UnexpectedEof` error when the
+    /// file ends before. The pages of `buf` are made in bulk
+    /// (`cores::make_pages`; a fresh buffer's pages, made one by one by
+    /// the copies, cost as much as the reads here), those of a direct read
+    /// while the device works. A large range whose first page the cache
+    /// holds comes from the cache, the rest directly.
+    pub fn read_exact_at(&mut self, buf: &mut [u8], at: u64) -> io::Result<()> {
+        let end = at + buf.len() as u64;
+        let block = BLOCK as u64;
+        let (a0, a1) = (at.div_ceil(block) * block, end - end % block);
+        let whole = |buf: &mut [u8]| make_pages(&[(buf.as_ptr() as usize, buf.len())]);
+        let Some(direct) = self.direct.as_ref().filter(|_| a1 >= a0 + DIRECT_READ_MIN) else {
+            whole(buf);
+            return self.plain.read_exact_at(buf, at);
+        };
+        // What the page cache holds already is copied from there (a file
+        // just written through the cache): the device is far slower. The
+        // first page tells.
+        let first = buf.len().min(BLOCK);
+        let cached = read_cached(&self.plain, &mut buf[..first], at);
+        if cached > 0 {
+            whole(buf);
+            let more = read_cached(&self.plain, &mut buf[cached..], at + cached as u64);
+            let done = cached + more;
+            return match done == buf.len() {
+                true => Ok(()),
+                false => self.read_exact_at(&mut buf[done..], at + done as u64),
+            };
+        }
+        let (p0, p1) = ((a0 - at) as usize, (a1 - at) as usize);
+        // The end first: a file that ends early fails before the long read.
+        self.plain.read_exact_at(&mut buf[p1..], a1)?;
+        self.plain.read_exact_at(&mut buf[..p0], at)?;
+        if !read_blocks(direct, &mut buf[p0..p1], a0)? {
+            self.direct = None;
+            self.plain.read_exact_at(&mut buf[p0..p1], a0)?;
+        }
+        Ok(())
+    }
+}
+
+/// Reads from the start of `buf` (file offset `at`) what the page cache
+/// holds without waiting on the device (`RWF_NOWAIT`); the bytes read.
+fn read_cached(file: &File, buf: &mut [u8], at: u64) -> usize {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        use std::os::fd::AsRawFd;
+        let mut done = 0usize;
+        while done < buf.len() {
+            let rest = &mut buf[done..];
+            let iov = libc::iovec {
+                iov_base: rest.as_mut_ptr().cast(),
+                iov_len: rest.len().min(1 << 30),
+            };
+            // SAFETY: one vector over the unread part of `buf`, an open
+            // descriptor; the kernel writes at most `iov_len` bytes.
+            let n = unsafe {
+                libc::preadv2(
+                    file.as_raw_fd(),
+                    &iov,
+                    1,
+                    (at + done as u64) as libc::off_t,
+                    libc::RWF_NOWAIT,
+                )
+            };
+            if n <= 0 {
+                break;
+            }
+            done += n as usize;
+        }
+        done
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        let _ = (file, buf, at);
+        0
+    }
+}
+
+/// Fills `dst` (whole blocks long) from the aligned offset `at` of
+/// `direct`: a thread reads each aligned buffer while this one copies the
+/// one before into place. `Ok(false)` when the file system refuses direct
+/// reads (nothing read then counts).
+fn read_blocks(direct: &File, dst: &mut [u8], at: u64) -> io::Result<bool> {
+    use std::sync::mpsc::channel;
+    let n = dst.len();
+    std::thread::scope(|s| {
+        let (give, take) = channel::<Vec<Block>>();
+        let (done, filled) = channel::<(Vec<Block>, io::Result<()>)>();
+        for _ in 0..2 {
+            give.send(new_blocks()).expect("the receiver is here");
+        }
+        s.spawn(move || {
+            for lo in (0..n).step_by(CHUNK) {
+                let Ok(mut b) = take.recv() else { return };
+                let len = (n - lo).min(CHUNK);
+                let r = direct.read_exact_at(&mut bytes_mut(&mut b)[..len], at + lo as u64);
+                let failed = r.is_err();
+                if done.send((b, r)).is_err() || failed {
+                    return;
+                }
+            }
+        });
+        for lo in (0..n).step_by(CHUNK) {
+            let len = (n - lo).min(CHUNK);
+            // The destination's fresh pages made while the device reads.
+            make_pages(&[(dst[lo..].as_ptr() as usize, len)]);
+            let (b, r) = filled
+                .recv()
+                .map_err(|_| io::Error::other("the reading thread failed"))?;
+            match r {
+                Ok(()) => {}
+                Err(e) if e.raw_os_error() == Some(libc::EINVAL) => return Ok(false),
+                Err(e) => return Err(e),
+            }
+            dst[lo..lo + len].copy_from_slice(&bytes(&b)[..len]);
+            // The thread may have stopped at the last buffer.
+            let _ = give.send(b);
+        }
+        Ok(true)
+    })
 }
 
 #[cfg(test)]
@@ -327,6 +502,42 @@ mod tests {
             assert_eq!(got.len() as u64, start + len as u64, "{start} {len}");
             let want: Vec<u8> = (0..start + len as u64).map(byte).collect();
             assert!(got == want, "{start} {len} {piece}: bytes differ");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Ranges of every awkward start and length read back byte for byte,
+    /// directly or not, and a range past the end fails as truncated.
+    #[test]
+    fn ranges_read_back_as_written() {
+        let dir = std::env::temp_dir().join(format!("octmesh_dread_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("f");
+        let byte = |i: u64| (i.wrapping_mul(2_654_435_761) >> 13) as u8;
+        let len = 3 * CHUNK as u64 + 5_000;
+        let all: Vec<u8> = (0..len).map(byte).collect();
+        std::fs::write(&path, &all).unwrap();
+        for direct in [true, false] {
+            let mut r = DirectReader::open(&path).unwrap();
+            if !direct {
+                r.direct = None;
+            }
+            println!("direct reads: {}", r.is_direct());
+            for (at, n) in [
+                (0u64, 0usize),
+                (7, 100),
+                (4096, 1 << 20),
+                (123, CHUNK + 4096),
+                (5000, 2 * CHUNK + 77),
+                (len - CHUNK as u64 - 3, CHUNK + 3),
+            ] {
+                let mut buf = vec![0u8; n];
+                r.read_exact_at(&mut buf, at).unwrap();
+                assert!(buf[..] == all[at as usize..at as usize + n], "{at} {n}");
+            }
+            let mut buf = vec![0u8; 2 * CHUNK];
+            let e = r.read_exact_at(&mut buf, len - CHUNK as u64).unwrap_err();
+            assert_eq!(e.kind(), io::ErrorKind::UnexpectedEof);
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }
