@@ -53,25 +53,7 @@ pub fn build(
     tags: &[u32],
 ) -> Result<std::result::Result<Conforming, Uncovered>> {
     debug_assert_eq!(leaves.len(), tags.len());
-    let mut macros = Vec::with_capacity(leaves.len() / 4);
-    let mut flags = Vec::with_capacity(leaves.len() / 4);
-    let mut i = 0;
-    while i < leaves.len() {
-        let o = leaves[i];
-        let whole = o.level() > 0
-            && o.child_id() == 0
-            && i + 8 <= leaves.len()
-            && (0..8).all(|k| leaves[i + k] == o.parent().child(k as u32))
-            && (1..8).all(|k| tags[i + k] == tags[i]);
-        if whole {
-            macros.push(o.parent());
-            i += 8;
-        } else {
-            macros.push(o);
-            i += 1;
-        }
-        flags.push(tags[i - 1]);
-    }
+    let (macros, flags) = conditions::families(leaves, tags);
     let mut tree = LinearOctree::from_local_leaves(comm, macros.clone())?;
     tree.balance(Connectivity::Corner)?;
     let balanced = tree.leaves();

@@ -15,14 +15,27 @@ use crate::parallel::comm::CommRef;
 /// balanced across corners. The mesh's leaves are the macro cells'
 /// children; everything added is the scheme's extra refinement.
 pub fn macro_tree(comm: CommRef, leaves: &[Octant]) -> Result<Vec<Octant>> {
+    let (macros, _) = families(leaves, &vec![0; leaves.len()]);
+    let mut tree = LinearOctree::from_local_leaves(comm, macros)?;
+    tree.balance(Connectivity::Corner)?;
+    Ok(tree.leaves().to_vec())
+}
+
+/// The macro cells of a complete, sorted set of leaves before the
+/// balance, each with its tag: a whole family of leaves with one tag
+/// becomes its parent, any other leaf a macro cell of its own.
+pub fn families(leaves: &[Octant], tags: &[u32]) -> (Vec<Octant>, Vec<u32>) {
     let mut macros = Vec::with_capacity(leaves.len() / 4);
+    let mut out = Vec::with_capacity(leaves.len() / 4);
     let mut i = 0;
     while i < leaves.len() {
         let o = leaves[i];
         let whole = o.level() > 0
             && o.child_id() == 0
             && i + 8 <= leaves.len()
-            && (0..8).all(|k| leaves[i + k] == o.parent().child(k as u32));
+            && (0..8).all(|k| leaves[i + k] == o.parent().child(k as u32))
+            && (1..8).all(|k| tags[i + k] == tags[i]);
+        out.push(tags[i]);
         if whole {
             macros.push(o.parent());
             i += 8;
@@ -31,9 +44,7 @@ pub fn macro_tree(comm: CommRef, leaves: &[Octant]) -> Result<Vec<Octant>> {
             i += 1;
         }
     }
-    let mut tree = LinearOctree::from_local_leaves(comm, macros)?;
-    tree.balance(Connectivity::Corner)?;
-    Ok(tree.leaves().to_vec())
+    (macros, out)
 }
 
 /// The marks of each macro cell of a corner-balanced macro tree: corner
