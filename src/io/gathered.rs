@@ -46,6 +46,32 @@ pub const ABAQUS_FACE_NODES: [[usize; 4]; 6] = [
     [3, 7, 4, 0],
 ];
 
+/// Faces of elements as (element, Abaqus label less one): those two
+/// elements share as (first, its label, second), then those of one only.
+pub type MatchedFaces = (Vec<(u32, u8, u32)>, Vec<(u32, u8)>);
+
+/// The faces of conforming hexahedra (VTK order) by their Abaqus labels,
+/// matched by their sorted corners: each face two elements have, as
+/// (first element, its label, second element), and each face only one
+/// element has, as (element, label), in no particular order.
+pub fn match_faces(elements: &[[u32; 8]]) -> MatchedFaces {
+    let mut open: FoldMap<[u32; 4], (u32, u8)> = FoldMap::default();
+    let mut pairs = Vec::with_capacity(3 * elements.len());
+    for (h, hex) in elements.iter().enumerate() {
+        for (label, corners) in ABAQUS_FACE_NODES.iter().enumerate() {
+            let mut key = corners.map(|c| hex[c]);
+            key.sort_unstable();
+            match open.remove(&key) {
+                Some((o, l)) => pairs.push((o, l, h as u32)),
+                None => {
+                    open.insert(key, (h as u32, label as u8));
+                }
+            }
+        }
+    }
+    (pairs, open.into_values().collect())
+}
+
 /// A boundary face of the gathered mesh.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub struct GatheredFace {

@@ -8,7 +8,7 @@ use std::rc::Rc;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::hash::FoldMap;
-use crate::io::gathered::{Gathered, GatheredFace, ABAQUS_FACE, ABAQUS_FACE_NODES};
+use crate::io::gathered::{match_faces, Gathered, GatheredFace, ABAQUS_FACE, ABAQUS_FACE_NODES};
 use crate::mesh::conforming::build::{build, Conforming};
 use crate::mesh::conforming::MACRO;
 use crate::octree::domain::Domain;
@@ -95,23 +95,14 @@ fn to_gathered(
         .map(|p| domain.from_lattice(p.map(|c| c as f64 / unit as f64)))
         .collect();
     // Faces seen once are the boundary.
-    let mut once: FoldMap<[u32; 4], (u32, u8)> = FoldMap::default();
-    for (h, hex) in mesh.hexes.iter().enumerate() {
-        for (label, corners) in ABAQUS_FACE_NODES.iter().enumerate() {
-            let mut key = corners.map(|c| hex[c]);
-            key.sort_unstable();
-            if once.remove(&key).is_none() {
-                once.insert(key, (h as u32, label as u8));
-            }
-        }
-    }
+    let (_, once) = match_faces(&mesh.hexes);
     let patch_of: FoldMap<(u64, u8), u16> = hanging
         .faces
         .iter()
         .map(|f| ((f.element, f.label), f.patch))
         .collect();
     let mut faces = Vec::with_capacity(once.len());
-    for &(h, label) in once.values() {
+    for &(h, label) in &once {
         let hex = &mesh.hexes[h as usize];
         let quad = ABAQUS_FACE_NODES[label as usize].map(|c| mesh.points[hex[c] as usize]);
         let axis = (0..3)

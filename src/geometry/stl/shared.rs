@@ -103,15 +103,19 @@ pub(crate) fn share(n: u64, r: usize, p: usize) -> (u64, u64) {
     (at(r), at(r + 1))
 }
 
-fn read_binary(comm: &dyn Comm, file: &SharedFile, n: u64) -> Option<Result<Surface>> {
+/// This rank's share of the `n` records of a binary STL file, or `None`
+/// on every rank when a rank's read failed. Collective.
+fn read_records(comm: &dyn Comm, file: &SharedFile, n: u64) -> Option<Vec<u8>> {
     let (lo, hi) = share(n, comm.rank(), comm.size());
     let mut records = vec![0u8; ((hi - lo) as usize) * RECORD];
     let ok = file
         .read_at_all(PREAMBLE as u64 + lo * RECORD as u64, &mut records)
         .is_ok();
-    if !all_ok(comm, ok) {
-        return None;
-    }
+    all_ok(comm, ok).then_some(records)
+}
+
+fn read_binary(comm: &dyn Comm, file: &SharedFile, n: u64) -> Option<Result<Surface>> {
+    let records = read_records(comm, file, n)?;
     let mut mine = Vec::with_capacity(records.len() / RECORD * VERTICES);
     for rec in records.chunks_exact(RECORD) {
         // Bytes 0..12 hold the normal, which is ignored.
@@ -155,14 +159,8 @@ pub fn read_stl_share(comm: &dyn Comm, path: &Path) -> Option<StlShare> {
         return None;
     }
     let n = n as u64;
-    let (lo, hi) = share(n, comm.rank(), comm.size());
-    let mut records = vec![0u8; ((hi - lo) as usize) * RECORD];
-    let ok = file
-        .read_at_all(PREAMBLE as u64 + lo * RECORD as u64, &mut records)
-        .is_ok();
-    if !all_ok(comm, ok) {
-        return None;
-    }
+    let records = read_records(comm, &file, n)?;
+    let (lo, _) = share(n, comm.rank(), comm.size());
     let triangles = records
         .chunks_exact(RECORD)
         .map(|rec| triangle_of(&rec[12..12 + VERTICES]))

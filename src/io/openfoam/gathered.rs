@@ -10,7 +10,7 @@
 
 use super::polymesh::header;
 use super::*;
-use crate::io::gathered::{Gathered, ABAQUS_FACE_NODES};
+use crate::io::gathered::{match_faces, Gathered, ABAQUS_FACE_NODES};
 use crate::mesh::faces::SURFACE_PATCH;
 use crate::mesh::patches::PatchNames;
 
@@ -77,28 +77,18 @@ fn write_polymesh(dir: &Path, g: &Gathered, patches: &PatchNames) -> Result<Foam
     let loc = "constant/polyMesh";
     let fmt = FoamFormat::Ascii;
     // Internal faces: the first element to list a face owns it.
-    let mut first: crate::geometry::hash::FoldMap<[u32; 4], (u32, u8)> = Default::default();
-    let mut internal: Vec<(u32, u32, [u32; 4])> = Vec::new();
-    for h in 0..g.elements.len() {
-        for label in 0..6 {
-            let face = outward(g, h, label);
-            let mut key = face;
-            key.sort_unstable();
-            match first.remove(&key) {
-                Some((o, l)) => internal.push((o, h as u32, outward(g, o as usize, l as usize))),
-                None => {
-                    first.insert(key, (h as u32, label as u8));
-                }
-            }
-        }
-    }
+    let (pairs, once) = match_faces(&g.elements);
+    let mut internal: Vec<(u32, u32, [u32; 4])> = pairs
+        .into_iter()
+        .map(|(o, l, n)| (o, n, outward(g, o as usize, l as usize)))
+        .collect();
     internal.sort_unstable_by_key(|&(o, n, _)| (o, n));
-    if first.len() != g.faces.len() {
+    if once.len() != g.faces.len() {
         return Err(Error::new(
             ErrorKind::Internal,
             format!(
                 "{} faces are in one element only but {} are on patches",
-                first.len(),
+                once.len(),
                 g.faces.len()
             ),
         ));
