@@ -39,6 +39,9 @@ const SMOOTH: usize = 10;
 const DEPTH: f64 = 0.2;
 /// How far (cells) a staircase point may move in.
 const REACH: f64 = 0.6;
+/// How far (cells) a staircase point may move from the staircase while
+/// the new cells are improved.
+const SHIFT: f64 = 0.7;
 /// Fixed-point scale of the neighbour sums, in lattice units.
 const FIXED: f64 = (1u64 << 32) as f64;
 
@@ -397,7 +400,8 @@ pub(super) fn place(
             add_scaled(p[i], n, -need.min(REACH * h[i]))
         })
         .collect();
-    ctx.untangle(&near, &inner, &mut s);
+    let mut inner = inner;
+    ctx.improve(&near, (&p, &h), &mut inner, &mut s);
     let me = comm.rank() as u64;
     let rows: Vec<(u64, [f64; 3])> = (0..nw)
         .filter(|&i| merged[i].watchers > 0 && merged[i].lowest == me)
@@ -474,6 +478,39 @@ impl Ctx<'_> {
             .collect()
     }
 
+    /// Each wall point's normal of the outer surface: the mean of the unit
+    /// normals of its faces' outer polygons, summed in fixed point over the
+    /// ranks (collective).
+    fn outer_normals(&self, s: &[[f64; 3]]) -> Vec<Option<[f64; 3]>> {
+        let mut sums = vec![[0i64; 3]; s.len()];
+        for poly in &self.wall.polys {
+            let a = super::layer::polygon_area(poly.iter().map(|&i| s[i as usize]));
+            let Some(u) = unit(a) else { continue };
+            let f = u.map(|v| (v * FIXED).round() as i64);
+            for &i in poly {
+                for k in 0..3 {
+                    sums[i as usize][k] += f[k];
+                }
+            }
+        }
+        let rows: Vec<(u64, Vec<u64>)> = self
+            .shared
+            .iter()
+            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
+            .collect();
+        let total = self.directory.merge_shared(self.comm, &rows, 3, |m, v| {
+            for j in 0..3 {
+                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
+            }
+        });
+        for &i in self.shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                sums[i] = std::array::from_fn(|j| t[j] as i64);
+            }
+        }
+        sums.iter().map(|v| unit(v.map(|x| x as f64))).collect()
+    }
+
     /// The least over wall points of `q` (each point's rows combined by
     /// the least over the ranks; collective).
     fn least_shared(&self, q: &mut [Vec<f64>]) {
@@ -500,12 +537,25 @@ impl Ctx<'_> {
         }
     }
 
-    /// Moves the outer points of new cells that would be invalid (a face
-    /// pyramid of nearly no or negative volume, [`cell_quality`]) along
-    /// the surface, towards their neighbours' mean: each round, every
-    /// point of such a cell takes the best of a few candidates if it makes
-    /// its worst cell better. Collective; the same moves on every rank.
-    fn untangle(&self, near: &Near, inner: &[[f64; 3]], s: &mut [[f64; 3]]) {
+    /// Moves the wall points of new cells that are invalid (a face pyramid
+    /// of nearly no or negative volume) or near checkMesh's limits
+    /// ([`cell_figure`]): each round, every point of such a cell tries a
+    /// few candidates and takes the best if it makes its worst cell better.
+    /// Its outer point moves along the surface towards its neighbours'
+    /// mean or towards the place that copies the inner points' shape
+    /// (which spreads outer points that crowd where the surface runs
+    /// nearly along the faces); its inner point moves towards the place
+    /// under its outer point along the outer surface's normal (which
+    /// straightens a sheared thin cell) or towards its neighbours' mean,
+    /// within [`SHIFT`] cells of the staircase. Collective; the same moves
+    /// on every rank.
+    fn improve(
+        &self,
+        near: &Near,
+        (p, h): (&[[f64; 3]], &[f64]),
+        inner: &mut [[f64; 3]],
+        s: &mut [[f64; 3]],
+    ) {
         let nw = s.len();
         let mut cells_at: Vec<Vec<u32>> = vec![Vec::new(); nw];
         for (k, poly) in self.wall.polys.iter().enumerate() {
@@ -513,55 +563,82 @@ impl Ctx<'_> {
                 cells_at[i as usize].push(k as u32);
             }
         }
-        let worst = |s: &[[f64; 3]], i: usize, x: [f64; 3]| {
+        let worst = |inner: &[[f64; 3]], s: &[[f64; 3]], i: usize, m: Moved| {
             cells_at[i]
                 .iter()
-                .map(|&k| cell_quality(self.wall, k as usize, inner, s, (i as u32, x)))
+                .map(|&k| cell_figure(self.wall, p, k as usize, (inner, s), m))
                 .fold(f64::INFINITY, f64::min)
         };
-        // Towards the neighbours' mean, and towards the place that copies
-        // the inner points' shape (the inner point's offset from its
-        // neighbours' mean) onto the surface, which spreads outer points
-        // that crowd where the surface runs nearly along the faces.
-        const WEIGHTS: [f64; 6] = [0.25, 0.5, 0.75, 1.0, 0.5, 1.0];
-        let inner_means = self.neighbour_means(inner);
-        for _ in 0..UNTANGLE {
+        const OUTER: [(bool, f64); 5] = [
+            (false, 0.25),
+            (false, 0.5),
+            (false, 1.0),
+            (true, 0.5),
+            (true, 1.0),
+        ];
+        const INNER: [(bool, f64); 4] = [(false, 0.25), (false, 0.5), (false, 1.0), (true, 0.5)];
+        const N: usize = OUTER.len() + INNER.len();
+        for _ in 0..ROUNDS {
             // Each cell measured once; a point's figure is its worst cell's.
             let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
             for (k, poly) in self.wall.polys.iter().enumerate() {
-                let c = cell_quality(self.wall, k, inner, s, (poly[0], s[poly[0] as usize]));
+                let c = cell_figure(self.wall, p, k, (inner, s), Moved::None);
                 for &i in poly {
                     q[i as usize][0] = q[i as usize][0].min(c);
                 }
             }
             self.least_shared(&mut q);
-            let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < GOOD).collect();
+            let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < FAIR).collect();
             let mut any = [bad.len() as u64];
             self.comm.sum_u64(&mut any);
             if any[0] == 0 {
                 return;
             }
             let means = self.neighbour_means(s);
-            let mut tries: Vec<Vec<f64>> = vec![vec![f64::INFINITY; WEIGHTS.len()]; nw];
-            let mut cand: Vec<[[f64; 3]; WEIGHTS.len()]> = vec![[[0.0; 3]; WEIGHTS.len()]; nw];
+            let inner_means = self.neighbour_means(inner);
+            let normals = self.outer_normals(s);
+            let mut tries: Vec<Vec<f64>> = vec![vec![f64::NEG_INFINITY; N]; nw];
+            let mut cand: Vec<[Moved; N]> = vec![[Moved::None; N]; nw];
             for &i in &bad {
                 let shape = add(means[i], sub(inner[i], inner_means[i]));
-                for (j, &w) in WEIGHTS.iter().enumerate() {
-                    let to = if j < 4 { means[i] } else { shape };
+                for (j, &(by_shape, w)) in OUTER.iter().enumerate() {
+                    let to = if by_shape { shape } else { means[i] };
                     let x = near.project(add_scaled(s[i], sub(to, s[i]), w));
-                    cand[i][j] = x;
-                    tries[i][j] = worst(s, i, x);
+                    cand[i][j] = Moved::Outer(i as u32, x);
+                }
+                let under = normals[i].map(|n| {
+                    let depth = dot(n, sub(s[i], inner[i])).max(DEPTH * h[i]);
+                    add_scaled(s[i], n, -depth)
+                });
+                for (j, &(by_mean, w)) in INNER.iter().enumerate() {
+                    let Some(to) = (if by_mean { Some(inner_means[i]) } else { under }) else {
+                        continue;
+                    };
+                    let x = add_scaled(inner[i], sub(to, inner[i]), w);
+                    let d = sub(x, p[i]);
+                    let (l, lim) = (norm(d), SHIFT * h[i]);
+                    let x = add_scaled(p[i], d, if l > lim { lim / l } else { 1.0 });
+                    cand[i][OUTER.len() + j] = Moved::Inner(i as u32, x);
+                }
+                for j in 0..N {
+                    if !matches!(cand[i][j], Moved::None) {
+                        tries[i][j] = worst(inner, s, i, cand[i][j]);
+                    }
                 }
             }
             self.least_shared(&mut tries);
             let mut moves = [0u64];
             for &i in &bad {
-                let best = (0..WEIGHTS.len()).fold(None, |b: Option<usize>, j| match b {
+                let best = (0..N).fold(None, |b: Option<usize>, j| match b {
                     Some(b) if tries[i][b] >= tries[i][j] => Some(b),
                     _ => Some(j),
                 });
                 if let Some(j) = best.filter(|&j| tries[i][j] > q[i][0]) {
-                    s[i] = cand[i][j];
+                    match cand[i][j] {
+                        Moved::Outer(_, x) => s[i] = x,
+                        Moved::Inner(_, x) => inner[i] = x,
+                        Moved::None => {}
+                    }
                     moves[0] += 1;
                 }
             }
@@ -574,10 +651,25 @@ impl Ctx<'_> {
     }
 }
 
-/// Rounds of untangling at most.
-const UNTANGLE: usize = 30;
-/// The least [`cell_quality`] a new cell needs to be left alone.
+/// Rounds of improvement at most.
+const ROUNDS: usize = 30;
+/// The least pyramid figure (in cubes of the face's side) of a valid new
+/// cell.
 const GOOD: f64 = 0.01;
+/// The figure below which a new cell's points try to move.
+const FAIR: f64 = -0.9 / 1.9;
+/// The non-orthogonality (degrees) and skewness a new cell aims below:
+/// checkMesh's 65 and 4, with a margin.
+const NON_ORTHO: f64 = 60.0;
+const SKEW: f64 = 3.5;
+
+/// One wall point moved: its inner or its outer point.
+#[derive(Clone, Copy)]
+enum Moved {
+    None,
+    Inner(u32, [f64; 3]),
+    Outer(u32, [f64; 3]),
+}
 
 /// A face's area vector and centre as OpenFOAM computes them: the
 /// triangles of its fan about its points' mean, the centre weighted by
@@ -610,23 +702,45 @@ fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     (area, centre)
 }
 
-/// How far the new cell on wall face `k` is from having a face that
-/// points into it: the least over its faces of the face's area vector
-/// dotted with the way from the cell's centre to the face's, in cubes of
-/// the face's side (checkMesh's face pyramids, with OpenFOAM's face and
-/// cell centres). `moved` replaces one outer point.
-fn cell_quality(
+/// The angle (degrees) between two vectors.
+fn angle(u: [f64; 3], v: [f64; 3]) -> f64 {
+    let l = norm(u) * norm(v);
+    if l > 0.0 {
+        (dot(u, v) / l).clamp(-1.0, 1.0).acos().to_degrees()
+    } else {
+        0.0
+    }
+}
+
+/// How good the new cell on wall face `k` is, as checkMesh measures it
+/// (OpenFOAM's face and cell centres), higher is better. An invalid cell
+/// (a face pyramid of less than [`GOOD`] cubes of the face's side) is
+/// below -1, by that volume; a valid one is in (-1, 0], from its worst
+/// ratio to [`NON_ORTHO`] and [`SKEW`] of: the non-orthogonality of its
+/// staircase face (the old cell's centre estimated from the staircase
+/// cube and its moved points), the angle between each side face's normal
+/// and the way to it from the centre (the side's share of the
+/// non-orthogonality with the next new cell), and the skewness of its
+/// outer face. `moved` replaces one point.
+fn cell_figure(
     wall: &Wall,
+    p: &[[f64; 3]],
     k: usize,
-    inner: &[[f64; 3]],
-    s: &[[f64; 3]],
-    moved: (u32, [f64; 3]),
+    (inner, s): (&[[f64; 3]], &[[f64; 3]]),
+    moved: Moved,
 ) -> f64 {
     let poly = &wall.polys[k];
-    let outer = |i: u32| if i == moved.0 { moved.1 } else { s[i as usize] };
+    let inner_at = |i: u32| match moved {
+        Moved::Inner(j, x) if j == i => x,
+        _ => inner[i as usize],
+    };
+    let outer_at = |i: u32| match moved {
+        Moved::Outer(j, x) if j == i => x,
+        _ => s[i as usize],
+    };
     let n = poly.len();
-    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner[i as usize]).collect();
-    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer(i)).collect();
+    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner_at(i)).collect();
+    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer_at(i)).collect();
     let mut faces: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(n + 2);
     let rev: Vec<[f64; 3]> = a.iter().rev().copied().collect();
     faces.push(face_geometry(&rev));
@@ -647,9 +761,43 @@ fn cell_quality(
         centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
     }
     let c = scale(centre, 1.0 / vol);
-    faces
+    let side = wall.sides[k];
+    let pyramid = faces
         .iter()
         .map(|&(sf, cf)| dot(sf, sub(cf, c)))
         .fold(f64::INFINITY, f64::min)
-        / wall.sides[k].powi(3)
+        / side.powi(3);
+    if pyramid < GOOD {
+        return -2.0 + pyramid.max(-1.0);
+    }
+    let mean = |v: &mut dyn Iterator<Item = [f64; 3]>| {
+        scale(v.fold([0.0; 3], add), 1.0 / n as f64)
+    };
+    let stair = mean(&mut poly.iter().map(|&i| p[i as usize]));
+    let shift = sub(mean(&mut a.iter().copied()), stair);
+    let out = axes(1 << wall.dirs[k])[0];
+    let old = add(add_scaled(stair, out, -0.5 * side), scale(shift, 0.5));
+    let mut worst = angle(sub(c, old), scale(faces[0].0, -1.0)) / NON_ORTHO;
+    for &(sf, cf) in &faces[2..] {
+        worst = worst.max(angle(sub(cf, c), sf) / NON_ORTHO);
+    }
+    // checkMesh's boundary skewness: the outer face centre's offset along
+    // the face from the cell centre, against 0.4 of the distance normal to
+    // it or the face's extent that way.
+    let (sf, cf) = faces[1];
+    let cpf = sub(cf, c);
+    if let Some(u) = unit(sf) {
+        let d = scale(u, dot(u, cpf));
+        let sv = sub(cpf, d);
+        let l = norm(sv);
+        if l > 0.0 {
+            let dir = scale(sv, 1.0 / l);
+            let fd = b
+                .iter()
+                .map(|&x| dot(dir, sub(x, cf)).abs())
+                .fold(0.4 * norm(d), f64::max);
+            worst = worst.max(l / fd.max(f64::MIN_POSITIVE) / SKEW);
+        }
+    }
+    -worst / (1.0 + worst)
 }
