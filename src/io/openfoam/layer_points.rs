@@ -401,7 +401,8 @@ pub(super) fn place(
         })
         .collect();
     let mut inner = inner;
-    ctx.improve(&near, (&p, &h), &mut inner, &mut s);
+    let old = OldCells::new(pm, wall);
+    ctx.improve(&near, (&p, &h, &old), &mut inner, &mut s);
     let me = comm.rank() as u64;
     let rows: Vec<(u64, [f64; 3])> = (0..nw)
         .filter(|&i| merged[i].watchers > 0 && merged[i].lowest == me)
@@ -419,6 +420,80 @@ pub(super) fn place(
         }
     }
     Ok((inner, s))
+}
+
+/// The staircase cells under the wall faces, for an estimate of their
+/// centres once their wall points move: by wall face, its cell's cube
+/// centre and the wall points among the cube's corners (a cell may be
+/// coarser than its wall face, and have several).
+struct OldCells {
+    cube: Vec<[f64; 3]>,
+    corners: Vec<Vec<u32>>,
+}
+
+impl OldCells {
+    fn new(pm: &PolyMesh, wall: &Wall) -> OldCells {
+        let mut at: HashMap<u32, usize> = HashMap::new();
+        for &f in &wall.faces {
+            let n = at.len();
+            at.entry(pm.owner[f]).or_insert(n);
+        }
+        let mut labels: Vec<Vec<u32>> = vec![Vec::new(); at.len()];
+        for f in 0..pm.owner.len() {
+            let cells = [Some(pm.owner[f]), pm.neighbour.get(f).copied()];
+            for c in cells.into_iter().flatten() {
+                if let Some(&j) = at.get(&c) {
+                    labels[j].extend_from_slice(pm.face(f));
+                }
+            }
+        }
+        let number: HashMap<u32, u32> = wall
+            .labels
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| (l, i as u32))
+            .collect();
+        let cells: Vec<([f64; 3], Vec<u32>)> = labels
+            .into_iter()
+            .map(|mut ls| {
+                ls.sort_unstable();
+                ls.dedup();
+                let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+                for &l in &ls {
+                    let x = pm.points[l as usize];
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(x[k]);
+                        hi[k] = hi[k].max(x[k]);
+                    }
+                }
+                let corners = ls
+                    .iter()
+                    .filter(|&&l| {
+                        let x = pm.points[l as usize];
+                        (0..3).all(|k| x[k] == lo[k] || x[k] == hi[k])
+                    })
+                    .filter_map(|l| number.get(l).copied())
+                    .collect();
+                (scale(add(lo, hi), 0.5), corners)
+            })
+            .collect();
+        let (cube, corners) = wall
+            .faces
+            .iter()
+            .map(|f| cells[at[&pm.owner[*f]]].clone())
+            .unzip();
+        OldCells { cube, corners }
+    }
+
+    /// The centre of the staircase cell under wall face `k` with its wall
+    /// points at `inner`.
+    fn centre(&self, k: usize, p: &[[f64; 3]], inner: &dyn Fn(u32) -> [f64; 3]) -> [f64; 3] {
+        let shift = self.corners[k]
+            .iter()
+            .map(|&i| sub(inner(i), p[i as usize]))
+            .fold([0.0; 3], add);
+        add_scaled(self.cube[k], shift, 1.0 / 8.0)
+    }
 }
 
 /// What the passes over the wall points share.
@@ -552,7 +627,7 @@ impl Ctx<'_> {
     fn improve(
         &self,
         near: &Near,
-        (p, h): (&[[f64; 3]], &[f64]),
+        (p, h, old): (&[[f64; 3]], &[f64], &OldCells),
         inner: &mut [[f64; 3]],
         s: &mut [[f64; 3]],
     ) {
@@ -566,7 +641,7 @@ impl Ctx<'_> {
         let worst = |inner: &[[f64; 3]], s: &[[f64; 3]], i: usize, m: Moved| {
             cells_at[i]
                 .iter()
-                .map(|&k| cell_figure(self.wall, p, k as usize, (inner, s), m))
+                .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), m))
                 .fold(f64::INFINITY, f64::min)
         };
         const OUTER: [(bool, f64); 5] = [
@@ -582,7 +657,7 @@ impl Ctx<'_> {
             // Each cell measured once; a point's figure is its worst cell's.
             let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
             for (k, poly) in self.wall.polys.iter().enumerate() {
-                let c = cell_figure(self.wall, p, k, (inner, s), Moved::None);
+                let c = cell_figure(self.wall, (p, old), k, (inner, s), Moved::None);
                 for &i in poly {
                     q[i as usize][0] = q[i as usize][0].min(c);
                 }
@@ -718,13 +793,13 @@ fn angle(u: [f64; 3], v: [f64; 3]) -> f64 {
 /// below -1, by that volume; a valid one is in (-1, 0], from its worst
 /// ratio to [`NON_ORTHO`] and [`SKEW`] of: the non-orthogonality of its
 /// staircase face (the old cell's centre estimated from the staircase
-/// cube and its moved points), the angle between each side face's normal
+/// cube and its moved wall points, [`OldCells`]), the angle between each side face's normal
 /// and the way to it from the centre (the side's share of the
 /// non-orthogonality with the next new cell), and the skewness of its
 /// outer face. `moved` replaces one point.
 fn cell_figure(
     wall: &Wall,
-    p: &[[f64; 3]],
+    (p, old_cells): (&[[f64; 3]], &OldCells),
     k: usize,
     (inner, s): (&[[f64; 3]], &[[f64; 3]]),
     moved: Moved,
@@ -770,13 +845,7 @@ fn cell_figure(
     if pyramid < GOOD {
         return -2.0 + pyramid.max(-1.0);
     }
-    let mean = |v: &mut dyn Iterator<Item = [f64; 3]>| {
-        scale(v.fold([0.0; 3], add), 1.0 / n as f64)
-    };
-    let stair = mean(&mut poly.iter().map(|&i| p[i as usize]));
-    let shift = sub(mean(&mut a.iter().copied()), stair);
-    let out = axes(1 << wall.dirs[k])[0];
-    let old = add(add_scaled(stair, out, -0.5 * side), scale(shift, 0.5));
+    let old = old_cells.centre(k, p, &inner_at);
     let mut worst = angle(sub(c, old), scale(faces[0].0, -1.0)) / NON_ORTHO;
     for &(sf, cf) in &faces[2..] {
         worst = worst.max(angle(sub(cf, c), sf) / NON_ORTHO);
