@@ -33,7 +33,7 @@ use crate::octree::domain::Domain;
 /// surface.
 const CAST: f64 = 3.0;
 /// Rounds of smoothing along the surface.
-const SMOOTH: usize = 10;
+const SMOOTH: usize = 5;
 /// How far (cells) the outer point must be ahead of each face of its
 /// staircase point.
 const DEPTH: f64 = 0.2;
@@ -268,8 +268,15 @@ struct Near<'s> {
 impl Near<'_> {
     /// The closest surface point to `x`.
     fn project(&self, x: [f64; 3]) -> [f64; 3] {
-        match self.bvh.nearest(self.tris, x, f64::INFINITY) {
+        self.project_from(x, &mut None)
+    }
+
+    /// [`Near::project`] starting from the triangle `hint` (the answer
+    /// does not depend on it), which becomes the nearest triangle.
+    fn project_from(&self, x: [f64; 3], hint: &mut Option<u32>) -> [f64; 3] {
+        match self.bvh.nearest_from(self.tris, x, f64::INFINITY, *hint) {
             Some((t, _)) => {
+                *hint = Some(t);
                 let [a, b, c] = self.tris[t as usize].v;
                 closest_point_triangle(x, a, b, c)
             }
@@ -377,10 +384,12 @@ pub(super) fn place(
         shared: &shared,
         domain,
     };
+    // The nearest triangle of each outer point's last projection.
+    let mut hints: Vec<Option<u32>> = vec![None; nw];
     for _ in 0..SMOOTH {
         let means = ctx.neighbour_means(&s);
         for i in 0..nw {
-            let x = near.project(scale(add(s[i], means[i]), 0.5));
+            let x = near.project_from(scale(add(s[i], means[i]), 0.5), &mut hints[i]);
             let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
             if margin(x, p[i], d) >= m.min(DEPTH * h[i]) {
                 s[i] = x;
@@ -402,7 +411,7 @@ pub(super) fn place(
         .collect();
     let mut inner = inner;
     let old = OldCells::new(pm, wall);
-    ctx.improve(&near, (&p, &h, &old), &mut inner, &mut s);
+    ctx.improve((&near, &mut hints), (&p, &h, &old), &mut inner, &mut s);
     let me = comm.rank() as u64;
     let rows: Vec<(u64, [f64; 3])> = (0..nw)
         .filter(|&i| merged[i].watchers > 0 && merged[i].lowest == me)
@@ -626,7 +635,7 @@ impl Ctx<'_> {
     /// on every rank.
     fn improve(
         &self,
-        near: &Near,
+        (near, hints): (&Near, &mut [Option<u32>]),
         (p, h, old): (&[[f64; 3]], &[f64], &OldCells),
         inner: &mut [[f64; 3]],
         s: &mut [[f64; 3]],
@@ -653,7 +662,9 @@ impl Ctx<'_> {
         ];
         const INNER: [(bool, f64); 4] = [(false, 0.25), (false, 0.5), (false, 1.0), (true, 0.5)];
         const N: usize = OUTER.len() + INNER.len();
-        for _ in 0..ROUNDS {
+        // The fewest points of bad cells so far, and when.
+        let mut fewest = (u64::MAX, 0);
+        for round in 0..ROUNDS {
             // Each cell measured once; a point's figure is its worst cell's.
             let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
             for (k, poly) in self.wall.polys.iter().enumerate() {
@@ -666,7 +677,11 @@ impl Ctx<'_> {
             let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < FAIR).collect();
             let mut any = [bad.len() as u64];
             self.comm.sum_u64(&mut any);
-            if any[0] == 0 {
+            if any[0] < fewest.0 {
+                fewest = (any[0], round);
+            }
+            // None left, or moves that go round in circles.
+            if any[0] == 0 || round >= fewest.1 + STALL {
                 return;
             }
             let means = self.neighbour_means(s);
@@ -678,7 +693,7 @@ impl Ctx<'_> {
                 let shape = add(means[i], sub(inner[i], inner_means[i]));
                 for (j, &(by_shape, w)) in OUTER.iter().enumerate() {
                     let to = if by_shape { shape } else { means[i] };
-                    let x = near.project(add_scaled(s[i], sub(to, s[i]), w));
+                    let x = near.project_from(add_scaled(s[i], sub(to, s[i]), w), &mut hints[i]);
                     cand[i][j] = Moved::Outer(i as u32, x);
                 }
                 let under = normals[i].map(|n| {
@@ -728,6 +743,8 @@ impl Ctx<'_> {
 
 /// Rounds of improvement at most.
 const ROUNDS: usize = 30;
+/// Rounds without fewer points of bad cells after which improving stops.
+const STALL: usize = 4;
 /// The least pyramid figure (in cubes of the face's side) of a valid new
 /// cell.
 const GOOD: f64 = 0.01;
