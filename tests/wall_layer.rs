@@ -2,9 +2,11 @@
 //! staircase and the surface, judged by OpenFOAM's `checkMesh` and by the
 //! written files read back here.
 //!
-//! - The sphere and the bunny, fluid and solid, level 6, on 1 and 3 ranks:
-//!   `checkMesh` (`-parallel` on 3) prints `Mesh OK.` with its default
-//!   limits; every point of every wall face lies within 1e-9 of the model's
+//! - The sphere, bunny, armadillo, fandisk, flange and Tangaroa, fluid and
+//!   solid, level 6, on 1 and 3 ranks: `checkMesh` (`-parallel` on 3)
+//!   prints `Mesh OK.` with its default limits, and within OpenFOAM's
+//!   `meshQualityDict` limits its maximum non-orthogonality is at most 65
+//!   and its maximum skewness at most 4 (read from its report); every point of every wall face lies within 1e-9 of the model's
 //!   size from the surface's triangles (the distance computed here, from
 //!   the STL or the built-in sphere's triangles); no cell has two faces on
 //!   the wall (the staircase's corner cells keep none); the cases of 1 and
@@ -238,6 +240,24 @@ fn check_case(rc: &Path, case: &Path, np: usize, near: &Near, size: f64, tag: &s
     };
     let text = foam(rc, case, &par);
     assert!(text.contains("\nMesh OK."), "{tag}: checkMesh:\n{text}");
+    let figure = |label: &str| -> f64 {
+        let at = text
+            .find(label)
+            .unwrap_or_else(|| panic!("{tag}: no '{label}':\n{text}"));
+        let word = text[at + label.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap_or("");
+        word.trim_end_matches(',')
+            .parse()
+            .unwrap_or_else(|_| panic!("{tag}: '{word}' after '{label}'"))
+    };
+    let non_ortho = figure("non-orthogonality Max:");
+    let skew = figure("Max skewness =");
+    assert!(
+        non_ortho <= 65.0 && skew <= 4.0,
+        "{tag}: maximum non-orthogonality {non_ortho} (at most 65), maximum skewness {skew} (at most 4)"
+    );
     let cells = common::number_after(&text, "cells:") as usize;
     let tol = 1e-9 * size;
     let (mut points, mut wall_faces, mut far) = (Vec::new(), 0, 0);
@@ -263,7 +283,10 @@ fn check_case(rc: &Path, case: &Path, np: usize, near: &Near, size: f64, tag: &s
     );
     points.sort_unstable();
     points.dedup();
-    println!("{tag}: Mesh OK, {cells} cells, {wall_faces} wall faces, every wall point within {tol:.1e} of the surface");
+    println!(
+        "{tag}: Mesh OK, {cells} cells, {wall_faces} wall faces, non-orthogonality {non_ortho}, \
+         skewness {skew}, every wall point within {tol:.1e} of the surface"
+    );
     Summary {
         points,
         cells,
@@ -275,12 +298,22 @@ fn check_case(rc: &Path, case: &Path, np: usize, near: &Near, size: f64, tag: &s
 fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
     let Some(rc) = openfoam() else { return };
     let dir = scratch("wall_layer");
-    let mut models = vec![("sphere".to_string(), 2.0)];
-    if let Some(p) = shared_model("bunny.stl") {
-        models.push((p.to_string_lossy().into_owned(), 0.998));
+    let mut models = vec!["sphere".to_string()];
+    for name in ["bunny", "armadillo", "fandisk", "flange", "tangaroa"] {
+        if let Some(p) = shared_model(&format!("{name}.stl")) {
+            models.push(p.to_string_lossy().into_owned());
+        }
     }
-    for (surface, size) in &models {
-        let near = Near::new(triangles(surface), 1e-9 * size);
+    for surface in &models {
+        let tris = triangles(surface);
+        // The model's size: the largest side of its box.
+        let size = (0..3)
+            .map(|k| {
+                let v = tris.iter().flatten().map(|x| x[k]);
+                v.clone().fold(f64::NEG_INFINITY, f64::max) - v.fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max);
+        let near = Near::new(tris, 1e-9 * size);
         let name = Path::new(surface)
             .file_stem()
             .unwrap()
@@ -314,7 +347,7 @@ fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
                     String::from_utf8_lossy(&out.stderr)
                 );
                 let tag = format!("{name} {keep} np {np}");
-                let s = check_case(&rc, &case, np, &near, *size, &tag);
+                let s = check_case(&rc, &case, np, &near, size, &tag);
                 if let Some(first) = seen.first() {
                     assert!(
                         s == *first,

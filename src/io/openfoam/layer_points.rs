@@ -9,7 +9,9 @@
 //! where its outer point stays ahead of its faces, and the staircase point
 //! moves in along its normal until the outer point is [`DEPTH`] cells ahead
 //! of each of its faces (at most [`REACH`] cells), so no new cell starts
-//! flat.
+//! flat. Last, the points of new cells that are invalid or near checkMesh's
+//! limits move (`Ctx::improve`, [`cell_figure`]): outer points along the
+//! surface, staircase points under their outer points.
 //!
 //! Parallel: a wall point's faces may lie on several ranks. Each point has
 //! a home rank (by a hash of its lattice key) that merges what the ranks
