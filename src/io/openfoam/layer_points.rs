@@ -757,6 +757,10 @@ const FAIR: f64 = -0.9 / 1.9;
 const NON_ORTHO: f64 = 60.0;
 const SKEW: f64 = 3.5;
 
+/// The most points of a wall face whose new cell is measured without
+/// allocating.
+const MAXP: usize = 12;
+
 /// One wall point moved: its inner or its outer point.
 #[derive(Clone, Copy)]
 enum Moved {
@@ -771,19 +775,16 @@ enum Moved {
 fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     use crate::geometry::vector::cross;
     let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / f.len() as f64);
-    let (mut area, mut sum_n, mut centre) = ([0.0; 3], 0.0, [0.0; 3]);
-    let tris: Vec<([f64; 3], [f64; 3])> = (0..f.len())
-        .map(|j| {
-            let (a, b) = (f[j], f[(j + 1) % f.len()]);
-            let n = scale(cross(sub(a, m), sub(b, m)), 0.5);
-            (n, scale(add(add(a, b), m), 1.0 / 3.0))
-        })
-        .collect();
-    for &(n, _) in &tris {
-        area = add(area, n);
-    }
-    for &(n, c) in &tris {
+    let tri = |j: usize| {
+        let (a, b) = (f[j], f[(j + 1) % f.len()]);
+        let n = scale(cross(sub(a, m), sub(b, m)), 0.5);
+        (n, scale(add(add(a, b), m), 1.0 / 3.0))
+    };
+    let area = (0..f.len()).fold([0.0; 3], |s, j| add(s, tri(j).0));
+    let (mut sum_n, mut centre) = (0.0, [0.0; 3]);
+    for j in 0..f.len() {
         // OpenFOAM weighs each triangle by its area along the face's.
+        let (n, c) = tri(j);
         let w = dot(n, area);
         sum_n += w;
         centre = add_scaled(centre, c, w);
@@ -794,16 +795,6 @@ fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
         m
     };
     (area, centre)
-}
-
-/// The angle (degrees) between two vectors.
-fn angle(u: [f64; 3], v: [f64; 3]) -> f64 {
-    let l = norm(u) * norm(v);
-    if l > 0.0 {
-        (dot(u, v) / l).clamp(-1.0, 1.0).acos().to_degrees()
-    } else {
-        0.0
-    }
 }
 
 /// How good the new cell on wall face `k` is, as checkMesh measures it
@@ -833,23 +824,42 @@ fn cell_figure(
         _ => s[i as usize],
     };
     let n = poly.len();
-    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner_at(i)).collect();
-    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer_at(i)).collect();
-    let mut faces: Vec<([f64; 3], [f64; 3])> = Vec::with_capacity(n + 2);
-    let rev: Vec<[f64; 3]> = a.iter().rev().copied().collect();
-    faces.push(face_geometry(&rev));
-    faces.push(face_geometry(&b));
+    // On the stack: under 2:1 balance a wall face has at most 8 points.
+    let (mut abuf, mut bbuf) = ([[0.0; 3]; MAXP], [[0.0; 3]; MAXP]);
+    let mut fbuf = [([0.0; 3], [0.0; 3]); MAXP + 2];
+    let (mut va, mut vb, mut vf) = (Vec::new(), Vec::new(), Vec::new());
+    let (a, b, faces): (
+        &mut [[f64; 3]],
+        &mut [[f64; 3]],
+        &mut [([f64; 3], [f64; 3])],
+    ) = if n <= MAXP {
+        (&mut abuf[..n], &mut bbuf[..n], &mut fbuf[..n + 2])
+    } else {
+        va.resize(n, [0.0; 3]);
+        vb.resize(n, [0.0; 3]);
+        vf.resize(n + 2, ([0.0; 3], [0.0; 3]));
+        (&mut va, &mut vb, &mut vf)
+    };
+    for (j, &i) in poly.iter().enumerate() {
+        a[j] = inner_at(i);
+        b[j] = outer_at(i);
+    }
+    // The staircase face points out of the new cell: its polygon reversed.
+    let (sa, ca) = face_geometry(a);
+    faces[0] = (scale(sa, -1.0), ca);
+    faces[1] = face_geometry(b);
     for j in 0..n {
         let jn = (j + 1) % n;
-        faces.push(face_geometry(&[a[j], a[jn], b[jn], b[j]]));
+        faces[j + 2] = face_geometry(&[a[j], a[jn], b[jn], b[j]]);
     }
+    let faces = &*faces;
     // OpenFOAM's cell centre: pyramids from the mean of the face centres.
     let est = scale(
         faces.iter().map(|f| f.1).fold([0.0; 3], add),
         1.0 / faces.len() as f64,
     );
     let (mut vol, mut centre) = (0.0, [0.0; 3]);
-    for &(sf, cf) in &faces {
+    for &(sf, cf) in faces {
         let v = dot(sf, sub(cf, est)).max(f64::MIN_POSITIVE);
         vol += v;
         centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
@@ -865,10 +875,20 @@ fn cell_figure(
         return -2.0 + pyramid.max(-1.0);
     }
     let old = old_cells.centre(k, p, &inner_at);
-    let mut worst = angle(sub(c, old), scale(faces[0].0, -1.0)) / NON_ORTHO;
-    for &(sf, cf) in &faces[2..] {
-        worst = worst.max(angle(sub(cf, c), sf) / NON_ORTHO);
-    }
+    // The largest angle, from the least cosine.
+    let cosine = |u: [f64; 3], v: [f64; 3]| {
+        let l = norm(u) * norm(v);
+        if l > 0.0 {
+            (dot(u, v) / l).clamp(-1.0, 1.0)
+        } else {
+            1.0
+        }
+    };
+    let least = faces[2..]
+        .iter()
+        .map(|&(sf, cf)| cosine(sub(cf, c), sf))
+        .fold(cosine(sub(c, old), scale(faces[0].0, -1.0)), f64::min);
+    let mut worst = least.acos().to_degrees() / NON_ORTHO;
     // checkMesh's boundary skewness: the outer face centre's offset along
     // the face from the cell centre, against 0.4 of the distance normal to
     // it or the face's extent that way.
