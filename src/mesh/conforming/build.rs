@@ -1,14 +1,15 @@
 //! A conforming mesh of the kept leaves of a whole octree: the conditions,
-//! the marks and every kept macro cell's template, with nodes numbered by
-//! first use in Morton order of the macro cells, so the result depends on
-//! the leaves alone.
+//! the marks, the closure ([`close`]) and every kept macro cell's template,
+//! with nodes numbered by first use in Morton order of the macro cells, so
+//! the result depends on the leaves alone.
 //!
 //! The kept region and the zones do not change: each leaf has a tag (0:
-//! dropped, else kept, in zone `tag - 1`); a family whose leaves have
-//! different tags is split like a family that is not whole, so each macro
-//! cell has one tag, and the refinement the conditions add inherits the
-//! tag of the cell it refines. Dropped macro cells still mark corners,
-//! which only makes a kept cell's pattern finer where it meets them.
+//! dropped, else kept, in zone `tag - 1`); a macro cell keeps its eight
+//! children's tags, and the closure splits one whose tags differ wherever
+//! it has marks (without marks its template is its leaves, each with its
+//! tag); the refinement the conditions add inherits the tag of the leaf
+//! it refines. Dropped macro cells still mark corners, which only makes a
+//! kept cell's pattern finer where it meets them.
 
 use super::assemble::GlobalPoint;
 use super::{conditions, macro_template, Marks, MACRO};

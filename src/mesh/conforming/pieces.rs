@@ -1,15 +1,19 @@
 //! The templates as data: the hexahedra of a macro cell for a mark set, in
 //! the macro's integer lattice (quarters of a fine cell, `[0, 16]^3`).
 //!
-//! A macro cell is meshed octant by octant when its marked edges share no
-//! corner (`Marks::is_matching`); the octant at macro corner `c` gets
+//! A macro cell is meshed octant by octant when every octant's three macro
+//! faces ask for one of these pieces ([`piece`]); the octant at macro
+//! corner `c` gets
 //!
 //! - `c` unmarked: one box (the leaf itself);
-//! - `c` marked, no marked edge at `c`: the corner piece, a fine cell at
-//!   the corner and three frusta from its outer faces to the octant's
-//!   (4 hexahedra, each octant face at the corner a unit square and two
-//!   trapezoids, the three inner faces whole);
-//! - `c` marked, the edge along `d` marked: the half-edge piece, two fine
+//! - `c` marked, every face at `c` showing the corner quadrant (no marked
+//!   edge at `c`, or the faces holding one are L faces): the corner piece,
+//!   a fine cell at the corner and three frusta from its outer faces to
+//!   the octant's (4 hexahedra, each octant face at the corner a unit
+//!   square and two trapezoids, the three inner faces whole);
+//! - `c` marked, the two faces holding the marked edge along `d` showing
+//!   the half-edge quadrant and the third the corner quadrant: the
+//!   half-edge piece, two fine
 //!   cells along `d`, and over each of the two trapezoids of the corner
 //!   piece's section half of the 2D pair template (4 segments to 2) swept
 //!   across the trapezoid (8 hexahedra; the inner face across `d` shows the
