@@ -2,7 +2,7 @@
 //! the macro's integer lattice (quarters of a fine cell, `[0, 16]^3`).
 //!
 //! A macro cell is meshed octant by octant when every octant's three macro
-//! faces ask for one of these pieces ([`piece`]); the octant at macro
+//! faces ask for one of these pieces (`piece`); the octant at macro
 //! corner `c` gets
 //!
 //! - `c` unmarked: one box (the leaf itself);
