@@ -1470,9 +1470,10 @@ octmesh_status_t octmesh_mesh_set_zones(octmesh_t *h, bool on);
  * until set), like the command's `--conforming`: no hanging nodes, every
  * inner face shared whole by two elements, the patches and zones of the
  * mesh. The mesh itself, its getters and the other writers keep the
- * hanging-node mesh. Those writers fail with `OCTMESH_STATUS_INVALID`
- * where finer cells wrap around an edge or a corner of coarser ones,
- * which no template covers yet. Every rank must pass the same value.
+ * hanging-node mesh. Where finer cells wrap around an edge or a corner
+ * of coarser ones, which no template covers yet, the conforming mesh
+ * refines the coarser cells (up to the finest level of the octree).
+ * Every rank must pass the same value.
  * Collective.
  *
  * \param[in] h   the handle

@@ -136,7 +136,32 @@ fn pipeline_from_c_on_1_and_2_ranks() {
             exo.to_str().unwrap(),
         ],
     );
+    let conforming = dir.join("cli_conforming.msh");
+    common::octmesh_ok(
+        1,
+        &[
+            "mesh",
+            "sphere",
+            "--level",
+            "5",
+            "--keep",
+            "inside",
+            "--conforming",
+            "--gmsh",
+            conforming.to_str().unwrap(),
+            "--quiet",
+        ],
+    );
     for np in [1, 2] {
+        for (name, cli_file) in [("conforming", &conforming), ("hanging", &msh)] {
+            let c_file = dir.join(format!("sphere_np{np}.pvtu_{name}.msh"));
+            assert!(
+                std::fs::read(&c_file).unwrap() == std::fs::read(cli_file).unwrap(),
+                "{} differs from the command's {}",
+                c_file.display(),
+                cli_file.display()
+            );
+        }
         let cgns = dir.join(format!("sphere_np{np}.pvtu.cgns"));
         assert!(cgns.is_file(), "{} not written", cgns.display());
         for (ext, cli_file) in [("inp", &inp), ("msh", &msh), ("exo", &exo)] {

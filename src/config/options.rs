@@ -759,8 +759,9 @@ options! {
 
     /// Write --gmsh, --abaqus, --exodus, --cgns and --openfoam (one serial
     /// case) as conforming all-hexahedral meshes (no hanging nodes) from
-    /// refinement templates; for now only where the finer regions are
-    /// boxes (a clear error otherwise), without --snap, --out or --quality
+    /// refinement templates, refining where no template fits (around a
+    /// surface's staircase: up to the finest level); without --snap, --out
+    /// or --quality
     Mesh "conforming": Switch bool,
     keys ["mesh.conforming"],
     default none,

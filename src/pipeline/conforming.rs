@@ -59,23 +59,7 @@ pub(super) fn conforming_gathered(
             1 + zones.get(next - 1).map_or(0, |&z| u32::from(z))
         })
         .collect();
-    let mesh = build(Rc::new(SerialComm), &leaves, &tags)?.map_err(|u| {
-        let classes: Vec<String> = u.classes.iter().map(|m| format!("{:08b}", m.0)).collect();
-        let a = domain.from_lattice(u.first.coords().map(f64::from));
-        let s = f64::from(u.first.side()) / domain.scale();
-        Error::invalid(format!(
-            "--conforming: {} macro cells have corner marks without a template yet (classes {}, \
-             each with a face that has three of its four corners marked: where finer cells wrap \
-             around an edge or a corner of coarser ones); the first is the cube at ({:.6e}, \
-             {:.6e}, {:.6e}) of side {s:.6e}. Conforming meshes are available where the finer \
-             regions are boxes",
-            u.count,
-            classes.join(" "),
-            a[0],
-            a[1],
-            a[2],
-        ))
-    })?;
+    let mesh = build(Rc::new(SerialComm), &leaves, &tags)?;
     to_gathered(&mesh, &kept, domain, hanging)
 }
 

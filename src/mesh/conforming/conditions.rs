@@ -22,9 +22,10 @@ pub fn macro_tree(comm: CommRef, leaves: &[Octant]) -> Result<Vec<Octant>> {
 }
 
 /// The macro cells of a complete, sorted set of leaves before the
-/// balance, each with its tag: a whole family of leaves with one tag
-/// becomes its parent, any other leaf a macro cell of its own.
-pub fn families(leaves: &[Octant], tags: &[u32]) -> (Vec<Octant>, Vec<u32>) {
+/// balance, each with the tags of its eight children (Morton order): a
+/// whole family of leaves becomes its parent with its leaves' tags, any
+/// other leaf a macro cell of its own whose children share its tag.
+pub fn families(leaves: &[Octant], tags: &[u32]) -> (Vec<Octant>, Vec<[u32; 8]>) {
     let mut macros = Vec::with_capacity(leaves.len() / 4);
     let mut out = Vec::with_capacity(leaves.len() / 4);
     let mut i = 0;
@@ -33,14 +34,14 @@ pub fn families(leaves: &[Octant], tags: &[u32]) -> (Vec<Octant>, Vec<u32>) {
         let whole = o.level() > 0
             && o.child_id() == 0
             && i + 8 <= leaves.len()
-            && (0..8).all(|k| leaves[i + k] == o.parent().child(k as u32))
-            && (1..8).all(|k| tags[i + k] == tags[i]);
-        out.push(tags[i]);
+            && (0..8).all(|k| leaves[i + k] == o.parent().child(k as u32));
         if whole {
             macros.push(o.parent());
+            out.push(std::array::from_fn(|k| tags[i + k]));
             i += 8;
         } else {
             macros.push(o);
+            out.push([tags[i]; 8]);
             i += 1;
         }
     }

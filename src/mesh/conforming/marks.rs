@@ -28,10 +28,36 @@ impl Marks {
         (0..3).filter(|&a| self.edge_marked(c, a)).count()
     }
 
-    /// Whether no two marked edges share a corner: the configurations the
-    /// octant pieces mesh.
+    /// Whether no two marked edges share a corner.
     pub fn is_matching(self) -> bool {
         (0..8).all(|c| self.degree(c) <= 1)
+    }
+
+    /// What the macro face normal to `axis` on `side` is: by how many of
+    /// its corners are marked and how.
+    pub fn face_kind(self, axis: usize, side: usize) -> FaceKind {
+        let (u, v) = face_axes(axis);
+        let corners = (0..8).filter(|&c| c >> axis & 1 == side);
+        if corners.clone().all(|c| self.marked(c)) {
+            FaceKind::Full
+        } else if corners
+            .clone()
+            .any(|c| self.edge_marked(c, u) && self.edge_marked(c, v))
+        {
+            FaceKind::L
+        } else {
+            FaceKind::Plain
+        }
+    }
+
+    /// The edge along which the face normal to `axis` at corner `c` shows
+    /// the half-edge quadrant, if any: a plain face with a marked edge at
+    /// `c` ([`quadrant_pattern`]).
+    pub fn face_edge(self, c: usize, axis: usize) -> Option<usize> {
+        let (u, v) = face_axes(axis);
+        (self.face_kind(axis, c >> axis & 1) == FaceKind::Plain)
+            .then(|| [u, v].into_iter().find(|&a| self.edge_marked(c, a)))
+            .flatten()
     }
 
     /// The marks after the symmetry `s` of the cube.
@@ -51,6 +77,26 @@ impl Marks {
             .min()
             .expect("48 symmetries")
     }
+}
+
+/// A macro face by its corner marks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaceKind {
+    /// All four corners marked: fine cells.
+    Full,
+    /// Three corners marked, two marked edges meeting at one of them (an L
+    /// of marks): the corner quadrant at each marked corner, the marked
+    /// edges split by the quadrants' fine squares and trapezoids.
+    L,
+    /// Anything else: per quadrant, the leaf, the corner quadrant or the
+    /// half-edge quadrant.
+    Plain,
+}
+
+/// The two axes of a face normal to `axis`, increasing.
+pub fn face_axes(axis: usize) -> (usize, usize) {
+    let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+    (a.min(b), a.max(b))
 }
 
 /// A symmetry of the cube: output axis `a` is input axis `perm[a]`,
@@ -157,21 +203,19 @@ pub fn quadrant_pattern(marked: bool, eu: bool, ev: bool) -> Vec<LocalQuad> {
 }
 
 /// The canonical quadrilaterals of the macro face normal to `axis` on side
-/// `side` (0 low, 1 high), in the macro's lattice units, or `None` when the
-/// face's marks have no pattern yet: the face's marked edges must share no
-/// corner, or all four corners be marked.
+/// `side` (0 low, 1 high), in the macro's lattice units: per quadrant, by
+/// the face's [`FaceKind`].
 pub fn face_pattern(marks: Marks, axis: usize, side: usize) -> Option<Vec<[Point; 4]>> {
-    let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
-    let (u_axis, v_axis) = (a.min(b), a.max(b));
+    let (u_axis, v_axis) = face_axes(axis);
     let corners: Vec<usize> = (0..8).filter(|&c| c >> axis & 1 == side).collect();
-    let all = corners.iter().all(|&c| marks.marked(c));
+    let kind = marks.face_kind(axis, side);
     let mut quads = Vec::new();
     for &c in &corners {
-        let eu = marks.edge_marked(c, u_axis);
-        let ev = marks.edge_marked(c, v_axis);
-        if eu && ev && !all {
-            return None;
-        }
+        let (eu, ev) = match kind {
+            FaceKind::Full => (true, true),
+            FaceKind::L => (false, false),
+            FaceKind::Plain => (marks.edge_marked(c, u_axis), marks.edge_marked(c, v_axis)),
+        };
         for quad in quadrant_pattern(marks.marked(c), eu, ev) {
             quads.push(quad.map(|[u, v]| {
                 let mut p = [0; 3];

@@ -1,8 +1,9 @@
 //! Conforming all-hexahedral meshes by refinement templates: the scheme,
 //! its configurations and the templates proven so far. [`build::build`]
-//! meshes a whole octree's kept leaves (`--conforming`); it refuses an
-//! octree with a kept macro cell in one of the eleven classes of
-//! configurations that have no template yet.
+//! meshes a whole octree's kept leaves (`--conforming`); where a kept macro
+//! cell is in one of the eight classes of configurations that have no
+//! template yet, it splits the cell and balances again until none is left
+//! ([`build::close`]).
 //!
 //! # Macro cells and marks
 //!
@@ -22,8 +23,11 @@
 //! # Why faces match
 //!
 //! A macro face shows a pattern of quadrilaterals that depends only on the
-//! marks of its four corners ([`marks::face_pattern`]). Across a face, a
-//! macro cell sees either
+//! marks of its four corners ([`marks::face_pattern`]): fine cells on a
+//! full face (four marks), the corner quadrant at each marked corner on an
+//! L face (three marks, two marked edges meeting at one), and per quadrant
+//! the leaf, the corner quadrant or the half-edge quadrant on any other.
+//! Across a face, a macro cell sees either
 //!
 //! - one macro cell of its level: the same four corners, the same marks,
 //!   the same pattern;
@@ -46,38 +50,36 @@
 //! # Templates
 //!
 //! [`pieces::macro_template`]: unmarked corners keep their leaf; a macro cell
-//! whose marked edges share no corner is meshed octant by octant (corner and
-//! half-edge pieces, see [`pieces`]); one whole marked face has the face
-//! template (the pair template in x whose lower quadrilaterals each carry
-//! the pair template in y, its mid-plane lifted); all eight marked is
-//! 4 x 4 x 4 fine cells. Every template is checked by brute force in the
-//! unit tests: volumes add up to the macro cell's, every corner's scaled
-//! Jacobian at least 0.3 (the templates reach 0.400), every inner face in
-//! exactly two hexahedra, no node inside another hexahedron's edge, the
-//! boundary equal to the canonical pattern of each face. That covers 11 of
-//! the 22 classes (84 of the 256 mark sets). [`assemble::assemble`] places
-//! the templates of a whole macro tree in one lattice, checked globally in
-//! the unit tests on octrees whose macro cells all have covered classes.
+//! whose octants each see corner quadrants on their three faces, or the
+//! half-edge quadrant along one marked edge on the two faces holding it, is
+//! meshed octant by octant (corner and half-edge pieces, see [`pieces`]);
+//! one whole marked face has the face template (the pair template in x
+//! whose lower quadrilaterals each carry the pair template in y, its
+//! mid-plane lifted); all eight marked is 4 x 4 x 4 fine cells. Every
+//! template is checked by brute force in the unit tests: volumes add up to
+//! the macro cell's, every corner's scaled Jacobian at least 0.3 (the
+//! templates reach 0.400), every inner face in exactly two hexahedra, no
+//! node inside another hexahedron's edge, the boundary equal to the
+//! canonical pattern of each face. That covers 14 of the 22 classes (104 of
+//! the 256 mark sets). [`assemble::assemble`] places the templates of a
+//! whole macro tree in one lattice, checked globally in the unit tests on
+//! octrees whose macro cells all have covered classes.
 //!
 //! # Configurations without a template
 //!
-//! The eleven classes with a corner that has two marked edges on one face
-//! and not all four of that face's corners marked (an L of three marks on a
-//! face: the convex corner, the concave edge and corner, and the rest) have
-//! neither a face pattern nor a template yet. Two constraints on them are
-//! proven. No octant-by-octant template exists: a hexahedral mesh of a ball
-//! has an even number of boundary quadrilaterals, and the octant at a corner
-//! with marked edges along x and y, on a fully marked x-y face, has 1 + 5 +
-//! 5 + 5 + 5 + 4 = 25. And an L face must have an even number of
-//! quadrilaterals (the macro cell with four marks at a corner and its three
-//! neighbours has three L faces and three faces of 6, the one with seven
-//! marks three L faces and three of 16); built by quadrants (5 at each other
-//! marked corner, 1 at the unmarked one), the quadrant at the L's corner
-//! needs an odd number, which with its 10 boundary edges means an odd number
-//! of inner nodes (quadrilaterals = inner nodes + 4). [`configurations`] lists the classes
-//! with their coverage; on the sphere at level 5 the open ones are the
-//! convex corner (`00010111`), the concave edge (`00111111`) and the
-//! concave corner (`01111111`), 88 of 1,408 macro cells.
+//! Eight classes have none: those with an octant whose plain face shows the
+//! half-edge quadrant along an edge that an L face beside it holds too
+//! (`00000111`, `00011011`, `00011110`, `00111101`), and those with a full
+//! face beside a plain or L face at one corner (`00011111`, the concave
+//! edge `00111111`, `01101111`, the concave corner `01111111`). No
+//! octant-by-octant template exists for an octant on a full face whose
+//! other two faces show half-edge quadrants: it would have 1 + 5 + 5 + 5 +
+//! 5 + 4 = 25 boundary quadrilaterals, and a hexahedral mesh of a ball has
+//! an even number. [`configurations`] lists the classes with their
+//! coverage; on the sphere at level 5 the open ones are the concave edge
+//! and corner, 72 of 1,408 macro cells. The closure splits them, and the
+//! staircases make it refine every coarser region bounded by finer cells
+//! to the finest level.
 
 pub mod assemble;
 pub mod build;

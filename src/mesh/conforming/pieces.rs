@@ -1,15 +1,19 @@
 //! The templates as data: the hexahedra of a macro cell for a mark set, in
 //! the macro's integer lattice (quarters of a fine cell, `[0, 16]^3`).
 //!
-//! A macro cell is meshed octant by octant when its marked edges share no
-//! corner (`Marks::is_matching`); the octant at macro corner `c` gets
+//! A macro cell is meshed octant by octant when every octant's three macro
+//! faces ask for one of these pieces (`piece`); the octant at macro
+//! corner `c` gets
 //!
 //! - `c` unmarked: one box (the leaf itself);
-//! - `c` marked, no marked edge at `c`: the corner piece, a fine cell at
-//!   the corner and three frusta from its outer faces to the octant's
-//!   (4 hexahedra, each octant face at the corner a unit square and two
-//!   trapezoids, the three inner faces whole);
-//! - `c` marked, the edge along `d` marked: the half-edge piece, two fine
+//! - `c` marked, every face at `c` showing the corner quadrant (no marked
+//!   edge at `c`, or the faces holding one are L faces): the corner piece,
+//!   a fine cell at the corner and three frusta from its outer faces to
+//!   the octant's (4 hexahedra, each octant face at the corner a unit
+//!   square and two trapezoids, the three inner faces whole);
+//! - `c` marked, the two faces holding the marked edge along `d` showing
+//!   the half-edge quadrant and the third the corner quadrant: the
+//!   half-edge piece, two fine
 //!   cells along `d`, and over each of the two trapezoids of the corner
 //!   piece's section half of the 2D pair template (4 segments to 2) swept
 //!   across the trapezoid (8 hexahedra; the inner face across `d` shows the
@@ -47,22 +51,59 @@ pub fn macro_template(marks: Marks) -> Option<Vec<Hex>> {
     if let Some(s) = Symmetry::all().find(|&s| Marks(0x0f).transform(s) == marks) {
         return Some(face_template().iter().map(|h| turn(s, h)).collect());
     }
-    if !marks.is_matching() {
-        return None;
+    let pieces: Vec<Piece> = (0..8).map(|c| piece(marks, c)).collect::<Option<_>>()?;
+    // Across the face between two octants the half-edge piece along the
+    // axis shows its split trapezoids, every other piece one quadrilateral.
+    for c in 0..8 {
+        for a in 0..3 {
+            let across = |p: Piece| p == Piece::HalfEdge(a);
+            if across(pieces[c]) != across(pieces[c ^ 1 << a]) {
+                return None;
+            }
+        }
     }
     let mut hexes = Vec::new();
-    for c in 0..8 {
-        let local = if !marks.marked(c) {
-            vec![boxed([0.0; 3], [2.0; 3])]
-        } else {
-            match (0..3).find(|&a| marks.edge_marked(c, a)) {
-                None => corner_piece(),
-                Some(d) => half_edge_piece(d),
-            }
+    for (c, &p) in pieces.iter().enumerate() {
+        let local = match p {
+            Piece::Leaf => vec![boxed([0.0; 3], [2.0; 3])],
+            Piece::Corner => corner_piece(),
+            Piece::HalfEdge(d) => half_edge_piece(d),
         };
         hexes.extend(local.iter().map(|h| place(c, h)));
     }
     Some(hexes)
+}
+
+/// The octant pieces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Piece {
+    Leaf,
+    Corner,
+    /// Along the axis.
+    HalfEdge(usize),
+}
+
+/// The piece whose three macro faces at corner `c` show what the faces'
+/// patterns ask for there, if there is one: the leaf at an unmarked
+/// corner; the corner piece where every face shows the corner quadrant;
+/// the half-edge piece along `d` where the two faces holding the edge
+/// along `d` show the half-edge quadrant along it and the third the corner
+/// quadrant.
+fn piece(marks: Marks, c: usize) -> Option<Piece> {
+    use super::marks::FaceKind;
+    if !marks.marked(c) {
+        return Some(Piece::Leaf);
+    }
+    if (0..3).any(|a| marks.face_kind(a, c >> a & 1) == FaceKind::Full) {
+        return None;
+    }
+    let edges = [0, 1, 2].map(|a| marks.face_edge(c, a));
+    if edges.iter().all(Option::is_none) {
+        return Some(Piece::Corner);
+    }
+    (0..3)
+        .find(|&d| edges[d].is_none() && (0..3).all(|a| a == d || edges[a] == Some(d)))
+        .map(Piece::HalfEdge)
 }
 
 /// The macro cell as `n^3` boxes.

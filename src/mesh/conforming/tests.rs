@@ -161,15 +161,11 @@ fn every_template_passes_the_brute_force_check() {
         }
     }
     eprintln!("{covered} of 256 mark sets have a template; worst scaled Jacobian {worst:.3}");
-    // Every mark set whose marked edges share no corner, one whole face,
-    // and all eight.
-    let expected = (0..=255u8)
-        .filter(|&m| {
-            Marks(m).is_matching()
-                || m == 0xff
-                || Symmetry::all().any(|s| Marks(0x0f).transform(s) == Marks(m))
-        })
-        .count();
+    // Every mark set whose marked edges share no corner (77), one whole
+    // face (6), all eight (1), and the three classes whose L faces make
+    // every octant a corner piece: the convex corner 00010111 (8), its
+    // pair 01101011 (8) and 01111110 (4).
+    let expected = 77 + 6 + 1 + 8 + 8 + 4;
     assert_eq!(covered, expected);
     assert!(worst >= 0.399, "worst scaled Jacobian {worst}");
 }
@@ -418,6 +414,18 @@ fn boxed_leaves(level: u8, refined: &[Region], deeper: &[Region]) -> Vec<Octant>
 /// at least 0.3. Returns the number of hexahedra.
 fn check_global(hexes: &[[assemble::GlobalPoint; 8]]) -> usize {
     let root = (1u64 << (crate::octree::octant::MAX_LEVEL + 1)) * MACRO as u64;
+    check_kept(hexes, (root as f64).powi(3), |q| {
+        (0..3).any(|a| q.iter().all(|p| p[a] == 0) || q.iter().all(|p| p[a] == root))
+    })
+}
+
+/// [`check_global`] for a mesh of part of the root: the volume is
+/// `expected`, every face is in two hexahedra or in one and `boundary`.
+fn check_kept(
+    hexes: &[[assemble::GlobalPoint; 8]],
+    expected: f64,
+    boundary: impl Fn(&[assemble::GlobalPoint; 4]) -> bool,
+) -> usize {
     let mut volume = 0.0;
     for h in hexes {
         let p = h.map(|q| q.map(|x| x as f64));
@@ -425,8 +433,10 @@ fn check_global(hexes: &[[assemble::GlobalPoint; 8]]) -> usize {
         let sj = corner_scaled_jacobians(&p);
         assert!(sj.iter().all(|&x| x >= 0.3), "{h:?}: {sj:?}");
     }
-    let root_volume = (root as f64).powi(3);
-    assert!((volume - root_volume).abs() <= 1e-12 * root_volume);
+    assert!(
+        (volume - expected).abs() <= 1e-12 * expected,
+        "volume {volume} against {expected}"
+    );
     let mut uses: BTreeMap<[assemble::GlobalPoint; 4], usize> = BTreeMap::new();
     for h in hexes {
         for f in HEX_FACES {
@@ -436,9 +446,7 @@ fn check_global(hexes: &[[assemble::GlobalPoint; 8]]) -> usize {
         }
     }
     for (q, n) in &uses {
-        let on_boundary =
-            (0..3).any(|a| q.iter().all(|p| p[a] == 0) || q.iter().all(|p| p[a] == root));
-        assert_eq!(*n, if on_boundary { 1 } else { 2 }, "face {q:?}");
+        assert!(*n == 2 || (*n == 1 && boundary(q)), "face {q:?} in {n}");
     }
     // A node inside an edge sits at a lattice point between its ends: walk
     // each edge in its smallest lattice steps.
@@ -514,5 +522,71 @@ fn octrees_of_covered_configurations_assemble_into_conforming_meshes() {
             n as f64 / leaves.len() as f64
         );
         assert!(n <= 4 * leaves.len());
+    }
+}
+
+/// The closure on random corner-balanced octrees (whose staircases have
+/// every class, covered or not): every leaf kept, the mesh is conforming
+/// over the whole root and has only templates of covered classes; with
+/// random tags (0 dropped), the kept volume is the kept leaves', every
+/// face is in two hexahedra or on the kept region's boundary (a face of
+/// a kept leaf whose other side is dropped or outside the root), and each
+/// hexahedron has its leaf's tag.
+#[test]
+fn the_closure_meshes_random_octrees() {
+    let unit = MACRO as u64;
+    let root = (1u64 << (crate::octree::octant::MAX_LEVEL + 1)) * unit;
+    for seed in 0..6 {
+        let leaves = random_leaves(100 + seed, 5, 0.35);
+        let all = build::build(serial(), &leaves, &vec![1; leaves.len()]).unwrap();
+        let hexes: Vec<_> = all
+            .hexes
+            .iter()
+            .map(|h| h.map(|n| all.points[n as usize]))
+            .collect();
+        let n = check_global(&hexes);
+        eprintln!(
+            "random {seed}: {} leaves, {n} hexahedra ({:.2} per leaf), {} macro cells split in {} rounds",
+            leaves.len(),
+            n as f64 / leaves.len() as f64,
+            all.refined,
+            all.rounds
+        );
+        assert!(all.rounds > 0, "the octree needs the closure to test it");
+        // Tags by leaf, some dropped.
+        let mut rng = crate::testutil::Rng(seed);
+        let tags: Vec<u32> = leaves.iter().map(|_| (rng.unit() * 3.0) as u32).collect();
+        let kept = build::build(serial(), &leaves, &tags).unwrap();
+        let tag_at = |p: [f64; 3]| -> u32 {
+            let c = p.map(|x| (x / unit as f64) as u32);
+            let cell = crate::octree::octant::morton_encode(c[0], c[1], c[2]);
+            tags[leaves.partition_point(|o| o.cell_end() <= cell)]
+        };
+        let volume: f64 = leaves
+            .iter()
+            .zip(&tags)
+            .filter(|(_, &t)| t != 0)
+            .map(|(o, _)| (o.side() as f64 * unit as f64).powi(3))
+            .sum();
+        let hexes: Vec<_> = kept
+            .hexes
+            .iter()
+            .map(|h| h.map(|n| kept.points[n as usize]))
+            .collect();
+        for (h, &t) in hexes.iter().zip(&kept.tags) {
+            let c = [0, 1, 2].map(|d| h.iter().map(|p| p[d] as f64).sum::<f64>() / 8.0);
+            assert_eq!(tag_at(c), t, "hexahedron {h:?}");
+        }
+        check_kept(&hexes, volume, |q| {
+            // The point just outside the face's centre is dropped or
+            // outside the root.
+            let axis = (0..3).find(|&a| q.iter().all(|p| p[a] == q[0][a])).unwrap();
+            let c = [0, 1, 2].map(|d| q.iter().map(|p| p[d] as f64).sum::<f64>() / 4.0);
+            [-0.5, 0.5].iter().any(|&e| {
+                let mut p = c;
+                p[axis] += e;
+                p[axis] < 0.0 || p[axis] > root as f64 || tag_at(p) == 0
+            })
+        });
     }
 }
