@@ -20,15 +20,16 @@ const KEPT: u64 = 1 << 63;
 
 /// Rank 0: the conforming mesh of the octree whose local leaves are
 /// `leaves` and kept ones `elements` (a sorted subset), as a gathered mesh
-/// with `hanging`'s patches and zones; other ranks: an empty one. Errors
-/// only on rank 0 (the caller agrees them). Collective.
+/// with `hanging`'s patches and zones, and the macro cells the closure
+/// split; other ranks: an empty one and 0. Errors only on rank 0 (the
+/// caller agrees them). Collective.
 pub(super) fn conforming_gathered(
     comm: &dyn Comm,
     leaves: &[Octant],
     elements: &[Octant],
     domain: &Domain,
     hanging: &Gathered,
-) -> Result<Gathered> {
+) -> Result<(Gathered, u64)> {
     let mut send = Vec::with_capacity(leaves.len());
     let mut e = elements.iter().peekable();
     for &o in leaves {
@@ -39,7 +40,7 @@ pub(super) fn conforming_gathered(
     counts[0] = send.len();
     let (all, _) = comm.alltoallv_u64(&send, &counts);
     if comm.rank() != 0 {
-        return Ok(Gathered::default());
+        return Ok((Gathered::default(), 0));
     }
     let leaves: Vec<Octant> = all.iter().map(|&k| Octant::from_key(k & !KEPT)).collect();
     let kept: Vec<Octant> = all
@@ -60,7 +61,10 @@ pub(super) fn conforming_gathered(
         })
         .collect();
     let mesh = build(Rc::new(SerialComm), &leaves, &tags)?;
-    to_gathered(&mesh, &kept, domain, hanging)
+    Ok((
+        to_gathered(&mesh, &kept, domain, hanging)?,
+        mesh.refined as u64,
+    ))
 }
 
 /// The gathered form of `mesh`: positions in user units, boundary faces

@@ -67,8 +67,16 @@ impl Session {
                 &g,
             )
         });
-        let c = agree(&*comm, c)?;
+        let (c, refined) = agree(&*comm, c)?;
         self.report_phase(Some(c.elements.len() as u64));
+        // Rank 0 built it: its counts for every rank's observer.
+        let mut n = [c.elements.len() as u64, g.elements.len() as u64, refined];
+        comm.sum_u64(&mut n);
+        self.observer.event(&Event::Conforming {
+            hexahedra: n[0],
+            elements: n[1],
+            refined: n[2],
+        });
         Ok(c)
     }
 

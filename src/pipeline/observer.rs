@@ -87,6 +87,16 @@ pub enum Event<'a> {
     /// leaves a finite-element solver's stiffness singular unless every
     /// piece is held.
     Pieces(&'a [u64]),
+    /// The conforming mesh was built ([`crate::mesh::conforming`]).
+    Conforming {
+        /// Its hexahedra.
+        hexahedra: u64,
+        /// The hanging-node mesh's elements of the same region.
+        elements: u64,
+        /// Macro cells the closure split where no template fits: each
+        /// makes the mesh finer than the octree there.
+        refined: u64,
+    },
     /// A file was written.
     Wrote(&'a Path),
     /// The run ended.

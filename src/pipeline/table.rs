@@ -253,6 +253,23 @@ impl Observer for Table {
                     sizes[0]
                 );
             }
+            Event::Conforming {
+                hexahedra,
+                elements,
+                refined,
+            } => {
+                say!(
+                    "  conforming: {hexahedra} hexahedra for {elements} elements (x{:.2})",
+                    *hexahedra as f64 / (*elements).max(1) as f64
+                );
+                if *refined > 0 {
+                    say!(
+                        "  warning: {refined} macro cells had no refinement template (the concave edges and \
+                         corners of a staircase) or children in different zones: they were split, so the \
+                         conforming mesh is finer than the octree there (ARCHITECTURE.md, \"Conforming meshes\")"
+                    );
+                }
+            }
             Event::Wrote(p) => say!("  wrote {}", p.display()),
             Event::Finished {
                 seconds,
