@@ -666,13 +666,17 @@ impl Ctx<'_> {
         const N: usize = OUTER.len() + INNER.len();
         // The fewest points of bad cells so far, and when.
         let mut fewest = (u64::MAX, 0);
+        // Each cell's figure, measured again only when one of its points
+        // moves (all its points are on this rank).
+        let mut figure: Vec<f64> = (0..self.wall.polys.len())
+            .map(|k| cell_figure(self.wall, (p, old), k, (inner, s), Moved::None))
+            .collect();
         for round in 0..ROUNDS {
-            // Each cell measured once; a point's figure is its worst cell's.
+            // A point's figure is its worst cell's.
             let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
             for (k, poly) in self.wall.polys.iter().enumerate() {
-                let c = cell_figure(self.wall, (p, old), k, (inner, s), Moved::None);
                 for &i in poly {
-                    q[i as usize][0] = q[i as usize][0].min(c);
+                    q[i as usize][0] = q[i as usize][0].min(figure[k]);
                 }
             }
             self.least_shared(&mut q);
@@ -720,6 +724,7 @@ impl Ctx<'_> {
             }
             self.least_shared(&mut tries);
             let mut moves = [0u64];
+            let mut dirty = vec![false; figure.len()];
             for &i in &bad {
                 let best = (0..N).fold(None, |b: Option<usize>, j| match b {
                     Some(b) if tries[i][b] >= tries[i][j] => Some(b),
@@ -732,6 +737,14 @@ impl Ctx<'_> {
                         Moved::None => {}
                     }
                     moves[0] += 1;
+                    for &k in &cells_at[i] {
+                        dirty[k as usize] = true;
+                    }
+                }
+            }
+            for (k, f) in figure.iter_mut().enumerate() {
+                if dirty[k] {
+                    *f = cell_figure(self.wall, (p, old), k, (inner, s), Moved::None);
                 }
             }
             // Stuck everywhere: more rounds would change nothing.
