@@ -782,10 +782,13 @@ enum Moved {
     Outer(u32, [f64; 3]),
 }
 
+/// A face's area vector and centre.
+type FaceGeometry = ([f64; 3], [f64; 3]);
+
 /// A face's area vector and centre as OpenFOAM computes them: the
 /// triangles of its fan about its points' mean, the centre weighted by
 /// their areas.
-fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
     use crate::geometry::vector::cross;
     let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / f.len() as f64);
     let tri = |j: usize| {
@@ -839,13 +842,9 @@ fn cell_figure(
     let n = poly.len();
     // On the stack: under 2:1 balance a wall face has at most 8 points.
     let (mut abuf, mut bbuf) = ([[0.0; 3]; MAXP], [[0.0; 3]; MAXP]);
-    let mut fbuf = [([0.0; 3], [0.0; 3]); MAXP + 2];
+    let mut fbuf: [FaceGeometry; MAXP + 2] = [([0.0; 3], [0.0; 3]); MAXP + 2];
     let (mut va, mut vb, mut vf) = (Vec::new(), Vec::new(), Vec::new());
-    let (a, b, faces): (
-        &mut [[f64; 3]],
-        &mut [[f64; 3]],
-        &mut [([f64; 3], [f64; 3])],
-    ) = if n <= MAXP {
+    let (a, b, faces): (&mut [[f64; 3]], &mut [[f64; 3]], &mut [FaceGeometry]) = if n <= MAXP {
         (&mut abuf[..n], &mut bbuf[..n], &mut fbuf[..n + 2])
     } else {
         va.resize(n, [0.0; 3]);
