@@ -599,18 +599,17 @@ impl Ctx<'_> {
 
     /// The least over wall points of `q` (each point's rows combined by
     /// the least over the ranks; collective).
-    fn least_shared(&self, q: &mut [Vec<f64>]) {
+    fn least_shared(&self, q: &mut [f64], w: usize) {
         let rows: Vec<(u64, Vec<u64>)> = self
             .shared
             .iter()
             .map(|&i| {
                 (
                     self.wall.keys[i],
-                    q[i].iter().map(|x| x.to_bits()).collect(),
+                    q[i * w..(i + 1) * w].iter().map(|x| x.to_bits()).collect(),
                 )
             })
             .collect();
-        let w = q.first().map_or(0, Vec::len);
         let total = self.directory.merge_shared(self.comm, &rows, w, |m, v| {
             for j in 0..m.len() {
                 m[j] = f64::from_bits(m[j]).min(f64::from_bits(v[j])).to_bits();
@@ -618,7 +617,9 @@ impl Ctx<'_> {
         });
         for &i in self.shared {
             if let Some(t) = total.get(&self.wall.keys[i]) {
-                q[i] = t.iter().map(|&b| f64::from_bits(b)).collect();
+                for (x, &b) in q[i * w..(i + 1) * w].iter_mut().zip(t) {
+                    *x = f64::from_bits(b);
+                }
             }
         }
     }
@@ -673,14 +674,14 @@ impl Ctx<'_> {
             .collect();
         for round in 0..ROUNDS {
             // A point's figure is its worst cell's.
-            let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
+            let mut q = vec![f64::INFINITY; nw];
             for (k, poly) in self.wall.polys.iter().enumerate() {
                 for &i in poly {
-                    q[i as usize][0] = q[i as usize][0].min(figure[k]);
+                    q[i as usize] = q[i as usize].min(figure[k]);
                 }
             }
-            self.least_shared(&mut q);
-            let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < FAIR).collect();
+            self.least_shared(&mut q, 1);
+            let bad: Vec<usize> = (0..nw).filter(|&i| q[i] < FAIR).collect();
             let mut any = [bad.len() as u64];
             self.comm.sum_u64(&mut any);
             if any[0] < fewest.0 {
@@ -693,7 +694,7 @@ impl Ctx<'_> {
             let means = self.neighbour_means(s);
             let inner_means = self.neighbour_means(inner);
             let normals = self.outer_normals(s);
-            let mut tries: Vec<Vec<f64>> = vec![vec![f64::NEG_INFINITY; N]; nw];
+            let mut tries = vec![f64::NEG_INFINITY; N * nw];
             let mut cand: Vec<[Moved; N]> = vec![[Moved::None; N]; nw];
             for &i in &bad {
                 let shape = add(means[i], sub(inner[i], inner_means[i]));
@@ -718,19 +719,19 @@ impl Ctx<'_> {
                 }
                 for j in 0..N {
                     if !matches!(cand[i][j], Moved::None) {
-                        tries[i][j] = worst(inner, s, i, cand[i][j]);
+                        tries[i * N + j] = worst(inner, s, i, cand[i][j]);
                     }
                 }
             }
-            self.least_shared(&mut tries);
+            self.least_shared(&mut tries, N);
             let mut moves = [0u64];
             let mut dirty = vec![false; figure.len()];
             for &i in &bad {
                 let best = (0..N).fold(None, |b: Option<usize>, j| match b {
-                    Some(b) if tries[i][b] >= tries[i][j] => Some(b),
+                    Some(b) if tries[i * N + b] >= tries[i * N + j] => Some(b),
                     _ => Some(j),
                 });
-                if let Some(j) = best.filter(|&j| tries[i][j] > q[i][0]) {
+                if let Some(j) = best.filter(|&j| tries[i * N + j] > q[i]) {
                     match cand[i][j] {
                         Moved::Outer(_, x) => s[i] = x,
                         Moved::Inner(_, x) => inner[i] = x,
@@ -790,18 +791,32 @@ type FaceGeometry = ([f64; 3], [f64; 3]);
 /// their areas.
 fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
     use crate::geometry::vector::cross;
-    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / f.len() as f64);
+    let n = f.len();
+    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / n as f64);
     let tri = |j: usize| {
-        let (a, b) = (f[j], f[(j + 1) % f.len()]);
-        let n = scale(cross(sub(a, m), sub(b, m)), 0.5);
-        (n, scale(add(add(a, b), m), 1.0 / 3.0))
+        let (a, b) = (f[j], f[if j + 1 == n { 0 } else { j + 1 }]);
+        (
+            scale(cross(sub(a, m), sub(b, m)), 0.5),
+            scale(add(add(a, b), m), 1.0 / 3.0),
+        )
     };
-    let area = (0..f.len()).fold([0.0; 3], |s, j| add(s, tri(j).0));
+    // The fan's triangles kept on the stack when they fit, else computed
+    // twice.
+    let mut buf = [([0.0; 3], [0.0; 3]); MAXP];
+    let kept = n <= MAXP;
+    let mut area = [0.0; 3];
+    for j in 0..n {
+        let t = tri(j);
+        area = add(area, t.0);
+        if kept {
+            buf[j] = t;
+        }
+    }
     let (mut sum_n, mut centre) = (0.0, [0.0; 3]);
-    for j in 0..f.len() {
+    for j in 0..n {
         // OpenFOAM weighs each triangle by its area along the face's.
-        let (n, c) = tri(j);
-        let w = dot(n, area);
+        let (a, c) = if kept { buf[j] } else { tri(j) };
+        let w = dot(a, area);
         sum_n += w;
         centre = add_scaled(centre, c, w);
     }
