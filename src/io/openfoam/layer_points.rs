@@ -656,14 +656,8 @@ impl Ctx<'_> {
                 .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), m))
                 .fold(f64::INFINITY, f64::min)
         };
-        const OUTER: [(bool, f64); 5] = [
-            (false, 0.25),
-            (false, 0.5),
-            (false, 1.0),
-            (true, 0.5),
-            (true, 1.0),
-        ];
-        const INNER: [(bool, f64); 4] = [(false, 0.25), (false, 0.5), (false, 1.0), (true, 0.5)];
+        const OUTER: [(bool, f64); 4] = [(false, 0.5), (false, 1.0), (true, 0.5), (true, 1.0)];
+        const INNER: [(bool, f64); 3] = [(false, 0.5), (false, 1.0), (true, 0.5)];
         const N: usize = OUTER.len() + INNER.len();
         // The fewest points of bad cells so far, and when.
         let mut fewest = (u64::MAX, 0);
@@ -772,8 +766,8 @@ const NON_ORTHO: f64 = 60.0;
 const SKEW: f64 = 3.5;
 
 /// The most points of a wall face whose new cell is measured without
-/// allocating.
-const MAXP: usize = 12;
+/// allocating: under 2:1 balance a face has at most 8.
+const MAXP: usize = 8;
 
 /// One wall point moved: its inner or its outer point.
 #[derive(Clone, Copy)]
@@ -790,6 +784,17 @@ type FaceGeometry = ([f64; 3], [f64; 3]);
 /// triangles of its fan about its points' mean, the centre weighted by
 /// their areas.
 fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
+    // The fan's triangles kept on the stack when they fit (a small buffer
+    // for the quadrilaterals most faces are), else computed twice.
+    match f.len() {
+        0..=4 => fan::<4>(f),
+        0..=MAXP => fan::<MAXP>(f),
+        _ => fan::<0>(f),
+    }
+}
+
+/// [`face_geometry`] with room for `K` triangles.
+fn fan<const K: usize>(f: &[[f64; 3]]) -> FaceGeometry {
     use crate::geometry::vector::cross;
     let n = f.len();
     let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / n as f64);
@@ -800,10 +805,8 @@ fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
             scale(add(add(a, b), m), 1.0 / 3.0),
         )
     };
-    // The fan's triangles kept on the stack when they fit, else computed
-    // twice.
-    let mut buf = [([0.0; 3], [0.0; 3]); MAXP];
-    let kept = n <= MAXP;
+    let mut buf = [([0.0; 3], [0.0; 3]); K];
+    let kept = n <= K;
     let mut area = [0.0; 3];
     for j in 0..n {
         let t = tri(j);
@@ -855,7 +858,6 @@ fn cell_figure(
         _ => s[i as usize],
     };
     let n = poly.len();
-    // On the stack: under 2:1 balance a wall face has at most 8 points.
     let (mut abuf, mut bbuf) = ([[0.0; 3]; MAXP], [[0.0; 3]; MAXP]);
     let mut fbuf: [FaceGeometry; MAXP + 2] = [([0.0; 3], [0.0; 3]); MAXP + 2];
     let (mut va, mut vb, mut vf) = (Vec::new(), Vec::new(), Vec::new());
