@@ -788,7 +788,7 @@ fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
     // for the quadrilaterals most faces are), else computed twice.
     match f.len() {
         0..=4 => fan::<4>(f),
-        0..=MAXP => fan::<MAXP>(f),
+        5..=MAXP => fan::<MAXP>(f),
         _ => fan::<0>(f),
     }
 }
@@ -807,18 +807,17 @@ fn fan<const K: usize>(f: &[[f64; 3]]) -> FaceGeometry {
     };
     let mut buf = [([0.0; 3], [0.0; 3]); K];
     let kept = n <= K;
-    let mut area = [0.0; 3];
-    for j in 0..n {
-        let t = tri(j);
-        area = add(area, t.0);
-        if kept {
-            buf[j] = t;
+    if kept {
+        for (j, t) in buf.iter_mut().take(n).enumerate() {
+            *t = tri(j);
         }
     }
+    let at = |j: usize| if kept { buf[j] } else { tri(j) };
+    let area = (0..n).fold([0.0; 3], |s, j| add(s, at(j).0));
     let (mut sum_n, mut centre) = (0.0, [0.0; 3]);
     for j in 0..n {
         // OpenFOAM weighs each triangle by its area along the face's.
-        let (a, c) = if kept { buf[j] } else { tri(j) };
+        let (a, c) = at(j);
         let w = dot(a, area);
         sum_n += w;
         centre = add_scaled(centre, c, w);
