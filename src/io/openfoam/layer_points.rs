@@ -816,9 +816,11 @@ fn fan<const K: usize>(f: &[[f64; 3]]) -> FaceGeometry {
     let area = (0..n).fold([0.0; 3], |s, j| add(s, at(j).0));
     let (mut sum_n, mut centre) = (0.0, [0.0; 3]);
     for j in 0..n {
-        // OpenFOAM weighs each triangle by its area along the face's.
+        // OpenFOAM v1912 (what checkMesh runs here) weighs each triangle by
+        // its area; later versions by its area along the face's, which
+        // differs on warped slivers.
         let (a, c) = at(j);
-        let w = dot(a, area);
+        let w = norm(a);
         sum_n += w;
         centre = add_scaled(centre, c, w);
     }
