@@ -16,8 +16,9 @@
 //! Parallel: a wall point's faces may lie on several ranks. Each point has
 //! a home rank (by a hash of its lattice key) that merges what the ranks
 //! know of it (the normals of its faces, its finest face), sums the
-//! neighbour means of each round as integers (fixed point), and tells the
-//! ranks that only have the point in a cell where it moved. Every rank that
+//! neighbour means and outer normals of each round as integers (fixed
+//! point), takes the least of the ranks' cell figures, and tells the ranks
+//! that only have the point in a cell where it moved. Every rank that
 //! has a wall point then computes the same position from the same data, and
 //! the positions do not depend on the number of ranks.
 
