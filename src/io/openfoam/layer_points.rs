@@ -16,8 +16,9 @@
 //! Parallel: a wall point's faces may lie on several ranks. Each point has
 //! a home rank (by a hash of its lattice key) that merges what the ranks
 //! know of it (the normals of its faces, its finest face), sums the
-//! neighbour means of each round as integers (fixed point), and tells the
-//! ranks that only have the point in a cell where it moved. Every rank that
+//! neighbour means and outer normals of each round as integers (fixed
+//! point), takes the least of the ranks' cell figures, and tells the ranks
+//! that only have the point in a cell where it moved. Every rank that
 //! has a wall point then computes the same position from the same data, and
 //! the positions do not depend on the number of ranks.
 
@@ -599,18 +600,17 @@ impl Ctx<'_> {
 
     /// The least over wall points of `q` (each point's rows combined by
     /// the least over the ranks; collective).
-    fn least_shared(&self, q: &mut [Vec<f64>]) {
+    fn least_shared(&self, q: &mut [f64], w: usize) {
         let rows: Vec<(u64, Vec<u64>)> = self
             .shared
             .iter()
             .map(|&i| {
                 (
                     self.wall.keys[i],
-                    q[i].iter().map(|x| x.to_bits()).collect(),
+                    q[i * w..(i + 1) * w].iter().map(|x| x.to_bits()).collect(),
                 )
             })
             .collect();
-        let w = q.first().map_or(0, Vec::len);
         let total = self.directory.merge_shared(self.comm, &rows, w, |m, v| {
             for j in 0..m.len() {
                 m[j] = f64::from_bits(m[j]).min(f64::from_bits(v[j])).to_bits();
@@ -618,7 +618,9 @@ impl Ctx<'_> {
         });
         for &i in self.shared {
             if let Some(t) = total.get(&self.wall.keys[i]) {
-                q[i] = t.iter().map(|&b| f64::from_bits(b)).collect();
+                for (x, &b) in q[i * w..(i + 1) * w].iter_mut().zip(t) {
+                    *x = f64::from_bits(b);
+                }
             }
         }
     }
@@ -655,28 +657,26 @@ impl Ctx<'_> {
                 .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), m))
                 .fold(f64::INFINITY, f64::min)
         };
-        const OUTER: [(bool, f64); 5] = [
-            (false, 0.25),
-            (false, 0.5),
-            (false, 1.0),
-            (true, 0.5),
-            (true, 1.0),
-        ];
-        const INNER: [(bool, f64); 4] = [(false, 0.25), (false, 0.5), (false, 1.0), (true, 0.5)];
+        const OUTER: [(bool, f64); 4] = [(false, 0.5), (false, 1.0), (true, 0.5), (true, 1.0)];
+        const INNER: [(bool, f64); 3] = [(false, 0.5), (false, 1.0), (true, 0.5)];
         const N: usize = OUTER.len() + INNER.len();
         // The fewest points of bad cells so far, and when.
         let mut fewest = (u64::MAX, 0);
+        // Each cell's figure, measured again only when one of its points
+        // moves (all its points are on this rank).
+        let mut figure: Vec<f64> = (0..self.wall.polys.len())
+            .map(|k| cell_figure(self.wall, (p, old), k, (inner, s), Moved::None))
+            .collect();
         for round in 0..ROUNDS {
-            // Each cell measured once; a point's figure is its worst cell's.
-            let mut q: Vec<Vec<f64>> = vec![vec![f64::INFINITY]; nw];
+            // A point's figure is its worst cell's.
+            let mut q = vec![f64::INFINITY; nw];
             for (k, poly) in self.wall.polys.iter().enumerate() {
-                let c = cell_figure(self.wall, (p, old), k, (inner, s), Moved::None);
                 for &i in poly {
-                    q[i as usize][0] = q[i as usize][0].min(c);
+                    q[i as usize] = q[i as usize].min(figure[k]);
                 }
             }
-            self.least_shared(&mut q);
-            let bad: Vec<usize> = (0..nw).filter(|&i| q[i][0] < FAIR).collect();
+            self.least_shared(&mut q, 1);
+            let bad: Vec<usize> = (0..nw).filter(|&i| q[i] < FAIR).collect();
             let mut any = [bad.len() as u64];
             self.comm.sum_u64(&mut any);
             if any[0] < fewest.0 {
@@ -689,7 +689,7 @@ impl Ctx<'_> {
             let means = self.neighbour_means(s);
             let inner_means = self.neighbour_means(inner);
             let normals = self.outer_normals(s);
-            let mut tries: Vec<Vec<f64>> = vec![vec![f64::NEG_INFINITY; N]; nw];
+            let mut tries = vec![f64::NEG_INFINITY; N * nw];
             let mut cand: Vec<[Moved; N]> = vec![[Moved::None; N]; nw];
             for &i in &bad {
                 let shape = add(means[i], sub(inner[i], inner_means[i]));
@@ -714,24 +714,33 @@ impl Ctx<'_> {
                 }
                 for j in 0..N {
                     if !matches!(cand[i][j], Moved::None) {
-                        tries[i][j] = worst(inner, s, i, cand[i][j]);
+                        tries[i * N + j] = worst(inner, s, i, cand[i][j]);
                     }
                 }
             }
-            self.least_shared(&mut tries);
+            self.least_shared(&mut tries, N);
             let mut moves = [0u64];
+            let mut dirty = vec![false; figure.len()];
             for &i in &bad {
                 let best = (0..N).fold(None, |b: Option<usize>, j| match b {
-                    Some(b) if tries[i][b] >= tries[i][j] => Some(b),
+                    Some(b) if tries[i * N + b] >= tries[i * N + j] => Some(b),
                     _ => Some(j),
                 });
-                if let Some(j) = best.filter(|&j| tries[i][j] > q[i][0]) {
+                if let Some(j) = best.filter(|&j| tries[i * N + j] > q[i]) {
                     match cand[i][j] {
                         Moved::Outer(_, x) => s[i] = x,
                         Moved::Inner(_, x) => inner[i] = x,
                         Moved::None => {}
                     }
                     moves[0] += 1;
+                    for &k in &cells_at[i] {
+                        dirty[k as usize] = true;
+                    }
+                }
+            }
+            for (k, f) in figure.iter_mut().enumerate() {
+                if dirty[k] {
+                    *f = cell_figure(self.wall, (p, old), k, (inner, s), Moved::None);
                 }
             }
             // Stuck everywhere: more rounds would change nothing.
@@ -758,8 +767,8 @@ const NON_ORTHO: f64 = 60.0;
 const SKEW: f64 = 3.5;
 
 /// The most points of a wall face whose new cell is measured without
-/// allocating.
-const MAXP: usize = 12;
+/// allocating: under 2:1 balance a face has at most 8.
+const MAXP: usize = 8;
 
 /// One wall point moved: its inner or its outer point.
 #[derive(Clone, Copy)]
@@ -769,23 +778,50 @@ enum Moved {
     Outer(u32, [f64; 3]),
 }
 
+/// A face's area vector and centre.
+type FaceGeometry = ([f64; 3], [f64; 3]);
+
 /// A face's area vector and centre as OpenFOAM computes them: the
 /// triangles of its fan about its points' mean, the centre weighted by
 /// their areas.
-fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
+    // The fan's triangles kept on the stack when they fit (a small buffer
+    // for the quadrilaterals most faces are), else computed twice.
+    match f.len() {
+        0..=4 => fan::<4>(f),
+        5..=MAXP => fan::<MAXP>(f),
+        _ => fan::<0>(f),
+    }
+}
+
+/// [`face_geometry`] with room for `K` triangles.
+fn fan<const K: usize>(f: &[[f64; 3]]) -> FaceGeometry {
     use crate::geometry::vector::cross;
-    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / f.len() as f64);
+    let n = f.len();
+    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / n as f64);
     let tri = |j: usize| {
-        let (a, b) = (f[j], f[(j + 1) % f.len()]);
-        let n = scale(cross(sub(a, m), sub(b, m)), 0.5);
-        (n, scale(add(add(a, b), m), 1.0 / 3.0))
+        let (a, b) = (f[j], f[if j + 1 == n { 0 } else { j + 1 }]);
+        (
+            scale(cross(sub(a, m), sub(b, m)), 0.5),
+            scale(add(add(a, b), m), 1.0 / 3.0),
+        )
     };
-    let area = (0..f.len()).fold([0.0; 3], |s, j| add(s, tri(j).0));
+    let mut buf = [([0.0; 3], [0.0; 3]); K];
+    let kept = n <= K;
+    if kept {
+        for (j, t) in buf.iter_mut().take(n).enumerate() {
+            *t = tri(j);
+        }
+    }
+    let at = |j: usize| if kept { buf[j] } else { tri(j) };
+    let area = (0..n).fold([0.0; 3], |s, j| add(s, at(j).0));
     let (mut sum_n, mut centre) = (0.0, [0.0; 3]);
-    for j in 0..f.len() {
-        // OpenFOAM weighs each triangle by its area along the face's.
-        let (n, c) = tri(j);
-        let w = dot(n, area);
+    for j in 0..n {
+        // OpenFOAM v1912 (what checkMesh runs here) weighs each triangle by
+        // its area; later versions by its area along the face's, which
+        // differs on warped slivers.
+        let (a, c) = at(j);
+        let w = norm(a);
         sum_n += w;
         centre = add_scaled(centre, c, w);
     }
@@ -824,15 +860,10 @@ fn cell_figure(
         _ => s[i as usize],
     };
     let n = poly.len();
-    // On the stack: under 2:1 balance a wall face has at most 8 points.
     let (mut abuf, mut bbuf) = ([[0.0; 3]; MAXP], [[0.0; 3]; MAXP]);
-    let mut fbuf = [([0.0; 3], [0.0; 3]); MAXP + 2];
+    let mut fbuf: [FaceGeometry; MAXP + 2] = [([0.0; 3], [0.0; 3]); MAXP + 2];
     let (mut va, mut vb, mut vf) = (Vec::new(), Vec::new(), Vec::new());
-    let (a, b, faces): (
-        &mut [[f64; 3]],
-        &mut [[f64; 3]],
-        &mut [([f64; 3], [f64; 3])],
-    ) = if n <= MAXP {
+    let (a, b, faces): (&mut [[f64; 3]], &mut [[f64; 3]], &mut [FaceGeometry]) = if n <= MAXP {
         (&mut abuf[..n], &mut bbuf[..n], &mut fbuf[..n + 2])
     } else {
         va.resize(n, [0.0; 3]);
