@@ -170,6 +170,8 @@ pub struct Session {
     quality: Option<(u64, crate::mesh::quality::Quality)>,
     /// The snap that made the mesh of a generation.
     snapped: Option<(u64, crate::mesh::snap::SnapReport)>,
+    /// The boundary layers of the last OpenFOAM case written with them.
+    layer_report: Option<crate::io::openfoam::LayerReport>,
     /// The named parts of the surface (patches), kept when it is released.
     parts: Vec<String>,
     /// Which part is nearest a point, for surfaces of several parts.
@@ -204,6 +206,7 @@ impl Session {
             gathered: None,
             quality: None,
             snapped: None,
+            layer_report: None,
             parts: Vec::new(),
             data: None,
             locator: None,
@@ -375,8 +378,7 @@ impl Session {
         }
         // A snap needs the surface after meshing, zones while meshing (the
         // solids they split the inside by).
-        let snap =
-            command == Command::Mesh && (self.config.mesh.snap || self.config.mesh.wall_layer);
+        let snap = command == Command::Mesh && (self.config.mesh.snap || self.config.wall_layer());
         let zones = command == Command::Mesh && self.config.mesh.zones;
         if !snap && !zones {
             self.release_surface();

@@ -43,12 +43,12 @@ const REACH: f64 = 0.6;
 const FIXED: f64 = (1u64 << 32) as f64;
 
 /// The home rank of a key.
-fn home(key: u64, p: usize) -> usize {
+pub(super) fn home(key: u64, p: usize) -> usize {
     ((key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) % p as u64) as usize
 }
 
 /// Sends `out[r]` to rank `r`; returns what each rank sent here.
-fn exchange(comm: &dyn Comm, out: Vec<Vec<u64>>) -> Vec<Vec<u64>> {
+pub(super) fn exchange(comm: &dyn Comm, out: Vec<Vec<u64>>) -> Vec<Vec<u64>> {
     let counts: Vec<usize> = out.iter().map(Vec::len).collect();
     let (recv, rc) = comm.alltoallv_u64(&out.concat(), &counts);
     let mut at = 0;
