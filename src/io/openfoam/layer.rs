@@ -385,8 +385,7 @@ pub(super) fn layered_case(
             comm,
             &mut pm,
             &wall,
-            plan,
-            names,
+            (plan, names, mesh.domain().side),
             (inner, outer),
         )),
         None => {

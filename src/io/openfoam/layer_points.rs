@@ -615,7 +615,7 @@ fn face_geometry(f: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
 /// dotted with the way from the cell's centre to the face's, in cubes of
 /// the face's side (checkMesh's face pyramids, with OpenFOAM's face and
 /// cell centres). `moved` replaces one outer point.
-fn cell_quality(
+pub(super) fn cell_quality(
     wall: &Wall,
     k: usize,
     inner: &[[f64; 3]],

@@ -25,7 +25,7 @@ use serde::Serialize;
 use super::layer::{PolyMesh, Wall};
 use super::layer_points::{exchange, home};
 use super::*;
-use crate::geometry::vector::{add_scaled, norm, scale, sub};
+use crate::geometry::vector::{add, add_scaled, dot, norm, scale, sub};
 
 /// The most of a point's gap (staircase to surface) its layers may take.
 pub const FILL: f64 = 0.6;
@@ -134,70 +134,125 @@ pub struct LayerReport {
     pub seconds: f64,
 }
 
-/// Per wall point: the patch whose setting it takes (`u64::MAX`: none)
-/// and its finest face's side, each the least over the ranks that have
-/// the point (collective).
+/// What each wall point takes from all its faces, merged over the ranks
+/// that have the point.
+struct PointSettings {
+    /// The patch whose setting it takes (`u64::MAX`: none).
+    patch: Vec<u64>,
+    /// Its finest face's side.
+    side: Vec<f64>,
+    /// The unit normal of its faces on the surface, into the mesh.
+    normal: Vec<Option<[f64; 3]>>,
+}
+
+/// Fixed-point scale of the normals' sums: areas in units of the domain
+/// side's square.
+const FIXED: f64 = (1u64 << 60) as f64;
+
+/// The wall points' settings: the least patch and side and the summed
+/// area vectors (integers, so the sum does not depend on the order) over
+/// the point's faces on all ranks (collective).
 fn point_settings(
     comm: &dyn Comm,
     pm: &PolyMesh,
     wall: &Wall,
-    plan: &LayerPlan,
-) -> (Vec<u64>, Vec<f64>) {
+    (plan, outer, domain_side): (&LayerPlan, &[[f64; 3]], f64),
+) -> PointSettings {
     let nw = wall.labels.len();
-    let mut patch = vec![u64::MAX; nw];
-    let mut side = vec![f64::INFINITY; nw];
+    // Patch, side bits, area sums x y z.
+    let mut rows = vec![[u64::MAX, u64::MAX, 0, 0, 0]; nw];
     let mut q = SURFACE_PATCH as usize;
     for (k, &f) in wall.faces.iter().enumerate() {
         while !pm.patches[q].contains(&f) {
             q += 1;
         }
         let with = plan.patches[q - SURFACE_PATCH as usize].is_some();
-        for &i in &wall.polys[k] {
-            let i = i as usize;
+        let poly = &wall.polys[k];
+        let area = super::layer::polygon_area(poly.iter().map(|&i| outer[i as usize]));
+        let fixed = area.map(|a| (a / (domain_side * domain_side) * FIXED).round() as i64);
+        for &i in poly {
+            let r = &mut rows[i as usize];
             if with {
-                patch[i] = patch[i].min(q as u64);
+                r[0] = r[0].min(q as u64);
             }
-            side[i] = side[i].min(wall.sides[k]);
+            // Positive numbers order as their bits do.
+            r[1] = r[1].min(wall.sides[k].to_bits());
+            for j in 0..3 {
+                r[2 + j] = (r[2 + j] as i64).wrapping_add(fixed[j]) as u64;
+            }
         }
     }
+    merge(comm, &wall.keys, &mut rows, |e, c| {
+        e[0] = e[0].min(c[0]);
+        e[1] = e[1].min(c[1]);
+        for j in 2..5 {
+            e[j] = (e[j] as i64).wrapping_add(c[j] as i64) as u64;
+        }
+    });
+    PointSettings {
+        patch: rows.iter().map(|r| r[0]).collect(),
+        side: rows.iter().map(|r| f64::from_bits(r[1])).collect(),
+        // The faces point out of the mesh.
+        normal: rows
+            .iter()
+            .map(|r| {
+                let v = [r[2], r[3], r[4]].map(|x| -(x as i64 as f64));
+                let l = norm(v);
+                (l > 0.0).then(|| scale(v, 1.0 / l))
+            })
+            .collect(),
+    }
+}
+
+/// Combines each wall point's row over the ranks that have the point
+/// (`combine` must not depend on the order; collective): every rank ends
+/// with the combined rows of its points.
+fn merge<const W: usize>(
+    comm: &dyn Comm,
+    keys: &[u64],
+    rows: &mut [[u64; W]],
+    combine: impl Fn(&mut [u64; W], &[u64; W]),
+) {
     let p = comm.size();
     let mut out = vec![Vec::new(); p];
-    for i in 0..nw {
-        out[home(wall.keys[i], p)].extend([wall.keys[i], patch[i], side[i].to_bits()]);
+    for (k, r) in keys.iter().zip(rows.iter()) {
+        out[home(*k, p)].push(*k);
+        out[home(*k, p)].extend(r);
     }
-    // Positive numbers order as their bits do.
-    let mut least: std::collections::BTreeMap<u64, [u64; 2]> = Default::default();
+    let mut merged: std::collections::BTreeMap<u64, [u64; W]> = Default::default();
     let mut senders: Vec<Vec<u64>> = vec![Vec::new(); p];
     for (r, recs) in exchange(comm, out).iter().enumerate() {
-        for c in recs.chunks_exact(3) {
-            let e = least.entry(c[0]).or_insert([u64::MAX; 2]);
-            e[0] = e[0].min(c[1]);
-            e[1] = e[1].min(c[2]);
+        for c in recs.chunks_exact(W + 1) {
+            let row: [u64; W] = c[1..].try_into().expect("W words");
+            match merged.get_mut(&c[0]) {
+                Some(e) => combine(e, &row),
+                None => {
+                    merged.insert(c[0], row);
+                }
+            }
             senders[r].push(c[0]);
         }
     }
     let reply: Vec<Vec<u64>> = senders
         .iter()
-        .map(|keys| {
-            keys.iter()
-                .flat_map(|k| {
-                    let e = least[k];
-                    [*k, e[0], e[1]]
-                })
+        .map(|ks| {
+            ks.iter()
+                .flat_map(|k| std::iter::once(*k).chain(merged[k]))
                 .collect()
         })
         .collect();
-    let back: std::collections::HashMap<u64, [u64; 2]> = exchange(comm, reply)
+    let back: std::collections::HashMap<u64, [u64; W]> = exchange(comm, reply)
         .iter()
-        .flat_map(|r| r.chunks_exact(3).map(|c| (c[0], [c[1], c[2]])))
+        .flat_map(|r| {
+            r.chunks_exact(W + 1)
+                .map(|c| (c[0], c[1..].try_into().expect("W words")))
+        })
         .collect();
-    for i in 0..nw {
-        if let Some(e) = back.get(&wall.keys[i]) {
-            patch[i] = e[0];
-            side[i] = f64::from_bits(e[1]);
+    for (k, r) in keys.iter().zip(rows.iter_mut()) {
+        if let Some(e) = back.get(k) {
+            *r = *e;
         }
     }
-    (patch, side)
 }
 
 /// One wall point's column: the distances from the surface point of its
@@ -223,6 +278,32 @@ fn column(spec: Option<&LayerSpec>, side: f64, gap: f64, most: u32) -> (Vec<f64>
     (t, thinned)
 }
 
+/// The way a wall point's layers grow from its surface point and the room
+/// along it: the surface's normal (into the mesh) where it points well
+/// into the gap towards the inner point (`toward`, `gap` away), else
+/// the mean of the two, the room being the gap's length along that way.
+fn direction(normal: Option<[f64; 3]>, toward: [f64; 3], gap: f64) -> ([f64; 3], f64) {
+    let Some(n) = normal else {
+        return (toward, gap);
+    };
+    let dir = if dot(n, toward) >= LEAN {
+        n
+    } else {
+        let m = add(n, toward);
+        let l = norm(m);
+        if l > 1e-9 {
+            scale(m, 1.0 / l)
+        } else {
+            toward
+        }
+    };
+    (dir, gap * dot(dir, toward).max(0.0))
+}
+
+/// The least cosine between the surface's normal and the way to the
+/// inner point for the layers to grow along the normal.
+const LEAN: f64 = 0.5;
+
 /// The point layers of the wall from the staircase (`inner`) to the
 /// surface (`outer`): `most + 2` of them, by wall point number, and per
 /// wall point its first layer's height and whether it was thinned
@@ -233,10 +314,14 @@ fn point_layers(
     comm: &dyn Comm,
     pm: &PolyMesh,
     wall: &Wall,
-    plan: &LayerPlan,
+    (plan, domain_side): (&LayerPlan, f64),
     (inner, outer): (Vec<[f64; 3]>, Vec<[f64; 3]>),
 ) -> Layers {
-    let (patch, side) = point_settings(comm, pm, wall, plan);
+    let PointSettings {
+        patch,
+        side,
+        normal,
+    } = point_settings(comm, pm, wall, (plan, &outer, domain_side));
     let most = plan.most();
     let nw = inner.len();
     let mut layers = vec![Vec::with_capacity(nw); most as usize];
@@ -244,11 +329,12 @@ fn point_layers(
     for i in 0..nw {
         let d = sub(inner[i], outer[i]);
         let gap = norm(d);
-        let dir = if gap > 0.0 {
+        let toward = if gap > 0.0 {
             scale(d, 1.0 / gap)
         } else {
             [0.0; 3]
         };
+        let (dir, gap) = direction(normal[i], toward, gap);
         let spec = (patch[i] != u64::MAX)
             .then(|| plan.patches[patch[i] as usize - SURFACE_PATCH as usize].as_ref())
             .flatten();
@@ -260,11 +346,110 @@ fn point_layers(
             layers[j].push(add_scaled(outer[i], dir, tj));
         }
     }
-    let mut all = Vec::with_capacity(most as usize + 2);
-    all.push(inner);
-    all.extend(layers);
-    all.push(outer);
+    let mut full = Vec::with_capacity(most as usize + 2);
+    full.push(inner);
+    full.extend(layers);
+    full.push(outer);
+    // The wall cell cut evenly along the way to the inner point.
+    let m = full.len() - 1;
+    let even: Vec<Vec<[f64; 3]>> = (0..=m)
+        .map(|j| {
+            let w = 1.0 - j as f64 / m as f64;
+            (0..nw)
+                .map(|i| add_scaled(full[m][i], sub(full[0][i], full[m][i]), w))
+                .collect()
+        })
+        .collect();
+    let spread = spread_bad_columns(comm, wall, &full, &even);
+    let all: Vec<Vec<[f64; 3]>> = (0..=m)
+        .map(|j| {
+            (0..nw)
+                .map(|i| match spread[i] {
+                    0 => full[j][i],
+                    a => {
+                        let a = a as f64 / SPREAD as f64;
+                        add_scaled(full[j][i], sub(even[j][i], full[j][i]), a)
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    for i in 0..nw {
+        if spread[i] > 0 {
+            thinned[i] = true;
+            first[i] = norm(sub(all[m - 1][i], all[m][i]));
+        }
+    }
     (all, first, thinned)
+}
+
+/// Steps from a column's layers to its even cut.
+const SPREAD: u64 = 4;
+/// The least quality (a cell's [`super::layer_points::cell_quality`] over
+/// that of a box as thick) a layer cell needs.
+const GOOD: f64 = 0.05;
+
+/// Where a layer cell would be nearly flat or inverted, its points move
+/// step by step from their layers towards the even cut of the wall cell
+/// (`even`), which is as valid as the wall cell: per wall point the steps
+/// taken, the same on every rank (collective).
+fn spread_bad_columns(
+    comm: &dyn Comm,
+    wall: &Wall,
+    full: &[Vec<[f64; 3]>],
+    even: &[Vec<[f64; 3]>],
+) -> Vec<u64> {
+    let nw = wall.labels.len();
+    let mut level = vec![[0u64]; nw];
+    let at = |level: &[[u64; 1]], j: usize, i: usize| match level[i][0] {
+        0 => full[j][i],
+        a => add_scaled(
+            full[j][i],
+            sub(even[j][i], full[j][i]),
+            a as f64 / SPREAD as f64,
+        ),
+    };
+    for _ in 0..SPREAD {
+        let layers: Vec<Vec<[f64; 3]>> = (0..full.len())
+            .map(|j| (0..nw).map(|i| at(&level, j, i)).collect())
+            .collect();
+        let mut bump = vec![[0u64]; nw];
+        let mut any = [0u64];
+        for (k, poly) in wall.polys.iter().enumerate() {
+            let bad = (0..full.len() - 1).any(|j| {
+                let (a, b) = (&layers[j], &layers[j + 1]);
+                let thick = poly
+                    .iter()
+                    .map(|&i| norm(sub(b[i as usize], a[i as usize])))
+                    .sum::<f64>()
+                    / poly.len() as f64
+                    / wall.sides[k];
+                let q = super::layer_points::cell_quality(
+                    wall,
+                    k,
+                    a,
+                    b,
+                    (poly[0], b[poly[0] as usize]),
+                );
+                q < GOOD * 0.5 * thick
+            });
+            if bad {
+                any[0] += 1;
+                for &i in poly {
+                    bump[i as usize][0] = 1;
+                }
+            }
+        }
+        comm.sum_u64(&mut any);
+        if any[0] == 0 {
+            break;
+        }
+        merge(comm, &wall.keys, &mut bump, |e, c| e[0] = e[0].max(c[0]));
+        for i in 0..nw {
+            level[i][0] = (level[i][0] + bump[i][0]).min(SPREAD);
+        }
+    }
+    level.iter().map(|l| l[0]).collect()
 }
 
 /// Adds the buffer cells and the layers of `plan` on the wall of `pm`
@@ -274,11 +459,10 @@ pub(super) fn add_layers(
     comm: &dyn Comm,
     pm: &mut PolyMesh,
     wall: &Wall,
-    plan: &LayerPlan,
-    names: &PatchNames,
+    (plan, names, domain_side): (&LayerPlan, &PatchNames, f64),
     points: (Vec<[f64; 3]>, Vec<[f64; 3]>),
 ) -> LayerReport {
-    let (layers, first, thinned) = point_layers(comm, pm, wall, plan, points);
+    let (layers, first, thinned) = point_layers(comm, pm, wall, (plan, domain_side), points);
     let report = report(comm, pm, wall, plan, names, (&layers, &first, &thinned));
     super::layer::stack(pm, wall, &layers);
     report
