@@ -799,7 +799,7 @@ options! {
 
     /// Each boundary layer's height over the one before it, from the wall
     /// out (snappyHexMesh's expansionRatio)
-    Mesh "layer-expansion" <"R">: One f64 = parse_finite,
+    Mesh "layer-expansion" <"R"> hyphen yes: One f64 = parse_finite,
     keys ["mesh.layer_expansion"],
     default config,
     range POSITIVE => |c| Some(c.mesh.layer_expansion),
@@ -807,21 +807,21 @@ options! {
 
     /// The first boundary layer's height, on the wall (surface units, or
     /// with --relative-sizes a fraction of the wall cell)
-    Mesh "first-layer" <"T">: One f64 = parse_finite,
+    Mesh "first-layer" <"T"> hyphen yes: One f64 = parse_finite,
     keys ["mesh.first_layer"],
     default none,
     range POSITIVE => |c| c.mesh.first_layer,
     set |c, v, _g| { c.mesh.first_layer = Some(v); }
 
     /// The last boundary layer's height, the farthest from the wall
-    Mesh "final-layer" <"T">: One f64 = parse_finite,
+    Mesh "final-layer" <"T"> hyphen yes: One f64 = parse_finite,
     keys ["mesh.final_layer"],
     default none,
     range POSITIVE => |c| c.mesh.final_layer,
     set |c, v, _g| { c.mesh.final_layer = Some(v); }
 
     /// The boundary layers' total thickness
-    Mesh "layer-thickness" <"T">: One f64 = parse_finite,
+    Mesh "layer-thickness" <"T"> hyphen yes: One f64 = parse_finite,
     keys ["mesh.layer_thickness"],
     default none,
     range POSITIVE => |c| c.mesh.layer_thickness,
