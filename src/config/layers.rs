@@ -148,6 +148,25 @@ impl Config {
         Ok(())
     }
 
+    /// The layer settings' ranges and consistency, as an error naming the
+    /// case file's keys (the C API's check).
+    pub fn check_layer_settings(&self) -> crate::Result<()> {
+        let keys = [
+            ("mesh.layers", self.mesh.layers.map(f64::from)),
+            ("mesh.layer_expansion", Some(self.mesh.layer_expansion)),
+            ("mesh.first_layer", self.mesh.first_layer),
+            ("mesh.final_layer", self.mesh.final_layer),
+            ("mesh.layer_thickness", self.mesh.layer_thickness),
+        ];
+        for (key, v) in keys {
+            if let Some(v) = v {
+                super::options::check_key(key, key, v)?;
+            }
+        }
+        self.check_layers()
+            .map_err(|e| crate::Error::invalid(e.render(|k| k.to_string())))
+    }
+
     /// A `[[layers]]` table completed with the global settings.
     fn patch_spec(
         &self,
