@@ -403,8 +403,8 @@ fn centre(m: &Foam, f: usize) -> [f64; 3] {
     let n = m.faces[f].len() as f64;
     let mut c = [0.0; 3];
     for &l in &m.faces[f] {
-        for k in 0..3 {
-            c[k] += m.points[l][k] / n;
+        for (ck, pk) in c.iter_mut().zip(m.points[l]) {
+            *ck += pk / n;
         }
     }
     c

@@ -308,7 +308,14 @@ const LEAN: f64 = 0.5;
 /// surface (`outer`): `most + 2` of them, by wall point number, and per
 /// wall point its first layer's height and whether it was thinned
 /// (collective).
-type Layers = (Vec<Vec<[f64; 3]>>, Vec<f64>, Vec<bool>);
+struct Columns {
+    /// The point layers, staircase first.
+    layers: Vec<Vec<[f64; 3]>>,
+    /// Each wall point's first layer height (0: no layers).
+    first: Vec<f64>,
+    /// Whether its stack was thinned or spread.
+    thinned: Vec<bool>,
+}
 
 fn point_layers(
     comm: &dyn Comm,
@@ -316,7 +323,7 @@ fn point_layers(
     wall: &Wall,
     (plan, domain_side): (&LayerPlan, f64),
     (inner, outer): (Vec<[f64; 3]>, Vec<[f64; 3]>),
-) -> Layers {
+) -> Columns {
     let PointSettings {
         patch,
         side,
@@ -380,7 +387,11 @@ fn point_layers(
             first[i] = norm(sub(all[m - 1][i], all[m][i]));
         }
     }
-    (all, first, thinned)
+    Columns {
+        layers: all,
+        first,
+        thinned,
+    }
 }
 
 /// Steps from a column's layers to its even cut.
@@ -462,9 +473,9 @@ pub(super) fn add_layers(
     (plan, names, domain_side): (&LayerPlan, &PatchNames, f64),
     points: (Vec<[f64; 3]>, Vec<[f64; 3]>),
 ) -> LayerReport {
-    let (layers, first, thinned) = point_layers(comm, pm, wall, (plan, domain_side), points);
-    let report = report(comm, pm, wall, plan, names, (&layers, &first, &thinned));
-    super::layer::stack(pm, wall, &layers);
+    let columns = point_layers(comm, pm, wall, (plan, domain_side), points);
+    let report = report(comm, pm, wall, (plan, names), &columns);
+    super::layer::stack(pm, wall, &columns.layers);
     report
 }
 
@@ -476,10 +487,10 @@ fn report(
     comm: &dyn Comm,
     pm: &PolyMesh,
     wall: &Wall,
-    plan: &LayerPlan,
-    names: &PatchNames,
-    (layers, first, thinned): (&[Vec<[f64; 3]>], &[f64], &[bool]),
+    (plan, names): (&LayerPlan, &PatchNames),
+    columns: &Columns,
 ) -> LayerReport {
+    let (layers, first, thinned) = (&columns.layers, &columns.first, &columns.thinned);
     let np = plan.patches.len();
     let mut sums = vec![0.0f64; np * SUMS];
     let (mut lo, mut hi) = (vec![f64::INFINITY; np], vec![f64::NEG_INFINITY; np]);
