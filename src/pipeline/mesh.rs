@@ -102,6 +102,7 @@ impl Session {
         self.drop_mesh();
         self.mesh = Some(mesh);
         self.mesh_generation += 1;
+        self.mesh_kept = Some((keep, cut_rule));
         Ok(())
     }
 
@@ -379,6 +380,12 @@ impl Session {
             (true, Some(_)) if self.mesh.as_ref().is_some_and(|m| m.moved().is_some()) => {
                 Err(Error::invalid(
                     "the wall layer needs the staircase kept off the surface, not a snapped mesh",
+                ))
+            }
+            (true, _) if self.mesh_kept.is_some_and(|k| k.0 == Keep::All || k.1 != CutRule::None) => {
+                Err(Error::invalid(
+                    "the wall layer needs a mesh that keeps the inside or the outside with the cut \
+                     rule none (the staircase kept off the surface)",
                 ))
             }
             (true, Some(s)) => Ok(Some(&s.surface)),

@@ -143,6 +143,8 @@ pub struct Session {
     progress: Option<Style>,
     /// Counts the meshes built, so that views of a mesh know it changed.
     mesh_generation: u64,
+    /// What the current mesh kept: its leaves and cut leaves.
+    mesh_kept: Option<(crate::classify::Keep, crate::classify::CutRule)>,
     timer: PhaseTimer,
     observer: Box<dyn Observer>,
     surface: Option<SurfaceState>,
@@ -191,6 +193,7 @@ impl Session {
             plan: Command::Mesh,
             progress: None,
             mesh_generation: 0,
+            mesh_kept: None,
             config,
             timer: PhaseTimer::new(),
             observer: Box::new(Silent),

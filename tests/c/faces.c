@@ -261,6 +261,9 @@ int main(int argc, char **argv) {
   CHECK_STATUS(octmesh_mesh_set_layers(h, 3, 1.2, 0, 0, 0, false), bad, h);
   CHECK_STATUS(octmesh_mesh_set_layers(h, rank == 0 ? 3 : 2, 1.2, 0.002, 0, 0, false),
                size > 1 ? bad : OCTMESH_STATUS_OK, h);
+  /* The mesh keeps the cut leaves (OCTMESH_CUT_RULE_CENTER): no wall layer. */
+  OK(octmesh_mesh_set_wall_layer(h, true), h);
+  CHECK_STATUS(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, true), bad, h);
   OK(octmesh_mesh_set_wall_layer(h, false), h);
   OK(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_NONE), h);
   OK(octmesh_mesh_build_faces(h), h);
