@@ -242,3 +242,69 @@ impl Config {
         Ok(Some(LayerPlan { patches }))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config() -> Config {
+        let mut c = Config::default();
+        (c.mesh.layers, c.mesh.first_layer, c.mesh.layer_expansion) = (Some(3), Some(0.01), 1.2);
+        c
+    }
+
+    #[test]
+    fn tables_override_the_global_setting_per_patch() {
+        let names = PatchNames::with_parts("s", &["hull".into(), "keel".into()]);
+        let mut c = config();
+        c.layers = vec![PatchLayers {
+            patch: "keel".into(),
+            layers: Some(2),
+            thickness: Some(0.05),
+            ..PatchLayers::default()
+        }];
+        c.check_layers().unwrap();
+        let plan = c.layer_plan(&names).unwrap().unwrap();
+        assert_eq!(plan.patches.len(), 2);
+        let hull = plan.patches[0].unwrap();
+        assert_eq!(
+            (hull.layers, hull.thickness),
+            (3, LayerThickness::First(0.01))
+        );
+        let keel = plan.patches[1].unwrap();
+        assert_eq!(keel.layers, 2);
+        assert_eq!(keel.expansion, 1.2);
+        assert_eq!(keel.thickness, LayerThickness::Total(0.05));
+        // Without the global count only the table's patch gets layers.
+        c.mesh.layers = None;
+        let plan = c.layer_plan(&names).unwrap().unwrap();
+        assert!(plan.patches[0].is_none() && plan.patches[1].is_some());
+    }
+
+    #[test]
+    fn bad_settings_and_unknown_patches_are_refused() {
+        let names = PatchNames::new("sphere");
+        let mut c = config();
+        c.mesh.final_layer = Some(0.1);
+        assert!(c
+            .check_layers()
+            .unwrap_err()
+            .message
+            .contains("one thickness"));
+        let mut c = config();
+        (c.mesh.relative_sizes, c.mesh.first_layer) = (true, Some(1.0));
+        assert!(c.check_layers().unwrap_err().message.contains("below 1"));
+        let mut c = config();
+        c.mesh.layers = Some(0);
+        assert!(c.check_layers().unwrap_err().message.contains("at least 1"));
+        for (patch, word) in [("wing", "does not have"), ("xmin", "a side")] {
+            let mut c = config();
+            c.layers = vec![PatchLayers {
+                patch: patch.into(),
+                ..PatchLayers::default()
+            }];
+            let e = c.layer_plan(&names).unwrap_err();
+            assert!(e.message().contains(word), "{e}");
+        }
+    }
+}

@@ -1032,6 +1032,9 @@ mod tests {
         (c.leak.inside_point, c.leak.path) = (Some([0.0; 3]), Some("l".into()));
         c.mesh.patches.insert("a".into(), "b".into());
         (c.mesh.clean_walls, c.mesh.snap_min_jacobian) = (Some(true), Some(0.1));
+        (c.mesh.layers, c.mesh.first_layer) = (Some(3), Some(0.1));
+        (c.mesh.final_layer, c.mesh.layer_thickness) = (Some(0.2), Some(0.3));
+        c.layers = vec![super::super::PatchLayers::default()];
         let out = &mut c.output;
         (out.stats, out.leaves, out.refined_leaves) =
             (Some("s".into()), Some("l".into()), Some("r".into()));
