@@ -166,6 +166,7 @@ module octmesh
   public :: octmesh_mesh_build_faces, octmesh_mesh_get_faces, octmesh_mesh_get_cell_halo
   public :: octmesh_mesh_get_boundary, octmesh_mesh_get_patch_name_f
   public :: octmesh_mesh_rename_patch_f, octmesh_mesh_write_openfoam_f
+  public :: octmesh_mesh_set_wall_layer, octmesh_mesh_set_layers
   public :: octmesh_mesh_snap, octmesh_mesh_get_snap_report
   public :: octmesh_mesh_keep_previous, octmesh_mesh_get_element_map
   public :: octmesh_mesh_transfer_elements, octmesh_mesh_transfer_nodes
@@ -781,6 +782,26 @@ module octmesh
        character(kind=c_char), intent(in) :: from(*), to(*)
        integer(c_int) :: c_octmesh_mesh_rename_patch
      end function c_octmesh_mesh_rename_patch
+
+     !> Collective: whether the OpenFOAM case gets the wall layer.
+     function octmesh_mesh_set_wall_layer(h, on) bind(c, name="octmesh_mesh_set_wall_layer")
+       import :: c_ptr, c_int, c_bool
+       type(c_ptr), value :: h
+       logical(c_bool), value :: on
+       integer(c_int) :: octmesh_mesh_set_wall_layer
+     end function octmesh_mesh_set_wall_layer
+
+     !> Collective: boundary layers on every wall patch of the OpenFOAM
+     !> case; exactly one of first_layer, final_layer, thickness above 0.
+     function octmesh_mesh_set_layers(h, layers, expansion, first_layer, final_layer, &
+          thickness, relative) bind(c, name="octmesh_mesh_set_layers")
+       import :: c_ptr, c_int, c_int32_t, c_double, c_bool
+       type(c_ptr), value :: h
+       integer(c_int32_t), value :: layers
+       real(c_double), value :: expansion, first_layer, final_layer, thickness
+       logical(c_bool), value :: relative
+       integer(c_int) :: octmesh_mesh_set_layers
+     end function octmesh_mesh_set_layers
 
      function c_octmesh_mesh_write_openfoam(h, dir, format, overwrite) &
           bind(c, name="octmesh_mesh_write_openfoam")

@@ -1402,6 +1402,47 @@ octmesh_status_t octmesh_mesh_get_patch_name(const octmesh_t *h,
 octmesh_status_t octmesh_mesh_rename_patch(octmesh_t *h, const char *from, const char *to);
 
 /**
+ * Sets whether `octmesh_mesh_write_openfoam` gives the case a wall layer
+ * (off until set), like the command's `--wall-layer`: every wall face of
+ * the staircase gets one more cell whose outer face lies on the surface.
+ * Needs a mesh built with `OCTMESH_KEEP_INSIDE` or `OCTMESH_KEEP_OUTSIDE`
+ * and `OCTMESH_CUT_RULE_NONE`, not snapped, and the surface still loaded
+ * when writing. Every rank must pass the same value. Collective.
+ *
+ * \param[in] h   the handle
+ * \param[in] on  whether the OpenFOAM case gets the wall layer
+ */
+octmesh_status_t octmesh_mesh_set_wall_layer(octmesh_t *h, bool on);
+
+/**
+ * Sets the boundary layers of the OpenFOAM case on every wall patch, like
+ * the command's `--layers`, `--layer-expansion`, `--first-layer`,
+ * `--final-layer`, `--layer-thickness` and `--relative-sizes`: `layers`
+ * cells on each wall face next to the surface, growing by `expansion`
+ * away from it, inside the wall layer's cell (which they imply, with its
+ * needs, see `octmesh_mesh_set_wall_layer`). Exactly one of
+ * `first_layer`, `final_layer` and `thickness` is above 0, the others
+ * 0. `layers` 0 turns the layers off. Every rank must pass the same
+ * values. Collective.
+ *
+ * \param[in] h            the handle
+ * \param[in] layers       layers per wall face, 0 for none
+ * \param[in] expansion    each layer's height over the one before (> 0)
+ * \param[in] first_layer  the first layer's height, or 0
+ * \param[in] final_layer  the last layer's height, or 0
+ * \param[in] thickness    all layers' thickness, or 0
+ * \param[in] relative     the heights are fractions (below 1) of the
+ *                         local wall cell's side
+ */
+octmesh_status_t octmesh_mesh_set_layers(octmesh_t *h,
+                                         int32_t layers,
+                                         double expansion,
+                                         double first_layer,
+                                         double final_layer,
+                                         double thickness,
+                                         bool relative);
+
+/**
  * Writes the mesh as an OpenFOAM case in `dir`, like the command's
  * `--openfoam`: `dir/constant/polyMesh` on one rank, else
  * `dir/processor<r>/constant/polyMesh` with processor patches (ready for

@@ -394,6 +394,20 @@ class Mesher {
     detail::check(octmesh_mesh_rename_patch(h_, from.c_str(), to.c_str()), h_,
                   "octmesh_mesh_rename_patch");
   }
+  /// octmesh_mesh_set_wall_layer: whether write_openfoam gives the case a
+  /// wall layer (the staircase kept off the surface, OCTMESH_CUT_RULE_NONE).
+  void set_wall_layer(bool on = true) {
+    detail::check(octmesh_mesh_set_wall_layer(h_, on), h_, "octmesh_mesh_set_wall_layer");
+  }
+  /// octmesh_mesh_set_layers: boundary layers on every wall patch of the
+  /// OpenFOAM case; exactly one of first_layer, final_layer and thickness
+  /// above 0 (layers 0: none).
+  void set_layers(int layers, double expansion, double first_layer, double final_layer = 0.0,
+                  double thickness = 0.0, bool relative = false) {
+    detail::check(octmesh_mesh_set_layers(h_, layers, expansion, first_layer, final_layer,
+                                          thickness, relative),
+                  h_, "octmesh_mesh_set_layers");
+  }
   void write_openfoam(const std::string &dir,
                       octmesh_foam_format_t format = OCTMESH_FOAM_FORMAT_BINARY,
                       bool overwrite = false) {

@@ -15,6 +15,16 @@
 //! - Bad requests fail with a clear message on every rank: without
 //!   `--cut-rule none`, with `--snap`, with another mesh output, with
 //!   `--keep all`, without `--openfoam`.
+//! - `--layers 3 --layer-expansion 1.2` on the same cases: the same checks,
+//!   and the layers read back from the polyMesh: from every wall face the
+//!   test walks three cells inward, each entered through the face opposite
+//!   the last (the one sharing no point with it), and measures each cell's
+//!   height as the distance between the two faces' point means; a face is
+//!   covered when the first height is the asked one (within [0.5, 1] of
+//!   it: the layers grow along the point normals, slanted to the face) and
+//!   each next one grows by 1.2 within 1 %. At least 99 % of the wall's
+//!   area is covered. A `[[layers]]` table for the sphere's patch gives
+//!   its own count; bad layer requests fail on every rank.
 
 mod common;
 
@@ -37,11 +47,13 @@ fn list_lines(path: &Path) -> Vec<String> {
         .collect()
 }
 
-/// One ASCII polyMesh: points, faces, owners and the wall faces' range.
+/// One ASCII polyMesh: points, faces, owners, neighbours and the wall
+/// faces' range.
 struct Foam {
     points: Vec<[f64; 3]>,
     faces: Vec<Vec<usize>>,
     owner: Vec<usize>,
+    neighbour: Vec<usize>,
     wall: Vec<std::ops::Range<usize>>,
 }
 
@@ -70,6 +82,10 @@ fn read_foam(mesh: &Path) -> Foam {
         .iter()
         .map(|l| l.parse().unwrap())
         .collect();
+    let neighbour = list_lines(&mesh.join("neighbour"))
+        .iter()
+        .map(|l| l.parse().unwrap())
+        .collect();
     let text = std::fs::read_to_string(mesh.join("boundary")).unwrap();
     let mut wall = Vec::new();
     for block in text
@@ -84,6 +100,7 @@ fn read_foam(mesh: &Path) -> Foam {
         points,
         faces,
         owner,
+        neighbour,
         wall,
     }
 }
@@ -410,6 +427,354 @@ fn bad_wall_layer_requests_fail_on_every_rank() {
                 "{args:?}: {line}"
             );
         }
+    }
+    assert!(!case.exists(), "a refused run wrote a case");
+}
+
+/// The mean of a face's points.
+fn centre(m: &Foam, f: usize) -> [f64; 3] {
+    let n = m.faces[f].len() as f64;
+    let mut c = [0.0; 3];
+    for &l in &m.faces[f] {
+        for (ck, pk) in c.iter_mut().zip(m.points[l]) {
+            *ck += pk / n;
+        }
+    }
+    c
+}
+
+/// The area of a face (its fan about the points' mean).
+fn area(m: &Foam, f: usize) -> f64 {
+    let c = centre(m, f);
+    let p = &m.faces[f];
+    let mut a = [0.0; 3];
+    for i in 0..p.len() {
+        let (u, v) = (
+            sub(m.points[p[i]], c),
+            sub(m.points[p[(i + 1) % p.len()]], c),
+        );
+        a[0] += u[1] * v[2] - u[2] * v[1];
+        a[1] += u[2] * v[0] - u[0] * v[2];
+        a[2] += u[0] * v[1] - u[1] * v[0];
+    }
+    0.5 * dot(a, a).sqrt()
+}
+
+/// The heights of the `n` cells inward of wall face `f`, each entered
+/// through the face opposite the last; fewer where the walk stops.
+fn column_heights(m: &Foam, cells: &[Vec<usize>], f: usize, n: usize) -> Vec<f64> {
+    let (mut cur, mut c, mut hs) = (f, m.owner[f], Vec::new());
+    for _ in 0..n {
+        let here: std::collections::HashSet<usize> = m.faces[cur].iter().copied().collect();
+        let opp: Vec<usize> = cells[c]
+            .iter()
+            .copied()
+            .filter(|&g| g != cur && m.faces[g].iter().all(|l| !here.contains(l)))
+            .collect();
+        if opp.len() != 1 {
+            break;
+        }
+        let g = opp[0];
+        let d = sub(centre(m, g), centre(m, cur));
+        hs.push(dot(d, d).sqrt());
+        if g >= m.neighbour.len() {
+            break;
+        }
+        c = if m.owner[g] == c {
+            m.neighbour[g]
+        } else {
+            m.owner[g]
+        };
+        cur = g;
+    }
+    hs
+}
+
+/// The wall's area fraction whose faces carry `n` layers of first height
+/// `first` growing by `r` (see the module), over all meshes of a case.
+fn layer_coverage(meshes: &[Foam], n: usize, first: f64, r: f64) -> f64 {
+    let (mut total, mut covered) = (0.0, 0.0);
+    for m in meshes {
+        let mut cells = vec![Vec::new(); m.owner.iter().max().map_or(0, |&c| c + 1)];
+        for (f, &c) in m.owner.iter().enumerate() {
+            cells[c].push(f);
+        }
+        for (f, &c) in m.neighbour.iter().enumerate() {
+            cells[c].push(f);
+        }
+        for range in &m.wall {
+            for f in range.clone() {
+                let a = area(m, f);
+                let hs = column_heights(m, &cells, f, n);
+                let ok = hs.len() == n
+                    && hs[0] >= 0.5 * first
+                    && hs[0] <= first * (1.0 + 1e-6)
+                    && hs.windows(2).all(|w| (w[1] / w[0] / r - 1.0).abs() < 0.01);
+                total += a;
+                if ok {
+                    covered += a;
+                }
+            }
+        }
+    }
+    covered / total
+}
+
+#[test]
+fn three_layers_pass_checkmesh_and_cover_the_wall() {
+    let Some(rc) = openfoam() else { return };
+    let dir = scratch("wall_layer_layers");
+    let mut models = vec![("sphere".to_string(), 2.0)];
+    if let Some(p) = shared_model("bunny.stl") {
+        models.push((p.to_string_lossy().into_owned(), 0.998));
+    }
+    let mut failures = Vec::new();
+    for (surface, size) in &models {
+        let near = Near::new(triangles(surface), 1e-9 * size);
+        let name = Path::new(surface)
+            .file_stem()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
+        let first = 5e-4 * size;
+        let first_arg = format!("{first:e}");
+        for keep in ["outside", "inside"] {
+            let mut seen: Vec<Summary> = Vec::new();
+            for np in [1, 3] {
+                let case = dir.join(format!("{name}-{keep}-{np}"));
+                let stats = dir.join(format!("{name}-{keep}-{np}.json"));
+                let args = [
+                    "mesh",
+                    surface.as_str(),
+                    "--level",
+                    "6",
+                    "--keep",
+                    keep,
+                    "--cut-rule",
+                    "none",
+                    "--layers",
+                    "3",
+                    "--layer-expansion",
+                    "1.2",
+                    "--first-layer",
+                    &first_arg,
+                    "--openfoam-format",
+                    "ascii",
+                    "--overwrite",
+                    "--quiet",
+                    "--stats",
+                    stats.to_str().unwrap(),
+                    "--openfoam",
+                    case.to_str().unwrap(),
+                ];
+                let out = common::mpirun(np, &octmesh_bin(), &args, Duration::from_secs(600));
+                assert!(
+                    out.status.success(),
+                    "octmesh {args:?} failed:\n{}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+                let tag = format!("{name} {keep} np {np} layers 3");
+                // checkMesh's verdict is collected so every case is reported.
+                let s = std::panic::catch_unwind(|| check_case(&rc, &case, np, &near, *size, &tag));
+                let cov = layer_coverage(&meshes(&case, np), 3, first, 1.2);
+                let report = common::json_file(&stats)["layers"]["patches"][0].clone();
+                println!(
+                    "{tag}: coverage from the polyMesh {:.2} %, octmesh's report {:.2} %",
+                    100.0 * cov,
+                    100.0 * report["coverage"].as_f64().unwrap()
+                );
+                if cov < 0.99 {
+                    failures.push(format!("{tag}: coverage {:.2} % < 99 %", 100.0 * cov));
+                }
+                match s {
+                    Ok(s) => {
+                        if let Some(first) = seen.first() {
+                            if s != *first {
+                                failures.push(format!("{tag}: the case differs from 1 rank's"));
+                            }
+                        }
+                        seen.push(s);
+                    }
+                    Err(_) => failures.push(format!("{tag}: checkMesh or the wall check failed")),
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+#[test]
+fn a_layers_table_sets_its_patch() {
+    let dir = scratch("wall_layer_table");
+    let case = dir.join("case");
+    let stats = dir.join("stats.json");
+    let toml = dir.join("case.toml");
+    std::fs::write(
+        &toml,
+        format!(
+            "[surface]\nfile = \"sphere\"\n[octree]\nlevel = 5\n[mesh]\nkeep = \"outside\"\n\
+             cut_rule = \"none\"\n[output]\nopenfoam = \"{}\"\nopenfoam_format = \"ascii\"\n\
+             overwrite = true\nquiet = true\nstats = \"{}\"\n[[layers]]\npatch = \"sphere\"\n\
+             layers = 2\nexpansion = 1.5\nfirst_layer = 0.002\n",
+            case.display(),
+            stats.display()
+        ),
+    )
+    .unwrap();
+    let out = common::mpirun(
+        2,
+        &octmesh_bin(),
+        &["mesh", toml.to_str().unwrap()],
+        Duration::from_secs(300),
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = &common::json_file(&stats)["layers"]["patches"][0];
+    assert_eq!(r["patch"], "sphere");
+    assert_eq!(r["layers"], 2);
+    let cov = layer_coverage(&meshes(&case, 2), 2, 0.002, 1.5);
+    assert!(cov >= 0.99, "coverage {cov}");
+}
+
+#[test]
+fn bad_layer_requests_fail_on_every_rank() {
+    let dir = scratch("wall_layer_layers_bad");
+    let case = dir.join("case");
+    let c = case.to_str().unwrap();
+    let vtu = dir.join("m.pvtu");
+    let ok = ["--keep", "outside", "--cut-rule", "none", "--openfoam", c];
+    let with = |extra: &[&str], base: &[&str]| -> Vec<String> {
+        let mut v: Vec<String> = ["mesh", "sphere", "--level", "4"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        v.extend(base.iter().map(|s| s.to_string()));
+        v.extend(extra.iter().map(|s| s.to_string()));
+        v
+    };
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            with(&["--layers", "0", "--first-layer", "0.01"], &ok),
+            "at least 1",
+        ),
+        (
+            with(
+                &[
+                    "--layers",
+                    "3",
+                    "--first-layer",
+                    "0.01",
+                    "--layer-expansion",
+                    "0",
+                ],
+                &ok,
+            ),
+            "expansion",
+        ),
+        (
+            with(
+                &[
+                    "--layers",
+                    "3",
+                    "--first-layer",
+                    "0.01",
+                    "--layer-expansion",
+                    "-1",
+                ],
+                &ok,
+            ),
+            "expansion",
+        ),
+        (
+            with(
+                &[
+                    "--layers",
+                    "3",
+                    "--first-layer",
+                    "0.01",
+                    "--layer-thickness",
+                    "0.1",
+                ],
+                &ok,
+            ),
+            "one thickness",
+        ),
+        (
+            with(&["--layers", "3", "--first-layer", "0"], &ok),
+            "first-layer",
+        ),
+        (with(&["--layers", "3"], &ok), "needs one of"),
+        (
+            with(
+                &["--layers", "3", "--first-layer", "1.5", "--relative-sizes"],
+                &ok,
+            ),
+            "below 1",
+        ),
+        (
+            with(
+                &["--layers", "3", "--first-layer", "0.01"],
+                &["--keep", "outside", "--cut-rule", "none"],
+            ),
+            "openfoam",
+        ),
+        (
+            with(
+                &["--layers", "3", "--first-layer", "0.01"],
+                &["--keep", "all", "--cut-rule", "none", "--openfoam", c],
+            ),
+            "no wall",
+        ),
+        (
+            with(
+                &["--layers", "3", "--first-layer", "0.01"],
+                &["--keep", "outside", "--openfoam", c],
+            ),
+            "cut-rule",
+        ),
+        (
+            with(
+                &[
+                    "--layers",
+                    "3",
+                    "--first-layer",
+                    "0.01",
+                    "--out",
+                    vtu.to_str().unwrap(),
+                ],
+                &ok,
+            ),
+            "OpenFOAM writer only",
+        ),
+    ];
+    for (args, word) in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = common::mpirun(2, &octmesh_bin(), &args, Duration::from_secs(120));
+        for line in common::rank_error_lines(&out, 2, &format!("{args:?}")) {
+            assert!(
+                line.contains("layer") && line.contains(word),
+                "{args:?}: {line}"
+            );
+        }
+    }
+    // A [[layers]] table naming a patch the case does not have.
+    let toml = dir.join("case.toml");
+    std::fs::write(
+        &toml,
+        format!(
+            "[surface]\nfile = \"sphere\"\n[octree]\nlevel = 4\n[mesh]\nkeep = \"outside\"\n\
+             cut_rule = \"none\"\n[output]\nopenfoam = \"{c}\"\n[[layers]]\npatch = \"wing\"\n\
+             layers = 2\nfirst_layer = 0.01\n"
+        ),
+    )
+    .unwrap();
+    let args = ["mesh", toml.to_str().unwrap()];
+    let out = common::mpirun(2, &octmesh_bin(), &args, Duration::from_secs(120));
+    for line in common::rank_error_lines(&out, 2, "[[layers]] patch = wing") {
+        assert!(line.contains("'wing'") && line.contains("sphere"), "{line}");
     }
     assert!(!case.exists(), "a refused run wrote a case");
 }

@@ -38,10 +38,12 @@
 
 pub mod case;
 pub mod cli;
+mod layers;
 pub mod options;
 mod reference;
 mod values;
 
+pub use layers::PatchLayers;
 pub use options::{DEFAULT_FEATURE_ANGLE, DEFAULT_QUALITY_WORST};
 
 use std::collections::BTreeMap;
@@ -116,6 +118,11 @@ pub struct Config {
     /// `max`; `"sphere"` with `center`, `radius`; `"cylinder"` with `start`,
     /// `end`, `radius`; each with `level` and optionally `outside = true`).
     pub regions: Vec<Region>,
+    /// Boundary layers per wall patch (`[[layers]]` tables: `patch` with
+    /// any of `layers`, `expansion`, `first_layer`, `final_layer`,
+    /// `thickness`; the rest from `[mesh]`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub layers: Vec<PatchLayers>,
     /// Files written and what is printed.
     pub output: OutputConfig,
 }
@@ -332,6 +339,24 @@ pub struct MeshConfig {
     /// `keep` inside or outside, `cut_rule` none and an OpenFOAM case as
     /// the only mesh output; replaces `snap`.
     pub wall_layer: bool,
+    /// Boundary layers on every wall patch (`[[layers]]` tables set them
+    /// per patch): this many cells on each wall face in the wall layer's
+    /// room, growing by `layer_expansion` away from the wall. Implies
+    /// `wall_layer` and its needs.
+    pub layers: Option<u32>,
+    /// Each boundary layer's height over the one before it (> 0).
+    pub layer_expansion: f64,
+    /// The first boundary layer's height (the one on the wall). One of
+    /// `first_layer`, `final_layer` and `layer_thickness` gives the
+    /// thickness.
+    pub first_layer: Option<f64>,
+    /// The last boundary layer's height (the farthest from the wall).
+    pub final_layer: Option<f64>,
+    /// All boundary layers together.
+    pub layer_thickness: Option<f64>,
+    /// The layer thicknesses are fractions (below 1) of the local wall
+    /// cell's side, not lengths in the surface's units.
+    pub relative_sizes: bool,
 }
 
 impl MeshConfig {
@@ -367,6 +392,12 @@ impl Default for MeshConfig {
             zones: false,
             conforming: false,
             wall_layer: false,
+            layers: None,
+            layer_expansion: 1.0,
+            first_layer: None,
+            final_layer: None,
+            layer_thickness: None,
+            relative_sizes: false,
         }
     }
 }
@@ -615,7 +646,7 @@ impl Config {
                 let o = &self.output;
                 let other = [
                     ("mesh.snap", self.mesh.snap),
-                    ("mesh.wall_layer", self.mesh.wall_layer),
+                    ("mesh.wall_layer", self.wall_layer()),
                     ("output.vtu", o.vtu.is_some()),
                     ("output.quality", o.quality),
                 ];
@@ -629,8 +660,9 @@ impl Config {
                     ));
                 }
             }
-            if self.mesh.wall_layer {
+            if self.wall_layer() {
                 self.check_wall_layer()?;
+                self.check_layers()?;
             }
             if self.mesh.snap && self.mesh.keep == Keep::All {
                 return Err(ConfigError::new(
@@ -660,7 +692,10 @@ impl Config {
     /// an OpenFOAM case and no other mesh output (only the OpenFOAM writer
     /// makes the layer).
     fn check_wall_layer(&self) -> Result<(), ConfigError> {
-        let key = "mesh.wall_layer";
+        let key = match self.mesh.wall_layer {
+            true => "mesh.wall_layer",
+            false => self.layers_key(),
+        };
         if self.mesh.keep == Keep::All {
             return Err(ConfigError::new(
                 key,

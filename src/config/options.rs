@@ -160,6 +160,15 @@ const fn above_upto(lo: f64, hi: f64, unit: &'static str) -> Range {
     }
 }
 
+/// `(0, inf)`.
+const POSITIVE: Range = Range::Real {
+    lo: 0.0,
+    lo_in: false,
+    hi: f64::INFINITY,
+    hi_in: false,
+    unit: "",
+};
+
 /// How an entry gives its default.
 #[derive(Clone, Copy, Debug)]
 pub enum DefaultValue {
@@ -778,6 +787,55 @@ options! {
     range,
     set |c, _v, _g| { c.mesh.wall_layer = true; }
 
+    /// Boundary layers in the OpenFOAM case: N cells on every wall face
+    /// next to the surface, growing by --layer-expansion away from it, the
+    /// thickness from --first-layer, --final-layer or --layer-thickness
+    /// (implies --wall-layer and its needs; [[layers]] tables in a case
+    /// file set them per patch)
+    Mesh "layers" <"N">: One u32 = parse_u32,
+    keys ["mesh.layers", "layers"],
+    default none,
+    range Range::AtLeast(1) => |c| c.mesh.layers.map(f64::from),
+    set |c, v, _g| { c.mesh.layers = Some(v); }
+
+    /// Each boundary layer's height over the one before it, from the wall
+    /// out (snappyHexMesh's expansionRatio)
+    Mesh "layer-expansion" <"R"> hyphen yes: One f64 = parse_finite,
+    keys ["mesh.layer_expansion"],
+    default config,
+    range POSITIVE => |c| Some(c.mesh.layer_expansion),
+    set |c, v, _g| { c.mesh.layer_expansion = v; }
+
+    /// The first boundary layer's height, on the wall (surface units, or
+    /// with --relative-sizes a fraction of the wall cell)
+    Mesh "first-layer" <"T"> hyphen yes: One f64 = parse_finite,
+    keys ["mesh.first_layer"],
+    default none,
+    range POSITIVE => |c| c.mesh.first_layer,
+    set |c, v, _g| { c.mesh.first_layer = Some(v); }
+
+    /// The last boundary layer's height, the farthest from the wall
+    Mesh "final-layer" <"T"> hyphen yes: One f64 = parse_finite,
+    keys ["mesh.final_layer"],
+    default none,
+    range POSITIVE => |c| c.mesh.final_layer,
+    set |c, v, _g| { c.mesh.final_layer = Some(v); }
+
+    /// The boundary layers' total thickness
+    Mesh "layer-thickness" <"T"> hyphen yes: One f64 = parse_finite,
+    keys ["mesh.layer_thickness"],
+    default none,
+    range POSITIVE => |c| c.mesh.layer_thickness,
+    set |c, v, _g| { c.mesh.layer_thickness = Some(v); }
+
+    /// Layer thicknesses are fractions (below 1) of the local wall cell's
+    /// side, as snappyHexMesh's relativeSizes
+    Mesh "relative-sizes": Switch bool,
+    keys ["mesh.relative_sizes"],
+    default none,
+    range,
+    set |c, _v, _g| { c.mesh.relative_sizes = true; }
+
     /// Snap the mesh to the surface: the nodes on the surface move onto
     /// it (sharp edges kept), scaled back where an element would be
     /// invalid, the layers next to it relaxed (needs --keep inside or
@@ -975,6 +1033,9 @@ mod tests {
         (c.leak.inside_point, c.leak.path) = (Some([0.0; 3]), Some("l".into()));
         c.mesh.patches.insert("a".into(), "b".into());
         (c.mesh.clean_walls, c.mesh.snap_min_jacobian) = (Some(true), Some(0.1));
+        (c.mesh.layers, c.mesh.first_layer) = (Some(3), Some(0.1));
+        (c.mesh.final_layer, c.mesh.layer_thickness) = (Some(0.2), Some(0.3));
+        c.layers = vec![super::super::PatchLayers::default()];
         let out = &mut c.output;
         (out.stats, out.leaves, out.refined_leaves) =
             (Some("s".into()), Some("l".into()), Some("r".into()));

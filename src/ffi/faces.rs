@@ -466,6 +466,100 @@ pub extern "C" fn octmesh_mesh_rename_patch(
     })
 }
 
+/// Sets whether `octmesh_mesh_write_openfoam` gives the case a wall layer
+/// (off until set), like the command's `--wall-layer`: every wall face of
+/// the staircase gets one more cell whose outer face lies on the surface.
+/// Needs a mesh built with `OCTMESH_KEEP_INSIDE` or `OCTMESH_KEEP_OUTSIDE`
+/// and `OCTMESH_CUT_RULE_NONE`, not snapped, and the surface still loaded
+/// when writing. Every rank must pass the same value. Collective.
+///
+/// \param[in] h   the handle
+/// \param[in] on  whether the OpenFOAM case gets the wall layer
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_set_wall_layer(h: *mut octmesh_t, on: bool) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let all = h.comm.allgather_u64(u64::from(on));
+        if all.iter().any(|&r| r != all[0]) {
+            return Err(Error::invalid(
+                "the ranks passed different values to octmesh_mesh_set_wall_layer",
+            ));
+        }
+        h.session.config_mut().mesh.wall_layer = on;
+        Ok(())
+    })
+}
+
+/// Sets the boundary layers of the OpenFOAM case on every wall patch, like
+/// the command's `--layers`, `--layer-expansion`, `--first-layer`,
+/// `--final-layer`, `--layer-thickness` and `--relative-sizes`: `layers`
+/// cells on each wall face next to the surface, growing by `expansion`
+/// away from it, inside the wall layer's cell (which they imply, with its
+/// needs, see `octmesh_mesh_set_wall_layer`). Exactly one of
+/// `first_layer`, `final_layer` and `thickness` is above 0, the others
+/// 0. `layers` 0 turns the layers off. Every rank must pass the same
+/// values. Collective.
+///
+/// \param[in] h            the handle
+/// \param[in] layers       layers per wall face, 0 for none
+/// \param[in] expansion    each layer's height over the one before (> 0)
+/// \param[in] first_layer  the first layer's height, or 0
+/// \param[in] final_layer  the last layer's height, or 0
+/// \param[in] thickness    all layers' thickness, or 0
+/// \param[in] relative     the heights are fractions (below 1) of the
+///                         local wall cell's side
+#[no_mangle]
+pub extern "C" fn octmesh_mesh_set_layers(
+    h: *mut octmesh_t,
+    layers: i32,
+    expansion: f64,
+    first_layer: f64,
+    final_layer: f64,
+    thickness: f64,
+    relative: bool,
+) -> octmesh_status_t {
+    with_mut(h, |h| {
+        let bits = [
+            layers as u64,
+            expansion.to_bits(),
+            first_layer.to_bits(),
+            final_layer.to_bits(),
+            thickness.to_bits(),
+            u64::from(relative),
+        ];
+        let mut same = true;
+        for b in bits {
+            let all = h.comm.allgather_u64(b);
+            same &= all.iter().all(|&r| r == all[0]);
+        }
+        if !same {
+            return Err(Error::invalid(
+                "the ranks passed different values to octmesh_mesh_set_layers",
+            ));
+        }
+        let mut c = h.session.config().clone();
+        let given = |v: f64| (v != 0.0).then_some(v);
+        c.mesh.layers = match layers {
+            0 => None,
+            n if n < 0 => {
+                return Err(Error::invalid(format!(
+                    "layers must be 0 (none) or more, got {n}"
+                )))
+            }
+            n => Some(n as u32),
+        };
+        c.mesh.layer_expansion = expansion;
+        c.mesh.first_layer = given(first_layer);
+        c.mesh.final_layer = given(final_layer);
+        c.mesh.layer_thickness = given(thickness);
+        c.mesh.relative_sizes = relative;
+        if c.mesh.layers.is_some() {
+            c.check_layer_settings()?;
+        }
+        *h.session.config_mut() = c;
+        Ok(())
+    })
+}
+
 /// Writes the mesh as an OpenFOAM case in `dir`, like the command's
 /// `--openfoam`: `dir/constant/polyMesh` on one rank, else
 /// `dir/processor<r>/constant/polyMesh` with processor patches (ready for

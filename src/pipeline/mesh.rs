@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use crate::classify::{CutRule, Keep};
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::parts::PartLocator;
-use crate::io::openfoam::{write_case, FoamCounts, FoamOptions};
+use crate::io::openfoam::{write_case, FoamCounts, FoamOptions, WallLayer};
 use crate::io::vtp::write_boundary;
 use crate::io::vtu::write_mesh;
 use crate::mesh::patches::PatchNames;
@@ -102,6 +102,7 @@ impl Session {
         self.drop_mesh();
         self.mesh = Some(mesh);
         self.mesh_generation += 1;
+        self.mesh_kept = Some((keep, cut_rule));
         Ok(())
     }
 
@@ -372,12 +373,19 @@ impl Session {
             patches,
         };
         let comm = self.comm.clone();
-        let layer = self.config.mesh.wall_layer;
+        let layer = self.config.wall_layer();
+        let plan = agree(&*self.comm, self.config.layer_plan(&opts.patches))?;
         let surface = match (layer, &self.surface) {
             (false, _) => Ok(None),
             (true, Some(_)) if self.mesh.as_ref().is_some_and(|m| m.moved().is_some()) => {
                 Err(Error::invalid(
                     "the wall layer needs the staircase kept off the surface, not a snapped mesh",
+                ))
+            }
+            (true, _) if self.mesh_kept.is_some_and(|k| k.0 == Keep::All || k.1 != CutRule::None) => {
+                Err(Error::invalid(
+                    "the wall layer needs a mesh that keeps the inside or the outside with the cut \
+                     rule none (the staircase kept off the surface)",
                 ))
             }
             (true, Some(s)) => Ok(Some(&s.surface)),
@@ -388,13 +396,21 @@ impl Session {
         };
         let surface = agree(&*comm, surface)?;
         let (mesh, faces) = (&self.mesh, &self.faces);
-        let counts = self
+        let wall = surface.map(|surface| WallLayer {
+            surface,
+            plan: plan.as_ref(),
+        });
+        let (counts, report) = self
             .timer
             .time(&*comm, "openfoam", || match (mesh, faces) {
-                (Some(m), Some((_, f))) => write_case(&*comm, dir, (m, f), &opts, surface),
-                _ => Ok(FoamCounts::default()),
+                (Some(m), Some((_, f))) => write_case(&*comm, dir, (m, f), &opts, wall),
+                _ => Ok((FoamCounts::default(), None)),
             })?;
         self.report_phase(None);
+        if let Some(r) = &report {
+            self.observer.event(&Event::Layers(r));
+        }
+        self.layer_report = report;
         self.observer.event(&Event::Wrote(dir));
         Ok(counts)
     }

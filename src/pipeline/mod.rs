@@ -143,6 +143,8 @@ pub struct Session {
     progress: Option<Style>,
     /// Counts the meshes built, so that views of a mesh know it changed.
     mesh_generation: u64,
+    /// What the current mesh kept: its leaves and cut leaves.
+    mesh_kept: Option<(crate::classify::Keep, crate::classify::CutRule)>,
     timer: PhaseTimer,
     observer: Box<dyn Observer>,
     surface: Option<SurfaceState>,
@@ -170,6 +172,8 @@ pub struct Session {
     quality: Option<(u64, crate::mesh::quality::Quality)>,
     /// The snap that made the mesh of a generation.
     snapped: Option<(u64, crate::mesh::snap::SnapReport)>,
+    /// The boundary layers of the last OpenFOAM case written with them.
+    layer_report: Option<crate::io::openfoam::LayerReport>,
     /// The named parts of the surface (patches), kept when it is released.
     parts: Vec<String>,
     /// Which part is nearest a point, for surfaces of several parts.
@@ -189,6 +193,7 @@ impl Session {
             plan: Command::Mesh,
             progress: None,
             mesh_generation: 0,
+            mesh_kept: None,
             config,
             timer: PhaseTimer::new(),
             observer: Box::new(Silent),
@@ -204,6 +209,7 @@ impl Session {
             gathered: None,
             quality: None,
             snapped: None,
+            layer_report: None,
             parts: Vec::new(),
             data: None,
             locator: None,
@@ -375,8 +381,7 @@ impl Session {
         }
         // A snap needs the surface after meshing, zones while meshing (the
         // solids they split the inside by).
-        let snap =
-            command == Command::Mesh && (self.config.mesh.snap || self.config.mesh.wall_layer);
+        let snap = command == Command::Mesh && (self.config.mesh.snap || self.config.wall_layer());
         let zones = command == Command::Mesh && self.config.mesh.zones;
         if !snap && !zones {
             self.release_surface();

@@ -81,6 +81,9 @@ pub enum Event<'a> {
     Quality(&'a Quality),
     /// The mesh was snapped to the surface.
     Snapped(&'a crate::mesh::snap::SnapReport),
+    /// The OpenFOAM case got boundary layers: per wall patch, what they
+    /// came to.
+    Layers(&'a crate::io::openfoam::LayerReport),
     /// The mesh was gathered for a single-file writer: the sizes of its
     /// pieces joined through faces, largest first
     /// ([`crate::mesh::pieces`]). More than one piece

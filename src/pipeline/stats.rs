@@ -186,6 +186,10 @@ pub struct Stats {
     /// [`crate::mesh::snap`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub snap: Option<crate::mesh::snap::SnapReport>,
+    /// The boundary layers of the OpenFOAM case, when it got them (see
+    /// [`crate::io::openfoam::LayerReport`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub layers: Option<crate::io::openfoam::LayerReport>,
     /// Volume enclosed by the surface, user units.
     pub surface_volume: f64,
     /// Facets the clean-up dropped.
@@ -371,6 +375,7 @@ impl Session {
             quality: self.current_quality().cloned(),
             pieces: f.pieces.clone(),
             snap: self.current_snap().cloned(),
+            layers: self.layer_report.clone(),
             surface_volume: self.surface_volume(),
             dropped_facets: f.dropped.unwrap_or(0) as u64,
             timings: named(keys.iter().map(|k| (k.to_string(), t.get(k))).collect()),

@@ -242,6 +242,24 @@ impl Observer for Table {
                     r.min_scaled_jacobian
                 );
             }
+            Event::Layers(r) => {
+                for p in &r.patches {
+                    say!(
+                        "  layers {}: {} layers on {} faces | coverage {:.2} % | mean layers {:.3} | \
+                         thinned faces {} | first cell height mean {:.4e} min {:.4e} max {:.4e} | {:.3} s",
+                        p.patch,
+                        p.layers,
+                        p.faces,
+                        100.0 * p.coverage,
+                        p.mean_layers,
+                        p.thinned_faces,
+                        p.first_height_mean,
+                        p.first_height_min,
+                        p.first_height_max,
+                        r.seconds
+                    );
+                }
+            }
             Event::Pieces(sizes) if sizes.len() > 1 => {
                 let total: u64 = sizes.iter().sum();
                 say!(

@@ -249,6 +249,45 @@ int main(int argc, char **argv) {
   fclose(fb);
   CHECK(strstr(text, "inlet") && strstr(text, "body") && strstr(text, "outlet") == NULL, h);
 
+  /* Boundary layers: bad settings refused, then three layers on the wall
+     layer of the staircase kept off the surface: each wall face gets four
+     cells (the buffer and the layers). */
+  const octmesh_status_t bad = OCTMESH_STATUS_INVALID_ARGUMENT;
+  CHECK_STATUS(octmesh_mesh_set_layers(h, -1, 1.2, 0.01, 0, 0, false), bad, h);
+  CHECK_STATUS(octmesh_mesh_set_layers(h, 3, 0.0, 0.01, 0, 0, false), bad, h);
+  CHECK_STATUS(octmesh_mesh_set_layers(h, 3, 1.2, 0.01, 0.02, 0, false), bad, h);
+  CHECK_STATUS(octmesh_mesh_set_layers(h, 3, 1.2, -0.01, 0, 0, false), bad, h);
+  CHECK_STATUS(octmesh_mesh_set_layers(h, 3, 1.2, 1.5, 0, 0, true), bad, h);
+  CHECK_STATUS(octmesh_mesh_set_layers(h, 3, 1.2, 0, 0, 0, false), bad, h);
+  CHECK_STATUS(octmesh_mesh_set_layers(h, rank == 0 ? 3 : 2, 1.2, 0.002, 0, 0, false),
+               size > 1 ? bad : OCTMESH_STATUS_OK, h);
+  /* The mesh keeps the cut leaves (OCTMESH_CUT_RULE_CENTER): no wall layer. */
+  OK(octmesh_mesh_set_wall_layer(h, true), h);
+  CHECK_STATUS(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, true), bad, h);
+  OK(octmesh_mesh_set_wall_layer(h, false), h);
+  OK(octmesh_mesh_build(h, OCTMESH_KEEP_OUTSIDE, OCTMESH_CUT_RULE_NONE), h);
+  OK(octmesh_mesh_build_faces(h), h);
+  octmesh_faces_t f3;
+  OK(octmesh_mesh_get_faces(h, &f3), h);
+  octmesh_mesh_counts_t counts;
+  OK(octmesh_mesh_get_counts(h, &counts), h);
+  long wall = f3.patch_offsets[7] - f3.patch_offsets[6];
+  long expected = (long)counts.local_elements + 4 * wall;
+  OK(octmesh_mesh_set_layers(h, 3, 1.2, 0.002, 0, 0, false), h);
+  OK(octmesh_mesh_write_openfoam(h, argv[1], OCTMESH_FOAM_FORMAT_ASCII, true), h);
+  if (size == 1)
+    snprintf(path, sizeof path, "%s/constant/polyMesh/owner", argv[1]);
+  else
+    snprintf(path, sizeof path, "%s/processor%d/constant/polyMesh/owner", argv[1], rank);
+  fb = fopen(path, "r");
+  CHECK(fb != NULL, h);
+  len = fread(text, 1, sizeof text - 1, fb);
+  text[len] = '\0';
+  fclose(fb);
+  const char *note = strstr(text, "nCells:");
+  CHECK(note != NULL && atol(note + 7) == expected, h);
+  OK(octmesh_mesh_set_layers(h, 0, 1.0, 0, 0, 0, false), h);
+
   octmesh_destroy(h);
   printf("FACES OK\n");
   MPI_Finalize();

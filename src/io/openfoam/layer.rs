@@ -16,9 +16,9 @@
 //! The case is made in memory from the staircase's faces (the points,
 //! polygons, owners and patches of [`super::polygons`]), changed, then
 //! written: the wall layer is for the meshes a CFD user runs a solver on,
-//! not for the largest ones the streaming writer is made for. One layer of
-//! cells per wall face: `stack` takes the outer points of one layer as the
-//! inner points of the next, so N layers would stack N times.
+//! not for the largest ones the streaming writer is made for. `stack` adds
+//! a column of cells per wall face between layers of points (one cell for
+//! the wall layer; the buffer and N boundary layers of `layer_stack`).
 
 use std::collections::HashMap;
 use std::ops::Range;
@@ -242,39 +242,56 @@ pub(super) fn polygon_area(pts: impl Iterator<Item = [f64; 3]> + Clone) -> [f64;
     scale(a, 0.5)
 }
 
-/// Adds one layer of cells on the wall of `pm`: `inner` are the wall
-/// points' new positions (the staircase's, moved in where needed), `outer`
-/// the new points on the surface, both by wall point number.
-pub(super) fn stack(pm: &mut PolyMesh, wall: &Wall, inner: &[[f64; 3]], outer: &[[f64; 3]]) {
+/// Adds layers of cells on the wall of `pm`: `layers[0]` are the wall
+/// points' new positions (the staircase's, moved in where needed), each
+/// next one a layer of new points farther out, the last on the surface,
+/// all by wall point number. Each wall face gets a column of
+/// `layers.len() - 1` cells.
+pub(super) fn stack(pm: &mut PolyMesh, wall: &Wall, layers: &[Vec<[f64; 3]>]) {
+    let m = layers.len() - 1;
     let np = pm.points.len() as u32;
+    let nw = wall.labels.len() as u32;
     for (i, &l) in wall.labels.iter().enumerate() {
-        pm.points[l as usize] = inner[i];
+        pm.points[l as usize] = layers[0][i];
     }
-    pm.points.extend_from_slice(outer);
-    pm.watch.extend(outer.iter().map(|_| false));
-    let label = |i: u32| wall.labels[i as usize];
-    let twin = |i: u32| np + i;
+    for layer in &layers[1..] {
+        pm.points.extend_from_slice(layer);
+        pm.watch.extend(layer.iter().map(|_| false));
+    }
+    // The label of wall point `i` in point layer `j`.
+    let at = |j: usize, i: u32| match j {
+        0 => wall.labels[i as usize],
+        _ => np + (j as u32 - 1) * nw + i,
+    };
     let cells = pm.cells as u32;
-    let cell_of = |k: usize| cells + k as u32;
+    // A column's cells are consecutive, the wall's first.
+    let cell_of = |k: usize, j: usize| cells + (k * m + j) as u32;
     let mut wall_at = vec![usize::MAX; pm.owner.len()];
     for (k, &f) in wall.faces.iter().enumerate() {
         wall_at[f] = k;
     }
-    // Internal faces: the old ones, the wall faces, the sides between new
-    // cells on this rank; then ordered by owner and neighbour.
+    // Internal faces: the old ones, the wall faces, the faces between a
+    // column's cells, the sides between new cells on this rank; then
+    // ordered by owner and neighbour.
     let mut internal: Vec<(u32, u32, Vec<u32>)> = (0..pm.neighbour.len())
         .map(|i| (pm.owner[i], pm.neighbour[i], pm.face(i).to_vec()))
         .collect();
     for (k, &f) in wall.faces.iter().enumerate() {
-        internal.push((pm.owner[f], cell_of(k), pm.face(f).to_vec()));
+        internal.push((pm.owner[f], cell_of(k, 0), pm.face(f).to_vec()));
+        for j in 1..m {
+            let poly = wall.polys[k].iter().map(|&i| at(j, i)).collect();
+            internal.push((cell_of(k, j - 1), cell_of(k, j), poly));
+        }
     }
-    let side = |(a, b): (u32, u32)| vec![label(a), label(b), twin(b), twin(a)];
+    let side = |(a, b): (u32, u32), j: usize| vec![at(j, a), at(j, b), at(j + 1, b), at(j + 1, a)];
     for (k, poly) in wall.polys.iter().enumerate() {
         for i in 0..poly.len() {
             let e = (poly[i], poly[(i + 1) % poly.len()]);
             if let Some(&g) = wall.across.get(&(e.1, e.0)) {
                 if k < g {
-                    internal.push((cell_of(k), cell_of(g), side(e)));
+                    for j in 0..m {
+                        internal.push((cell_of(k, j), cell_of(g, j), side(e, j)));
+                    }
                 }
             }
         }
@@ -299,28 +316,30 @@ pub(super) fn stack(pm: &mut PolyMesh, wall: &Wall, inner: &[[f64; 3]], outer: &
             match wall_at[f] {
                 usize::MAX => put(pm.owner[f], pm.face(f), &mut ids, &mut start),
                 k => {
-                    let poly: Vec<u32> = wall.polys[k].iter().map(|&i| twin(i)).collect();
-                    put(cell_of(k), &poly, &mut ids, &mut start);
+                    let poly: Vec<u32> = wall.polys[k].iter().map(|&i| at(m, i)).collect();
+                    put(cell_of(k, m - 1), &poly, &mut ids, &mut start);
                 }
             }
         }
         patches.push(first..start.len() - 1);
     }
     // Processor faces: the old ones, then the sides whose other cell is on
-    // that rank, ordered by their staircase edge's keys on both sides and
-    // starting at the edge's lower point (the other side then runs the
-    // other way, as a processor patch's faces do).
-    let mut new_sides: Vec<(u32, u64, u64, Vec<u32>, usize)> = Vec::new();
+    // that rank, ordered by their staircase edge's keys and their layer on
+    // both sides and starting at the edge's lower point (the other side
+    // then runs the other way, as a processor patch's faces do).
+    let mut new_sides: Vec<(u32, u64, u64, usize, Vec<u32>, usize)> = Vec::new();
     for &((a, b), r) in &wall.remote {
         let k = wall.across[&(a, b)];
         let (ka, kb) = (wall.keys[a as usize], wall.keys[b as usize]);
-        let mut poly = side((a, b));
-        if kb < ka {
-            poly.rotate_left(1);
+        for j in 0..m {
+            let mut poly = side((a, b), j);
+            if kb < ka {
+                poly.rotate_left(1);
+            }
+            new_sides.push((r, ka.min(kb), ka.max(kb), j, poly, cell_of(k, j) as usize));
         }
-        new_sides.push((r, ka.min(kb), ka.max(kb), poly, k));
     }
-    new_sides.sort_by_key(|s| (s.0, s.1, s.2));
+    new_sides.sort_by_key(|s| (s.0, s.1, s.2, s.3));
     let mut ranks: Vec<u32> = pm.procs.iter().map(|p| p.0).collect();
     ranks.extend(new_sides.iter().map(|s| s.0));
     ranks.sort_unstable();
@@ -334,7 +353,7 @@ pub(super) fn stack(pm: &mut PolyMesh, wall: &Wall, inner: &[[f64; 3]], outer: &
             }
         }
         for s in new_sides.iter().filter(|s| s.0 == r) {
-            put(cell_of(s.4), &s.3, &mut ids, &mut start);
+            put(s.5 as u32, &s.4, &mut ids, &mut start);
         }
         procs.push((r, first..start.len() - 1));
     }
@@ -342,25 +361,39 @@ pub(super) fn stack(pm: &mut PolyMesh, wall: &Wall, inner: &[[f64; 3]], outer: &
     pm.ids = ids;
     pm.owner = owner;
     pm.neighbour = neighbour;
-    pm.cells += wall.faces.len();
+    pm.cells += wall.faces.len() * m;
     pm.patches = patches;
     pm.procs = procs;
 }
 
-/// Builds the case of `mesh` with a wall layer on `surface` (collective;
-/// the same result on every rank).
+/// Builds the case of `mesh` with a wall layer on `surface`, and the
+/// boundary layers of `plan` in it (collective; the same result on every
+/// rank).
 pub(super) fn layered_case(
     comm: &dyn Comm,
-    mesh: &Mesh,
-    faces: &Faces,
+    (mesh, faces): (&Mesh, &Faces),
     surface: &Surface,
-) -> Result<PolyMesh> {
+    plan: Option<&super::layer_stack::LayerPlan>,
+    names: &PatchNames,
+) -> Result<(PolyMesh, Option<super::layer_stack::LayerReport>)> {
     let local = PolyMesh::from_mesh(mesh, faces);
     let mut pm = agree(comm, local)?;
     let wall = Wall::new(comm, &pm, mesh.domain().side)?;
     let (inner, outer) = super::layer_points::place(comm, &mut pm, &wall, mesh.domain(), surface)?;
-    stack(&mut pm, &wall, &inner, &outer);
-    Ok(pm)
+    let report = match plan {
+        Some(plan) => Some(super::layer_stack::add_layers(
+            comm,
+            &mut pm,
+            &wall,
+            (plan, names, mesh.domain().side),
+            (inner, outer),
+        )),
+        None => {
+            stack(&mut pm, &wall, &[inner, outer]);
+            None
+        }
+    };
+    Ok((pm, report))
 }
 
 /// Writes `pm` as the polyMesh files in `dir`.

@@ -49,12 +49,12 @@ const SHIFT: f64 = 0.7;
 const FIXED: f64 = (1u64 << 32) as f64;
 
 /// The home rank of a key.
-fn home(key: u64, p: usize) -> usize {
+pub(super) fn home(key: u64, p: usize) -> usize {
     ((key.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) % p as u64) as usize
 }
 
 /// Sends `out[r]` to rank `r`; returns what each rank sent here.
-fn exchange(comm: &dyn Comm, out: Vec<Vec<u64>>) -> Vec<Vec<u64>> {
+pub(super) fn exchange(comm: &dyn Comm, out: Vec<Vec<u64>>) -> Vec<Vec<u64>> {
     let counts: Vec<usize> = out.iter().map(Vec::len).collect();
     let (recv, rc) = comm.alltoallv_u64(&out.concat(), &counts);
     let mut at = 0;
@@ -939,4 +939,49 @@ fn cell_figure(
         }
     }
     -worst / (1.0 + worst)
+}
+
+/// How far the cell between the polygons of wall face `k` in the point
+/// layers `inner` and `s` is from having a face that points into it: the
+/// least over its faces of the face's area vector dotted with the way from
+/// the cell's centre to the face's, in cubes of the face's side (checkMesh's
+/// face pyramids, with OpenFOAM's face and cell centres). `moved` replaces
+/// one point of `s`. The boundary layers' cells are judged by it.
+pub(super) fn cell_quality(
+    wall: &Wall,
+    k: usize,
+    inner: &[[f64; 3]],
+    s: &[[f64; 3]],
+    moved: (u32, [f64; 3]),
+) -> f64 {
+    let poly = &wall.polys[k];
+    let outer = |i: u32| if i == moved.0 { moved.1 } else { s[i as usize] };
+    let n = poly.len();
+    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner[i as usize]).collect();
+    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer(i)).collect();
+    let mut faces: Vec<FaceGeometry> = Vec::with_capacity(n + 2);
+    let rev: Vec<[f64; 3]> = a.iter().rev().copied().collect();
+    faces.push(face_geometry(&rev));
+    faces.push(face_geometry(&b));
+    for j in 0..n {
+        let jn = (j + 1) % n;
+        faces.push(face_geometry(&[a[j], a[jn], b[jn], b[j]]));
+    }
+    // OpenFOAM's cell centre: pyramids from the mean of the face centres.
+    let est = scale(
+        faces.iter().map(|f| f.1).fold([0.0; 3], add),
+        1.0 / faces.len() as f64,
+    );
+    let (mut vol, mut centre) = (0.0, [0.0; 3]);
+    for &(sf, cf) in &faces {
+        let v = dot(sf, sub(cf, est)).max(f64::MIN_POSITIVE);
+        vol += v;
+        centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
+    }
+    let c = scale(centre, 1.0 / vol);
+    faces
+        .iter()
+        .map(|&(sf, cf)| dot(sf, sub(cf, c)))
+        .fold(f64::INFINITY, f64::min)
+        / wall.sides[k].powi(3)
 }

@@ -50,6 +50,7 @@
 mod gathered;
 mod layer;
 mod layer_points;
+mod layer_stack;
 mod polygons;
 mod polymesh;
 mod system;
@@ -61,6 +62,9 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 pub use gathered::write_gathered_case;
+pub use layer_stack::{
+    LayerPlan, LayerReport, LayerSpec, LayerThickness, PatchLayerReport, FILL as LAYER_FILL,
+};
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::{corner_coords, VTK_TO_MORTON};
@@ -135,17 +139,28 @@ fn io_err(what: &Path, e: std::io::Error) -> Error {
     Error::io(format!("{}: {e}", what.display()))
 }
 
-/// Writes the case `dir` for `mesh`'s `faces` (collective). With
-/// `wall_layer`, the mesh is the staircase kept off that surface and the
-/// case gets a layer of cells between its wall and the surface (see
-/// `layer.rs`).
+/// The wall layer of a case: the mesh is the staircase kept off
+/// `surface`, and the case gets cells between its wall and the surface
+/// (see `layer.rs`): one per wall face, or a buffer and the boundary
+/// layers of `plan` (see `layer_stack.rs`).
+#[derive(Clone, Copy, Debug)]
+pub struct WallLayer<'a> {
+    /// The surface the wall goes onto.
+    pub surface: &'a Surface,
+    /// The boundary layers, if any.
+    pub plan: Option<&'a LayerPlan>,
+}
+
+/// Writes the case `dir` for `mesh`'s `faces` (collective), with a wall
+/// layer if asked; returns this rank's counts and, with boundary layers,
+/// their report (the same on every rank).
 pub fn write_case(
     comm: &dyn Comm,
     dir: &Path,
     (mesh, faces): (&Mesh, &Faces),
     opts: &FoamOptions,
-    wall_layer: Option<&Surface>,
-) -> Result<FoamCounts> {
+    wall_layer: Option<WallLayer<'_>>,
+) -> Result<(FoamCounts, Option<LayerReport>)> {
     let (me, p) = (comm.rank(), comm.size());
     let target = mesh_dir(dir, me, p);
     let check = if mesh.counts().elements == 0 {
@@ -164,9 +179,20 @@ pub fn write_case(
     // The interfaces between zones, known to every rank before any
     // writes (a rank whose directory failed must still take part).
     let interfaces = zone_interfaces(comm, mesh, faces);
-    let layered = match wall_layer {
-        Some(surface) => Some(layer::layered_case(comm, mesh, faces, surface)?),
-        None => None,
+    let (layered, report) = match wall_layer {
+        Some(w) => {
+            let clock = std::time::Instant::now();
+            let (pm, report) =
+                layer::layered_case(comm, (mesh, faces), w.surface, w.plan, &opts.patches)?;
+            let mut seconds = [clock.elapsed().as_secs_f64()];
+            comm.max_f64(&mut seconds);
+            let report = report.map(|r| LayerReport {
+                seconds: seconds[0],
+                ..r
+            });
+            (Some(pm), report)
+        }
+        None => (None, None),
     };
     // A core no rank of this node runs on makes the polygons while this
     // rank labels them (a serial run on a workstation, say).
@@ -212,7 +238,7 @@ pub fn write_case(
         Ok(())
     })();
     agree(comm, moved)?;
-    Ok(counts)
+    Ok((counts, report))
 }
 
 /// Removes `processor<r>` directories for `r >= p` left by an earlier run
