@@ -859,6 +859,62 @@ fn cell_figure(
         Moved::Outer(j, x) if j == i => x,
         _ => s[i as usize],
     };
+    let side = wall.sides[k];
+    with_prism(poly, inner_at, outer_at, side, |b, faces, c, pyramid| {
+        if pyramid < GOOD {
+            return -2.0 + pyramid.max(-1.0);
+        }
+        let old = old_cells.centre(k, p, &inner_at);
+        // The largest angle, from the least cosine.
+        let cosine = |u: [f64; 3], v: [f64; 3]| {
+            let l = norm(u) * norm(v);
+            if l > 0.0 {
+                (dot(u, v) / l).clamp(-1.0, 1.0)
+            } else {
+                1.0
+            }
+        };
+        let least = faces[2..]
+            .iter()
+            .map(|&(sf, cf)| cosine(sub(cf, c), sf))
+            .fold(cosine(sub(c, old), scale(faces[0].0, -1.0)), f64::min);
+        let mut worst = least.acos().to_degrees() / NON_ORTHO;
+        // checkMesh's boundary skewness: the outer face centre's offset along
+        // the face from the cell centre, against 0.4 of the distance normal to
+        // it or the face's extent that way.
+        let (sf, cf) = faces[1];
+        let cpf = sub(cf, c);
+        if let Some(u) = unit(sf) {
+            let d = scale(u, dot(u, cpf));
+            let sv = sub(cpf, d);
+            let l = norm(sv);
+            if l > 0.0 {
+                let dir = scale(sv, 1.0 / l);
+                let fd = b
+                    .iter()
+                    .map(|&x| dot(dir, sub(x, cf)).abs())
+                    .fold(0.4 * norm(d), f64::max);
+                worst = worst.max(l / fd.max(f64::MIN_POSITIVE) / SKEW);
+            }
+        }
+        -worst / (1.0 + worst)
+    })
+}
+
+/// Lays out the cell between polygon `poly`'s points in two layers (`lower`
+/// and `upper` by wall point number) on the stack and calls `f` with the
+/// upper polygon, the cell's faces (the lower face reversed, the upper
+/// face, the sides, as OpenFOAM computes area vectors and centres), the
+/// cell's centre as OpenFOAM computes it (pyramids from the mean of the
+/// face centres) and its least face pyramid in cubes of `side` (negative:
+/// a face points into the cell).
+fn with_prism<R>(
+    poly: &[u32],
+    lower: impl Fn(u32) -> [f64; 3],
+    upper: impl Fn(u32) -> [f64; 3],
+    side: f64,
+    f: impl FnOnce(&[[f64; 3]], &[FaceGeometry], [f64; 3], f64) -> R,
+) -> R {
     let n = poly.len();
     let (mut abuf, mut bbuf) = ([[0.0; 3]; MAXP], [[0.0; 3]; MAXP]);
     let mut fbuf: [FaceGeometry; MAXP + 2] = [([0.0; 3], [0.0; 3]); MAXP + 2];
@@ -872,10 +928,10 @@ fn cell_figure(
         (&mut va, &mut vb, &mut vf)
     };
     for (j, &i) in poly.iter().enumerate() {
-        a[j] = inner_at(i);
-        b[j] = outer_at(i);
+        a[j] = lower(i);
+        b[j] = upper(i);
     }
-    // The staircase face points out of the new cell: its polygon reversed.
+    // The lower face points out of the cell: its polygon reversed.
     let (sa, ca) = face_geometry(a);
     faces[0] = (scale(sa, -1.0), ca);
     faces[1] = face_geometry(b);
@@ -884,7 +940,6 @@ fn cell_figure(
         faces[j + 2] = face_geometry(&[a[j], a[jn], b[jn], b[j]]);
     }
     let faces = &*faces;
-    // OpenFOAM's cell centre: pyramids from the mean of the face centres.
     let est = scale(
         faces.iter().map(|f| f.1).fold([0.0; 3], add),
         1.0 / faces.len() as f64,
@@ -896,49 +951,12 @@ fn cell_figure(
         centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
     }
     let c = scale(centre, 1.0 / vol);
-    let side = wall.sides[k];
     let pyramid = faces
         .iter()
         .map(|&(sf, cf)| dot(sf, sub(cf, c)))
         .fold(f64::INFINITY, f64::min)
         / side.powi(3);
-    if pyramid < GOOD {
-        return -2.0 + pyramid.max(-1.0);
-    }
-    let old = old_cells.centre(k, p, &inner_at);
-    // The largest angle, from the least cosine.
-    let cosine = |u: [f64; 3], v: [f64; 3]| {
-        let l = norm(u) * norm(v);
-        if l > 0.0 {
-            (dot(u, v) / l).clamp(-1.0, 1.0)
-        } else {
-            1.0
-        }
-    };
-    let least = faces[2..]
-        .iter()
-        .map(|&(sf, cf)| cosine(sub(cf, c), sf))
-        .fold(cosine(sub(c, old), scale(faces[0].0, -1.0)), f64::min);
-    let mut worst = least.acos().to_degrees() / NON_ORTHO;
-    // checkMesh's boundary skewness: the outer face centre's offset along
-    // the face from the cell centre, against 0.4 of the distance normal to
-    // it or the face's extent that way.
-    let (sf, cf) = faces[1];
-    let cpf = sub(cf, c);
-    if let Some(u) = unit(sf) {
-        let d = scale(u, dot(u, cpf));
-        let sv = sub(cpf, d);
-        let l = norm(sv);
-        if l > 0.0 {
-            let dir = scale(sv, 1.0 / l);
-            let fd = b
-                .iter()
-                .map(|&x| dot(dir, sub(x, cf)).abs())
-                .fold(0.4 * norm(d), f64::max);
-            worst = worst.max(l / fd.max(f64::MIN_POSITIVE) / SKEW);
-        }
-    }
-    -worst / (1.0 + worst)
+    f(b, faces, c, pyramid)
 }
 
 /// How far the cell between the polygons of wall face `k` in the point
@@ -954,34 +972,12 @@ pub(super) fn cell_quality(
     s: &[[f64; 3]],
     moved: (u32, [f64; 3]),
 ) -> f64 {
-    let poly = &wall.polys[k];
     let outer = |i: u32| if i == moved.0 { moved.1 } else { s[i as usize] };
-    let n = poly.len();
-    let a: Vec<[f64; 3]> = poly.iter().map(|&i| inner[i as usize]).collect();
-    let b: Vec<[f64; 3]> = poly.iter().map(|&i| outer(i)).collect();
-    let mut faces: Vec<FaceGeometry> = Vec::with_capacity(n + 2);
-    let rev: Vec<[f64; 3]> = a.iter().rev().copied().collect();
-    faces.push(face_geometry(&rev));
-    faces.push(face_geometry(&b));
-    for j in 0..n {
-        let jn = (j + 1) % n;
-        faces.push(face_geometry(&[a[j], a[jn], b[jn], b[j]]));
-    }
-    // OpenFOAM's cell centre: pyramids from the mean of the face centres.
-    let est = scale(
-        faces.iter().map(|f| f.1).fold([0.0; 3], add),
-        1.0 / faces.len() as f64,
-    );
-    let (mut vol, mut centre) = (0.0, [0.0; 3]);
-    for &(sf, cf) in &faces {
-        let v = dot(sf, sub(cf, est)).max(f64::MIN_POSITIVE);
-        vol += v;
-        centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
-    }
-    let c = scale(centre, 1.0 / vol);
-    faces
-        .iter()
-        .map(|&(sf, cf)| dot(sf, sub(cf, c)))
-        .fold(f64::INFINITY, f64::min)
-        / wall.sides[k].powi(3)
+    with_prism(
+        &wall.polys[k],
+        |i| inner[i as usize],
+        outer,
+        wall.sides[k],
+        |_, _, _, pyramid| pyramid,
+    )
 }
