@@ -19,6 +19,7 @@ import argparse
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -140,6 +141,8 @@ def main():
         surface = model if model == "sphere" else str(DATA / (model + ".stl"))
         for keep in a.keep.split(","):
             case = work / ("%s-%s" % (model, keep))
+            # A serial run after a parallel one would leave the old processor folders, which the readers prefer.
+            shutil.rmtree(case, ignore_errors=True)
             cmd = ["mpirun", "-np", str(a.np)] if a.np > 1 else []
             cmd += [str(OCTMESH), "mesh", surface, "--level", str(a.level), "--keep", keep, "--cut-rule", "none",
                     "--wall-layer", "--openfoam", str(case), "--openfoam-format", "ascii", "--overwrite", "--quiet"]
@@ -178,6 +181,7 @@ def layers_table(a, work):
         for keep in a.keep.split(","):
             case = work / ("%s-%s-layers" % (model, keep))
             stats = work / ("%s-%s-layers.json" % (model, keep))
+            shutil.rmtree(case, ignore_errors=True)
             cmd = ["mpirun", "-np", str(a.np)] if a.np > 1 else []
             cmd += [str(OCTMESH), "mesh", surface, "--level", str(a.level), "--keep", keep, "--cut-rule", "none",
                     "--layers", str(a.layers), "--layer-expansion", str(a.expansion), "--first-layer", repr(first),

@@ -379,7 +379,12 @@ pub(super) fn layered_case(
     let local = PolyMesh::from_mesh(mesh, faces);
     let mut pm = agree(comm, local)?;
     let wall = Wall::new(comm, &pm, mesh.domain().side)?;
-    let (inner, outer) = super::layer_points::place(comm, &mut pm, &wall, mesh.domain(), surface)?;
+    // With layers the wall cell is cut into the buffer and the layers; the
+    // cut's last resort (`layer_stack`) is the even one, whose slab at the
+    // surface must then be valid too.
+    let slab = plan.map_or(0.0, |p| 1.0 / f64::from(p.most() + 1));
+    let (inner, outer) =
+        super::layer_points::place(comm, &mut pm, &wall, (mesh.domain(), surface), slab)?;
     let report = match plan {
         Some(plan) => Some(super::layer_stack::add_layers(
             comm,

@@ -11,7 +11,11 @@
 //! of each of its faces (at most [`REACH`] cells), so no new cell starts
 //! flat. Last, the points of new cells that are invalid or near checkMesh's
 //! limits move (`Ctx::improve`, [`cell_figure`]): outer points along the
-//! surface, staircase points under their outer points.
+//! surface, staircase points under their outer points. With boundary
+//! layers the slabs of a new cell cut evenly into the buffer and the
+//! layers (the layers' last resort, `layer_stack`) must be valid too at
+//! both ends: a cell valid as a whole can be too sheared or twisted for a
+//! thin slab at the surface or at the staircase.
 //!
 //! Parallel: a wall point's faces may lie on several ranks. Each point has
 //! a home rank (by a hash of its lattice key) that merges what the ranks
@@ -344,8 +348,8 @@ pub(super) fn place(
     comm: &dyn Comm,
     pm: &mut PolyMesh,
     wall: &Wall,
-    domain: &Domain,
-    surface: &Surface,
+    (domain, surface): (&Domain, &Surface),
+    slab: f64,
 ) -> Result<InnerOuter> {
     let nw = wall.labels.len();
     let (mut mask, mut size) = (vec![0u64; nw], vec![f64::INFINITY; nw]);
@@ -386,6 +390,7 @@ pub(super) fn place(
         wall,
         shared: &shared,
         domain,
+        slab,
     };
     // The nearest triangle of each outer point's last projection.
     let mut hints: Vec<Option<u32>> = vec![None; nw];
@@ -516,6 +521,9 @@ struct Ctx<'a> {
     /// The wall points with faces on several ranks.
     shared: &'a [usize],
     domain: &'a Domain,
+    /// The fraction of a new cell next to the surface that must be a valid
+    /// cell on its own (the boundary layers' even cut), 0 for none.
+    slab: f64,
 }
 
 impl Ctx<'_> {
@@ -654,7 +662,7 @@ impl Ctx<'_> {
         let worst = |inner: &[[f64; 3]], s: &[[f64; 3]], i: usize, m: Moved| {
             cells_at[i]
                 .iter()
-                .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), m))
+                .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), (m, self.slab)))
                 .fold(f64::INFINITY, f64::min)
         };
         const OUTER: [(bool, f64); 4] = [(false, 0.5), (false, 1.0), (true, 0.5), (true, 1.0)];
@@ -665,7 +673,7 @@ impl Ctx<'_> {
         // Each cell's figure, measured again only when one of its points
         // moves (all its points are on this rank).
         let mut figure: Vec<f64> = (0..self.wall.polys.len())
-            .map(|k| cell_figure(self.wall, (p, old), k, (inner, s), Moved::None))
+            .map(|k| cell_figure(self.wall, (p, old), k, (inner, s), (Moved::None, self.slab)))
             .collect();
         for round in 0..ROUNDS {
             // A point's figure is its worst cell's.
@@ -740,7 +748,7 @@ impl Ctx<'_> {
             }
             for (k, f) in figure.iter_mut().enumerate() {
                 if dirty[k] {
-                    *f = cell_figure(self.wall, (p, old), k, (inner, s), Moved::None);
+                    *f = cell_figure(self.wall, (p, old), k, (inner, s), (Moved::None, self.slab));
                 }
             }
             // Stuck everywhere: more rounds would change nothing.
@@ -848,7 +856,7 @@ fn cell_figure(
     (p, old_cells): (&[[f64; 3]], &OldCells),
     k: usize,
     (inner, s): (&[[f64; 3]], &[[f64; 3]]),
-    moved: Moved,
+    (moved, slab): (Moved, f64),
 ) -> f64 {
     let poly = &wall.polys[k];
     let inner_at = |i: u32| match moved {
@@ -860,7 +868,30 @@ fn cell_figure(
         _ => s[i as usize],
     };
     let side = wall.sides[k];
-    with_prism(poly, inner_at, outer_at, side, |b, faces, c, pyramid| {
+    // The even cut's slabs at the surface and at the staircase, where a
+    // sheared or twisted cell is thinnest (checking the slabs between too
+    // made no case valid that these left invalid, on the shared models).
+    let layered = if slab > 0.0 {
+        let cut = |w: f64| {
+            move |i: u32| {
+                let x = outer_at(i);
+                add_scaled(x, sub(inner_at(i), x), w)
+            }
+        };
+        let near = with_prism(poly, cut(slab), outer_at, side, |_, _, _, pyramid| pyramid);
+        let far = with_prism(poly, inner_at, cut(1.0 - slab), side, |_, _, _, pyramid| {
+            pyramid
+        });
+        let pyramid = near.min(far) / slab;
+        if pyramid < GOOD {
+            -2.0 + pyramid.max(-1.0)
+        } else {
+            0.0
+        }
+    } else {
+        0.0
+    };
+    let whole = with_prism(poly, inner_at, outer_at, side, |b, faces, c, pyramid| {
         if pyramid < GOOD {
             return -2.0 + pyramid.max(-1.0);
         }
@@ -898,7 +929,8 @@ fn cell_figure(
             }
         }
         -worst / (1.0 + worst)
-    })
+    });
+    whole.min(layered)
 }
 
 /// Lays out the cell between polygon `poly`'s points in two layers (`lower`
@@ -960,23 +992,16 @@ fn with_prism<R>(
 }
 
 /// How far the cell between the polygons of wall face `k` in the point
-/// layers `inner` and `s` is from having a face that points into it: the
-/// least over its faces of the face's area vector dotted with the way from
-/// the cell's centre to the face's, in cubes of the face's side (checkMesh's
-/// face pyramids, with OpenFOAM's face and cell centres). `moved` replaces
-/// one point of `s`. The boundary layers' cells are judged by it.
-pub(super) fn cell_quality(
-    wall: &Wall,
-    k: usize,
-    inner: &[[f64; 3]],
-    s: &[[f64; 3]],
-    moved: (u32, [f64; 3]),
-) -> f64 {
-    let outer = |i: u32| if i == moved.0 { moved.1 } else { s[i as usize] };
+/// layers `lower` and `upper` is from having a face that points into it:
+/// the least over its faces of the face's area vector dotted with the way
+/// from the cell's centre to the face's, in cubes of the face's side
+/// (checkMesh's face pyramids, with OpenFOAM's face and cell centres). The
+/// boundary layers' cells are judged by it.
+pub(super) fn cell_quality(wall: &Wall, k: usize, lower: &[[f64; 3]], upper: &[[f64; 3]]) -> f64 {
     with_prism(
         &wall.polys[k],
-        |i| inner[i as usize],
-        outer,
+        |i| lower[i as usize],
+        |i| upper[i as usize],
         wall.sides[k],
         |_, _, _, pyramid| pyramid,
     )

@@ -90,7 +90,7 @@ pub struct LayerPlan {
 
 impl LayerPlan {
     /// The most layers of any patch.
-    fn most(&self) -> u32 {
+    pub(super) fn most(&self) -> u32 {
         self.patches
             .iter()
             .flatten()
@@ -402,8 +402,8 @@ const GOOD: f64 = 0.05;
 
 /// Where a layer cell would be nearly flat or inverted, its points move
 /// step by step from their layers towards the even cut of the wall cell
-/// (`even`), which is as valid as the wall cell: per wall point the steps
-/// taken, the same on every rank (collective).
+/// (`even`), whose slabs `layer_points` made valid: per wall
+/// point the steps taken, the same on every rank (collective).
 fn spread_bad_columns(
     comm: &dyn Comm,
     wall: &Wall,
@@ -420,7 +420,9 @@ fn spread_bad_columns(
             a as f64 / SPREAD as f64,
         ),
     };
-    for _ in 0..SPREAD {
+    // A step of some points of a face can spoil a face beside it, which
+    // then steps too: rounds go on until no face that can still step is bad.
+    for _ in 0..SPREAD * SPREAD {
         let layers: Vec<Vec<[f64; 3]>> = (0..full.len())
             .map(|j| (0..nw).map(|i| at(&level, j, i)).collect())
             .collect();
@@ -435,16 +437,9 @@ fn spread_bad_columns(
                     .sum::<f64>()
                     / poly.len() as f64
                     / wall.sides[k];
-                let q = super::layer_points::cell_quality(
-                    wall,
-                    k,
-                    a,
-                    b,
-                    (poly[0], b[poly[0] as usize]),
-                );
-                q < GOOD * 0.5 * thick
+                super::layer_points::cell_quality(wall, k, a, b) < GOOD * 0.5 * thick
             });
-            if bad {
+            if bad && poly.iter().any(|&i| level[i as usize][0] < SPREAD) {
                 any[0] += 1;
                 for &i in poly {
                     bump[i as usize][0] = 1;
