@@ -122,6 +122,9 @@ impl Session {
             )
         });
         agree(&*self.comm, surface)?;
+        if self.config.mesh.conforming {
+            return self.snap_conforming(opts);
+        }
         let comm = self.comm.clone();
         let (mesh, surface) = (&mut self.mesh, &self.surface);
         let report = self.timer.time(&*comm, "snap", || match (mesh, surface) {
@@ -143,6 +146,17 @@ impl Session {
         self.mesh_generation += 1;
         self.snapped = Some((self.mesh_generation, report.clone()));
         Ok(report)
+    }
+
+    /// [`Session::snap`] of a conforming run: the conforming mesh of the
+    /// current mesh is built and snapped now ([`Session::gather_fe`]) and
+    /// is what the single-file writers write; the hanging-node mesh keeps
+    /// its lattice positions. Collective.
+    fn snap_conforming(&mut self, opts: &SnapOptions) -> Result<SnapReport> {
+        self.conforming_snap = Some((self.mesh_generation, *opts));
+        self.gathered = None;
+        self.gather_fe()?;
+        Ok(self.current_snap().cloned().unwrap_or_default())
     }
 
     /// The report of the snap of the current mesh, if it was snapped (not
