@@ -6,7 +6,7 @@ use std::path::Path;
 use crate::io::gathered::{gather, Gathered};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::pieces::pieces;
-use crate::mesh::snap::SnapReport;
+use crate::mesh::snap::{hexahedron_volume, SnapReport};
 use crate::parallel::comm::agree;
 
 use super::*;
@@ -108,6 +108,18 @@ impl Session {
             })?;
             self.report_phase(Some(report.snapped));
             self.observer.event(&Event::Snapped(&report));
+            // The snapped hexahedra's volume, rank 0's for every rank.
+            let mut kept = [match comm.rank() {
+                0 => c
+                    .elements
+                    .iter()
+                    .map(|h| hexahedron_volume(&h.map(|n| c.coordinates[n as usize])))
+                    .sum(),
+                _ => f64::NEG_INFINITY,
+            }];
+            comm.max_f64(&mut kept);
+            let e = self.volume_event_of(kept[0], &domain, self.config.mesh.keep, true);
+            self.observer.event(&e);
             self.snapped = Some((self.mesh_generation, report));
         }
         Ok(c)

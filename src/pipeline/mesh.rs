@@ -171,12 +171,24 @@ impl Session {
     /// The kept volume of `mesh` beside what a mesh keeping `keep` should
     /// fill, for the observer. Collective.
     fn volume_event(&self, mesh: &Mesh, keep: Keep, snapped: bool) -> Event<'static> {
+        let kept = kept_volume(&*self.comm, mesh);
+        self.volume_event_of(kept, mesh.domain(), keep, snapped)
+    }
+
+    /// The kept volume `kept` (of a mesh in `domain`) beside what a mesh
+    /// keeping `keep` should fill, for the observer.
+    pub(super) fn volume_event_of(
+        &self,
+        kept: f64,
+        domain: &crate::octree::domain::Domain,
+        keep: Keep,
+        snapped: bool,
+    ) -> Event<'static> {
         let reference = match self.surface_volume() {
             v if v > 0.0 => VolumeReference::of(keep),
             _ => VolumeReference::Domain,
         };
-        let kept = kept_volume(&*self.comm, mesh);
-        let expected = reference.volume(mesh.domain().volume(), self.surface_volume());
+        let expected = reference.volume(domain.volume(), self.surface_volume());
         Event::KeptVolume {
             kept,
             expected,
