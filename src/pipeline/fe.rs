@@ -83,15 +83,15 @@ impl Session {
         });
         let snap = self.conforming_snap.filter(|s| s.0 == self.mesh_generation);
         if let Some((_, opts)) = snap {
-            let surface = self.surface.as_ref().ok_or_else(|| {
+            let surface = self.surface.as_ref().map(|_| ()).ok_or_else(|| {
                 Error::new(
                     ErrorKind::State,
                     "snapping the conforming mesh needs the surface: load it again (it was \
                      released after meshing)",
                 )
             });
-            let surface = agree(&*comm, surface.map(|_| ())).map(|_| self.surface.as_ref());
-            let s = surface?.expect("agreed just now");
+            agree(&*comm, surface)?;
+            let s = self.surface.as_ref().expect("agreed just now");
             let spare = crate::parallel::cores::spare_core(&*comm);
             let report = self.timer.time(&*comm, "snap", || {
                 let local = match comm.rank() {

@@ -12,6 +12,10 @@
 //! Hanging nodes stay the mean of their dependencies, so the constraint
 //! stays exact.
 //!
+//! [`snap_conforming`] snaps a conforming mesh ([`crate::mesh::conforming`])
+//! on one process by the same steps (the `Snapper`'s), which take the
+//! hexahedra as connectivity alone.
+//!
 //! # Validity
 //!
 //! After the move every element touching a moved node is measured by its
