@@ -647,6 +647,194 @@ fn conforming_meshes_of_real_surfaces() {
     }
 }
 
+/// The triangles of a binary STL file.
+fn stl_triangles(path: &Path) -> Vec<[[f64; 3]; 3]> {
+    let bytes = std::fs::read(path).unwrap();
+    let n = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+    assert_eq!(bytes.len(), 84 + 50 * n, "{}: a binary STL", path.display());
+    let f = |at: usize| f64::from(f32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()));
+    (0..n)
+        .map(|t| {
+            let at = 84 + 50 * t + 12;
+            std::array::from_fn(|v| std::array::from_fn(|a| f(at + 12 * v + 4 * a)))
+        })
+        .collect()
+}
+
+/// The distance from `p` to triangle `t` (the closest point by the regions
+/// of the triangle's plane: vertices, edges, inside).
+fn triangle_distance(p: [f64; 3], t: &[[f64; 3]; 3]) -> f64 {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let seg = |a: [f64; 3], b: [f64; 3]| {
+        let (ab, ap) = (sub(b, a), sub(p, a));
+        let s = (dot(ap, ab) / dot(ab, ab).max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+        let q = [a[0] + s * ab[0], a[1] + s * ab[1], a[2] + s * ab[2]];
+        dot(sub(p, q), sub(p, q)).sqrt()
+    };
+    let [a, b, c] = *t;
+    let (ab, ac) = (sub(b, a), sub(c, a));
+    let n = [
+        ab[1] * ac[2] - ab[2] * ac[1],
+        ab[2] * ac[0] - ab[0] * ac[2],
+        ab[0] * ac[1] - ab[1] * ac[0],
+    ];
+    let nn = dot(n, n);
+    let edges = seg(a, b).min(seg(b, c)).min(seg(c, a));
+    if nn == 0.0 {
+        return edges;
+    }
+    // Inside the prism over the triangle: the distance to the plane.
+    let side = |u: [f64; 3], v: [f64; 3]| {
+        let (e, w) = (sub(v, u), sub(p, u));
+        let x = [
+            e[1] * w[2] - e[2] * w[1],
+            e[2] * w[0] - e[0] * w[2],
+            e[0] * w[1] - e[1] * w[0],
+        ];
+        dot(x, n) >= 0.0
+    };
+    if side(a, b) && side(b, c) && side(c, a) {
+        dot(sub(p, a), n).abs() / nn.sqrt()
+    } else {
+        edges
+    }
+}
+
+/// The triangles of a surface binned by their boxes grown by `tol` in a
+/// grid: a point within `tol` of a triangle finds it in its own cell.
+struct Near {
+    tris: Vec<[[f64; 3]; 3]>,
+    cell: f64,
+    bins: std::collections::HashMap<[i64; 3], Vec<u32>>,
+    tol: f64,
+}
+
+impl Near {
+    fn new(tris: Vec<[[f64; 3]; 3]>, tol: f64) -> Near {
+        let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
+        for p in tris.iter().flatten() {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        let cell = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max) / 64.0;
+        let mut bins: std::collections::HashMap<[i64; 3], Vec<u32>> = Default::default();
+        for (i, t) in tris.iter().enumerate() {
+            let b = |a: usize, f: fn(f64, f64) -> f64, d: f64| {
+                ((t.iter().map(|p| p[a]).fold(t[0][a], f) + d) / cell).floor() as i64
+            };
+            let (l, h) = (
+                [0, 1, 2].map(|a| b(a, f64::min, -tol)),
+                [0, 1, 2].map(|a| b(a, f64::max, tol)),
+            );
+            for x in l[0]..=h[0] {
+                for y in l[1]..=h[1] {
+                    for z in l[2]..=h[2] {
+                        bins.entry([x, y, z]).or_default().push(i as u32);
+                    }
+                }
+            }
+        }
+        Near {
+            tris,
+            cell,
+            bins,
+            tol,
+        }
+    }
+
+    /// Whether `p` is within the tolerance of the surface.
+    fn on(&self, p: [f64; 3]) -> bool {
+        let key = p.map(|x| (x / self.cell).floor() as i64);
+        self.bins.get(&key).is_some_and(|v| {
+            v.iter()
+                .any(|&i| triangle_distance(p, &self.tris[i as usize]) <= self.tol)
+        })
+    }
+}
+
+/// `--conforming --snap`: the conforming solid of the sphere and the bunny
+/// at level 5 snapped. Read back from the `.msh` alone: conforming, every
+/// hexahedron's eight corner Jacobians positive, and most of the wall's
+/// nodes (every node of a boundary quadrilateral: a solid inside the
+/// domain has no face on its sides) within 1e-9 of the model's size of
+/// the surface's triangles (at least the snapped ones the run reports; the
+/// rest sit at the staircase's convex corners, where the snap steps back).
+/// The least fractions: all of the sphere's wall, and 85 % of the bunny's
+/// (89.3 % measured: 1,308 of 1,464, 149 of the 156 others at cells with
+/// two or three wall faces). The files are the same on 1 and 2 ranks, and
+/// CalculiX's patch test passes on the snapped deck.
+#[test]
+fn conforming_meshes_snapped_to_the_surface() {
+    let sphere = octmesh::internals::geometry::shapes::default_sphere();
+    let sphere = sphere.triangles().iter().map(|t| t.v).collect();
+    let mut cases = vec![("sphere".to_string(), sphere, 0.999)];
+    if let Some(bunny) = shared_model("bunny.stl") {
+        let tris = stl_triangles(&bunny);
+        cases.push((bunny.to_str().unwrap().to_string(), tris, 0.85));
+    }
+    for (input, tris, least) in cases {
+        let name = Path::new(&input).file_stem().unwrap().to_str().unwrap();
+        let dir = scratch(&format!("fe_files_conforming_snapped_{name}"));
+        let args = ["--level", "5", "--keep", "inside", "--conforming", "--snap"];
+        let (inp, msh, stats) = mesh(1, &dir.join("np1"), &input, &args);
+        let c = common::conformity::check(&msh);
+        assert!(c.conforming(), "{name}: not conforming: {c:?}");
+        assert!(c.min_scaled_jacobian > 0.0, "{name}: {c:?}");
+        let m = common::conformity::read_msh(&msh);
+        let wall: BTreeSet<u64> = m.quads.iter().flatten().copied().collect();
+        // The model's size: the longest side of its box.
+        let size = (0..3)
+            .map(|a| {
+                let c = tris.iter().flatten().map(|p| p[a]);
+                c.clone().fold(f64::MIN, f64::max) - c.fold(f64::MAX, f64::min)
+            })
+            .fold(0.0, f64::max);
+        let near = Near::new(tris, 1e-9 * size);
+        let on = wall.iter().filter(|t| near.on(m.points[t])).count();
+        let snap = &stats["snap"];
+        println!(
+            "conforming {name} snapped: {on} of {} wall nodes on the surface, report {snap}, least \
+             scaled Jacobian {:.4}",
+            wall.len(),
+            c.min_scaled_jacobian
+        );
+        assert_eq!(
+            common::int(snap, "surface_nodes"),
+            wall.len() as u64,
+            "{name}"
+        );
+        assert!(on as u64 >= common::int(snap, "snapped"), "{name}: {on}");
+        assert!(
+            on as f64 >= least * wall.len() as f64,
+            "{name}: {on} of {}",
+            wall.len()
+        );
+        assert!(
+            (c.min_scaled_jacobian - common::num(snap, "min_scaled_jacobian")).abs() < 1e-9,
+            "{name}"
+        );
+        let text = std::fs::read_to_string(&inp).unwrap();
+        let (i, m2, _) = mesh(2, &dir.join("np2"), &input, &args);
+        assert!(
+            std::fs::read(i).unwrap() == text.as_bytes(),
+            "{name}: .inp, 2 ranks"
+        );
+        assert!(
+            std::fs::read(m2).unwrap() == std::fs::read(&msh).unwrap(),
+            "{name}: .msh, 2 ranks"
+        );
+        if let Some(ccx) = ccx() {
+            let (error, interior) = patch_test(&ccx, &dir.join("patch"), &text);
+            println!("conforming {name} snapped: patch test error {error:.3e} over {interior} interior nodes");
+            assert!(interior > 0);
+            assert!(error <= 1e-8, "{name}: patch test off by {error:e}");
+        }
+    }
+}
+
 /// What `--conforming` does not write is an error on every rank.
 #[test]
 fn conforming_refuses_what_it_cannot_do() {

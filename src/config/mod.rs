@@ -645,7 +645,6 @@ impl Config {
             if self.mesh.conforming {
                 let o = &self.output;
                 let other = [
-                    ("mesh.snap", self.mesh.snap),
                     ("mesh.wall_layer", self.wall_layer()),
                     ("output.vtu", o.vtu.is_some()),
                     ("output.quality", o.quality),

@@ -769,8 +769,8 @@ options! {
     /// Write --gmsh, --abaqus, --exodus, --cgns and --openfoam (one serial
     /// case) as conforming all-hexahedral meshes (no hanging nodes) from
     /// refinement templates, refining where no template fits (around a
-    /// surface's staircase: up to the finest level); without --snap, --out
-    /// or --quality
+    /// surface's staircase: up to the finest level); --snap snaps the
+    /// conforming mesh; without --out or --quality
     Mesh "conforming": Switch bool,
     keys ["mesh.conforming"],
     default none,
@@ -839,7 +839,7 @@ options! {
     /// Snap the mesh to the surface: the nodes on the surface move onto
     /// it (sharp edges kept), scaled back where an element would be
     /// invalid, the layers next to it relaxed (needs --keep inside or
-    /// outside)
+    /// outside; with --conforming the conforming mesh is snapped)
     Mesh "snap": Switch bool,
     keys ["mesh.snap"],
     default none,

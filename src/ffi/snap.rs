@@ -56,9 +56,12 @@ impl From<&SnapReport> for octmesh_snap_report_t {
 /// `iterations` iterations. Hanging nodes stay the mean of their
 /// dependencies. The coordinates, the VTU and the OpenFOAM output then
 /// give the moved positions (arrays handed out before are replaced). The
-/// positions are the same bits on any number of ranks. Needs a mesh kept
-/// inside or outside and the surface. Collective; every rank must pass the
-/// same values.
+/// positions are the same bits on any number of ranks. With
+/// `octmesh_mesh_set_conforming` on, the conforming mesh is built and
+/// snapped instead (by rank 0, with the same rules and report): the
+/// single-file meshes written next are snapped, the mesh's own arrays keep
+/// the lattice positions. Needs a mesh kept inside or outside and the
+/// surface. Collective; every rank must pass the same values.
 ///
 /// \param[in] h              the handle
 /// \param[in] feature_angle  degrees, 0 to 180 (30 is usual; 180: no

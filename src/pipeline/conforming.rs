@@ -2,18 +2,23 @@
 //! in place of the hanging-node mesh in the single-file finite-element
 //! files. Rank 0 builds it from every rank's leaves (8 bytes a leaf) and
 //! takes the patches and zones from the gathered hanging-node mesh of the
-//! same leaves, so the files are the same on any number of ranks.
+//! same leaves, so the files are the same on any number of ranks. With a
+//! snap, rank 0 snaps it ([`crate::mesh::snap::snap_conforming`]).
 
 use std::rc::Rc;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::hash::FoldMap;
+use crate::geometry::Surface;
 use crate::io::gathered::{match_faces, Gathered, GatheredFace, ABAQUS_FACE, ABAQUS_FACE_NODES};
 use crate::mesh::conforming::build::{build, Conforming};
 use crate::mesh::conforming::MACRO;
+use crate::mesh::faces::SURFACE_PATCH;
+use crate::mesh::snap::{snap_conforming, SnapOptions, SnapReport};
 use crate::octree::domain::Domain;
 use crate::octree::octant::{morton_encode, Octant};
 use crate::parallel::comm::{Comm, SerialComm};
+use crate::refine::SurfaceIndex;
 
 /// The kept bit of a leaf key sent to rank 0 (keys use 62 bits).
 const KEPT: u64 = 1 << 63;
@@ -21,15 +26,15 @@ const KEPT: u64 = 1 << 63;
 /// Rank 0: the conforming mesh of the octree whose local leaves are
 /// `leaves` and kept ones `elements` (a sorted subset), as a gathered mesh
 /// with `hanging`'s patches and zones, and the macro cells the closure
-/// split; other ranks: an empty one and 0. Errors only on rank 0 (the
-/// caller agrees them). Collective.
+/// split, and the conforming mesh itself (for the snap); other ranks: empty
+/// ones and 0. Errors only on rank 0 (the caller agrees them). Collective.
 pub(super) fn conforming_gathered(
     comm: &dyn Comm,
     leaves: &[Octant],
     elements: &[Octant],
     domain: &Domain,
     hanging: &Gathered,
-) -> Result<(Gathered, u64)> {
+) -> Result<(Gathered, u64, Conforming)> {
     let mut send = Vec::with_capacity(leaves.len());
     let mut e = elements.iter().peekable();
     for &o in leaves {
@@ -40,7 +45,7 @@ pub(super) fn conforming_gathered(
     counts[0] = send.len();
     let (all, _) = comm.alltoallv_u64(&send, &counts);
     if comm.rank() != 0 {
-        return Ok((Gathered::default(), 0));
+        return Ok((Gathered::default(), 0, Conforming::default()));
     }
     let leaves: Vec<Octant> = all.iter().map(|&k| Octant::from_key(k & !KEPT)).collect();
     let kept: Vec<Octant> = all
@@ -64,7 +69,74 @@ pub(super) fn conforming_gathered(
     Ok((
         to_gathered(&mesh, &kept, domain, hanging)?,
         mesh.refined as u64,
+        mesh,
     ))
+}
+
+/// Snaps `g`, the gathered form of the conforming mesh `mesh`
+/// ([`snap_conforming`]): its nodes on a surface patch (patches from
+/// [`SURFACE_PATCH`] up) and on no side of the domain move onto
+/// `surface`, `g`'s coordinates become the snapped ones. Rank 0's work
+/// (the caller shares the report: [`share_report`]).
+pub(super) fn snap_gathered(
+    g: &mut Gathered,
+    mesh: &Conforming,
+    domain: &Domain,
+    surface: &Surface,
+    index: Option<&SurfaceIndex>,
+    opts: &SnapOptions,
+    spare: bool,
+) -> Result<SnapReport> {
+    let mut masks = vec![0u64; g.coordinates.len()];
+    for (p, nodes) in g.patch_nodes.iter().enumerate() {
+        let bit = 1u64 << p.min(SURFACE_PATCH as usize);
+        for &n in nodes {
+            masks[n as usize] |= bit;
+        }
+    }
+    let (pos, report) = snap_conforming(mesh, surface, index, domain, &masks, opts, spare)?;
+    g.coordinates = pos;
+    Ok(report)
+}
+
+/// Rank 0's snap report `r` on every rank (the other ranks pass the
+/// default). Collective.
+pub(super) fn share_report(comm: &dyn Comm, r: SnapReport) -> SnapReport {
+    let mut n = [
+        r.surface_nodes,
+        r.snapped,
+        r.partial,
+        r.unsnapped,
+        r.feature_nodes,
+        r.relaxed_nodes,
+        r.reported_elements,
+        r.partial_by_wall_faces[0],
+        r.partial_by_wall_faces[1],
+        r.partial_by_wall_faces[2],
+        r.unsnapped_by_wall_faces[0],
+        r.unsnapped_by_wall_faces[1],
+        r.unsnapped_by_wall_faces[2],
+        u64::from(r.iterations),
+    ];
+    comm.sum_u64(&mut n);
+    let mut least = [match comm.rank() {
+        0 => -r.min_scaled_jacobian,
+        _ => f64::NEG_INFINITY,
+    }];
+    comm.max_f64(&mut least);
+    SnapReport {
+        surface_nodes: n[0],
+        snapped: n[1],
+        partial: n[2],
+        unsnapped: n[3],
+        feature_nodes: n[4],
+        relaxed_nodes: n[5],
+        reported_elements: n[6],
+        partial_by_wall_faces: [n[7], n[8], n[9]],
+        unsnapped_by_wall_faces: [n[10], n[11], n[12]],
+        min_scaled_jacobian: -least[0],
+        iterations: n[13] as u32,
+    }
 }
 
 /// The gathered form of `mesh`: positions in user units, boundary faces

@@ -6,6 +6,7 @@ use std::path::Path;
 use crate::io::gathered::{gather, Gathered};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::pieces::pieces;
+use crate::mesh::snap::{hexahedron_volume, SnapReport};
 use crate::parallel::comm::agree;
 
 use super::*;
@@ -48,7 +49,9 @@ impl Session {
 
     /// The conforming mesh of the current mesh's octree and kept leaves
     /// in place of the gathered hanging-node mesh `g`
-    /// ([`super::conforming`]). Phase `conforming`.
+    /// ([`super::conforming`]), snapped when [`Session::snap`] asked for it
+    /// on this mesh (rank 0 snaps it; the report is every rank's). Phases
+    /// `conforming` and `snap`.
     fn conforming(&mut self, g: Gathered) -> Result<Gathered> {
         let comm = self.comm.clone();
         self.tree_or_state()?;
@@ -67,7 +70,8 @@ impl Session {
                 &g,
             )
         });
-        let (c, refined) = agree(&*comm, c)?;
+        let domain = *domain;
+        let (mut c, refined, built) = agree(&*comm, c)?;
         self.report_phase(Some(c.elements.len() as u64));
         // Rank 0 built it: its counts for every rank's observer.
         let mut n = [c.elements.len() as u64, g.elements.len() as u64, refined];
@@ -77,6 +81,47 @@ impl Session {
             elements: n[1],
             refined: n[2],
         });
+        let snap = self.conforming_snap.filter(|s| s.0 == self.mesh_generation);
+        if let Some((_, opts)) = snap {
+            let surface = self.surface.as_ref().map(|_| ()).ok_or_else(|| {
+                Error::new(
+                    ErrorKind::State,
+                    "snapping the conforming mesh needs the surface: load it again (it was \
+                     released after meshing)",
+                )
+            });
+            agree(&*comm, surface)?;
+            let s = self.surface.as_ref().expect("agreed just now");
+            let spare = crate::parallel::cores::spare_core(&*comm);
+            let report = self.timer.time(&*comm, "snap", || {
+                let local = match comm.rank() {
+                    0 => {
+                        // The classification's index, if it was made for this cube.
+                        let index = (s.index_domain == domain).then_some(&s.index);
+                        super::conforming::snap_gathered(
+                            &mut c, &built, &domain, &s.surface, index, &opts, spare,
+                        )
+                    }
+                    _ => Ok(SnapReport::default()),
+                };
+                agree(&*comm, local).map(|r| super::conforming::share_report(&*comm, r))
+            })?;
+            self.report_phase(Some(report.snapped));
+            self.observer.event(&Event::Snapped(&report));
+            // The snapped hexahedra's volume, rank 0's for every rank.
+            let mut kept = [match comm.rank() {
+                0 => c
+                    .elements
+                    .iter()
+                    .map(|h| hexahedron_volume(&h.map(|n| c.coordinates[n as usize])))
+                    .sum(),
+                _ => f64::NEG_INFINITY,
+            }];
+            comm.max_f64(&mut kept);
+            let e = self.volume_event_of(kept[0], &domain, self.config.mesh.keep, true);
+            self.observer.event(&e);
+            self.snapped = Some((self.mesh_generation, report));
+        }
         Ok(c)
     }
 

@@ -172,6 +172,9 @@ pub struct Session {
     quality: Option<(u64, crate::mesh::quality::Quality)>,
     /// The snap that made the mesh of a generation.
     snapped: Option<(u64, crate::mesh::snap::SnapReport)>,
+    /// The snap asked for the conforming mesh of a generation's mesh
+    /// ([`Session::snap`] with `mesh.conforming`): made when it is built.
+    conforming_snap: Option<(u64, crate::mesh::snap::SnapOptions)>,
     /// The boundary layers of the last OpenFOAM case written with them.
     layer_report: Option<crate::io::openfoam::LayerReport>,
     /// The named parts of the surface (patches), kept when it is released.
@@ -209,6 +212,7 @@ impl Session {
             gathered: None,
             quality: None,
             snapped: None,
+            conforming_snap: None,
             layer_report: None,
             parts: Vec::new(),
             data: None,

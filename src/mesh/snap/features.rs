@@ -9,7 +9,7 @@ use crate::geometry::hash::{FoldMap, FoldSet};
 use crate::geometry::vector::{dot, norm};
 use crate::geometry::{Aabb, Surface, Triangle};
 use crate::mesh::dual::Bits;
-use crate::mesh::Mesh;
+use crate::octree::domain::Domain;
 use crate::refine::SurfaceIndex;
 
 use super::nearest::{NearTriangles, NEAR_REACH};
@@ -153,11 +153,11 @@ impl<'s> Target<'s> {
     /// `reach` is the largest feature reach any query will use
     /// ([`FEATURE_REACH`] times the largest cell); the features are those
     /// for the feature angle (degrees) that meet `region`, or `found`. `index`,
-    /// if given, is `surface` in the lattice units of `mesh`'s domain.
+    /// if given, is `surface` in the lattice units of `domain`.
     pub(super) fn new(
         surface: &Surface,
         index: Option<&'s SurfaceIndex>,
-        mesh: &Mesh,
+        domain: &Domain,
         feature_angle_deg: f64,
         region: &Region,
         reach: f64,
@@ -166,7 +166,7 @@ impl<'s> Target<'s> {
         let (tris, bvh) = match index {
             Some(ix) => (Cow::Borrowed(&ix.tris[..]), Cow::Borrowed(&ix.bvh)),
             None => {
-                let d = mesh.domain();
+                let d = domain;
                 let tris: Vec<Triangle> = surface
                     .triangles()
                     .iter()

@@ -12,6 +12,10 @@
 //! Hanging nodes stay the mean of their dependencies, so the constraint
 //! stays exact.
 //!
+//! [`snap_conforming`] snaps a conforming mesh ([`crate::mesh::conforming`])
+//! on one process by the same steps (the `Snapper`'s), which take the
+//! hexahedra as connectivity alone.
+//!
 //! # Validity
 //!
 //! After the move every element touching a moved node is measured by its
@@ -60,6 +64,7 @@
 //! Hanging nodes are the mean of their dependencies taken in the order of
 //! their lattice points.
 
+mod conforming;
 mod features;
 mod fv;
 mod measure;
@@ -72,13 +77,13 @@ mod wide;
 use crate::error::Result;
 use crate::geometry::cells::corner_scaled_jacobians;
 use crate::geometry::{Surface, Triangle};
-use crate::mesh::dual::Bits;
 use crate::mesh::faces::SURFACE_PATCH;
 use crate::mesh::Mesh;
 use crate::parallel::comm::Comm;
 use crate::refine::SurfaceIndex;
 
 pub use crate::geometry::cells::{hexahedron_volume, hexahedron_volume_centre, quad_area_centre};
+pub use conforming::snap_conforming;
 pub use fv::FvGeometry;
 pub use options::{
     SnapOptions, SnapReport, DEFAULT_FEATURE_ANGLE, DEFAULT_ITERATIONS, DEFAULT_LAYERS,
@@ -87,10 +92,8 @@ pub use options::{
 };
 
 use features::{features, Region, Target};
-use measure::corner_verdict;
-use nearest::NearTriangles;
 use options::{CHUNK, SPLIT_AT};
-use snapper::Snapper;
+use snapper::{Cells, Snapper};
 
 /// The corners of a hexahedron's faces, in VTK order.
 const HEX_FACES: [[usize; 4]; 6] = [
@@ -204,35 +207,17 @@ impl Mesh {
                         (d, h.len() as u8)
                     })
                     .collect();
-                let s = Snapper {
-                    mesh: self,
-                    comm,
-                    spare,
-                    wide,
-                    lists: if comm.size() > 1 {
-                        self.exchange_lists()
-                    } else {
-                        Vec::new()
-                    },
-                    ni,
-                    pos: lattice_u.iter().map(|q| q.map(f64::from)).collect(),
-                    lattice: lattice_u,
-                    deps,
-                    snap: vec![false; ni],
-                    target: vec![[0.0; 3]; ni],
-                    step: vec![STEPS; ni],
-                    climbing: vec![true; ni],
-                    layer: vec![false; ni],
-                    active: Vec::new(),
-                    adj_start: Vec::new(),
-                    adj: Vec::new(),
-                    side: Vec::new(),
-                    min_jacobian: opts.min_jacobian,
-                    least: vec![f64::NAN; self.elements().len()],
-                    flags: Vec::new(),
-                    sums: Vec::new(),
-                    seen: Bits::new(self.elements().len()),
+                let lists = if comm.size() > 1 {
+                    self.exchange_lists()
+                } else {
+                    Vec::new()
                 };
+                let cells = Cells {
+                    conn: self.connectivity(),
+                    owned: self.num_owned(),
+                    octants: Some(self.elements()),
+                };
+                let s = Snapper::new(cells, comm, (spare, wide), lists, ni, lattice_u, deps, opts);
                 // The finest element side at each node, over the ranks.
                 let mut side = vec![u64::MAX; ni];
                 for (e, c) in self.elements().iter().zip(self.connectivity()) {
@@ -257,9 +242,6 @@ impl Mesh {
                 (masks, s, side, reach, region)
             },
         );
-        let ni = s.ni;
-        let on_surface = |n: usize| is_on_surface(masks[n]);
-        let queried = |n: usize| is_queried(masks[n], side[n]);
         let found = found.map(|(edges, corners)| {
             let meets = |t: &Triangle| region.meets(&t.aabb());
             (
@@ -270,168 +252,58 @@ impl Mesh {
         let target_surface = Target::new(
             surface,
             index,
-            self,
+            self.domain(),
             opts.feature_angle_deg,
             &region,
             reach,
             found,
         );
-
-        let mut feature = vec![false; ni];
         // In the Morton order of their lattice points: each query's
         // neighbours come next, and the gathered triangles serve more.
         // (One node per lattice point: the keys are distinct.)
-        let mut order: Vec<u32> = (0..ni as u32).filter(|&n| queried(n as usize)).collect();
+        let mut order: Vec<u32> = (0..s.ni as u32)
+            .filter(|&n| is_queried(masks[n as usize], side[n as usize]))
+            .collect();
         let mut keys: Vec<u64> = order
             .iter()
             .map(|&n| crate::mesh::numbering::node_key(s.lattice[n as usize]))
             .collect();
         crate::octree::sort::radix_sort_pairs_bits(&mut keys, &mut order, 0, 64);
         drop(keys);
-        // A node's target depends on nothing but its point: the pieces of
-        // the order may go to two threads. The elements that may change
-        // are found meanwhile, from the nodes queried (nearly all of them
-        // find a target).
-        let spare_here = s.spare && order.len() >= SPLIT_AT;
-        let query = |part: std::ops::Range<usize>| {
-            let mut near_tris = NearTriangles {
-                wide,
-                ..NearTriangles::default()
-            };
-            order[part]
-                .iter()
-                .map(|&n| {
-                    let n = n as usize;
-                    let x = s.lattice[n].map(f64::from);
-                    target_surface.of(x, side[n] as f64, &mut near_tris)
-                })
-                .collect::<Vec<_>>()
-        };
-        let (targets, (layer, active, adj_start, adj)) =
-            crate::parallel::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
-                s.moving_elements(&queried, &masks, opts)
-            });
-        for (&n, found) in order.iter().zip(targets.into_iter().flatten()) {
-            let n = n as usize;
-            if let Some((t, f)) = found {
-                s.snap[n] = true;
-                s.target[n] = t;
-                s.step[n] = 0;
-                feature[n] = f;
-            }
-        }
-        drop(target_surface);
-        s.layer = layer;
-        s.active = active;
-        s.adj_start = adj_start;
-        s.adj = adj;
-        s.side = side;
-
-        s.scale_back();
-        let mut relaxed = vec![false; ni];
-        let mut iterations = 0;
-        for _ in 0..opts.iterations {
-            iterations += 1;
-            let moved = s.relax();
-            if moved == 0 {
-                break;
-            }
-        }
-        for (n, r) in relaxed.iter_mut().enumerate() {
-            *r = s.layer[n] && s.pos[n] != s.lattice(n);
-        }
-        s.place_surface_nodes();
-        s.update_hanging();
-
-        // The most wall faces (faces whose four corners are on the surface
-        // patch) of an element around each node, over the ranks: two or
-        // three mark a convex corner of the staircase, which snapping
-        // flattens.
-        let mut walls = vec![0u8; ni];
-        for c in self.connectivity() {
-            let w = HEX_FACES
-                .iter()
-                .filter(|f| f.iter().all(|&v| on_surface(c[v] as usize)))
-                .count()
-                .min(3) as u8;
-            for &n in c {
-                if let Some(x) = walls.get_mut(n as usize) {
-                    *x = (*x).max(w);
-                }
-            }
-        }
-        s.exchange(&mut walls, 1, |a, b| *a = (*a).max(b as u8));
-
-        // Figures, each node once (by its owner).
-        let owned = self.num_owned();
-        let mut counts = [0u64; 14];
-        for n in 0..owned {
-            if on_surface(n) {
-                counts[0] += 1;
-                let w = walls[n].max(1) as usize - 1;
-                match (s.snap[n], s.step[n]) {
-                    (true, 0) => {
-                        counts[1] += 1;
-                        counts[4] += feature[n] as u64;
-                    }
-                    (true, k) if k < STEPS => {
-                        counts[2] += 1;
-                        counts[8 + w] += 1;
-                    }
-                    _ => {
-                        counts[3] += 1;
-                        counts[11 + w] += 1;
-                    }
-                }
-            }
-            counts[6] += relaxed[n] as u64;
-        }
-        for &e in &s.active {
-            let mut reported = false;
-            s.support(e as usize, |n| reported |= on_surface(n) && s.step[n] > 0);
-            counts[7] += reported as u64;
-        }
-        comm.sum_u64(&mut counts);
+        let (feature, relaxed, iterations) = s.run(target_surface, &order, &masks, side, opts, 1.0);
+        let counts = s.figures(&masks, &feature, &relaxed);
         let domain = *self.domain();
-        let active = std::mem::take(&mut s.active);
-        // The minimum in user units, as the quality measures it. The
-        // lattice positions' figures (no roots), as last measured, pick
-        // the elements that may hold it: the two differ by rounding only,
-        // far inside the margin.
-        let squared: Vec<f64> = active.iter().map(|&e| s.least[e as usize]).collect();
-        let pos = s.pos;
-        debug_assert!(active.iter().zip(&squared).all(|(&e, &q)| {
-            let p = self.connectivity()[e as usize].map(|n| pos[n as usize]);
-            corner_verdict(&p, 0.0).1 == q
-        }));
-        let least = squared.iter().copied().fold(f64::INFINITY, f64::min);
-        let near = least + 1e-9 * least.abs() + 1e-12;
+        let near = s.near_least();
+        let pos = std::mem::take(&mut s.pos);
         self.moved = Some(pos.iter().map(|&p| domain.from_lattice(p)).collect());
         self.moved_lattice = Some(pos);
-        let mut min_j = 1.0f64;
-        for (&e, &q) in active.iter().zip(&squared) {
-            if q <= near {
-                let p = self.element_corners(e as usize, None);
-                for j in corner_scaled_jacobians(&p) {
-                    min_j = min_j.min(j);
-                }
-            }
-        }
-        let mut worst = [-min_j];
-        comm.max_f64(&mut worst);
-        Ok(SnapReport {
-            surface_nodes: counts[0],
-            snapped: counts[1],
-            partial: counts[2],
-            unsnapped: counts[3],
-            feature_nodes: counts[4],
-            relaxed_nodes: counts[6],
-            reported_elements: counts[7],
-            partial_by_wall_faces: [counts[8], counts[9], counts[10]],
-            unsnapped_by_wall_faces: [counts[11], counts[12], counts[13]],
-            min_scaled_jacobian: -worst[0],
-            iterations,
-        })
+        let min_j = near
+            .iter()
+            .flat_map(|&e| corner_scaled_jacobians(&self.element_corners(e as usize, None)))
+            .fold(1.0f64, f64::min);
+        Ok(report(comm, counts, min_j, iterations))
+    }
+}
+
+/// The report from the figures of [`Snapper::figures`] (each rank's) and
+/// each rank's least scaled Jacobian: sums and the minimum over the ranks.
+/// Collective.
+fn report(comm: &dyn Comm, mut counts: [u64; 14], min_j: f64, iterations: u32) -> SnapReport {
+    comm.sum_u64(&mut counts);
+    let mut worst = [-min_j];
+    comm.max_f64(&mut worst);
+    SnapReport {
+        surface_nodes: counts[0],
+        snapped: counts[1],
+        partial: counts[2],
+        unsnapped: counts[3],
+        feature_nodes: counts[4],
+        relaxed_nodes: counts[6],
+        reported_elements: counts[7],
+        partial_by_wall_faces: [counts[8], counts[9], counts[10]],
+        unsnapped_by_wall_faces: [counts[11], counts[12], counts[13]],
+        min_scaled_jacobian: -worst[0],
+        iterations,
     }
 }
 

@@ -3,16 +3,33 @@
 
 use crate::geometry::cells::{corner_coords, CORNER_EDGES, VTK_TO_MORTON};
 use crate::mesh::dual::Bits;
-use crate::mesh::Mesh;
+use crate::octree::octant::Octant;
 use crate::parallel::comm::Comm;
 
+use super::features::Target;
 use super::measure::Measure;
+use super::nearest::NearTriangles;
 use super::options::FIXED;
 use super::{mean, SnapOptions, CHUNK, FRACTIONS, RELAX_TOLERANCE, SPLIT_AT, STEPS};
 
-/// The state of one snap: positions in lattice units, per local node.
+/// The hexahedra a snap moves the corners of.
+#[derive(Clone, Copy)]
+pub(super) struct Cells<'a> {
+    /// Each element's nodes, VTK order.
+    pub(super) conn: &'a [[u32; 8]],
+    /// The nodes below this are the rank's own (the figures count them).
+    pub(super) owned: usize,
+    /// The hanging-node mesh's elements as octants, whose anchors and
+    /// sides give their corners' lattice points without fetching them
+    /// from all over memory; none for a mesh of other hexahedra (the
+    /// corners' points are read).
+    pub(super) octants: Option<&'a [Octant]>,
+}
+
+/// The state of one snap: positions in lattice units (or a fixed multiple
+/// of them), per local node.
 pub(super) struct Snapper<'a> {
-    pub(super) mesh: &'a Mesh,
+    pub(super) cells: Cells<'a>,
     pub(super) comm: &'a dyn Comm,
     /// Whether a second thread may take pieces of the long passes
     /// ([`crate::parallel::cores::map_chunks`]).
@@ -62,10 +79,215 @@ pub(super) struct Snapper<'a> {
 }
 
 impl<'a> Snapper<'a> {
+    /// A snap of `cells` whose nodes are at `lattice` (the first `ni`
+    /// independent, the others the means of `deps`), nothing moved yet;
+    /// `threads` is (`spare`, `wide`), `lists` the node exchange lists.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn new(
+        cells: Cells<'a>,
+        comm: &'a dyn Comm,
+        (spare, wide): (bool, bool),
+        lists: Vec<(u32, Vec<u32>)>,
+        ni: usize,
+        lattice: Vec<[u32; 3]>,
+        deps: Vec<([u32; 4], u8)>,
+        opts: &SnapOptions,
+    ) -> Self {
+        let elements = cells.conn.len();
+        Snapper {
+            cells,
+            comm,
+            spare,
+            wide,
+            lists,
+            ni,
+            pos: lattice.iter().map(|q| q.map(f64::from)).collect(),
+            lattice,
+            deps,
+            snap: vec![false; ni],
+            target: vec![[0.0; 3]; ni],
+            step: vec![STEPS; ni],
+            climbing: vec![true; ni],
+            layer: vec![false; ni],
+            active: Vec::new(),
+            adj_start: Vec::new(),
+            adj: Vec::new(),
+            side: Vec::new(),
+            min_jacobian: opts.min_jacobian,
+            least: vec![f64::NAN; elements],
+            flags: Vec::new(),
+            sums: Vec::new(),
+            seen: Bits::new(elements),
+        }
+    }
+
+    /// The snap itself, once the nodes are known: the nodes `order` (the
+    /// queried ones, in the order they are queried) go to their targets on
+    /// `surface` where those are found, scaled back until every element is
+    /// valid, then the layers are relaxed and the partly snapped nodes step
+    /// up. `masks` are the nodes' patches, `side` the finest element side
+    /// at each independent node; positions are `scale` times lattice units
+    /// (the surface's). Returns per independent node whether it went to a
+    /// feature and whether the relaxation moved it, and the relaxation's
+    /// iterations. Collective.
+    pub(super) fn run(
+        &mut self,
+        surface: Target,
+        order: &[u32],
+        masks: &[u64],
+        side: Vec<u64>,
+        opts: &SnapOptions,
+        scale: f64,
+    ) -> (Vec<bool>, Vec<bool>, u32) {
+        let ni = self.ni;
+        let queried = |n: usize| super::is_queried(masks[n], side[n]);
+        let mut feature = vec![false; ni];
+        // A node's target depends on nothing but its point: the pieces of
+        // the order may go to two threads. The elements that may change
+        // are found meanwhile, from the nodes queried (nearly all of them
+        // find a target).
+        let spare_here = self.spare && order.len() >= SPLIT_AT;
+        let (wide, lattice) = (self.wide, &self.lattice);
+        let query = |part: std::ops::Range<usize>| {
+            let mut near_tris = NearTriangles {
+                wide,
+                ..NearTriangles::default()
+            };
+            order[part]
+                .iter()
+                .map(|&n| {
+                    let n = n as usize;
+                    let x = lattice[n].map(|c| f64::from(c) / scale);
+                    surface
+                        .of(x, side[n] as f64 / scale, &mut near_tris)
+                        .map(|(t, f)| (t.map(|c| c * scale), f))
+                })
+                .collect::<Vec<_>>()
+        };
+        let this = &*self;
+        let (targets, (layer, active, adj_start, adj)) =
+            crate::parallel::cores::map_chunks_after(spare_here, order.len(), CHUNK, query, || {
+                this.moving_elements(&queried, masks, opts)
+            });
+        for (&n, found) in order.iter().zip(targets.into_iter().flatten()) {
+            let n = n as usize;
+            if let Some((t, f)) = found {
+                self.snap[n] = true;
+                self.target[n] = t;
+                self.step[n] = 0;
+                feature[n] = f;
+            }
+        }
+        drop(surface);
+        self.layer = layer;
+        self.active = active;
+        self.adj_start = adj_start;
+        self.adj = adj;
+        self.side = side;
+
+        self.scale_back();
+        let mut relaxed = vec![false; ni];
+        let mut iterations = 0;
+        for _ in 0..opts.iterations {
+            iterations += 1;
+            let moved = self.relax();
+            if moved == 0 {
+                break;
+            }
+        }
+        for (n, r) in relaxed.iter_mut().enumerate() {
+            *r = self.layer[n] && self.pos[n] != self.lattice(n);
+        }
+        self.place_surface_nodes();
+        self.update_hanging();
+        (feature, relaxed, iterations)
+    }
+
+    /// The report's counts on this rank (`super::report` sums them):
+    /// surface nodes, snapped, partly, not, to features, -, relaxed,
+    /// reported elements, partly and not snapped by wall faces. `feature`
+    /// and `relaxed` are [`Snapper::run`]'s. Collective (one exchange).
+    pub(super) fn figures(&self, masks: &[u64], feature: &[bool], relaxed: &[bool]) -> [u64; 14] {
+        let ni = self.ni;
+        let on_surface = |n: usize| super::is_on_surface(masks[n]);
+        // The most wall faces (faces whose four corners are on the surface
+        // patch) of an element around each node, over the ranks: two or
+        // three mark a convex corner of the staircase, which snapping
+        // flattens.
+        let mut walls = vec![0u8; ni];
+        for c in self.cells.conn {
+            let w = super::HEX_FACES
+                .iter()
+                .filter(|f| f.iter().all(|&v| on_surface(c[v] as usize)))
+                .count()
+                .min(3) as u8;
+            for &n in c {
+                if let Some(x) = walls.get_mut(n as usize) {
+                    *x = (*x).max(w);
+                }
+            }
+        }
+        self.exchange(&mut walls, 1, |a, b| *a = (*a).max(b as u8));
+
+        // Figures, each node once (by its owner).
+        let mut counts = [0u64; 14];
+        for n in 0..self.cells.owned {
+            if on_surface(n) {
+                counts[0] += 1;
+                let w = walls[n].max(1) as usize - 1;
+                match (self.snap[n], self.step[n]) {
+                    (true, 0) => {
+                        counts[1] += 1;
+                        counts[4] += feature[n] as u64;
+                    }
+                    (true, k) if k < STEPS => {
+                        counts[2] += 1;
+                        counts[8 + w] += 1;
+                    }
+                    _ => {
+                        counts[3] += 1;
+                        counts[11 + w] += 1;
+                    }
+                }
+            }
+            counts[6] += relaxed[n] as u64;
+        }
+        for &e in &self.active {
+            let mut reported = false;
+            self.support(e as usize, |n| {
+                reported |= on_surface(n) && self.step[n] > 0
+            });
+            counts[7] += reported as u64;
+        }
+        counts
+    }
+
+    /// The active elements that may hold the least scaled Jacobian: the
+    /// lattice positions' figures (no roots), as last measured, pick them;
+    /// the figures in user units differ from them by rounding only, far
+    /// inside the margin.
+    pub(super) fn near_least(&self) -> Vec<u32> {
+        debug_assert!(self.active.iter().all(|&e| {
+            let p = self.cells.conn[e as usize].map(|n| self.pos[n as usize]);
+            super::measure::corner_verdict(&p, 0.0).1 == self.least[e as usize]
+        }));
+        let least = self
+            .active
+            .iter()
+            .map(|&e| self.least[e as usize])
+            .fold(f64::INFINITY, f64::min);
+        let near = least + 1e-9 * least.abs() + 1e-12;
+        self.active
+            .iter()
+            .copied()
+            .filter(|&e| self.least[e as usize] <= near)
+            .collect()
+    }
+
     /// Calls `f` with each independent node element `e`'s corners depend
     /// on (hanging corners through their dependencies; repeats possible).
     pub(super) fn support(&self, e: usize, mut f: impl FnMut(usize)) {
-        for &c in &self.mesh.connectivity()[e] {
+        for &c in &self.cells.conn[e] {
             let c = c as usize;
             if c < self.ni {
                 f(c);
@@ -98,7 +320,7 @@ impl<'a> Snapper<'a> {
     #[inline]
     pub(super) fn fetch_ahead(&self, list: &[u32], k: usize) {
         if let Some(&ahead) = list.get(k + 6) {
-            for &n in &self.mesh.connectivity()[ahead as usize] {
+            for &n in &self.cells.conn[ahead as usize] {
                 crate::mesh::prefetch(&self.pos, n as usize);
             }
         }
@@ -123,7 +345,7 @@ impl<'a> Snapper<'a> {
         flags: &mut [u8],
         flagged: &mut Vec<u32>,
     ) {
-        let c = &self.mesh.connectivity()[e];
+        let c = &self.cells.conn[e];
         let mut any = false;
         let mut flag = |node: u32, any: &mut bool| {
             let node = node as usize;
@@ -246,7 +468,7 @@ impl<'a> Snapper<'a> {
         masks: &[u64],
         opts: &SnapOptions,
     ) -> (Vec<bool>, Vec<u32>, Vec<u32>, Vec<u32>) {
-        let (ni, elements) = (self.ni, self.mesh.elements().len());
+        let (ni, elements) = (self.ni, self.cells.conn.len());
         // Byte flags: the passes look them up all over the nodes, and a
         // byte array stays in cache where a word array does not.
         let mut near: Vec<u8> = (0..ni).map(|n| surface(n) as u8).collect();
@@ -313,7 +535,7 @@ impl<'a> Snapper<'a> {
     /// first: every hanging node depending on a changed node is a corner of
     /// an element around it.
     pub(super) fn bad_among(&mut self, cands: &[u32]) -> Vec<(u32, u8)> {
-        let conn = self.mesh.connectivity();
+        let conn = self.cells.conn;
         let j2 = self.min_jacobian * self.min_jacobian;
         let (ni, deps) = (self.ni, &self.deps);
         let (fixed, hanging) = self.pos.split_at_mut(ni);
@@ -415,7 +637,7 @@ impl<'a> Snapper<'a> {
                 flagged.sort_unstable();
                 flagged.dedup();
             }
-            let owned = self.mesh.num_owned() as u32;
+            let owned = self.cells.owned as u32;
             let mut count = [flagged.iter().filter(|&&n| n < owned).count() as u64];
             self.comm.sum_u64(&mut count);
             if count[0] == 0 {
@@ -474,11 +696,11 @@ impl<'a> Snapper<'a> {
         // The hanging nodes are where their dependencies put them: the
         // measurements after every change placed those around it.
         let ni = self.ni;
-        let conn = self.mesh.connectivity();
+        let conn = self.cells.conn;
         let mut sums = std::mem::take(&mut self.sums);
         sums.clear();
         sums.resize(4 * ni, 0);
-        let elements = self.mesh.elements();
+        let octants = self.cells.octants;
         for (k, &e) in self.active.iter().enumerate() {
             self.fetch_ahead(&self.active, k);
             let c = &conn[e as usize];
@@ -491,11 +713,14 @@ impl<'a> Snapper<'a> {
             // The corners' lattice points from the element's anchor and
             // side (the same numbers as the nodes' own, without fetching
             // eight of them from all over memory).
-            let (anchor, side) = (elements[e as usize].coords(), elements[e as usize].side());
+            let cube = octants.map(|o| (o[e as usize].coords(), o[e as usize].side()));
             let mut d = [0.0f64; 3];
             for (v, &n) in c.iter().enumerate() {
                 let p = self.pos[n as usize];
-                let x = corner_coords(anchor, side, VTK_TO_MORTON[v]);
+                let x = match cube {
+                    Some((anchor, side)) => corner_coords(anchor, side, VTK_TO_MORTON[v]),
+                    None => self.lattice[n as usize],
+                };
                 debug_assert_eq!(x, self.lattice[n as usize]);
                 for a in 0..3 {
                     d[a] += p[a] - f64::from(x[a]);
@@ -553,10 +778,7 @@ impl<'a> Snapper<'a> {
                 s.pos[n] = old[k].1;
             }
         });
-        let mut count = [moved[..self.mesh.num_owned()]
-            .iter()
-            .filter(|&&m| m)
-            .count() as u64];
+        let mut count = [moved[..self.cells.owned].iter().filter(|&&m| m).count() as u64];
         self.comm.sum_u64(&mut count);
         count[0]
     }
