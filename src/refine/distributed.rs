@@ -371,6 +371,22 @@ fn ranks_of_box(first_cells: &[u64], lo: [f64; 3], hi: [f64; 3], out: &mut Vec<u
     }
 }
 
+/// Whether rank `r` receives from [`redistribute`] with a halo of at least
+/// `grow` - [`MARGIN`] every triangle whose box this accepts: the box `b`
+/// (lattice units) grown by `grow` may meet a cell of `r`'s range. A box
+/// holding an accepted box is accepted too, and a box within `grow` of a
+/// point of `r`'s cells (closed) is.
+pub fn box_reaches_rank(first_cells: &[u64], r: usize, b: &Aabb, grow: f64) -> bool {
+    let mut out = Vec::new();
+    ranks_of_box(
+        first_cells,
+        b.min.map(|x| x - grow),
+        b.max.map(|x| x + grow),
+        &mut out,
+    );
+    out.contains(&r)
+}
+
 /// The segments from an octant's centre to a child's centre that the
 /// classification walk of rank `r` follows outside its range of cells
 /// (`first_cells`): into each octant of the range's cover and each of their
