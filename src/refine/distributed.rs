@@ -567,6 +567,23 @@ mod tests {
     }
 
     #[test]
+    fn a_box_reaches_the_rank_of_a_point_within_the_growth() {
+        // Two ranks: the lower and upper halves in Morton order (z < h, z >= h).
+        let f = [0, CELLS / 2, CELLS];
+        let h = ROOT_LEN as f64 / 2.0;
+        let b = |lo: f64, hi: f64| Aabb {
+            min: [1.0, 1.0, lo],
+            max: [2.0, 2.0, hi],
+        };
+        // A box below the plane reaches the upper rank only when grown
+        // across it; a box holding it reaches whatever it reaches.
+        assert!(!box_reaches_rank(&f, 1, &b(h - 20.0, h - 10.0), 1.0));
+        assert!(box_reaches_rank(&f, 1, &b(h - 20.0, h - 10.0), 12.0));
+        assert!(box_reaches_rank(&f, 1, &b(h - 30.0, h - 10.0), 12.0));
+        assert!(box_reaches_rank(&f, 0, &b(h - 20.0, h - 10.0), 0.0));
+    }
+
+    #[test]
     fn path_segments_start_at_the_root() {
         let f = [0, CELLS / 8 + 5, CELLS];
         let s = path_segments(&f, 1);
