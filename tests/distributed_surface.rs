@@ -3,7 +3,8 @@
 //! whole surface, on 1 to 4 ranks: the same leaves, the same Gmsh file
 //! (classes decide which leaves are kept) and the same OpenFOAM case, for a
 //! binary sphere, the bunny (also with curvature levels and a distance
-//! band), the dragon and the open bunny under parity;
+//! band, and snapped), the dragon (also snapped, fluid and solid) and the
+//! open bunny under parity, with each rank's VTU;
 //! runs that need the whole surface (the winding rule, a file of several
 //! solids) keep it whole, say so in their statistics, and give the same
 //! files. The dragon's surface on 8 ranks costs each rank at most a quarter
@@ -26,6 +27,8 @@ struct Case {
     file: PathBuf,
     level: &'static str,
     args: Vec<&'static str>,
+    /// `--keep`.
+    keep: &'static str,
     distributes: bool,
 }
 
@@ -47,6 +50,7 @@ fn main() {
                     file: sphere.clone(),
                     level: "5",
                     args: parity.clone(),
+                    keep: "outside",
                     distributes: true,
                 },
                 Case {
@@ -54,18 +58,20 @@ fn main() {
                     file: halves,
                     level: "5",
                     args: parity.clone(),
+                    keep: "outside",
                     distributes: false,
                 },
             ];
-            let models = r.test("the shared models", || {
-                ["bunny.stl", "dragon.stl", "bunny_open.stl"].map(common::shared_model)
-            });
-            if let Some([Some(bunny), Some(dragon), Some(open)]) = models {
+            // Not a test of its own, so that a filter picks these cases too
+            // (a missing model still fails under CI).
+            let models = ["bunny.stl", "dragon.stl", "bunny_open.stl"].map(common::shared_model);
+            if let [Some(bunny), Some(dragon), Some(open)] = models {
                 cases.push(Case {
                     name: "bunny",
                     file: bunny.clone(),
                     level: "7",
                     args: parity.clone(),
+                    keep: "outside",
                     distributes: true,
                 });
                 cases.push(Case {
@@ -80,6 +86,7 @@ fn main() {
                         "--distance",
                         "0.02:7",
                     ],
+                    keep: "outside",
                     distributes: true,
                 });
                 cases.push(Case {
@@ -87,6 +94,7 @@ fn main() {
                     file: dragon.clone(),
                     level: "7",
                     args: parity.clone(),
+                    keep: "outside",
                     distributes: true,
                 });
                 cases.push(Case {
@@ -94,6 +102,7 @@ fn main() {
                     file: open.clone(),
                     level: "7",
                     args: parity.clone(),
+                    keep: "outside",
                     distributes: true,
                 });
                 cases.push(Case {
@@ -101,8 +110,26 @@ fn main() {
                     file: open,
                     level: "7",
                     args: vec!["--inside", "winding"],
+                    keep: "outside",
                     distributes: false,
                 });
+                // Snapped, fluid and solid: each rank holds the triangles
+                // within the snap's reach of its cells.
+                let snap = vec!["--inside", "parity", "--snap"];
+                for (name, file, level, keep) in [
+                    ("bunny_snap", &bunny, "7", "outside"),
+                    ("dragon_snap", &dragon, "7", "outside"),
+                    ("dragon_snap_solid", &dragon, "6", "inside"),
+                ] {
+                    cases.push(Case {
+                        name,
+                        file: file.clone(),
+                        level,
+                        args: snap.clone(),
+                        keep,
+                        distributes: true,
+                    });
+                }
                 r.test(
                     "the dragon's surface on 8 ranks: at most a quarter of one rank's",
                     || dragon_memory(&dir, &dragon),
@@ -143,6 +170,8 @@ struct Run {
     leaves: Vec<u8>,
     msh: Vec<u8>,
     case: Vec<(String, Vec<u8>)>,
+    /// The PVTU and each rank's VTU.
+    vtu: Vec<(String, Vec<u8>)>,
     stats: serde_json::Value,
 }
 
@@ -152,20 +181,26 @@ fn run(dir: &Path, c: &Case, np: usize, distributed: bool) -> Run {
     let msh = dir.join(format!("{tag}.msh"));
     let case = dir.join(format!("{tag}_case"));
     let stats = dir.join(format!("{tag}.json"));
+    let vtu = dir.join(format!("{tag}_vtu"));
     let _ = std::fs::remove_dir_all(&case);
+    let _ = std::fs::remove_dir_all(&vtu);
+    std::fs::create_dir_all(&vtu).unwrap();
+    let pvtu = vtu.join("mesh.pvtu");
     let mut args = vec![
         "mesh",
         c.file.to_str().unwrap(),
         "--level",
         c.level,
         "--keep",
-        "outside",
+        c.keep,
         "--write-leaves",
         leaves.to_str().unwrap(),
         "--gmsh",
         msh.to_str().unwrap(),
         "--openfoam",
         case.to_str().unwrap(),
+        "--out",
+        pvtu.to_str().unwrap(),
         "--stats",
         stats.to_str().unwrap(),
         "--quiet",
@@ -178,7 +213,11 @@ fn run(dir: &Path, c: &Case, np: usize, distributed: bool) -> Run {
     let mut files = Vec::new();
     collect(&case, &case, &mut files);
     files.sort();
+    let mut vtus = Vec::new();
+    collect(&vtu, &vtu, &mut vtus);
+    vtus.sort();
     Run {
+        vtu: vtus,
         leaves: std::fs::read(&leaves).unwrap(),
         msh: std::fs::read(&msh).unwrap(),
         case: files,
@@ -237,6 +276,12 @@ fn same_as_whole(dir: &Path, c: &Case) {
         );
         for (a, b) in d.case.iter().zip(&whole.case) {
             assert!(a.1 == b.1, "{}: {} differs on {np} ranks", c.name, a.0);
+        }
+        // The same ranks' pieces: as the whole surface's run on as many.
+        assert_eq!(d.vtu.len(), whole.vtu.len(), "{}: VTU files", c.name);
+        assert!(d.vtu.len() > np, "{}: no VTU files", c.name);
+        for (a, b) in d.vtu.iter().zip(&whole.vtu) {
+            assert!(a == b, "{}: {} differs on {np} ranks", c.name, a.0);
         }
         for k in ["kept_cells", "octants_balanced"] {
             assert_eq!(d.stats[k], whole.stats[k], "{}: {k}", c.name);

@@ -35,7 +35,7 @@ impl Session {
     /// Whether [`Session::run`] of `command` may distribute the surface: on
     /// several ranks when asked, for the parity rule (the winding rule
     /// orients the whole surface and `auto` diagnoses it), without
-    /// snapping or zones (which read the whole surface near the nodes),
+    /// zones (which read the whole surface near the nodes),
     /// clean-up (which compares facets anywhere) or checkpoints (which
     /// record the surface's hash). Several parts are found after reading.
     pub(super) fn may_distribute(&self, command: Command) -> bool {
@@ -53,7 +53,7 @@ impl Session {
             && !c.surface.drop_duplicates
             && c.octree.load.is_none()
             && c.output.save.is_none()
-            && !(mesh && (c.mesh.snap || c.mesh.zones))
+            && !(mesh && c.mesh.zones)
     }
 
     /// Reads this rank's home share of the configured surface (a binary STL
@@ -216,4 +216,48 @@ pub(super) fn classify_near(
         d.shared = Some(shared_counts(&**comm, &d.home.lattice(&domain)));
     }
     d.shared.map(|c| (c, held))
+}
+
+/// Snaps `mesh` to the distributed surface of `s`: the classification's
+/// index goes, and each rank receives the triangles within the snap's
+/// reach of its cells for the snap alone (see
+/// [`crate::mesh::Mesh::snap_near`]); returns the report and the triangles
+/// held. Collective.
+pub(super) fn snap_near(
+    comm: &CommRef,
+    s: &mut SurfaceState,
+    mesh: &mut crate::mesh::Mesh,
+    opts: &crate::mesh::snap::SnapOptions,
+) -> Result<(crate::mesh::snap::SnapReport, usize)> {
+    let domain = s.index_domain;
+    agree(
+        &**comm,
+        if *mesh.domain() == domain {
+            Ok(())
+        } else {
+            Err(crate::error::Error::new(
+                crate::error::ErrorKind::State,
+                "the distributed surface is held for another cube than the mesh's",
+            ))
+        },
+    )?;
+    let Some(d) = s.dist.as_mut() else {
+        return Ok(Default::default());
+    };
+    let mut held = 0;
+    // The old index goes first: the new one reuses its memory.
+    s.index = SurfaceIndex::of_triangles(&[], &[], &domain);
+    let (home, projected_area) = (&d.home, d.projected_area);
+    let mut fetch = |first_cells: &[u64], halo: f64| {
+        let got = redistribute(&**comm, home, &domain, first_cells, halo, false);
+        held = got.tris.len();
+        let mut index = SurfaceIndex::of_triangles(&got.tris, &got.part, &domain);
+        index.projected_area = projected_area;
+        index
+    };
+    let report = mesh.snap_near(&**comm, &mut fetch, opts);
+    // The snap's index went with it: held for no ranges, the next stage
+    // that needs triangles receives them again.
+    d.region = Some((Vec::new(), false));
+    Ok((report?, held))
 }

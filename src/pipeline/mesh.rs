@@ -126,16 +126,21 @@ impl Session {
             return self.snap_conforming(opts);
         }
         let comm = self.comm.clone();
-        let (mesh, surface) = (&mut self.mesh, &self.surface);
+        let (mesh, surface) = (&mut self.mesh, &mut self.surface);
         let report = self.timer.time(&*comm, "snap", || match (mesh, surface) {
+            (Some(m), Some(s)) if s.dist.is_some() => {
+                super::distributed::snap_near(&comm, s, m, opts)
+            }
             (Some(m), Some(s)) => {
                 // The classification's index, if it was made for this cube.
                 let index = (s.index_domain == *m.domain()).then_some(&s.index);
                 m.snap_indexed(&*comm, &s.surface, index, opts)
+                    .map(|r| (r, 0))
             }
-            _ => Ok(SnapReport::default()),
+            _ => Ok((SnapReport::default(), 0)),
         });
-        let report = agree(&*comm, report)?;
+        let (report, held) = agree(&*comm, report)?;
+        self.facts.held = self.facts.held.max(held);
         self.report_phase(Some(report.snapped));
         self.observer.event(&Event::Snapped(&report));
         if let Some(m) = &self.mesh {

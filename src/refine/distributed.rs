@@ -371,6 +371,22 @@ fn ranks_of_box(first_cells: &[u64], lo: [f64; 3], hi: [f64; 3], out: &mut Vec<u
     }
 }
 
+/// Whether rank `r` receives from [`redistribute`] with a halo of at least
+/// `grow` - [`MARGIN`] every triangle whose box this accepts: the box `b`
+/// (lattice units) grown by `grow` may meet a cell of `r`'s range. A box
+/// holding an accepted box is accepted too, and a box within `grow` of a
+/// point of `r`'s cells (closed) is.
+pub fn box_reaches_rank(first_cells: &[u64], r: usize, b: &Aabb, grow: f64) -> bool {
+    let mut out = Vec::new();
+    ranks_of_box(
+        first_cells,
+        b.min.map(|x| x - grow),
+        b.max.map(|x| x + grow),
+        &mut out,
+    );
+    out.contains(&r)
+}
+
 /// The segments from an octant's centre to a child's centre that the
 /// classification walk of rank `r` follows outside its range of cells
 /// (`first_cells`): into each octant of the range's cover and each of their
@@ -548,6 +564,23 @@ mod tests {
         ranks_of_box(&f, [1.0; 3], [2.0; 3], &mut out);
         out.dedup();
         assert_eq!(out, vec![0]);
+    }
+
+    #[test]
+    fn a_box_reaches_the_rank_of_a_point_within_the_growth() {
+        // Two ranks: the lower and upper halves in Morton order (z < h, z >= h).
+        let f = [0, CELLS / 2, CELLS];
+        let h = ROOT_LEN as f64 / 2.0;
+        let b = |lo: f64, hi: f64| Aabb {
+            min: [1.0, 1.0, lo],
+            max: [2.0, 2.0, hi],
+        };
+        // A box below the plane reaches the upper rank only when grown
+        // across it; a box holding it reaches whatever it reaches.
+        assert!(!box_reaches_rank(&f, 1, &b(h - 20.0, h - 10.0), 1.0));
+        assert!(box_reaches_rank(&f, 1, &b(h - 20.0, h - 10.0), 12.0));
+        assert!(box_reaches_rank(&f, 1, &b(h - 30.0, h - 10.0), 12.0));
+        assert!(box_reaches_rank(&f, 0, &b(h - 20.0, h - 10.0), 0.0));
     }
 
     #[test]

@@ -14,6 +14,7 @@ use crate::refine::SurfaceIndex;
 
 use super::nearest::{NearTriangles, NEAR_REACH};
 use super::{FEATURE_REACH, SURFACE_REACH};
+use crate::refine::distributed::box_reaches_rank;
 
 /// The surface in lattice units with its trees, and its features.
 pub(super) struct Target<'s> {
@@ -94,6 +95,12 @@ pub(super) struct Region {
     /// One bit per cell, x fastest.
     pub(super) bits: Bits,
     pub(super) any: bool,
+    /// With a partly held surface: the ranks' cell ranges and this rank's
+    /// number. A box then meets the region only if it also reaches the
+    /// rank's cells by the growth: every facet whose box does is held, as
+    /// is every facet around its edges and vertices (a larger box reaches
+    /// further), and every feature within reach of a node still meets it.
+    pub(super) held: Option<(Vec<u64>, usize)>,
 }
 
 impl Region {
@@ -110,6 +117,7 @@ impl Region {
             grow: reach * (1.0 + 1e-9) + 1.0,
             bits: Bits::new(cells * cells * cells),
             any: false,
+            held: None,
         };
         for p in points {
             let c = p.map(|v| r.index(v));
@@ -140,7 +148,10 @@ impl Region {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
                     if self.bits.get(self.key([x, y, z])) {
-                        return true;
+                        return self
+                            .held
+                            .as_ref()
+                            .is_none_or(|(cells, r)| box_reaches_rank(cells, *r, b, self.grow));
                     }
                 }
             }

@@ -95,6 +95,19 @@ use features::{features, Region, Target};
 use options::{CHUNK, SPLIT_AT};
 use snapper::{Cells, Snapper};
 
+/// Collectively, the index of the triangles near this rank's cells (see
+/// [`Mesh::snap_near`]).
+pub(crate) type Fetch<'a> = &'a mut dyn FnMut(&[u64], f64) -> SurfaceIndex;
+
+/// The surface a snap reads.
+enum Source<'a> {
+    /// The whole surface, with its index for the mesh's domain if there is
+    /// one.
+    Whole(&'a Surface, Option<&'a SurfaceIndex>),
+    /// A surface each rank holds in part ([`Mesh::snap_near`]).
+    Near(Fetch<'a>),
+}
+
 /// The corners of a hexahedron's faces, in VTK order.
 const HEX_FACES: [[usize; 4]; 6] = [
     [0, 1, 2, 3],
@@ -160,8 +173,32 @@ impl Mesh {
         let spare = crate::parallel::cores::spare_core(comm);
         self.snap_threads(
             comm,
-            surface,
-            index,
+            Source::Whole(surface, index),
+            opts,
+            spare,
+            crate::parallel::cores::avx512(),
+        )
+    }
+
+    /// [`Mesh::snap`] to a surface each rank holds only in part (the
+    /// distributed surface): once the largest cell at a surface node is
+    /// known, `fetch(first_cells, halo)` must return, collectively, the
+    /// index (in the lattice units of the mesh's domain) of at least every
+    /// triangle whose box comes within `halo` + [`crate::refine::distributed::MARGIN`]
+    /// lattice units of this rank's cells (`first_cells` as
+    /// [`crate::octree::LinearOctree::first_cells`]). Every closest point
+    /// and every feature a node of the rank can reach lies there, so the
+    /// positions are the bits [`Mesh::snap`] gives with the whole surface.
+    pub(crate) fn snap_near(
+        &mut self,
+        comm: &dyn Comm,
+        fetch: Fetch,
+        opts: &SnapOptions,
+    ) -> Result<SnapReport> {
+        let spare = crate::parallel::cores::spare_core(comm);
+        self.snap_threads(
+            comm,
+            Source::Near(fetch),
             opts,
             spare,
             crate::parallel::cores::avx512(),
@@ -174,13 +211,19 @@ impl Mesh {
     fn snap_threads(
         &mut self,
         comm: &dyn Comm,
-        surface: &Surface,
-        index: Option<&SurfaceIndex>,
+        source: Source,
         opts: &SnapOptions,
         spare: bool,
         wide: bool,
     ) -> Result<SnapReport> {
-        let index = index.filter(|ix| ix.tris.len() == surface.len());
+        let empty;
+        let (surface, index, near) = match source {
+            Source::Whole(s, ix) => (s, ix.filter(|ix| ix.tris.len() == s.len()), None),
+            Source::Near(fetch) => {
+                empty = Surface::stand_in(crate::geometry::Aabb::empty(), Vec::new());
+                (&empty, None, Some(fetch))
+            }
+        };
         self.moved = None;
         self.moved_lattice = None;
         // On a lone rank with a spare core, the surface's features (which
@@ -191,57 +234,60 @@ impl Mesh {
             Some(ix) if spare && comm.size() == 1 && opts.feature_angle_deg < 180.0 => Some(ix),
             _ => None,
         };
-        let (found, (masks, mut s, side, reach, region)) = crate::parallel::cores::join(
-            early.is_some(),
-            || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, |_| true)),
-            || {
-                let lattice_u = self.node_lattice();
-                let masks = self.plain_patch_masks(comm, &lattice_u);
-                let ni = self.num_independent();
-                let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
-                    .map(|k| {
-                        let mut d = [0u32; 4];
-                        let h = self.hanging_deps(k);
-                        d[..h.len()].copy_from_slice(&h);
-                        d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
-                        (d, h.len() as u8)
-                    })
-                    .collect();
-                let lists = if comm.size() > 1 {
-                    self.exchange_lists()
-                } else {
-                    Vec::new()
-                };
-                let cells = Cells {
-                    conn: self.connectivity(),
-                    owned: self.num_owned(),
-                    octants: Some(self.elements()),
-                };
-                let s = Snapper::new(cells, comm, (spare, wide), lists, ni, lattice_u, deps, opts);
-                // The finest element side at each node, over the ranks.
-                let mut side = vec![u64::MAX; ni];
-                for (e, c) in self.elements().iter().zip(self.connectivity()) {
-                    for &n in c {
-                        let n = n as usize;
-                        if n < ni {
-                            side[n] = side[n].min(e.side() as u64);
+        let (found, (masks, mut s, side, reach, mut region, largest_side)) =
+            crate::parallel::cores::join(
+                early.is_some(),
+                || early.map(|ix| features(&ix.tris, opts.feature_angle_deg, |_| true)),
+                || {
+                    let lattice_u = self.node_lattice();
+                    let masks = self.plain_patch_masks(comm, &lattice_u);
+                    let ni = self.num_independent();
+                    let deps: Vec<([u32; 4], u8)> = (0..self.num_hanging())
+                        .map(|k| {
+                            let mut d = [0u32; 4];
+                            let h = self.hanging_deps(k);
+                            d[..h.len()].copy_from_slice(&h);
+                            d[..h.len()].sort_unstable_by_key(|&x| lattice_u[x as usize]);
+                            (d, h.len() as u8)
+                        })
+                        .collect();
+                    let lists = if comm.size() > 1 {
+                        self.exchange_lists()
+                    } else {
+                        Vec::new()
+                    };
+                    let cells = Cells {
+                        conn: self.connectivity(),
+                        owned: self.num_owned(),
+                        octants: Some(self.elements()),
+                    };
+                    let s =
+                        Snapper::new(cells, comm, (spare, wide), lists, ni, lattice_u, deps, opts);
+                    // The finest element side at each node, over the ranks.
+                    let mut side = vec![u64::MAX; ni];
+                    for (e, c) in self.elements().iter().zip(self.connectivity()) {
+                        for &n in c {
+                            let n = n as usize;
+                            if n < ni {
+                                side[n] = side[n].min(e.side() as u64);
+                            }
                         }
                     }
-                }
-                s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
-                let queried = |n: usize| is_queried(masks[n], side[n]);
-                let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
-                let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
-                // The features that can attract a node lie within `reach` of
-                // it.
-                let region = Region::new(
-                    (0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)),
-                    largest.unwrap_or(1) as f64,
-                    reach,
-                );
-                (masks, s, side, reach, region)
-            },
-        );
+                    s.exchange(&mut side, 1, |a, b| *a = (*a).min(b));
+                    let queried = |n: usize| is_queried(masks[n], side[n]);
+                    let largest = (0..ni).filter(|&n| queried(n)).map(|n| side[n]).max();
+                    let reach = FEATURE_REACH * largest.unwrap_or(1) as f64;
+                    let largest_side = largest.unwrap_or(1);
+                    // The features that can attract a node lie within `reach` of
+                    // it.
+                    let region = Region::new(
+                        (0..ni).filter(|&n| queried(n)).map(|n| s.lattice(n)),
+                        largest.unwrap_or(1) as f64,
+                        reach,
+                    );
+                    (masks, s, side, reach, region, largest_side)
+                },
+            );
         let found = found.map(|(edges, corners)| {
             let meets = |t: &Triangle| region.meets(&t.aabb());
             (
@@ -249,6 +295,22 @@ impl Mesh {
                 corners.into_iter().filter(meets).collect(),
             )
         });
+        // A partly held surface: the triangles within reach of this rank's
+        // nodes, for the largest cell at a surface node of any rank (every
+        // rank takes part in the exchange), and the features read only
+        // from facets held with both neighbours of each of their edges.
+        let fetched;
+        let index = match near {
+            Some(fetch) => {
+                let mut l = [largest_side];
+                comm.max_u64(&mut l);
+                let halo = SURFACE_REACH * l[0] as f64 + 2.0;
+                fetched = fetch(&self.first_cells, halo);
+                region.held = Some((self.first_cells.clone(), comm.rank()));
+                Some(&fetched)
+            }
+            None => index,
+        };
         let target_surface = Target::new(
             surface,
             index,
@@ -327,7 +389,13 @@ mod tests {
         // A snapped mesh is snapped again from the lattice.
         let mut run = |spare: bool, wide: bool| {
             let r = m
-                .snap_threads(&SerialComm, &s, Some(&index), &opts, spare, wide)
+                .snap_threads(
+                    &SerialComm,
+                    Source::Whole(&s, Some(&index)),
+                    &opts,
+                    spare,
+                    wide,
+                )
                 .unwrap();
             (format!("{r:?}"), m.moved_lattice.clone().unwrap())
         };
