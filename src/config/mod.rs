@@ -328,8 +328,9 @@ pub struct MeshConfig {
     /// Needs `keep` all.
     pub zones: bool,
     /// Write the single-file finite-element meshes (`gmsh`, `abaqus`,
-    /// `exodus`, `cgns`) and the OpenFOAM case (serial) as conforming
-    /// all-hexahedral meshes
+    /// `exodus`, `cgns`), the OpenFOAM case (serial) and the VTU (rank 0's
+    /// piece) as conforming all-hexahedral meshes, and measure their
+    /// `quality`
     /// ([`crate::mesh::conforming`]): no hanging nodes, every inner face
     /// shared whole by two elements.
     pub conforming: bool,
@@ -643,19 +644,16 @@ impl Config {
                 ));
             }
             if self.mesh.conforming {
-                let o = &self.output;
                 let other = [
                     ("mesh.snap", self.mesh.snap),
                     ("mesh.wall_layer", self.wall_layer()),
-                    ("output.vtu", o.vtu.is_some()),
-                    ("output.quality", o.quality),
                 ];
                 if let Some((key, _)) = other.iter().find(|(_, on)| *on) {
                     return Err(ConfigError::new(
                         "mesh.conforming",
                         format!(
-                            "writes the OpenFOAM, Gmsh, Abaqus, Exodus II and CGNS files only: \
-                             {{{key}}} is not available with it yet"
+                            "meshes the octree's leaves as they are: {{{key}}} moves nodes of \
+                             the hanging-node mesh and is not available with it yet"
                         ),
                     ));
                 }

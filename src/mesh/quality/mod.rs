@@ -707,6 +707,107 @@ impl Mesh {
         all
     }
 }
+
+/// The quality of a mesh of conforming hexahedra `hexes` (VTK order) on
+/// `points` (user units) that one rank holds whole, as [`Mesh::quality`]
+/// measures a hanging-node mesh: the scaled Jacobian of each hexahedron at
+/// its 8 corners, and the face figures over its quadrilaterals, each
+/// measured as OpenFOAM does on the polygon of its 4 corners (area vector
+/// and centre by [`polygon_area_centre`], cell centres and volumes by the
+/// pyramid rule of [`cell_centre`]), an internal face oriented from the
+/// hexahedron with the lower number. The other ranks pass empty lists:
+/// the reduction gives every rank the holder's figures, so they do not
+/// depend on the rank count. Collective. Returns the figures and the
+/// scaled Jacobians (empty on the other ranks).
+pub fn hexahedra_quality(
+    comm: &dyn Comm,
+    points: &[[f64; 3]],
+    hexes: &[[u32; 8]],
+) -> (Quality, Vec<f64>) {
+    use crate::io::gathered::{match_faces, ABAQUS_FACE_NODES};
+    let corners = |h: usize| hexes[h].map(|n| points[n as usize]);
+    // The corners of face `label` of `h`, turning about the normal out of
+    // `h` (the Abaqus order turns about the inward one).
+    let face = |h: usize, label: u8| {
+        let c = corners(h);
+        let mut q = ABAQUS_FACE_NODES[label as usize].map(|k| c[k]);
+        q.reverse();
+        q
+    };
+    let jac: Vec<f64> = (0..hexes.len())
+        .map(|h| scaled_jacobian(&corners(h)))
+        .collect();
+    let mut figures = Figures::new();
+    for &j in &jac {
+        figures.element(j);
+    }
+    let cells: Vec<Cell> = (0..hexes.len())
+        .map(|h| {
+            let faces: [([f64; 3], [f64; 3]); 6] = std::array::from_fn(|l| {
+                let (s, c) = polygon_area_centre(&face(h, l as u8));
+                (c, s)
+            });
+            cell_centre_volume(&faces)
+        })
+        .collect();
+    let (mut pairs, mut once) = match_faces(hexes);
+    // One order whatever the hash map's.
+    pairs.sort_unstable();
+    once.sort_unstable();
+    let mut tensors = vec![AreaTensor::default(); hexes.len()];
+    for &(a, label, b) in &pairs {
+        let q = face(a as usize, label);
+        let (s, c) = polygon_area_centre(&q);
+        tensors[a as usize].add(s);
+        tensors[b as usize].add(s);
+        figures.internal_face(&q, c, s, cells[a as usize], cells[b as usize]);
+    }
+    for &(h, label) in &once {
+        let q = face(h as usize, label);
+        let (s, c) = polygon_area_centre(&q);
+        figures.boundary_face(&q, c, s, cells[h as usize].0);
+    }
+    for t in &tensors {
+        figures.cell(t);
+    }
+    (figures.reduce(comm), jac)
+}
+
+/// The `n` hexahedra of [`hexahedra_quality`]'s mesh with the smallest
+/// scaled Jacobians `jac` (ties by number), worst first, each with its
+/// number as the global number, rank 0, and its `level` and `class`
+/// (per hexahedron). Not collective.
+pub fn worst_hexahedra(
+    points: &[[f64; 3]],
+    hexes: &[[u32; 8]],
+    jac: &[f64],
+    (level, class): (&[u8], &[u8]),
+    n: usize,
+) -> Vec<WorstElement> {
+    let mut order: Vec<usize> = (0..jac.len()).collect();
+    let cmp = |a: &usize, b: &usize| jac[*a].total_cmp(&jac[*b]).then(a.cmp(b));
+    if order.len() > n {
+        order.select_nth_unstable_by(n, cmp);
+        order.truncate(n);
+    }
+    order.sort_unstable_by(cmp);
+    order
+        .into_iter()
+        .map(|h| {
+            let corners = hexes[h].map(|k| points[k as usize]);
+            WorstElement {
+                scaled_jacobian: jac[h],
+                global: h as u64,
+                rank: 0,
+                level: level.get(h).copied().unwrap_or(0),
+                class: class.get(h).copied().unwrap_or(0),
+                corners,
+                corner_values: corner_scaled_jacobians(&corners),
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
