@@ -1036,6 +1036,21 @@ mod tests {
     }
 
     #[test]
+    fn conforming_takes_quality_and_vtu_but_not_the_snap() {
+        let mut c = sphere(4);
+        c.mesh.conforming = true;
+        c.output.vtu = Some("m.pvtu".into());
+        c.output.quality = true;
+        c.output.quality_out = Some("w.vtu".into());
+        assert!(c.validate(Command::Mesh).is_ok());
+        c.mesh.keep = Keep::Inside;
+        c.mesh.snap = true;
+        let e = c.validate(Command::Mesh).unwrap_err();
+        assert_eq!(e.key, "mesh.conforming");
+        assert!(e.render(|k| k.to_string()).contains("mesh.snap"), "{e:?}");
+    }
+
+    #[test]
     fn toml_round_trip_keeps_every_field() {
         let mut c = sphere(7);
         c.domain.cube = Some([-2.0, -2.0, -2.0, 4.0]);

@@ -184,7 +184,7 @@ impl Session {
     /// `write`.
     ///
     /// With `mesh.conforming` it writes the conforming mesh rank 0 builds
-    /// ([`super::conforming`], gathered as for the single-file writers):
+    /// ([`crate::mesh::conforming`], gathered as for the single-file writers):
     /// rank 0's piece holds all of it ([`write_gathered`]), the other
     /// pieces are empty; caller fields, given per node of the hanging-node
     /// mesh, are refused.

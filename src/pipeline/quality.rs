@@ -18,7 +18,7 @@ impl Session {
     /// Phase `quality`.
     ///
     /// With `mesh.conforming` it measures the conforming mesh rank 0
-    /// builds ([`super::conforming`]), gathered as for the single-file
+    /// builds ([`crate::mesh::conforming`]), gathered as for the single-file
     /// writers (phases `gather` and `conforming` when not made yet), by
     /// [`hexahedra_quality`]: the same figures on any number of ranks.
     pub fn quality(&mut self) -> Result<Quality> {
