@@ -103,6 +103,7 @@ use serde::Serialize;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::TINY;
+use crate::geometry::hash::FoldMap;
 use crate::geometry::vector::{cross, dot, norm, scale, sub};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
@@ -708,6 +709,17 @@ impl Mesh {
     }
 }
 
+/// The faces of a hexahedron in VTK order, each turning about its
+/// normal out of the hexahedron.
+const HEX_FACES: [[usize; 4]; 6] = [
+    [3, 2, 1, 0],
+    [5, 6, 7, 4],
+    [1, 5, 4, 0],
+    [2, 6, 5, 1],
+    [3, 7, 6, 2],
+    [0, 4, 7, 3],
+];
+
 /// The quality of a mesh of conforming hexahedra `hexes` (VTK order) on
 /// `points` (user units) that one rank holds whole, as [`Mesh::quality`]
 /// measures a hanging-node mesh: the scaled Jacobian of each hexahedron at
@@ -724,15 +736,12 @@ pub fn hexahedra_quality(
     points: &[[f64; 3]],
     hexes: &[[u32; 8]],
 ) -> (Quality, Vec<f64>) {
-    use crate::io::gathered::{match_faces, ABAQUS_FACE_NODES};
     let corners = |h: usize| hexes[h].map(|n| points[n as usize]);
     // The corners of face `label` of `h`, turning about the normal out of
-    // `h` (the Abaqus order turns about the inward one).
+    // `h`.
     let face = |h: usize, label: u8| {
         let c = corners(h);
-        let mut q = ABAQUS_FACE_NODES[label as usize].map(|k| c[k]);
-        q.reverse();
-        q
+        HEX_FACES[label as usize].map(|k| c[k])
     };
     let jac: Vec<f64> = (0..hexes.len())
         .map(|h| scaled_jacobian(&corners(h)))
@@ -750,7 +759,23 @@ pub fn hexahedra_quality(
             cell_centre_volume(&faces)
         })
         .collect();
-    let (mut pairs, mut once) = match_faces(hexes);
+    // Faces matched by their sorted corners: those of two hexahedra as
+    // (first, its label, second), then those of one.
+    let mut open: FoldMap<[u32; 4], (u32, u8)> = FoldMap::default();
+    let mut pairs = Vec::with_capacity(3 * hexes.len());
+    for (h, hex) in hexes.iter().enumerate() {
+        for (label, f) in HEX_FACES.iter().enumerate() {
+            let mut key = f.map(|k| hex[k]);
+            key.sort_unstable();
+            match open.remove(&key) {
+                Some((o, l)) => pairs.push((o, l, h as u32)),
+                None => {
+                    open.insert(key, (h as u32, label as u8));
+                }
+            }
+        }
+    }
+    let mut once: Vec<(u32, u8)> = open.into_values().collect();
     // One order whatever the hash map's.
     pairs.sort_unstable();
     once.sort_unstable();
