@@ -844,6 +844,47 @@ mod tests {
     }
 
     #[test]
+    fn two_conforming_hexahedra() {
+        // Two unit cubes sharing the face x = 1, the second's far face
+        // moved: one internal face, six boundary faces each.
+        let mut points = Vec::new();
+        for x in 0..3 {
+            for (y, z) in [(0, 0), (1, 0), (1, 1), (0, 1)] {
+                let far = if x == 2 { 0.5 * y as f64 } else { 0.0 };
+                points.push([x as f64 + far, y as f64, z as f64]);
+            }
+        }
+        // VTK order: bottom (z = 0) counter-clockwise, then top.
+        let hex = |x: u32| {
+            [
+                4 * x,
+                4 * x + 4,
+                4 * x + 5,
+                4 * x + 1,
+                4 * x + 3,
+                4 * x + 7,
+                4 * x + 6,
+                4 * x + 2,
+            ]
+        };
+        let hexes = [hex(0), hex(1)];
+        let (q, jac) = hexahedra_quality(&SerialComm, &points, &hexes);
+        assert_eq!(q.elements, 2);
+        assert_eq!(q.internal_faces, 1);
+        assert_eq!(jac[0], 1.0);
+        assert!(jac[1] < 1.0 && jac[1] > 0.5, "{jac:?}");
+        assert_eq!(q.scaled_jacobian_min, jac[1]);
+        assert_eq!(q.inverted_elements, 0);
+        // The second cell's centre moved off the first's axis.
+        assert!(q.non_orthogonality_max > 1.0, "{q:?}");
+        // Volumes 1 and 1.25.
+        assert!((q.volume_ratio_min - 0.8).abs() < 1e-12, "{q:?}");
+        let worst = worst_hexahedra(&points, &hexes, &jac, (&[1, 1], &[2, 1]), 1);
+        assert_eq!(worst.len(), 1);
+        assert_eq!((worst[0].global, worst[0].class), (1, 1));
+    }
+
+    #[test]
     fn histogram_bins_are_tenths() {
         assert_eq!(histogram_bin(-1.0), 0);
         assert_eq!(histogram_bin(-1.5), 0);
