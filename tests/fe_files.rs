@@ -835,19 +835,24 @@ fn conforming_meshes_snapped_to_the_surface() {
     }
 }
 
-/// What `--conforming` does not write is an error on every rank.
+/// What `--conforming` cannot do (the wall layer) is an error on every rank.
 #[test]
 fn conforming_refuses_what_it_cannot_do() {
     let dir = scratch("fe_files_conforming_refused");
-    let vtu = dir.join("m.pvtu");
+    let case = dir.join("case");
     let args = [
         "mesh",
         "sphere",
         "--level",
         "2",
+        "--keep",
+        "inside",
         "--conforming",
-        "--out",
-        vtu.to_str().unwrap(),
+        "--cut-rule",
+        "none",
+        "--wall-layer",
+        "--openfoam",
+        case.to_str().unwrap(),
     ];
     let out = common::mpirun(
         2,
@@ -855,23 +860,206 @@ fn conforming_refuses_what_it_cannot_do() {
         &args,
         std::time::Duration::from_secs(300),
     );
-    let lines = common::rank_error_lines(&out, 2, "--conforming --out");
-    assert!(lines.iter().all(|l| l.contains("--out")), "{lines:?}");
+    let lines = common::rank_error_lines(&out, 2, "--conforming --wall-layer");
+    assert!(
+        lines.iter().all(|l| l.contains("--wall-layer")),
+        "{lines:?}"
+    );
+}
+
+/// Gmsh's smallest IGE measure (for hexahedra the scaled Jacobian at the
+/// corners) of the `.msh` at `msh`: (hexahedra, minimum).
+fn gmsh_min_scaled_jacobian(python: &Path, msh: &Path) -> (u64, f64) {
+    let script = r#"
+import sys, gmsh
+gmsh.initialize()
+gmsh.option.setNumber("General.Terminal", 0)
+gmsh.open(sys.argv[1])
+gmsh.plugin.setNumber("AnalyseMeshQuality", "IGEMeasure", 1)
+gmsh.plugin.setNumber("AnalyseMeshQuality", "CreateView", 1)
+gmsh.plugin.setNumber("AnalyseMeshQuality", "DimensionOfElements", 3)
+gmsh.plugin.run("AnalyseMeshQuality")
+for v in gmsh.view.getTags():
+    name = gmsh.option.getString("View[%d].Name" % gmsh.view.getIndex(v))
+    if name.startswith("IGE"):
+        _, tags, data, _, _ = gmsh.view.getModelData(v, 0)
+        print("ige %d %.17g" % (len(tags), min(d[0] for d in data)))
+gmsh.finalize()
+"#;
+    let out = Command::new(python)
+        .args(["-c", script, msh.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "gmsh failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("ige "))
+        .unwrap_or_else(|| panic!("no IGE view:\n{text}"));
+    let f: Vec<&str> = line.split_whitespace().collect();
+    (f[1].parse().unwrap(), f[2].parse().unwrap())
+}
+
+/// `--conforming --quality --out`: the quality measures the conforming
+/// mesh (its hexahedra; Gmsh's smallest scaled Jacobian of the `.msh` and
+/// the independent checker's equal octmesh's to 1e-9, and the templates
+/// make it less than 1), the worst elements' VTU holds its smallest
+/// value, and the VTU holds the `.msh`'s hexahedra on its points (meshio
+/// reads both), all in rank 0's piece; the figures and files are the
+/// same on 1 and 2 ranks.
+#[test]
+fn conforming_quality_and_vtu_are_the_conforming_mesh() {
+    let dir = scratch("fe_files_conforming_quality");
+    let mut runs = Vec::new();
+    for np in [1, 2] {
+        let d = dir.join(format!("np{np}"));
+        std::fs::create_dir_all(&d).unwrap();
+        let path = |f: &str| d.join(f).to_str().unwrap().to_string();
+        let (msh, pvtu, worst, stats) = (
+            path("m.msh"),
+            path("m.pvtu"),
+            path("worst.vtu"),
+            path("s.json"),
+        );
+        let mut args = vec!["mesh", "sphere"];
+        args.extend(CONFORMING);
+        args.extend([
+            "--gmsh",
+            &msh,
+            "--out",
+            &pvtu,
+            "--quality",
+            "--quality-out",
+            &worst,
+            "--stats",
+            &stats,
+            "--quiet",
+        ]);
+        octmesh_ok(np, &args);
+        runs.push((d.clone(), json_file(Path::new(&stats))));
+    }
+    let (d1, s1) = &runs[0];
+    let (d2, s2) = &runs[1];
+    assert_eq!(s1["quality"], s2["quality"], "quality on 1 and 2 ranks");
+    let read = |d: &Path, f: &str| std::fs::read(d.join(f)).unwrap();
+    for f in ["m.msh", "m_0000.vtu", "worst.vtu"] {
+        assert!(read(d1, f) == read(d2, f), "{f} differs on 2 ranks");
+    }
+    let q = &s1["quality"];
+    let ours = q["scaled_jacobian_min"].as_f64().unwrap();
+    let msh = d1.join("m.msh");
+    let c = common::conformity::check(&msh);
+    assert!(c.conforming(), "{c:?}");
+    assert_eq!(common::int(q, "elements"), c.elements as u64);
+    assert!(
+        common::int(q, "elements") > common::int(s1, "elements"),
+        "the conforming mesh has more hexahedra than the octree leaves"
+    );
+    assert!(ours < 0.99, "the templates should make non-cubes: {ours}");
+    assert!((c.min_scaled_jacobian - ours).abs() <= 1e-9);
+    // The worst elements' file, read by meshio: its smallest element value.
+    let python = common::python_with_meshio();
+    let script = r#"
+import sys, meshio, numpy as np
+w = meshio.read(sys.argv[1])
+print("worst %d %.17g" % (len(w.points) // 8, w.point_data["scaled_jacobian"].min()))
+v = meshio.read(sys.argv[2]); m = meshio.read(sys.argv[3])
+def hexes(x):
+    return np.concatenate([c.data for c in x.cells if c.type == "hexahedron"])
+hv, hm = hexes(v), hexes(m)
+same = hv.shape == hm.shape and bool((hv == hm).all())
+dp = float(np.abs(v.points - m.points).max()) if v.points.shape == m.points.shape else -1.0
+print("vtu %d %d msh %d %d same %d %.17g" % (len(hv), len(v.points), len(hm), len(m.points), same, dp))
+"#;
+    let out = Command::new(&python)
+        .args([
+            "-c",
+            script,
+            d1.join("worst.vtu").to_str().unwrap(),
+            d2.join("m_0000.vtu").to_str().unwrap(),
+            msh.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "meshio failed:\n{text}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let words = |tag: &str| -> Vec<f64> {
+        let line = text.lines().find(|l| l.starts_with(tag)).unwrap();
+        line.split_whitespace()
+            .skip(1)
+            .filter_map(|w| w.parse().ok())
+            .collect()
+    };
+    let w = words("worst ");
+    // serde_json's float parsing may be one unit in the last place off.
+    assert!(
+        (w[1] - ours).abs() <= 1e-12,
+        "worst element {}, {ours}",
+        w[1]
+    );
+    let v = words("vtu ");
+    println!("conforming: {text}");
+    assert_eq!(v[0], c.elements as f64, "VTU hexahedra");
+    assert_eq!(v[0], v[2], "VTU and .msh hexahedra");
+    assert_eq!(v[1], v[3], "VTU and .msh points");
+    assert_eq!(v[4], 1.0, "the VTU's hexahedra are the .msh's");
+    assert_eq!(v[5], 0.0, "the VTU's points are the .msh's");
+    // Every piece as check_vtu.py reads it: rank 1's is empty.
+    let check = Command::new(&python)
+        .arg(common::repo().join("tools/check_vtu.py"))
+        .arg(d2.join("m.pvtu"))
+        .output()
+        .unwrap();
+    assert!(
+        check.status.success(),
+        "{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(common::int(&j, "pieces"), 2);
+    assert_eq!(common::int(&j, "cells"), c.elements as u64);
+    assert_eq!(common::int(&j, "hanging_points"), 0);
+    let Some(gmsh) = require(Oracle::Python {
+        module: "gmsh",
+        package: "python3-gmsh",
+    }) else {
+        return;
+    };
+    let (n, gmsh_min) = gmsh_min_scaled_jacobian(&gmsh, &msh);
+    println!("conforming: {n} hexahedra, smallest scaled Jacobian gmsh {gmsh_min}, octmesh {ours}");
+    assert_eq!(n, c.elements as u64);
+    assert!(
+        (gmsh_min - ours).abs() <= 1e-9,
+        "gmsh {gmsh_min}, octmesh {ours}"
+    );
 }
 
 /// `--conforming --openfoam`: one serial case of hexahedra only, which
 /// checkMesh accepts (`Mesh OK.`, no polyhedra), the same files on 1 and
-/// 3 ranks.
+/// 3 ranks; `--quality`'s face figures of the conforming mesh are what
+/// checkMesh prints for the case.
 #[test]
 fn conforming_openfoam_case_is_all_hexahedra() {
     let dir = scratch("fe_files_conforming_foam");
     let mut cases = Vec::new();
+    let stats = dir.join("s.json");
     for np in [1, 3] {
         let case = dir.join(format!("np{np}"));
         let _ = std::fs::remove_dir_all(&case);
         let mut args = vec!["mesh", "sphere"];
         args.extend(CONFORMING);
         args.extend(["--openfoam", case.to_str().unwrap(), "--quiet"]);
+        if np == 1 {
+            args.extend(["--quality", "--stats", stats.to_str().unwrap()]);
+        }
         octmesh_ok(np, &args);
         cases.push(case);
     }
@@ -898,4 +1086,21 @@ fn conforming_openfoam_case_is_all_hexahedra() {
     assert_eq!(count("polyhedra:"), 0);
     assert_eq!(count("hexahedra:"), count("cells:"));
     println!("conforming: checkMesh OK on {} hexahedra", count("cells:"));
+    let q = json_file(&stats)["quality"].clone();
+    assert_eq!(common::int(&q, "elements"), count("cells:"));
+    // checkMesh prints 8 significant digits.
+    for (label, key) in [
+        ("Mesh non-orthogonality Max:", "non_orthogonality_max"),
+        ("average:", "non_orthogonality_average"),
+        ("Max skewness =", "skewness_max"),
+        ("minimum:", "determinant_min"),
+    ] {
+        let printed = common::number_after(&text, label);
+        let ours = q[key].as_f64().unwrap();
+        assert!(
+            (ours - printed).abs() <= 1e-7 * printed.abs().max(1e-3),
+            "{key}: octmesh {ours}, checkMesh {printed}"
+        );
+    }
+    assert!(q["non_orthogonality_max"].as_f64().unwrap() > 1.0);
 }

@@ -328,8 +328,9 @@ pub struct MeshConfig {
     /// Needs `keep` all.
     pub zones: bool,
     /// Write the single-file finite-element meshes (`gmsh`, `abaqus`,
-    /// `exodus`, `cgns`) and the OpenFOAM case (serial) as conforming
-    /// all-hexahedral meshes
+    /// `exodus`, `cgns`), the OpenFOAM case (serial) and the VTU (rank 0's
+    /// piece) as conforming all-hexahedral meshes, and measure their
+    /// `quality`
     /// ([`crate::mesh::conforming`]): no hanging nodes, every inner face
     /// shared whole by two elements.
     pub conforming: bool,
@@ -643,18 +644,16 @@ impl Config {
                 ));
             }
             if self.mesh.conforming {
-                let o = &self.output;
-                let other = [
-                    ("mesh.wall_layer", self.wall_layer()),
-                    ("output.vtu", o.vtu.is_some()),
-                    ("output.quality", o.quality),
-                ];
-                if let Some((key, _)) = other.iter().find(|(_, on)| *on) {
+                if self.wall_layer() {
+                    let key = match self.mesh.wall_layer {
+                        true => "mesh.wall_layer",
+                        false => self.layers_key(),
+                    };
                     return Err(ConfigError::new(
                         "mesh.conforming",
                         format!(
-                            "writes the OpenFOAM, Gmsh, Abaqus, Exodus II and CGNS files only: \
-                             {{{key}}} is not available with it yet"
+                            "does not take {{{key}}} yet: the layers are made in the hanging-node \
+                             mesh's OpenFOAM case"
                         ),
                     ));
                 }
@@ -1034,6 +1033,27 @@ mod tests {
             e.render(|k| k.to_string()),
             "leak.path needs leak.inside_point"
         );
+    }
+
+    #[test]
+    fn conforming_takes_quality_vtu_and_snap_but_not_the_wall_layer() {
+        let mut c = sphere(4);
+        c.mesh.conforming = true;
+        c.output.vtu = Some("m.pvtu".into());
+        c.output.quality = true;
+        c.output.quality_out = Some("w.vtu".into());
+        assert!(c.validate(Command::Mesh).is_ok());
+        c.mesh.keep = Keep::Inside;
+        c.mesh.snap = true;
+        assert!(c.validate(Command::Mesh).is_ok());
+        c.mesh.snap = false;
+        c.output.vtu = None;
+        c.mesh.cut_rule = CutRule::None;
+        c.mesh.wall_layer = true;
+        c.output.openfoam = Some("case".into());
+        let e = c.validate(Command::Mesh).unwrap_err();
+        assert_eq!(e.key, "mesh.conforming");
+        assert!(e.render(|k| k.to_string()).contains("mesh.wall_layer"), "{e:?}");
     }
 
     #[test]

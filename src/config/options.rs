@@ -766,11 +766,12 @@ options! {
     range,
     set |c, _v, _g| { c.mesh.zones = true; }
 
-    /// Write --gmsh, --abaqus, --exodus, --cgns and --openfoam (one serial
-    /// case) as conforming all-hexahedral meshes (no hanging nodes) from
-    /// refinement templates, refining where no template fits (around a
-    /// surface's staircase: up to the finest level); --snap snaps the
-    /// conforming mesh; without --out or --quality
+    /// Write --gmsh, --abaqus, --exodus, --cgns, --openfoam (one serial
+    /// case) and --out (the whole mesh in rank 0's piece) as conforming
+    /// all-hexahedral meshes (no hanging nodes) from refinement templates,
+    /// refining where no template fits (around a surface's staircase: up
+    /// to the finest level); --snap snaps it and --quality measures it;
+    /// without the wall layer
     Mesh "conforming": Switch bool,
     keys ["mesh.conforming"],
     default none,

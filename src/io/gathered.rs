@@ -144,6 +144,13 @@ pub struct Gathered {
     /// Each element's zone index, global element order (empty without
     /// zones).
     pub element_zones: Vec<u16>,
+    /// The conforming mesh's ([`crate::mesh::conforming`]): per
+    /// hexahedron, the octree level (from the root cells) and the class
+    /// ([`crate::classify::LeafClass`] as a byte) of the kept leaf its
+    /// centre lies in. Empty for the hanging-node mesh.
+    pub element_level: Vec<u8>,
+    /// See [`Gathered::element_level`].
+    pub element_class: Vec<u8>,
 }
 
 impl Gathered {

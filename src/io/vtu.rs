@@ -600,6 +600,54 @@ pub fn write_mesh(
     write_parallel(comm, pvtu, &piece)
 }
 
+/// Writes a mesh that rank 0 holds whole ([`crate::io::gathered`], the
+/// conforming mesh of [`crate::mesh::conforming`]): rank 0's piece holds
+/// every node and hexahedron in the gathered numbering, the other ranks'
+/// pieces are empty, and rank 0 writes the PVTU. Cell data `level` and
+/// `class` are those of the octree leaf each hexahedron's centre lies in
+/// ([`crate::io::gathered::Gathered::element_level`]; 0 when the gathered
+/// mesh has none), `rank` is 0 (the writer's); point data `global_id` is
+/// the node's number in the gathered mesh (that of the Gmsh, Abaqus,
+/// Exodus and CGNS files, less one) and `hanging` is 0 for the
+/// independent nodes, 1 and 2 for edge- and face-hanging ones. Apart from
+/// the piece names the files are the same on any number of ranks.
+/// Collective; returns the PVTU path.
+pub fn write_gathered(
+    comm: &dyn Comm,
+    pvtu: &Path,
+    g: &crate::io::gathered::Gathered,
+) -> Result<PathBuf> {
+    let n = g.coordinates.len();
+    let cells = g.elements.len();
+    let or_zeros = |v: &[u8]| {
+        if v.len() == cells {
+            v.to_vec()
+        } else {
+            vec![0; cells]
+        }
+    };
+    let (level, class) = (or_zeros(&g.element_level), or_zeros(&g.element_class));
+    let global: Vec<i64> = (0..n as i64).collect();
+    let hanging: Vec<u8> = (0..n)
+        .map(|i| match i.checked_sub(g.num_independent) {
+            None => 0,
+            Some(k) if g.dependencies[k].len() == 4 => 2,
+            Some(_) => 1,
+        })
+        .collect();
+    let piece = VtuPiece {
+        points: &g.coordinates,
+        cells: &g.elements,
+        cell_level: &level,
+        cell_class: &class,
+        rank: 0,
+        point_global_id: &global,
+        point_hanging: &hanging,
+        point_fields: &[],
+    };
+    write_parallel(comm, pvtu, &piece)
+}
+
 /// Writes `worst` ([`crate::mesh::Mesh::worst_elements`]) as one VTU file for ParaView:
 /// each element with its own 8 points (none shared), cell data `level`,
 /// `class` (and `rank`, 0: the writer's), point data `scaled_jacobian`

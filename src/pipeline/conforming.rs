@@ -24,14 +24,15 @@ use crate::refine::SurfaceIndex;
 const KEPT: u64 = 1 << 63;
 
 /// Rank 0: the conforming mesh of the octree whose local leaves are
-/// `leaves` and kept ones `elements` (a sorted subset), as a gathered mesh
-/// with `hanging`'s patches and zones, and the macro cells the closure
-/// split, and the conforming mesh itself (for the snap); other ranks: empty
-/// ones and 0. Errors only on rank 0 (the caller agrees them). Collective.
+/// `leaves` and kept ones `elements` (a sorted subset, of classes
+/// `classes`), as a gathered mesh with `hanging`'s patches and zones, the
+/// macro cells the closure split, and the conforming mesh itself (for the
+/// snap); other ranks: empty ones and 0. Errors only on rank 0 (the caller
+/// agrees them). Collective.
 pub(super) fn conforming_gathered(
     comm: &dyn Comm,
     leaves: &[Octant],
-    elements: &[Octant],
+    (elements, classes): (&[Octant], &[u8]),
     domain: &Domain,
     hanging: &Gathered,
 ) -> Result<(Gathered, u64, Conforming)> {
@@ -44,6 +45,9 @@ pub(super) fn conforming_gathered(
     let mut counts = vec![0; comm.size()];
     counts[0] = send.len();
     let (all, _) = comm.alltoallv_u64(&send, &counts);
+    let classes: Vec<u64> = classes.iter().map(|&c| u64::from(c)).collect();
+    counts[0] = classes.len();
+    let (classes, _) = comm.alltoallv_u64(&classes, &counts);
     if comm.rank() != 0 {
         return Ok((Gathered::default(), 0, Conforming::default()));
     }
@@ -66,11 +70,9 @@ pub(super) fn conforming_gathered(
         })
         .collect();
     let mesh = build(Rc::new(SerialComm), &leaves, &tags)?;
-    Ok((
-        to_gathered(&mesh, &kept, domain, hanging)?,
-        mesh.refined as u64,
-        mesh,
-    ))
+    let mut g = to_gathered(&mesh, &kept, domain, hanging)?;
+    (g.element_level, g.element_class) = leaf_of_each(&mesh, &kept, &classes, domain)?;
+    Ok((g, mesh.refined as u64, mesh))
 }
 
 /// Snaps `g`, the gathered form of the conforming mesh `mesh`
@@ -236,5 +238,42 @@ fn to_gathered(
         faces,
         zone_names: hanging.zone_names.clone(),
         element_zones,
+        ..Gathered::default()
     })
+}
+
+/// Per hexahedron of `mesh`, the level (from the root cells) and class
+/// (`classes`, per kept leaf) of the kept leaf of `kept` its centre lies
+/// in: the kept leaves tile the conforming mesh's region.
+fn leaf_of_each(
+    mesh: &Conforming,
+    kept: &[Octant],
+    classes: &[u64],
+    domain: &Domain,
+) -> Result<(Vec<u8>, Vec<u8>)> {
+    let root = domain.brick.level();
+    let unit = MACRO as u64;
+    let mut level = Vec::with_capacity(mesh.hexes.len());
+    let mut class = Vec::with_capacity(mesh.hexes.len());
+    for hex in &mesh.hexes {
+        let q: [u32; 3] = std::array::from_fn(|a| {
+            let sum: u64 = hex.iter().map(|&n| mesh.points[n as usize][a]).sum();
+            (sum / (8 * unit)) as u32
+        });
+        let cell = morton_encode(q[0], q[1], q[2]);
+        let e = kept.partition_point(|o| o.cell_end() <= cell);
+        match kept.get(e).filter(|o| o.cell_begin() <= cell) {
+            Some(o) => {
+                level.push(o.level() - root);
+                class.push(classes.get(e).copied().unwrap_or(0) as u8);
+            }
+            None => {
+                return Err(Error::new(
+                    ErrorKind::Internal,
+                    format!("a hexahedron of the conforming mesh at lattice cell {q:?} lies in no kept leaf"),
+                ))
+            }
+        }
+    }
+    Ok((level, class))
 }

@@ -65,7 +65,7 @@ impl Session {
             super::conforming::conforming_gathered(
                 &*comm,
                 tree.leaves(),
-                mesh.elements(),
+                (mesh.elements(), mesh.element_class()),
                 domain,
                 &g,
             )

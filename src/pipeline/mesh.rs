@@ -7,7 +7,7 @@ use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::parts::PartLocator;
 use crate::io::openfoam::{write_case, FoamCounts, FoamOptions, WallLayer};
 use crate::io::vtp::write_boundary;
-use crate::io::vtu::write_mesh;
+use crate::io::vtu::{write_gathered, write_mesh};
 use crate::mesh::patches::PatchNames;
 use crate::mesh::snap::{hexahedron_volume, SnapOptions, SnapReport};
 use crate::mesh::{Boundary, Mesh, MeshOptions};
@@ -213,9 +213,32 @@ impl Session {
     /// Writes the mesh as one binary VTU per rank and a PVTU, with the
     /// caller's point `fields` (name, one value per local node). Phase
     /// `write`.
+    ///
+    /// With `mesh.conforming` it writes the conforming mesh rank 0 builds
+    /// ([`crate::mesh::conforming`], gathered as for the single-file writers):
+    /// rank 0's piece holds all of it ([`write_gathered`]), the other
+    /// pieces are empty; caller fields, given per node of the hanging-node
+    /// mesh, are refused.
     pub fn write_vtu(&mut self, pvtu: &Path, fields: &[(&str, &[f64])]) -> Result<()> {
         self.mesh_or_state()?;
         let comm = self.comm.clone();
+        if self.config.mesh.conforming {
+            let refused = match fields {
+                [] => Ok(()),
+                _ => Err(Error::invalid(
+                    "VTU point fields are given per node of the hanging-node mesh: \
+                     the conforming mesh's VTU has none",
+                )),
+            };
+            agree(&*comm, refused)?;
+            self.gather_fe()?;
+            let g = &self.gathered.as_ref().expect("gathered just now").1;
+            self.timer
+                .time(&*comm, "write", || write_gathered(&*comm, pvtu, g))?;
+            self.report_phase(None);
+            self.observer.event(&Event::Wrote(pvtu));
+            return Ok(());
+        }
         let mesh = &self.mesh;
         self.timer.time(&*comm, "write", || match mesh {
             Some(m) => write_mesh(&*comm, pvtu, m, fields).map(|_| ()),

@@ -103,6 +103,7 @@ use serde::Serialize;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::TINY;
+use crate::geometry::hash::FoldMap;
 use crate::geometry::vector::{cross, dot, norm, scale, sub};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
@@ -707,6 +708,131 @@ impl Mesh {
         all
     }
 }
+
+/// The faces of a hexahedron in VTK order, each turning about its
+/// normal out of the hexahedron.
+const HEX_FACES: [[usize; 4]; 6] = [
+    [3, 2, 1, 0],
+    [5, 6, 7, 4],
+    [1, 5, 4, 0],
+    [2, 6, 5, 1],
+    [3, 7, 6, 2],
+    [0, 4, 7, 3],
+];
+
+/// The quality of a mesh of conforming hexahedra `hexes` (VTK order) on
+/// `points` (user units) that one rank holds whole, as [`Mesh::quality`]
+/// measures a hanging-node mesh: the scaled Jacobian of each hexahedron at
+/// its 8 corners, and the face figures over its quadrilaterals, each
+/// measured as OpenFOAM does on the polygon of its 4 corners (area vector
+/// and centre by [`polygon_area_centre`], cell centres and volumes by the
+/// pyramid rule of [`cell_centre`]), an internal face oriented from the
+/// hexahedron with the lower number. The other ranks pass empty lists:
+/// the reduction gives every rank the holder's figures, so they do not
+/// depend on the rank count. Collective. Returns the figures and the
+/// scaled Jacobians (empty on the other ranks).
+pub fn hexahedra_quality(
+    comm: &dyn Comm,
+    points: &[[f64; 3]],
+    hexes: &[[u32; 8]],
+) -> (Quality, Vec<f64>) {
+    let corners = |h: usize| hexes[h].map(|n| points[n as usize]);
+    // The corners of face `label` of `h`, turning about the normal out of
+    // `h`.
+    let face = |h: usize, label: u8| {
+        let c = corners(h);
+        HEX_FACES[label as usize].map(|k| c[k])
+    };
+    let jac: Vec<f64> = (0..hexes.len())
+        .map(|h| scaled_jacobian(&corners(h)))
+        .collect();
+    let mut figures = Figures::new();
+    for &j in &jac {
+        figures.element(j);
+    }
+    let cells: Vec<Cell> = (0..hexes.len())
+        .map(|h| {
+            let faces: [([f64; 3], [f64; 3]); 6] = std::array::from_fn(|l| {
+                let (s, c) = polygon_area_centre(&face(h, l as u8));
+                (c, s)
+            });
+            cell_centre_volume(&faces)
+        })
+        .collect();
+    // Faces matched by their sorted corners: those of two hexahedra as
+    // (first, its label, second), then those of one.
+    let mut open: FoldMap<[u32; 4], (u32, u8)> = FoldMap::default();
+    let mut pairs = Vec::with_capacity(3 * hexes.len());
+    for (h, hex) in hexes.iter().enumerate() {
+        for (label, f) in HEX_FACES.iter().enumerate() {
+            let mut key = f.map(|k| hex[k]);
+            key.sort_unstable();
+            match open.remove(&key) {
+                Some((o, l)) => pairs.push((o, l, h as u32)),
+                None => {
+                    open.insert(key, (h as u32, label as u8));
+                }
+            }
+        }
+    }
+    let mut once: Vec<(u32, u8)> = open.into_values().collect();
+    // One order whatever the hash map's.
+    pairs.sort_unstable();
+    once.sort_unstable();
+    let mut tensors = vec![AreaTensor::default(); hexes.len()];
+    for &(a, label, b) in &pairs {
+        let q = face(a as usize, label);
+        let (s, c) = polygon_area_centre(&q);
+        tensors[a as usize].add(s);
+        tensors[b as usize].add(s);
+        figures.internal_face(&q, c, s, cells[a as usize], cells[b as usize]);
+    }
+    for &(h, label) in &once {
+        let q = face(h as usize, label);
+        let (s, c) = polygon_area_centre(&q);
+        figures.boundary_face(&q, c, s, cells[h as usize].0);
+    }
+    for t in &tensors {
+        figures.cell(t);
+    }
+    (figures.reduce(comm), jac)
+}
+
+/// The `n` hexahedra of [`hexahedra_quality`]'s mesh with the smallest
+/// scaled Jacobians `jac` (ties by number), worst first, each with its
+/// number as the global number, rank 0, and its `level` and `class`
+/// (per hexahedron). Not collective.
+pub fn worst_hexahedra(
+    points: &[[f64; 3]],
+    hexes: &[[u32; 8]],
+    jac: &[f64],
+    (level, class): (&[u8], &[u8]),
+    n: usize,
+) -> Vec<WorstElement> {
+    let mut order: Vec<usize> = (0..jac.len()).collect();
+    let cmp = |a: &usize, b: &usize| jac[*a].total_cmp(&jac[*b]).then(a.cmp(b));
+    if order.len() > n {
+        order.select_nth_unstable_by(n, cmp);
+        order.truncate(n);
+    }
+    order.sort_unstable_by(cmp);
+    order
+        .into_iter()
+        .map(|h| {
+            let corners = hexes[h].map(|k| points[k as usize]);
+            WorstElement {
+                scaled_jacobian: jac[h],
+                global: h as u64,
+                rank: 0,
+                level: level.get(h).copied().unwrap_or(0),
+                class: class.get(h).copied().unwrap_or(0),
+                corners,
+                corner_values: corner_scaled_jacobians(&corners),
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -715,6 +841,47 @@ mod tests {
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-14
+    }
+
+    #[test]
+    fn two_conforming_hexahedra() {
+        // Two unit cubes sharing the face x = 1, the second's far face
+        // moved: one internal face, six boundary faces each.
+        let mut points = Vec::new();
+        for x in 0..3 {
+            for (y, z) in [(0, 0), (1, 0), (1, 1), (0, 1)] {
+                let far = if x == 2 { 0.5 * y as f64 } else { 0.0 };
+                points.push([x as f64 + far, y as f64, z as f64]);
+            }
+        }
+        // VTK order: bottom (z = 0) counter-clockwise, then top.
+        let hex = |x: u32| {
+            [
+                4 * x,
+                4 * x + 4,
+                4 * x + 5,
+                4 * x + 1,
+                4 * x + 3,
+                4 * x + 7,
+                4 * x + 6,
+                4 * x + 2,
+            ]
+        };
+        let hexes = [hex(0), hex(1)];
+        let (q, jac) = hexahedra_quality(&SerialComm, &points, &hexes);
+        assert_eq!(q.elements, 2);
+        assert_eq!(q.internal_faces, 1);
+        assert_eq!(jac[0], 1.0);
+        assert!(jac[1] < 1.0 && jac[1] > 0.5, "{jac:?}");
+        assert_eq!(q.scaled_jacobian_min, jac[1]);
+        assert_eq!(q.inverted_elements, 0);
+        // The second cell's centre moved off the first's axis.
+        assert!(q.non_orthogonality_max > 1.0, "{q:?}");
+        // Volumes 1 and 1.25.
+        assert!((q.volume_ratio_min - 0.8).abs() < 1e-12, "{q:?}");
+        let worst = worst_hexahedra(&points, &hexes, &jac, (&[1, 1], &[2, 1]), 1);
+        assert_eq!(worst.len(), 1);
+        assert_eq!((worst[0].global, worst[0].class), (1, 1));
     }
 
     #[test]
