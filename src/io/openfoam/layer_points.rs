@@ -380,17 +380,11 @@ pub(super) fn place(
         .map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
         .collect();
     let shared: Vec<usize> = (0..nw).filter(|&i| merged[i].walls > 1).collect();
-    let ctx = Ctx {
-        comm,
-        directory: &directory,
-        wall,
-        shared: &shared,
-        domain,
-    };
+    let ctx = Ctx::new(comm, &directory, wall, &shared, domain);
     // The nearest triangle of each outer point's last projection.
     let mut hints: Vec<Option<u32>> = vec![None; nw];
     for _ in 0..SMOOTH {
-        let means = ctx.neighbour_means(&s);
+        let means = ctx.neighbour_means(&s, Points::All);
         for i in 0..nw {
             let x = near.project_from(scale(add(s[i], means[i]), 0.5), &mut hints[i]);
             let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
@@ -516,86 +510,194 @@ struct Ctx<'a> {
     /// The wall points with faces on several ranks.
     shared: &'a [usize],
     domain: &'a Domain,
+    /// Each wall point's neighbours along the wall's edges, one per face
+    /// that has the edge: `nbrs[nbr_start[i]..nbr_start[i + 1]]`.
+    nbr_start: Vec<usize>,
+    nbrs: Vec<u32>,
+    /// Each wall point's faces: `faces_at[face_start[i]..face_start[i + 1]]`.
+    face_start: Vec<usize>,
+    faces_at: Vec<u32>,
 }
 
-impl Ctx<'_> {
+/// Which wall points a pass computes.
+#[derive(Clone, Copy)]
+enum Points<'a> {
+    All,
+    /// These (the same shared points on every rank that has them).
+    Only(&'a [usize]),
+}
+
+impl<'a> Points<'a> {
+    fn each(self, n: usize, mut f: impl FnMut(usize)) {
+        match self {
+            Points::All => (0..n).for_each(&mut f),
+            Points::Only(list) => list.iter().for_each(|&i| f(i)),
+        }
+    }
+}
+
+impl<'a> Ctx<'a> {
+    fn new(
+        comm: &'a dyn Comm,
+        directory: &'a Directory,
+        wall: &'a Wall,
+        shared: &'a [usize],
+        domain: &'a Domain,
+    ) -> Ctx<'a> {
+        let nw = wall.labels.len();
+        let (mut nbr_start, mut face_start) = (vec![0usize; nw + 1], vec![0usize; nw + 1]);
+        for poly in &wall.polys {
+            for &i in poly {
+                nbr_start[i as usize + 1] += 2;
+                face_start[i as usize + 1] += 1;
+            }
+        }
+        for i in 0..nw {
+            nbr_start[i + 1] += nbr_start[i];
+            face_start[i + 1] += face_start[i];
+        }
+        let (mut nbrs, mut faces_at) = (vec![0u32; nbr_start[nw]], vec![0u32; face_start[nw]]);
+        let (mut nn, mut nf) = (nbr_start.clone(), face_start.clone());
+        for (k, poly) in wall.polys.iter().enumerate() {
+            let n = poly.len();
+            for j in 0..n {
+                let i = poly[j] as usize;
+                nbrs[nn[i]] = poly[(j + 1) % n];
+                nbrs[nn[i] + 1] = poly[(j + n - 1) % n];
+                nn[i] += 2;
+                faces_at[nf[i]] = k as u32;
+                nf[i] += 1;
+            }
+        }
+        Ctx {
+            comm,
+            directory,
+            wall,
+            shared,
+            domain,
+            nbr_start,
+            nbrs,
+            face_start,
+            faces_at,
+        }
+    }
+
+    /// The wall faces that have wall point `i`.
+    fn faces_of(&self, i: usize) -> &[u32] {
+        &self.faces_at[self.face_start[i]..self.face_start[i + 1]]
+    }
+
+    /// The shared points among `which`.
+    fn shared_in(&self, which: Points) -> Vec<usize> {
+        match which {
+            Points::All => self.shared.to_vec(),
+            Points::Only(list) => {
+                let mut keep = Vec::new();
+                let mut sh = self.shared.iter().peekable();
+                // Both lists ascend.
+                for &i in list {
+                    while sh.next_if(|&&j| j < i).is_some() {}
+                    if sh.next_if(|&&j| j == i).is_some() {
+                        keep.push(i);
+                    }
+                }
+                keep
+            }
+        }
+    }
+
+    /// Sums of `W` integers per wall point of `which`, combined over the
+    /// ranks for shared points (collective).
+    fn add_shared<const W: usize>(&self, which: Points, sums: &mut [[i64; W]]) {
+        let shared = self.shared_in(which);
+        let rows: Vec<(u64, Vec<u64>)> = shared
+            .iter()
+            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
+            .collect();
+        let total = self.directory.merge_shared(self.comm, &rows, W, |m, v| {
+            for j in 0..W {
+                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
+            }
+        });
+        for &i in &shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                sums[i] = std::array::from_fn(|j| t[j] as i64);
+            }
+        }
+    }
+
     /// The mean of each wall point's neighbours along the wall's edges
     /// (each edge counted once per face that has it), summed in fixed
-    /// point so that it does not depend on the ranks (collective).
-    fn neighbour_means(&self, s: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    /// point so that it does not depend on the ranks (collective). Only
+    /// the points of `which` are computed (the others are left at zero).
+    fn neighbour_means(&self, s: &[[f64; 3]], which: Points) -> Vec<[f64; 3]> {
         let fixed = |x: [f64; 3]| {
             self.domain
                 .to_lattice(x)
                 .map(|v| (v * FIXED).round() as i64)
         };
         let mut sums = vec![[0i64; 4]; s.len()];
-        for poly in &self.wall.polys {
-            for j in 0..poly.len() {
-                let (a, b) = (poly[j] as usize, poly[(j + 1) % poly.len()] as usize);
-                let (fa, fb) = (fixed(s[a]), fixed(s[b]));
+        // Each point's fixed-point position once, when all are wanted.
+        let all: Vec<[i64; 3]> = match which {
+            Points::All => s.iter().map(|&x| fixed(x)).collect(),
+            Points::Only(_) => Vec::new(),
+        };
+        which.each(s.len(), |i| {
+            let nb = &self.nbrs[self.nbr_start[i]..self.nbr_start[i + 1]];
+            let mut v = [0i64; 4];
+            for &b in nb {
+                let f = if all.is_empty() {
+                    fixed(s[b as usize])
+                } else {
+                    all[b as usize]
+                };
                 for k in 0..3 {
-                    sums[a][k] += fb[k];
-                    sums[b][k] += fa[k];
+                    v[k] = v[k].wrapping_add(f[k]);
                 }
-                sums[a][3] += 1;
-                sums[b][3] += 1;
             }
-        }
-        let rows: Vec<(u64, Vec<u64>)> = self
-            .shared
-            .iter()
-            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
-            .collect();
-        let total = self.directory.merge_shared(self.comm, &rows, 4, |m, v| {
-            for j in 0..4 {
-                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
-            }
+            v[3] = nb.len() as i64;
+            sums[i] = v;
         });
-        for &i in self.shared {
-            if let Some(t) = total.get(&self.wall.keys[i]) {
-                sums[i] = std::array::from_fn(|j| t[j] as i64);
-            }
-        }
-        sums.iter()
-            .map(|v| {
-                let deg = v[3].max(1) as f64;
-                self.domain
-                    .from_lattice(std::array::from_fn(|k| v[k] as f64 / deg / FIXED))
-            })
-            .collect()
+        self.add_shared(which, &mut sums);
+        let mut means = vec![[0.0; 3]; s.len()];
+        which.each(s.len(), |i| {
+            let v = sums[i];
+            let deg = v[3].max(1) as f64;
+            means[i] = self
+                .domain
+                .from_lattice(std::array::from_fn(|k| v[k] as f64 / deg / FIXED));
+        });
+        means
     }
 
     /// Each wall point's normal of the outer surface: the mean of the unit
     /// normals of its faces' outer polygons, summed in fixed point over the
-    /// ranks (collective).
-    fn outer_normals(&self, s: &[[f64; 3]]) -> Vec<Option<[f64; 3]>> {
+    /// ranks (collective). Only the points of `which` are computed.
+    fn outer_normals(&self, s: &[[f64; 3]], which: Points) -> Vec<Option<[f64; 3]>> {
+        let np = self.wall.polys.len();
+        // Each face's fixed-point unit normal, computed once when first needed.
+        let mut normal: Vec<Option<Option<[i64; 3]>>> = vec![None; np];
         let mut sums = vec![[0i64; 3]; s.len()];
-        for poly in &self.wall.polys {
-            let a = super::layer::polygon_area(poly.iter().map(|&i| s[i as usize]));
-            let Some(u) = unit(a) else { continue };
-            let f = u.map(|v| (v * FIXED).round() as i64);
-            for &i in poly {
-                for k in 0..3 {
-                    sums[i as usize][k] += f[k];
+        which.each(s.len(), |i| {
+            let mut v = [0i64; 3];
+            for &k in self.faces_of(i) {
+                let f = *normal[k as usize].get_or_insert_with(|| {
+                    let poly = &self.wall.polys[k as usize];
+                    let a = super::layer::polygon_area(poly.iter().map(|&i| s[i as usize]));
+                    unit(a).map(|u| u.map(|v| (v * FIXED).round() as i64))
+                });
+                if let Some(f) = f {
+                    for j in 0..3 {
+                        v[j] = v[j].wrapping_add(f[j]);
+                    }
                 }
             }
-        }
-        let rows: Vec<(u64, Vec<u64>)> = self
-            .shared
-            .iter()
-            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
-            .collect();
-        let total = self.directory.merge_shared(self.comm, &rows, 3, |m, v| {
-            for j in 0..3 {
-                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
-            }
+            sums[i] = v;
         });
-        for &i in self.shared {
-            if let Some(t) = total.get(&self.wall.keys[i]) {
-                sums[i] = std::array::from_fn(|j| t[j] as i64);
-            }
-        }
-        sums.iter().map(|v| unit(v.map(|x| x as f64))).collect()
+        self.add_shared(which, &mut sums);
+        let mut out = vec![None; s.len()];
+        which.each(s.len(), |i| out[i] = unit(sums[i].map(|x| x as f64)));
+        out
     }
 
     /// The least over wall points of `q` (each point's rows combined by
@@ -645,14 +747,8 @@ impl Ctx<'_> {
         s: &mut [[f64; 3]],
     ) {
         let nw = s.len();
-        let mut cells_at: Vec<Vec<u32>> = vec![Vec::new(); nw];
-        for (k, poly) in self.wall.polys.iter().enumerate() {
-            for &i in poly {
-                cells_at[i as usize].push(k as u32);
-            }
-        }
         let worst = |inner: &[[f64; 3]], s: &[[f64; 3]], i: usize, m: Moved| {
-            cells_at[i]
+            self.faces_of(i)
                 .iter()
                 .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), m))
                 .fold(f64::INFINITY, f64::min)
@@ -686,9 +782,11 @@ impl Ctx<'_> {
             if any[0] == 0 || round >= fewest.1 + STALL {
                 return;
             }
-            let means = self.neighbour_means(s);
-            let inner_means = self.neighbour_means(inner);
-            let normals = self.outer_normals(s);
+            // Only the points that move need their neighbours' means and
+            // normals.
+            let means = self.neighbour_means(s, Points::Only(&bad));
+            let inner_means = self.neighbour_means(inner, Points::Only(&bad));
+            let normals = self.outer_normals(s, Points::Only(&bad));
             let mut tries = vec![f64::NEG_INFINITY; N * nw];
             let mut cand: Vec<[Moved; N]> = vec![[Moved::None; N]; nw];
             for &i in &bad {
@@ -733,7 +831,7 @@ impl Ctx<'_> {
                         Moved::None => {}
                     }
                     moves[0] += 1;
-                    for &k in &cells_at[i] {
+                    for &k in self.faces_of(i) {
                         dirty[k as usize] = true;
                     }
                 }
