@@ -31,12 +31,15 @@ use crate::geometry::distance::closest_point_triangle;
 use crate::geometry::vector::{add, add_scaled, dot, norm, scale, sub};
 use crate::geometry::{Surface, Triangle};
 use crate::octree::domain::Domain;
+use crate::parallel::cores::{join, map_chunks, spare_core};
 
 /// How far (in cells of the point's finest wall face) a ray looks for the
 /// surface.
 const CAST: f64 = 3.0;
 /// Rounds of smoothing along the surface.
 const SMOOTH: usize = 5;
+/// Wall points per piece of a pass shared with a spare core.
+const CHUNK: usize = 4096;
 /// How far (cells) the outer point must be ahead of each face of its
 /// staircase point.
 const DEPTH: f64 = 0.2;
@@ -364,10 +367,18 @@ pub(super) fn place(
     watch.sort_unstable();
     watch.dedup();
     let recs: Vec<(u64, u64, f64)> = (0..nw).map(|i| (wall.keys[i], mask[i], size[i])).collect();
-    let (directory, merged) = Directory::register(comm, &recs, &watch);
+    // A spare core builds the surface's tree while this one registers the
+    // wall points, and shares the passes over the points (each point's
+    // result is its own, so the split changes no bit).
+    let spare = spare_core(comm);
+    let (bvh, (directory, merged)) = join(
+        spare,
+        || Bvh::new(surface.triangles()),
+        || Directory::register(comm, &recs, &watch),
+    );
     let near = Near {
         tris: surface.triangles(),
-        bvh: crate::geometry::bvh::Bvh::new(surface.triangles()),
+        bvh,
     };
     let p: Vec<[f64; 3]> = wall.labels.iter().map(|&l| pm.points[l as usize]).collect();
     let dirs: Vec<Vec<[f64; 3]>> = merged.iter().map(|m| axes(m.mask)).collect();
@@ -376,19 +387,30 @@ pub(super) fn place(
         .iter()
         .map(|d| unit(d.iter().copied().fold([0.0; 3], add)))
         .collect();
-    let mut s: Vec<[f64; 3]> = (0..nw)
-        .map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
-        .collect();
+    let mut s: Vec<[f64; 3]> = map_chunks(spare, nw, CHUNK, |r| {
+        r.map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
+            .collect::<Vec<_>>()
+    })
+    .concat();
     let shared: Vec<usize> = (0..nw).filter(|&i| merged[i].walls > 1).collect();
-    let ctx = Ctx::new(comm, &directory, wall, &shared, domain);
+    let ctx = Ctx::new(comm, &directory, wall, &shared, (domain, spare));
     // The nearest triangle of each outer point's last projection.
     let mut hints: Vec<Option<u32>> = vec![None; nw];
     for _ in 0..SMOOTH {
         let means = ctx.neighbour_means(&s, Points::All);
-        for i in 0..nw {
-            let x = near.project_from(scale(add(s[i], means[i]), 0.5), &mut hints[i]);
-            let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
-            if margin(x, p[i], d) >= m.min(DEPTH * h[i]) {
+        let moved = map_chunks(spare, nw, CHUNK, |r| {
+            r.map(|i| {
+                let mut hint = hints[i];
+                let x = near.project_from(scale(add(s[i], means[i]), 0.5), &mut hint);
+                let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
+                let x = (margin(x, p[i], d) >= m.min(DEPTH * h[i])).then_some(x);
+                (x, hint)
+            })
+            .collect::<Vec<_>>()
+        });
+        for (i, (x, hint)) in moved.into_iter().flatten().enumerate() {
+            hints[i] = hint;
+            if let Some(x) = x {
                 s[i] = x;
             }
         }
@@ -510,6 +532,8 @@ struct Ctx<'a> {
     /// The wall points with faces on several ranks.
     shared: &'a [usize],
     domain: &'a Domain,
+    /// Whether a spare core shares the passes.
+    spare: bool,
     /// Each wall point's neighbours along the wall's edges, one per face
     /// that has the edge: `nbrs[nbr_start[i]..nbr_start[i + 1]]`.
     nbr_start: Vec<usize>,
@@ -542,7 +566,7 @@ impl<'a> Ctx<'a> {
         directory: &'a Directory,
         wall: &'a Wall,
         shared: &'a [usize],
-        domain: &'a Domain,
+        (domain, spare): (&'a Domain, bool),
     ) -> Ctx<'a> {
         let nw = wall.labels.len();
         let (mut nbr_start, mut face_start) = (vec![0usize; nw + 1], vec![0usize; nw + 1]);
@@ -575,6 +599,7 @@ impl<'a> Ctx<'a> {
             wall,
             shared,
             domain,
+            spare,
             nbr_start,
             nbrs,
             face_start,
@@ -760,9 +785,11 @@ impl<'a> Ctx<'a> {
         let mut fewest = (u64::MAX, 0);
         // Each cell's figure, measured again only when one of its points
         // moves (all its points are on this rank).
-        let mut figure: Vec<f64> = (0..self.wall.polys.len())
-            .map(|k| cell_figure(self.wall, (p, old), k, (inner, s), Moved::None))
-            .collect();
+        let mut figure: Vec<f64> = map_chunks(self.spare, self.wall.polys.len(), CHUNK, |r| {
+            r.map(|k| cell_figure(self.wall, (p, old), k, (&*inner, &*s), Moved::None))
+                .collect::<Vec<_>>()
+        })
+        .concat();
         for round in 0..ROUNDS {
             // A point's figure is its worst cell's.
             let mut q = vec![f64::INFINITY; nw];

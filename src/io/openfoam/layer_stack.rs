@@ -442,7 +442,12 @@ fn spread_bad_columns(
     };
     // A cell is measured again only when one of its points has moved.
     let mut moved = vec![false; nw];
-    let mut bad: Vec<bool> = (0..wall.polys.len()).map(|k| is_bad(&layers, k)).collect();
+    let spare = crate::parallel::cores::spare_core(comm);
+    let mut bad: Vec<bool> =
+        crate::parallel::cores::map_chunks(spare, wall.polys.len(), 4096, |r| {
+            r.map(|k| is_bad(&layers, k)).collect::<Vec<_>>()
+        })
+        .concat();
     for round in 0..SPREAD {
         if round > 0 {
             for (k, poly) in wall.polys.iter().enumerate() {
