@@ -1053,7 +1053,10 @@ mod tests {
         c.output.openfoam = Some("case".into());
         let e = c.validate(Command::Mesh).unwrap_err();
         assert_eq!(e.key, "mesh.conforming");
-        assert!(e.render(|k| k.to_string()).contains("mesh.wall_layer"), "{e:?}");
+        assert!(
+            e.render(|k| k.to_string()).contains("mesh.wall_layer"),
+            "{e:?}"
+        );
     }
 
     #[test]

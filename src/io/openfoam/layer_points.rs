@@ -29,18 +29,22 @@
 use std::collections::{BTreeMap, HashMap};
 
 use super::layer::{PolyMesh, Wall};
+use super::layer_cell::with_prism;
 use super::*;
 use crate::geometry::bvh::Bvh;
 use crate::geometry::distance::closest_point_triangle;
 use crate::geometry::vector::{add, add_scaled, dot, norm, scale, sub};
 use crate::geometry::{Surface, Triangle};
 use crate::octree::domain::Domain;
+use crate::parallel::cores::{join, map_chunks, spare_core};
 
 /// How far (in cells of the point's finest wall face) a ray looks for the
 /// surface.
 const CAST: f64 = 3.0;
 /// Rounds of smoothing along the surface.
 const SMOOTH: usize = 5;
+/// Wall points per piece of a pass shared with a spare core.
+const CHUNK: usize = 4096;
 /// How far (cells) the outer point must be ahead of each face of its
 /// staircase point.
 const DEPTH: f64 = 0.2;
@@ -368,10 +372,18 @@ pub(super) fn place(
     watch.sort_unstable();
     watch.dedup();
     let recs: Vec<(u64, u64, f64)> = (0..nw).map(|i| (wall.keys[i], mask[i], size[i])).collect();
-    let (directory, merged) = Directory::register(comm, &recs, &watch);
+    // A spare core builds the surface's tree while this one registers the
+    // wall points, and shares the passes over the points (each point's
+    // result is its own, so the split changes no bit).
+    let spare = spare_core(comm);
+    let (bvh, (directory, merged)) = join(
+        spare,
+        || Bvh::new(surface.triangles()),
+        || Directory::register(comm, &recs, &watch),
+    );
     let near = Near {
         tris: surface.triangles(),
-        bvh: crate::geometry::bvh::Bvh::new(surface.triangles()),
+        bvh,
     };
     let p: Vec<[f64; 3]> = wall.labels.iter().map(|&l| pm.points[l as usize]).collect();
     let dirs: Vec<Vec<[f64; 3]>> = merged.iter().map(|m| axes(m.mask)).collect();
@@ -380,26 +392,30 @@ pub(super) fn place(
         .iter()
         .map(|d| unit(d.iter().copied().fold([0.0; 3], add)))
         .collect();
-    let mut s: Vec<[f64; 3]> = (0..nw)
-        .map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
-        .collect();
+    let mut s: Vec<[f64; 3]> = map_chunks(spare, nw, CHUNK, |r| {
+        r.map(|i| near.target(p[i], normal[i], &dirs[i], h[i]))
+            .collect::<Vec<_>>()
+    })
+    .concat();
     let shared: Vec<usize> = (0..nw).filter(|&i| merged[i].walls > 1).collect();
-    let ctx = Ctx {
-        comm,
-        directory: &directory,
-        wall,
-        shared: &shared,
-        domain,
-        slab,
-    };
+    let ctx = Ctx::new(comm, &directory, wall, &shared, (domain, spare), slab);
     // The nearest triangle of each outer point's last projection.
     let mut hints: Vec<Option<u32>> = vec![None; nw];
     for _ in 0..SMOOTH {
-        let means = ctx.neighbour_means(&s);
-        for i in 0..nw {
-            let x = near.project_from(scale(add(s[i], means[i]), 0.5), &mut hints[i]);
-            let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
-            if margin(x, p[i], d) >= m.min(DEPTH * h[i]) {
+        let means = ctx.neighbour_means(&s, Points::All);
+        let moved = map_chunks(spare, nw, CHUNK, |r| {
+            r.map(|i| {
+                let mut hint = hints[i];
+                let x = near.project_from(scale(add(s[i], means[i]), 0.5), &mut hint);
+                let (d, m) = (&dirs[i], margin(s[i], p[i], &dirs[i]));
+                let x = (margin(x, p[i], d) >= m.min(DEPTH * h[i])).then_some(x);
+                (x, hint)
+            })
+            .collect::<Vec<_>>()
+        });
+        for (i, (x, hint)) in moved.into_iter().flatten().enumerate() {
+            hints[i] = hint;
+            if let Some(x) = x {
                 s[i] = x;
             }
         }
@@ -524,86 +540,199 @@ struct Ctx<'a> {
     /// The fraction of a new cell next to the surface that must be a valid
     /// cell on its own (the boundary layers' even cut), 0 for none.
     slab: f64,
+    /// Whether a spare core shares the passes.
+    spare: bool,
+    /// Each wall point's neighbours along the wall's edges, one per face
+    /// that has the edge: `nbrs[nbr_start[i]..nbr_start[i + 1]]`.
+    nbr_start: Vec<usize>,
+    nbrs: Vec<u32>,
+    /// Each wall point's faces: `faces_at[face_start[i]..face_start[i + 1]]`.
+    face_start: Vec<usize>,
+    faces_at: Vec<u32>,
 }
 
-impl Ctx<'_> {
+/// Which wall points a pass computes.
+#[derive(Clone, Copy)]
+enum Points<'a> {
+    All,
+    /// These (the same shared points on every rank that has them).
+    Only(&'a [usize]),
+}
+
+impl<'a> Points<'a> {
+    fn each(self, n: usize, mut f: impl FnMut(usize)) {
+        match self {
+            Points::All => (0..n).for_each(&mut f),
+            Points::Only(list) => list.iter().for_each(|&i| f(i)),
+        }
+    }
+}
+
+impl<'a> Ctx<'a> {
+    fn new(
+        comm: &'a dyn Comm,
+        directory: &'a Directory,
+        wall: &'a Wall,
+        shared: &'a [usize],
+        (domain, spare): (&'a Domain, bool),
+        slab: f64,
+    ) -> Ctx<'a> {
+        let nw = wall.labels.len();
+        let (mut nbr_start, mut face_start) = (vec![0usize; nw + 1], vec![0usize; nw + 1]);
+        for poly in &wall.polys {
+            for &i in poly {
+                nbr_start[i as usize + 1] += 2;
+                face_start[i as usize + 1] += 1;
+            }
+        }
+        for i in 0..nw {
+            nbr_start[i + 1] += nbr_start[i];
+            face_start[i + 1] += face_start[i];
+        }
+        let (mut nbrs, mut faces_at) = (vec![0u32; nbr_start[nw]], vec![0u32; face_start[nw]]);
+        let (mut nn, mut nf) = (nbr_start.clone(), face_start.clone());
+        for (k, poly) in wall.polys.iter().enumerate() {
+            let n = poly.len();
+            for j in 0..n {
+                let i = poly[j] as usize;
+                nbrs[nn[i]] = poly[(j + 1) % n];
+                nbrs[nn[i] + 1] = poly[(j + n - 1) % n];
+                nn[i] += 2;
+                faces_at[nf[i]] = k as u32;
+                nf[i] += 1;
+            }
+        }
+        Ctx {
+            comm,
+            directory,
+            wall,
+            shared,
+            domain,
+            slab,
+            spare,
+            nbr_start,
+            nbrs,
+            face_start,
+            faces_at,
+        }
+    }
+
+    /// The wall faces that have wall point `i`.
+    fn faces_of(&self, i: usize) -> &[u32] {
+        &self.faces_at[self.face_start[i]..self.face_start[i + 1]]
+    }
+
+    /// The shared points among `which`.
+    fn shared_in(&self, which: Points) -> Vec<usize> {
+        match which {
+            Points::All => self.shared.to_vec(),
+            Points::Only(list) => {
+                let mut keep = Vec::new();
+                let mut sh = self.shared.iter().peekable();
+                // Both lists ascend.
+                for &i in list {
+                    while sh.next_if(|&&j| j < i).is_some() {}
+                    if sh.next_if(|&&j| j == i).is_some() {
+                        keep.push(i);
+                    }
+                }
+                keep
+            }
+        }
+    }
+
+    /// Sums of `W` integers per wall point of `which`, combined over the
+    /// ranks for shared points (collective).
+    fn add_shared<const W: usize>(&self, which: Points, sums: &mut [[i64; W]]) {
+        let shared = self.shared_in(which);
+        let rows: Vec<(u64, Vec<u64>)> = shared
+            .iter()
+            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
+            .collect();
+        let total = self.directory.merge_shared(self.comm, &rows, W, |m, v| {
+            for j in 0..W {
+                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
+            }
+        });
+        for &i in &shared {
+            if let Some(t) = total.get(&self.wall.keys[i]) {
+                sums[i] = std::array::from_fn(|j| t[j] as i64);
+            }
+        }
+    }
+
     /// The mean of each wall point's neighbours along the wall's edges
     /// (each edge counted once per face that has it), summed in fixed
-    /// point so that it does not depend on the ranks (collective).
-    fn neighbour_means(&self, s: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    /// point so that it does not depend on the ranks (collective). Only
+    /// the points of `which` are computed (the others are left at zero).
+    fn neighbour_means(&self, s: &[[f64; 3]], which: Points) -> Vec<[f64; 3]> {
         let fixed = |x: [f64; 3]| {
             self.domain
                 .to_lattice(x)
                 .map(|v| (v * FIXED).round() as i64)
         };
         let mut sums = vec![[0i64; 4]; s.len()];
-        for poly in &self.wall.polys {
-            for j in 0..poly.len() {
-                let (a, b) = (poly[j] as usize, poly[(j + 1) % poly.len()] as usize);
-                let (fa, fb) = (fixed(s[a]), fixed(s[b]));
+        // Each point's fixed-point position once, when all are wanted.
+        let all: Vec<[i64; 3]> = match which {
+            Points::All => s.iter().map(|&x| fixed(x)).collect(),
+            Points::Only(_) => Vec::new(),
+        };
+        which.each(s.len(), |i| {
+            let nb = &self.nbrs[self.nbr_start[i]..self.nbr_start[i + 1]];
+            let mut v = [0i64; 4];
+            for &b in nb {
+                let f = if all.is_empty() {
+                    fixed(s[b as usize])
+                } else {
+                    all[b as usize]
+                };
                 for k in 0..3 {
-                    sums[a][k] += fb[k];
-                    sums[b][k] += fa[k];
+                    v[k] = v[k].wrapping_add(f[k]);
                 }
-                sums[a][3] += 1;
-                sums[b][3] += 1;
             }
-        }
-        let rows: Vec<(u64, Vec<u64>)> = self
-            .shared
-            .iter()
-            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
-            .collect();
-        let total = self.directory.merge_shared(self.comm, &rows, 4, |m, v| {
-            for j in 0..4 {
-                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
-            }
+            v[3] = nb.len() as i64;
+            sums[i] = v;
         });
-        for &i in self.shared {
-            if let Some(t) = total.get(&self.wall.keys[i]) {
-                sums[i] = std::array::from_fn(|j| t[j] as i64);
-            }
-        }
-        sums.iter()
-            .map(|v| {
-                let deg = v[3].max(1) as f64;
-                self.domain
-                    .from_lattice(std::array::from_fn(|k| v[k] as f64 / deg / FIXED))
-            })
-            .collect()
+        self.add_shared(which, &mut sums);
+        let mut means = vec![[0.0; 3]; s.len()];
+        which.each(s.len(), |i| {
+            let v = sums[i];
+            let deg = v[3].max(1) as f64;
+            means[i] = self
+                .domain
+                .from_lattice(std::array::from_fn(|k| v[k] as f64 / deg / FIXED));
+        });
+        means
     }
 
     /// Each wall point's normal of the outer surface: the mean of the unit
     /// normals of its faces' outer polygons, summed in fixed point over the
-    /// ranks (collective).
-    fn outer_normals(&self, s: &[[f64; 3]]) -> Vec<Option<[f64; 3]>> {
+    /// ranks (collective). Only the points of `which` are computed.
+    fn outer_normals(&self, s: &[[f64; 3]], which: Points) -> Vec<Option<[f64; 3]>> {
+        let np = self.wall.polys.len();
+        // Each face's fixed-point unit normal, computed once when first needed.
+        let mut normal: Vec<Option<Option<[i64; 3]>>> = vec![None; np];
         let mut sums = vec![[0i64; 3]; s.len()];
-        for poly in &self.wall.polys {
-            let a = super::layer::polygon_area(poly.iter().map(|&i| s[i as usize]));
-            let Some(u) = unit(a) else { continue };
-            let f = u.map(|v| (v * FIXED).round() as i64);
-            for &i in poly {
-                for k in 0..3 {
-                    sums[i as usize][k] += f[k];
+        which.each(s.len(), |i| {
+            let mut v = [0i64; 3];
+            for &k in self.faces_of(i) {
+                let f = *normal[k as usize].get_or_insert_with(|| {
+                    let poly = &self.wall.polys[k as usize];
+                    let a = super::layer::polygon_area(poly.iter().map(|&i| s[i as usize]));
+                    unit(a).map(|u| u.map(|v| (v * FIXED).round() as i64))
+                });
+                if let Some(f) = f {
+                    for j in 0..3 {
+                        v[j] = v[j].wrapping_add(f[j]);
+                    }
                 }
             }
-        }
-        let rows: Vec<(u64, Vec<u64>)> = self
-            .shared
-            .iter()
-            .map(|&i| (self.wall.keys[i], sums[i].map(|x| x as u64).to_vec()))
-            .collect();
-        let total = self.directory.merge_shared(self.comm, &rows, 3, |m, v| {
-            for j in 0..3 {
-                m[j] = (m[j] as i64).wrapping_add(v[j] as i64) as u64;
-            }
+            sums[i] = v;
         });
-        for &i in self.shared {
-            if let Some(t) = total.get(&self.wall.keys[i]) {
-                sums[i] = std::array::from_fn(|j| t[j] as i64);
-            }
-        }
-        sums.iter().map(|v| unit(v.map(|x| x as f64))).collect()
+        self.add_shared(which, &mut sums);
+        let mut out = vec![None; s.len()];
+        which.each(s.len(), |i| out[i] = unit(sums[i].map(|x| x as f64)));
+        out
     }
 
     /// The least over wall points of `q` (each point's rows combined by
@@ -653,14 +782,8 @@ impl Ctx<'_> {
         s: &mut [[f64; 3]],
     ) {
         let nw = s.len();
-        let mut cells_at: Vec<Vec<u32>> = vec![Vec::new(); nw];
-        for (k, poly) in self.wall.polys.iter().enumerate() {
-            for &i in poly {
-                cells_at[i as usize].push(k as u32);
-            }
-        }
         let worst = |inner: &[[f64; 3]], s: &[[f64; 3]], i: usize, m: Moved| {
-            cells_at[i]
+            self.faces_of(i)
                 .iter()
                 .map(|&k| cell_figure(self.wall, (p, old), k as usize, (inner, s), (m, self.slab)))
                 .fold(f64::INFINITY, f64::min)
@@ -672,9 +795,12 @@ impl Ctx<'_> {
         let mut fewest = (u64::MAX, 0);
         // Each cell's figure, measured again only when one of its points
         // moves (all its points are on this rank).
-        let mut figure: Vec<f64> = (0..self.wall.polys.len())
-            .map(|k| cell_figure(self.wall, (p, old), k, (inner, s), (Moved::None, self.slab)))
-            .collect();
+        let (wall, slab) = (self.wall, self.slab);
+        let mut figure: Vec<f64> = map_chunks(self.spare, self.wall.polys.len(), CHUNK, |r| {
+            r.map(|k| cell_figure(wall, (p, old), k, (&*inner, &*s), (Moved::None, slab)))
+                .collect::<Vec<_>>()
+        })
+        .concat();
         for round in 0..ROUNDS {
             // A point's figure is its worst cell's.
             let mut q = vec![f64::INFINITY; nw];
@@ -694,9 +820,11 @@ impl Ctx<'_> {
             if any[0] == 0 || round >= fewest.1 + STALL {
                 return;
             }
-            let means = self.neighbour_means(s);
-            let inner_means = self.neighbour_means(inner);
-            let normals = self.outer_normals(s);
+            // Only the points that move need their neighbours' means and
+            // normals.
+            let means = self.neighbour_means(s, Points::Only(&bad));
+            let inner_means = self.neighbour_means(inner, Points::Only(&bad));
+            let normals = self.outer_normals(s, Points::Only(&bad));
             let mut tries = vec![f64::NEG_INFINITY; N * nw];
             let mut cand: Vec<[Moved; N]> = vec![[Moved::None; N]; nw];
             for &i in &bad {
@@ -741,7 +869,7 @@ impl Ctx<'_> {
                         Moved::None => {}
                     }
                     moves[0] += 1;
-                    for &k in &cells_at[i] {
+                    for &k in self.faces_of(i) {
                         dirty[k as usize] = true;
                     }
                 }
@@ -774,71 +902,12 @@ const FAIR: f64 = -0.9 / 1.9;
 const NON_ORTHO: f64 = 60.0;
 const SKEW: f64 = 3.5;
 
-/// The most points of a wall face whose new cell is measured without
-/// allocating: under 2:1 balance a face has at most 8.
-const MAXP: usize = 8;
-
 /// One wall point moved: its inner or its outer point.
 #[derive(Clone, Copy)]
 enum Moved {
     None,
     Inner(u32, [f64; 3]),
     Outer(u32, [f64; 3]),
-}
-
-/// A face's area vector and centre.
-type FaceGeometry = ([f64; 3], [f64; 3]);
-
-/// A face's area vector and centre as OpenFOAM computes them: the
-/// triangles of its fan about its points' mean, the centre weighted by
-/// their areas.
-fn face_geometry(f: &[[f64; 3]]) -> FaceGeometry {
-    // The fan's triangles kept on the stack when they fit (a small buffer
-    // for the quadrilaterals most faces are), else computed twice.
-    match f.len() {
-        0..=4 => fan::<4>(f),
-        5..=MAXP => fan::<MAXP>(f),
-        _ => fan::<0>(f),
-    }
-}
-
-/// [`face_geometry`] with room for `K` triangles.
-fn fan<const K: usize>(f: &[[f64; 3]]) -> FaceGeometry {
-    use crate::geometry::vector::cross;
-    let n = f.len();
-    let m = scale(f.iter().copied().fold([0.0; 3], add), 1.0 / n as f64);
-    let tri = |j: usize| {
-        let (a, b) = (f[j], f[if j + 1 == n { 0 } else { j + 1 }]);
-        (
-            scale(cross(sub(a, m), sub(b, m)), 0.5),
-            scale(add(add(a, b), m), 1.0 / 3.0),
-        )
-    };
-    let mut buf = [([0.0; 3], [0.0; 3]); K];
-    let kept = n <= K;
-    if kept {
-        for (j, t) in buf.iter_mut().take(n).enumerate() {
-            *t = tri(j);
-        }
-    }
-    let at = |j: usize| if kept { buf[j] } else { tri(j) };
-    let area = (0..n).fold([0.0; 3], |s, j| add(s, at(j).0));
-    let (mut sum_n, mut centre) = (0.0, [0.0; 3]);
-    for j in 0..n {
-        // OpenFOAM v1912 (what checkMesh runs here) weighs each triangle by
-        // its area; later versions by its area along the face's, which
-        // differs on warped slivers.
-        let (a, c) = at(j);
-        let w = norm(a);
-        sum_n += w;
-        centre = add_scaled(centre, c, w);
-    }
-    let centre = if sum_n.abs() > 0.0 {
-        scale(centre, 1.0 / sum_n)
-    } else {
-        m
-    };
-    (area, centre)
 }
 
 /// How good the new cell on wall face `k` is, as checkMesh measures it
@@ -931,64 +1000,6 @@ fn cell_figure(
         -worst / (1.0 + worst)
     });
     whole.min(layered)
-}
-
-/// Lays out the cell between polygon `poly`'s points in two layers (`lower`
-/// and `upper` by wall point number) on the stack and calls `f` with the
-/// upper polygon, the cell's faces (the lower face reversed, the upper
-/// face, the sides, as OpenFOAM computes area vectors and centres), the
-/// cell's centre as OpenFOAM computes it (pyramids from the mean of the
-/// face centres) and its least face pyramid in cubes of `side` (negative:
-/// a face points into the cell).
-fn with_prism<R>(
-    poly: &[u32],
-    lower: impl Fn(u32) -> [f64; 3],
-    upper: impl Fn(u32) -> [f64; 3],
-    side: f64,
-    f: impl FnOnce(&[[f64; 3]], &[FaceGeometry], [f64; 3], f64) -> R,
-) -> R {
-    let n = poly.len();
-    let (mut abuf, mut bbuf) = ([[0.0; 3]; MAXP], [[0.0; 3]; MAXP]);
-    let mut fbuf: [FaceGeometry; MAXP + 2] = [([0.0; 3], [0.0; 3]); MAXP + 2];
-    let (mut va, mut vb, mut vf) = (Vec::new(), Vec::new(), Vec::new());
-    let (a, b, faces): (&mut [[f64; 3]], &mut [[f64; 3]], &mut [FaceGeometry]) = if n <= MAXP {
-        (&mut abuf[..n], &mut bbuf[..n], &mut fbuf[..n + 2])
-    } else {
-        va.resize(n, [0.0; 3]);
-        vb.resize(n, [0.0; 3]);
-        vf.resize(n + 2, ([0.0; 3], [0.0; 3]));
-        (&mut va, &mut vb, &mut vf)
-    };
-    for (j, &i) in poly.iter().enumerate() {
-        a[j] = lower(i);
-        b[j] = upper(i);
-    }
-    // The lower face points out of the cell: its polygon reversed.
-    let (sa, ca) = face_geometry(a);
-    faces[0] = (scale(sa, -1.0), ca);
-    faces[1] = face_geometry(b);
-    for j in 0..n {
-        let jn = (j + 1) % n;
-        faces[j + 2] = face_geometry(&[a[j], a[jn], b[jn], b[j]]);
-    }
-    let faces = &*faces;
-    let est = scale(
-        faces.iter().map(|f| f.1).fold([0.0; 3], add),
-        1.0 / faces.len() as f64,
-    );
-    let (mut vol, mut centre) = (0.0, [0.0; 3]);
-    for &(sf, cf) in faces {
-        let v = dot(sf, sub(cf, est)).max(f64::MIN_POSITIVE);
-        vol += v;
-        centre = add_scaled(centre, add(scale(cf, 0.75), scale(est, 0.25)), v);
-    }
-    let c = scale(centre, 1.0 / vol);
-    let pyramid = faces
-        .iter()
-        .map(|&(sf, cf)| dot(sf, sub(cf, c)))
-        .fold(f64::INFINITY, f64::min)
-        / side.powi(3);
-    f(b, faces, c, pyramid)
 }
 
 /// How far the cell between the polygons of wall face `k` in the point

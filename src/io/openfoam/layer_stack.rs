@@ -214,6 +214,10 @@ fn merge<const W: usize>(
     combine: impl Fn(&mut [u64; W], &[u64; W]),
 ) {
     let p = comm.size();
+    // Alone, each point's row is its only one (the keys are distinct).
+    if p == 1 {
+        return;
+    }
     let mut out = vec![Vec::new(); p];
     for (k, r) in keys.iter().zip(rows.iter()) {
         out[home(*k, p)].push(*k);
@@ -420,26 +424,42 @@ fn spread_bad_columns(
             a as f64 / SPREAD as f64,
         ),
     };
+    let mut layers: Vec<Vec<[f64; 3]>> = full.to_vec();
+    let is_bad = |layers: &[Vec<[f64; 3]>], k: usize| {
+        let poly = &wall.polys[k];
+        (0..layers.len() - 1).any(|j| {
+            let (a, b) = (&layers[j], &layers[j + 1]);
+            let thick = poly
+                .iter()
+                .map(|&i| norm(sub(b[i as usize], a[i as usize])))
+                .sum::<f64>()
+                / poly.len() as f64
+                / wall.sides[k];
+            super::layer_points::cell_quality(wall, k, a, b) < GOOD * 0.5 * thick
+        })
+    };
+    // A cell is measured again only when one of its points has moved.
+    let mut moved = vec![false; nw];
+    let spare = crate::parallel::cores::spare_core(comm);
+    let mut bad: Vec<bool> =
+        crate::parallel::cores::map_chunks(spare, wall.polys.len(), 4096, |r| {
+            r.map(|k| is_bad(&layers, k)).collect::<Vec<_>>()
+        })
+        .concat();
     // A step of some points of a face can spoil a face beside it, which
     // then steps too: rounds go on until no face that can still step is bad.
-    for _ in 0..SPREAD * SPREAD {
-        let layers: Vec<Vec<[f64; 3]>> = (0..full.len())
-            .map(|j| (0..nw).map(|i| at(&level, j, i)).collect())
-            .collect();
+    for round in 0..SPREAD * SPREAD {
+        if round > 0 {
+            for (k, poly) in wall.polys.iter().enumerate() {
+                if poly.iter().any(|&i| moved[i as usize]) {
+                    bad[k] = is_bad(&layers, k);
+                }
+            }
+        }
         let mut bump = vec![[0u64]; nw];
         let mut any = [0u64];
         for (k, poly) in wall.polys.iter().enumerate() {
-            let bad = (0..full.len() - 1).any(|j| {
-                let (a, b) = (&layers[j], &layers[j + 1]);
-                let thick = poly
-                    .iter()
-                    .map(|&i| norm(sub(b[i as usize], a[i as usize])))
-                    .sum::<f64>()
-                    / poly.len() as f64
-                    / wall.sides[k];
-                super::layer_points::cell_quality(wall, k, a, b) < GOOD * 0.5 * thick
-            });
-            if bad && poly.iter().any(|&i| level[i as usize][0] < SPREAD) {
+            if bad[k] && poly.iter().any(|&i| level[i as usize][0] < SPREAD) {
                 any[0] += 1;
                 for &i in poly {
                     bump[i as usize][0] = 1;
@@ -451,8 +471,16 @@ fn spread_bad_columns(
             break;
         }
         merge(comm, &wall.keys, &mut bump, |e, c| e[0] = e[0].max(c[0]));
+        moved.iter_mut().for_each(|m| *m = false);
         for i in 0..nw {
-            level[i][0] = (level[i][0] + bump[i][0]).min(SPREAD);
+            let l = (level[i][0] + bump[i][0]).min(SPREAD);
+            if l != level[i][0] {
+                level[i][0] = l;
+                moved[i] = true;
+                for (j, layer) in layers.iter_mut().enumerate() {
+                    layer[i] = at(&level, j, i);
+                }
+            }
         }
     }
     level.iter().map(|l| l[0]).collect()

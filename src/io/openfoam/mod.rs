@@ -49,6 +49,7 @@
 
 mod gathered;
 mod layer;
+mod layer_cell;
 mod layer_points;
 mod layer_stack;
 mod polygons;
