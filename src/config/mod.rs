@@ -643,20 +643,18 @@ impl Config {
                     ),
                 ));
             }
-            if self.mesh.conforming {
-                if self.wall_layer() {
-                    let key = match self.mesh.wall_layer {
-                        true => "mesh.wall_layer",
-                        false => self.layers_key(),
-                    };
-                    return Err(ConfigError::new(
-                        "mesh.conforming",
-                        format!(
-                            "does not take {{{key}}} yet: the layers are made in the hanging-node \
+            if self.mesh.conforming && self.wall_layer() {
+                let key = match self.mesh.wall_layer {
+                    true => "mesh.wall_layer",
+                    false => self.layers_key(),
+                };
+                return Err(ConfigError::new(
+                    "mesh.conforming",
+                    format!(
+                        "does not take {{{key}}} yet: the layers are made in the hanging-node \
                              mesh's OpenFOAM case"
-                        ),
-                    ));
-                }
+                    ),
+                ));
             }
             if self.wall_layer() {
                 self.check_wall_layer()?;

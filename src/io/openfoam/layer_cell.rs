@@ -122,3 +122,52 @@ pub(super) fn with_prism<R>(
         / side.powi(3);
     f(b, faces, c, pyramid)
 }
+
+/// The least face pyramid of the even cut's two end slabs of the cell
+/// between the polygons `lower` and `upper` (each `slab` of the way, at the
+/// surface and at the staircase, where a sheared or twisted cell is
+/// thinnest; checking the slabs between too made no case valid that these
+/// left invalid, on the shared models), per unit of the slab's share, in
+/// cubes of `side`.
+pub(super) fn end_slabs(
+    poly: &[u32],
+    (lower, upper): (
+        impl Fn(u32) -> [f64; 3] + Copy,
+        impl Fn(u32) -> [f64; 3] + Copy,
+    ),
+    side: f64,
+    slab: f64,
+) -> f64 {
+    let cut = |w: f64| {
+        move |i: u32| {
+            let x = upper(i);
+            add_scaled(x, sub(lower(i), x), w)
+        }
+    };
+    let near = with_prism(poly, cut(slab), upper, side, |_, _, _, pyramid| pyramid);
+    let far = with_prism(poly, lower, cut(1.0 - slab), side, |_, _, _, pyramid| {
+        pyramid
+    });
+    near.min(far) / slab
+}
+
+/// How far the cell between the polygons of wall face `k` in the point
+/// layers `lower` and `upper` is from having a face that points into it:
+/// the least over its faces of the face's area vector dotted with the way
+/// from the cell's centre to the face's, in cubes of the face's side
+/// (checkMesh's face pyramids, with OpenFOAM's face and cell centres). The
+/// boundary layers' cells are judged by it.
+pub(super) fn cell_quality(
+    wall: &super::layer::Wall,
+    k: usize,
+    lower: &[[f64; 3]],
+    upper: &[[f64; 3]],
+) -> f64 {
+    with_prism(
+        &wall.polys[k],
+        |i| lower[i as usize],
+        |i| upper[i as usize],
+        wall.sides[k],
+        |_, _, _, pyramid| pyramid,
+    )
+}

@@ -29,7 +29,7 @@
 use std::collections::{BTreeMap, HashMap};
 
 use super::layer::{PolyMesh, Wall};
-use super::layer_cell::with_prism;
+use super::layer_cell::{end_slabs, with_prism};
 use super::*;
 use crate::geometry::bvh::Bvh;
 use crate::geometry::distance::closest_point_triangle;
@@ -937,28 +937,12 @@ fn cell_figure(
         _ => s[i as usize],
     };
     let side = wall.sides[k];
-    // The even cut's slabs at the surface and at the staircase, where a
-    // sheared or twisted cell is thinnest (checking the slabs between too
-    // made no case valid that these left invalid, on the shared models).
-    let layered = if slab > 0.0 {
-        let cut = |w: f64| {
-            move |i: u32| {
-                let x = outer_at(i);
-                add_scaled(x, sub(inner_at(i), x), w)
-            }
-        };
-        let near = with_prism(poly, cut(slab), outer_at, side, |_, _, _, pyramid| pyramid);
-        let far = with_prism(poly, inner_at, cut(1.0 - slab), side, |_, _, _, pyramid| {
-            pyramid
-        });
-        let pyramid = near.min(far) / slab;
-        if pyramid < GOOD {
-            -2.0 + pyramid.max(-1.0)
-        } else {
-            0.0
-        }
-    } else {
-        0.0
+    let layered = match slab > 0.0 {
+        true => match end_slabs(poly, (inner_at, outer_at), side, slab) {
+            pyramid if pyramid < GOOD => -2.0 + pyramid.max(-1.0),
+            _ => 0.0,
+        },
+        false => 0.0,
     };
     let whole = with_prism(poly, inner_at, outer_at, side, |b, faces, c, pyramid| {
         if pyramid < GOOD {
@@ -1000,20 +984,4 @@ fn cell_figure(
         -worst / (1.0 + worst)
     });
     whole.min(layered)
-}
-
-/// How far the cell between the polygons of wall face `k` in the point
-/// layers `lower` and `upper` is from having a face that points into it:
-/// the least over its faces of the face's area vector dotted with the way
-/// from the cell's centre to the face's, in cubes of the face's side
-/// (checkMesh's face pyramids, with OpenFOAM's face and cell centres). The
-/// boundary layers' cells are judged by it.
-pub(super) fn cell_quality(wall: &Wall, k: usize, lower: &[[f64; 3]], upper: &[[f64; 3]]) -> f64 {
-    with_prism(
-        &wall.polys[k],
-        |i| lower[i as usize],
-        |i| upper[i as usize],
-        wall.sides[k],
-        |_, _, _, pyramid| pyramid,
-    )
 }

@@ -400,7 +400,7 @@ fn point_layers(
 
 /// Steps from a column's layers to its even cut.
 const SPREAD: u64 = 4;
-/// The least quality (a cell's [`super::layer_points::cell_quality`] over
+/// The least quality (a cell's [`super::layer_cell::cell_quality`] over
 /// that of a box as thick) a layer cell needs.
 const GOOD: f64 = 0.05;
 
@@ -435,7 +435,7 @@ fn spread_bad_columns(
                 .sum::<f64>()
                 / poly.len() as f64
                 / wall.sides[k];
-            super::layer_points::cell_quality(wall, k, a, b) < GOOD * 0.5 * thick
+            super::layer_cell::cell_quality(wall, k, a, b) < GOOD * 0.5 * thick
         })
     };
     // A cell is measured again only when one of its points has moved.
