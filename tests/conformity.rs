@@ -21,7 +21,6 @@ mod common;
 
 use std::collections::HashSet;
 use std::path::Path;
-use std::process::Command;
 
 use common::conformity::check;
 use common::{json_file, octmesh_ok, require, scratch, shared_model, Oracle};
@@ -149,38 +148,7 @@ fn gmsh_measures_the_scaled_jacobian_octmesh_reports() {
     let args = ["--level", "4", "--keep", "outside", "--snap", "--quality"];
     let (msh, s) = mesh(2, "snapped", "sphere", &args);
     let ours = s["quality"]["scaled_jacobian_min"].as_f64().unwrap();
-    let script = r#"
-import sys, gmsh
-gmsh.initialize()
-gmsh.option.setNumber("General.Terminal", 0)
-gmsh.open(sys.argv[1])
-gmsh.plugin.setNumber("AnalyseMeshQuality", "IGEMeasure", 1)
-gmsh.plugin.setNumber("AnalyseMeshQuality", "CreateView", 1)
-gmsh.plugin.setNumber("AnalyseMeshQuality", "DimensionOfElements", 3)
-gmsh.plugin.run("AnalyseMeshQuality")
-for v in gmsh.view.getTags():
-    name = gmsh.option.getString("View[%d].Name" % gmsh.view.getIndex(v))
-    if name.startswith("IGE"):
-        _, tags, data, _, _ = gmsh.view.getModelData(v, 0)
-        print("ige %d %.17g" % (len(tags), min(d[0] for d in data)))
-gmsh.finalize()
-"#;
-    let out = Command::new(&python)
-        .args(["-c", script, msh.to_str().unwrap()])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "gmsh failed:\n{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let line = text
-        .lines()
-        .find(|l| l.starts_with("ige "))
-        .unwrap_or_else(|| panic!("no IGE view:\n{text}"));
-    let f: Vec<&str> = line.split_whitespace().collect();
-    let (n, gmsh_min): (u64, f64) = (f[1].parse().unwrap(), f[2].parse().unwrap());
+    let (n, gmsh_min) = common::fe_oracle::gmsh_min_scaled_jacobian(&python, &msh);
     let checker = check(&msh).min_scaled_jacobian;
     println!("snapped sphere fluid: {n} hexahedra; smallest scaled Jacobian: gmsh {gmsh_min}, octmesh {ours}, checker {checker}");
     assert_eq!(n, common::int(&s, "elements"));

@@ -867,43 +867,6 @@ fn conforming_refuses_what_it_cannot_do() {
     );
 }
 
-/// Gmsh's smallest IGE measure (for hexahedra the scaled Jacobian at the
-/// corners) of the `.msh` at `msh`: (hexahedra, minimum).
-fn gmsh_min_scaled_jacobian(python: &Path, msh: &Path) -> (u64, f64) {
-    let script = r#"
-import sys, gmsh
-gmsh.initialize()
-gmsh.option.setNumber("General.Terminal", 0)
-gmsh.open(sys.argv[1])
-gmsh.plugin.setNumber("AnalyseMeshQuality", "IGEMeasure", 1)
-gmsh.plugin.setNumber("AnalyseMeshQuality", "CreateView", 1)
-gmsh.plugin.setNumber("AnalyseMeshQuality", "DimensionOfElements", 3)
-gmsh.plugin.run("AnalyseMeshQuality")
-for v in gmsh.view.getTags():
-    name = gmsh.option.getString("View[%d].Name" % gmsh.view.getIndex(v))
-    if name.startswith("IGE"):
-        _, tags, data, _, _ = gmsh.view.getModelData(v, 0)
-        print("ige %d %.17g" % (len(tags), min(d[0] for d in data)))
-gmsh.finalize()
-"#;
-    let out = Command::new(python)
-        .args(["-c", script, msh.to_str().unwrap()])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "gmsh failed:\n{text}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let line = text
-        .lines()
-        .find(|l| l.starts_with("ige "))
-        .unwrap_or_else(|| panic!("no IGE view:\n{text}"));
-    let f: Vec<&str> = line.split_whitespace().collect();
-    (f[1].parse().unwrap(), f[2].parse().unwrap())
-}
-
 /// `--conforming --quality --out`: the quality measures the conforming
 /// mesh (its hexahedra; Gmsh's smallest scaled Jacobian of the `.msh` and
 /// the independent checker's equal octmesh's to 1e-9, and the templates
@@ -1033,7 +996,7 @@ print("vtu %d %d msh %d %d same %d %.17g" % (len(hv), len(v.points), len(hm), le
     }) else {
         return;
     };
-    let (n, gmsh_min) = gmsh_min_scaled_jacobian(&gmsh, &msh);
+    let (n, gmsh_min) = common::fe_oracle::gmsh_min_scaled_jacobian(&gmsh, &msh);
     println!("conforming: {n} hexahedra, smallest scaled Jacobian gmsh {gmsh_min}, octmesh {ours}");
     assert_eq!(n, c.elements as u64);
     assert!(

@@ -311,6 +311,16 @@ fn check_case(rc: &Path, case: &Path, np: usize, near: &Near, size: f64, tag: &s
     }
 }
 
+/// A model's size: the largest side of its triangles' box.
+fn model_size(tris: &[[[f64; 3]; 3]]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let v = tris.iter().flatten().map(|x| x[k]);
+            v.clone().fold(f64::NEG_INFINITY, f64::max) - v.fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
     let Some(rc) = openfoam() else { return };
@@ -323,13 +333,7 @@ fn checkmesh_accepts_the_wall_layer_and_the_wall_is_on_the_surface() {
     }
     for surface in &models {
         let tris = triangles(surface);
-        // The model's size: the largest side of its box.
-        let size = (0..3)
-            .map(|k| {
-                let v = tris.iter().flatten().map(|x| x[k]);
-                v.clone().fold(f64::NEG_INFINITY, f64::max) - v.fold(f64::INFINITY, f64::min)
-            })
-            .fold(0.0, f64::max);
+        let size = model_size(&tris);
         let near = Near::new(tris, 1e-9 * size);
         let name = Path::new(surface)
             .file_stem()
@@ -520,6 +524,50 @@ fn layer_coverage(meshes: &[Foam], n: usize, first: f64, r: f64) -> f64 {
     covered / total
 }
 
+/// Meshes `surface` at level 6 with 3 layers (expansion 1.2, first layer
+/// `first`) into the ASCII case `case` on `np` ranks, with `--stats` when
+/// given; asserts the run succeeded.
+fn run_three_layers(
+    np: usize,
+    surface: &str,
+    keep: &str,
+    first: &str,
+    case: &Path,
+    stats: Option<&Path>,
+) {
+    let mut args = vec![
+        "mesh",
+        surface,
+        "--level",
+        "6",
+        "--keep",
+        keep,
+        "--cut-rule",
+        "none",
+        "--layers",
+        "3",
+        "--layer-expansion",
+        "1.2",
+        "--first-layer",
+        first,
+        "--openfoam-format",
+        "ascii",
+        "--overwrite",
+        "--quiet",
+        "--openfoam",
+        case.to_str().unwrap(),
+    ];
+    if let Some(st) = stats {
+        args.extend(["--stats", st.to_str().unwrap()]);
+    }
+    let out = common::mpirun(np, &octmesh_bin(), &args, Duration::from_secs(600));
+    assert!(
+        out.status.success(),
+        "octmesh {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn three_layers_pass_checkmesh_and_cover_the_wall() {
     let Some(rc) = openfoam() else { return };
@@ -543,36 +591,7 @@ fn three_layers_pass_checkmesh_and_cover_the_wall() {
             for np in [1, 3] {
                 let case = dir.join(format!("{name}-{keep}-{np}"));
                 let stats = dir.join(format!("{name}-{keep}-{np}.json"));
-                let args = [
-                    "mesh",
-                    surface.as_str(),
-                    "--level",
-                    "6",
-                    "--keep",
-                    keep,
-                    "--cut-rule",
-                    "none",
-                    "--layers",
-                    "3",
-                    "--layer-expansion",
-                    "1.2",
-                    "--first-layer",
-                    &first_arg,
-                    "--openfoam-format",
-                    "ascii",
-                    "--overwrite",
-                    "--quiet",
-                    "--stats",
-                    stats.to_str().unwrap(),
-                    "--openfoam",
-                    case.to_str().unwrap(),
-                ];
-                let out = common::mpirun(np, &octmesh_bin(), &args, Duration::from_secs(600));
-                assert!(
-                    out.status.success(),
-                    "octmesh {args:?} failed:\n{}",
-                    String::from_utf8_lossy(&out.stderr)
-                );
+                run_three_layers(np, surface, keep, &first_arg, &case, Some(&stats));
                 let tag = format!("{name} {keep} np {np} layers 3");
                 // checkMesh's verdict is collected so every case is reported.
                 let s = std::panic::catch_unwind(|| check_case(&rc, &case, np, &near, *size, &tag));
@@ -618,44 +637,12 @@ fn three_layers_give_valid_cells_on_the_shared_models() {
         };
         let surface = p.to_string_lossy().into_owned();
         let tris = triangles(&surface);
-        let size = (0..3)
-            .map(|k| {
-                let v = tris.iter().flatten().map(|x| x[k]);
-                v.clone().fold(f64::NEG_INFINITY, f64::max) - v.fold(f64::INFINITY, f64::min)
-            })
-            .fold(0.0, f64::max);
+        let size = model_size(&tris);
         let first_arg = format!("{:e}", 5e-4 * size);
         for keep in ["outside", "inside"] {
             for np in [1, 3] {
                 let case = dir.join(format!("{name}-{keep}-{np}"));
-                let args = [
-                    "mesh",
-                    surface.as_str(),
-                    "--level",
-                    "6",
-                    "--keep",
-                    keep,
-                    "--cut-rule",
-                    "none",
-                    "--layers",
-                    "3",
-                    "--layer-expansion",
-                    "1.2",
-                    "--first-layer",
-                    &first_arg,
-                    "--openfoam-format",
-                    "ascii",
-                    "--overwrite",
-                    "--quiet",
-                    "--openfoam",
-                    case.to_str().unwrap(),
-                ];
-                let out = common::mpirun(np, &octmesh_bin(), &args, Duration::from_secs(600));
-                assert!(
-                    out.status.success(),
-                    "octmesh {args:?} failed:\n{}",
-                    String::from_utf8_lossy(&out.stderr)
-                );
+                run_three_layers(np, &surface, keep, &first_arg, &case, None);
                 let par = if np > 1 {
                     format!("mpirun --oversubscribe -np {np} checkMesh -parallel")
                 } else {
