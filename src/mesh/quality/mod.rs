@@ -103,7 +103,6 @@ use serde::Serialize;
 
 use crate::error::{Error, ErrorKind, Result};
 use crate::geometry::cells::TINY;
-use crate::geometry::hash::FoldMap;
 use crate::geometry::vector::{cross, dot, norm, scale, sub};
 use crate::mesh::faces::{FaceKind, Faces, Other};
 use crate::mesh::points::{
@@ -709,8 +708,9 @@ impl Mesh {
     }
 }
 
-/// The faces of a hexahedron in VTK order, each turning about its
-/// normal out of the hexahedron.
+/// The faces of a hexahedron in VTK order by their Abaqus labels
+/// ([`crate::io::gathered::ABAQUS_FACE_NODES`] reversed), each turning
+/// about its normal out of the hexahedron.
 const HEX_FACES: [[usize; 4]; 6] = [
     [3, 2, 1, 0],
     [5, 6, 7, 4],
@@ -759,23 +759,9 @@ pub fn hexahedra_quality(
             cell_centre_volume(&faces)
         })
         .collect();
-    // Faces matched by their sorted corners: those of two hexahedra as
-    // (first, its label, second), then those of one.
-    let mut open: FoldMap<[u32; 4], (u32, u8)> = FoldMap::default();
-    let mut pairs = Vec::with_capacity(3 * hexes.len());
-    for (h, hex) in hexes.iter().enumerate() {
-        for (label, f) in HEX_FACES.iter().enumerate() {
-            let mut key = f.map(|k| hex[k]);
-            key.sort_unstable();
-            match open.remove(&key) {
-                Some((o, l)) => pairs.push((o, l, h as u32)),
-                None => {
-                    open.insert(key, (h as u32, label as u8));
-                }
-            }
-        }
-    }
-    let mut once: Vec<(u32, u8)> = open.into_values().collect();
+    // Faces matched by their sorted corners (the Abaqus labels are these
+    // faces' labels, turned inwards).
+    let (mut pairs, mut once) = crate::io::gathered::match_faces(hexes);
     // One order whatever the hash map's.
     pairs.sort_unstable();
     once.sort_unstable();
