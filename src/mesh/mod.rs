@@ -59,6 +59,7 @@ pub mod conforming;
 pub(crate) mod dual;
 pub mod faces;
 pub(crate) mod hanging;
+pub mod hexahedra;
 mod locate;
 pub mod manifold;
 pub(crate) mod numbering;

@@ -709,7 +709,7 @@ impl Mesh {
 }
 
 /// The faces of a hexahedron in VTK order by their Abaqus labels
-/// ([`crate::io::gathered::ABAQUS_FACE_NODES`] reversed), each turning
+/// ([`crate::mesh::hexahedra::ABAQUS_FACE_NODES`] reversed), each turning
 /// about its normal out of the hexahedron.
 const HEX_FACES: [[usize; 4]; 6] = [
     [3, 2, 1, 0],
@@ -761,7 +761,7 @@ pub fn hexahedra_quality(
         .collect();
     // Faces matched by their sorted corners (the Abaqus labels are these
     // faces' labels, turned inwards).
-    let (mut pairs, mut once) = crate::io::gathered::match_faces(hexes);
+    let (mut pairs, mut once) = super::hexahedra::match_faces(hexes);
     // One order whatever the hash map's.
     pairs.sort_unstable();
     once.sort_unstable();
